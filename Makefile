@@ -1,0 +1,93 @@
+# greenloop: every entry point. `make help` lists targets and the variables you can override.
+SHELL := bash
+.DELETE_ON_ERROR:
+.SUFFIXES:
+
+PYTHON   ?= python3
+VENV     ?= .venv
+BIN      := $(VENV)/bin
+DATASET  ?= data/synthetic-greenhouse
+RESULTS  ?= results
+PARAMS   ?=
+TIMEOUT  ?= 7200
+KERNEL   := greenloop
+export PYTHONPATH := $(CURDIR)
+export TF_CPP_MIN_LOG_LEVEL := 2
+export PYTHONUNBUFFERED := 1
+
+NOTEBOOKS := $(sort $(wildcard notebooks/[0-9][0-9]_*.ipynb))
+EXECUTED  := $(patsubst notebooks/%.ipynb,$(RESULTS)/%.ipynb,$(NOTEBOOKS))
+HTML      := $(EXECUTED:.ipynb=.html)
+SOURCES   := $(wildcard greenloop/*.py)
+STAMP     := $(VENV)/.installed
+SYNTHETIC := data/synthetic-greenhouse
+
+.PHONY: all help venv synthetic data test quick sweep bench clean-results
+.DEFAULT_GOAL := help
+
+help: ## this list
+	@echo "greenloop: CNN loop-closure detection study. Targets:"
+	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-14s %s\n", $$1, $$2}'
+	@echo "Variables (make VAR=value ...):"
+	@echo "  DATASET=$(DATASET)   sequence folder the notebooks study"
+	@echo "  RESULTS=$(RESULTS)   where executed notebooks, figures and tables go"
+	@echo "  PARAMS='-p epochs 50'   extra papermill arguments for every notebook"
+	@echo "  TIMEOUT=$(TIMEOUT)   per-cell execution timeout, seconds"
+	@echo "  PYTHON=$(PYTHON)   interpreter used to create $(VENV)"
+
+venv: $(STAMP) ## create .venv from environment.txt (and register the Jupyter kernel)
+
+$(STAMP): environment.txt
+	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install -q --upgrade pip
+	$(BIN)/python -m pip install -q -r environment.txt
+	$(BIN)/python -m ipykernel install --sys-prefix --name $(KERNEL) --display-name "Python (greenloop)" >/dev/null
+	@touch $@
+
+synthetic: $(SYNTHETIC)/.complete ## generate the embedded synthetic greenhouse sequence (2260 frames)
+
+$(SYNTHETIC)/.complete: | $(STAMP)
+	$(BIN)/python -m greenloop.synthetic $(SYNTHETIC)
+	@touch $@
+
+data: | $(STAMP) ## download the real GreenHouse set into data/greenhouse (resumable)
+	$(BIN)/python -m greenloop.download data/greenhouse
+
+# The dataset a run needs: the synthetic default is generated when missing; any other folder
+# must exist already.
+ifeq ($(DATASET),$(SYNTHETIC))
+DATA_DEP := $(SYNTHETIC)/.complete
+else
+DATA_DEP := $(DATASET)
+endif
+
+all: $(HTML) $(RESULTS)/tables.md ## run every notebook into results/, render HTML, assemble results/tables.md
+
+$(RESULTS)/%.ipynb: notebooks/%.ipynb $(SOURCES) $(DATA_DEP) | $(STAMP)
+	@mkdir -p $(@D)
+	@echo "== $* (log: $(RESULTS)/$*.log)"
+	$(BIN)/papermill -k $(KERNEL) --execution-timeout $(TIMEOUT) --progress-bar \
+	    -p dataset $(DATASET) -p results_dir $(RESULTS) $(PARAMS) $< $(@D)/.tmp-$*.ipynb
+	@mv $(@D)/.tmp-$*.ipynb $@
+
+$(RESULTS)/%.html: $(RESULTS)/%.ipynb
+	$(BIN)/jupyter nbconvert --to html --log-level WARN --output-dir $(@D) --output .tmp-$* $<
+	@mv $(@D)/.tmp-$*.html $@
+
+$(RESULTS)/tables.md: $(EXECUTED)
+	$(BIN)/python -m greenloop.report $(RESULTS)
+
+quick: ## the same notebooks with few epochs and seeds into results/quick/ (minutes)
+	$(MAKE) all RESULTS=results/quick PARAMS="-f params/quick.yaml $(PARAMS)"
+
+sweep: ## papermill sweep of frames per spot (40..80) into results/sweep/
+	@for L in 40 50 60 70 80; do \
+	  $(MAKE) --no-print-directory results/sweep/L$$L/01_spot_grouping.ipynb RESULTS=results/sweep/L$$L \
+	    PARAMS="-p frames_per_spot_list '[$$L]' $(PARAMS)" || exit 1; \
+	done
+
+test: | $(STAMP) ## run the test suite (unit tests and every notebook on tiny parameters)
+	$(BIN)/python -m pytest -q tests
+
+clean-results: ## remove executed notebooks and tables (keeps the model cache)
+	rm -rf $(EXECUTED) $(HTML) $(RESULTS)/tables.md
