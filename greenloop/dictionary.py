@@ -1,0 +1,141 @@
+"""The main paper's frequency-count dictionary: a closure is declared when a class count reaches tau.
+
+D(f_t) <- D(f_t) + 1 for the class f_t predicted for frame t; closure when exists c: D(c) >= tau.
+Counters never decay (as in the paper), so misclassifications accumulate over a long run.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def threshold(frames_per_spot: int, error_rate: float, margin: int) -> dict:
+    """The paper's threshold derivation.
+
+    frames_per_spot: L frames per spot. error_rate: eps, the expected misclassification rate
+    (0.10 in the paper's worst case). margin: Delta frames of safety buffer.
+    Returns {'frames_per_spot': L, 'error_rate': eps, 'margin': Delta,
+             'expected_correct': (1 - eps) * L  (54 for L = 60, eps = 0.10),
+             'tau': L + Delta  (70 for Delta = 10)}.
+    """
+    if frames_per_spot < 1:
+        raise ValueError(f"frames_per_spot must be >= 1, got {frames_per_spot}")
+    if not 0 <= error_rate < 1:
+        raise ValueError(f"error_rate must be in [0, 1), got {error_rate}")
+    tau = int(frames_per_spot + margin)
+    if tau < 1:
+        raise ValueError(f"tau = L + margin = {tau} must be >= 1: use a larger margin")
+    return {"frames_per_spot": int(frames_per_spot), "error_rate": float(error_rate),
+            "margin": int(margin), "expected_correct": (1 - error_rate) * frames_per_spot, "tau": tau}
+
+
+class LoopDetector:
+    """Frequency-count loop detector (the paper's key-value dictionary), O(1) per frame.
+
+    n_classes: number of spots N (labels 0 .. N-1). threshold: tau >= 1 detections.
+    ``update(label)`` returns True when that label's count has reached tau (at that frame and every
+    later frame of the class: a closure is a state, not an edge). ``counts`` is the (N,) int32
+    array D, ``nbytes`` its memory (4 bytes per counter, the paper's 152 bytes for 38 classes).
+    """
+
+    def __init__(self, n_classes: int, threshold: int):
+        if n_classes < 1:
+            raise ValueError(f"n_classes must be >= 1, got {n_classes}")
+        if threshold < 1:
+            raise ValueError(f"threshold tau must be >= 1 detections, got {threshold}")
+        self.n_classes = int(n_classes)
+        self.threshold = int(threshold)
+        self.counts = np.zeros(self.n_classes, dtype=np.int32)
+
+    def update(self, label: int) -> bool:
+        """Count one prediction; True if D(label) >= tau afterwards."""
+        label = int(label)
+        if not 0 <= label < self.n_classes:
+            raise ValueError(f"unknown label {label}: the detector has classes 0..{self.n_classes - 1}")
+        self.counts[label] += 1
+        return bool(self.counts[label] >= self.threshold)
+
+    def reset(self) -> None:
+        """Set every counter back to zero."""
+        self.counts[:] = 0
+
+    @property
+    def nbytes(self) -> int:
+        """Memory of the counters in bytes (int32 each)."""
+        return int(self.counts.nbytes)
+
+
+def run(labels, n_classes: int, threshold: int) -> np.ndarray:
+    """Run a fresh detector over a stream of predicted labels (T,) -> closure flags (T,) bool.
+
+    Vectorised equivalent of calling ``LoopDetector.update`` frame by frame: frame t is flagged when
+    the running count of labels[t] (itself included) is >= threshold.
+    """
+    labels = np.asarray(labels, dtype=np.int64)
+    if labels.ndim != 1:
+        raise ValueError(f"labels must be 1-D (T,), got {labels.shape}")
+    if threshold < 1:
+        raise ValueError(f"threshold tau must be >= 1, got {threshold}")
+    if len(labels) and (labels.min() < 0 or labels.max() >= n_classes):
+        raise ValueError(f"labels must lie in 0..{n_classes - 1}, got {labels.min()}..{labels.max()}")
+    onehot = np.zeros((len(labels), n_classes), dtype=np.int32)
+    onehot[np.arange(len(labels)), labels] = 1
+    running = np.cumsum(onehot, axis=0)[np.arange(len(labels)), labels]
+    return running >= threshold
+
+
+def closure_events(labels, n_classes: int, threshold: int) -> list[dict]:
+    """First closure of each class: [{'frame': t, 'spot': c, 'count': tau}] in frame order."""
+    flags = run(labels, n_classes, threshold)
+    events, seen = [], set()
+    for t in np.flatnonzero(flags):
+        c = int(labels[t])
+        if c not in seen:
+            seen.add(c)
+            events.append({"frame": int(t), "spot": c, "count": int(threshold)})
+    return events
+
+
+def score_closures(pred, reference_labels, gt, threshold: int, exclude: int = 150) -> dict:
+    """Score the detector's closures against pose ground truth.
+
+    pred: (T,) labels predicted for frames 0..T-1 in capture order.
+    reference_labels: (T,) the spot each frame belongs to (the labels the CNN was trained on).
+    gt: (T, T) bool ground-truth loop matrix (greenloop.groundtruth).
+    A flagged frame t with predicted spot c is a TRUE closure when some frame i of spot c with
+    |i - t| > exclude is a ground-truth loop partner of t, else FALSE. The first flag of each spot is
+    a closure event. Detection delay: for each maximal run of revisit frames (frames with an earlier
+    loop partner), frames from its start to its first true closure.
+    Returns {'tau', 'flagged', 'true_frames', 'false_frames', 'events', 'true_events',
+    'false_events', 'revisit_frames', 'revisits_detected', 'delays' (list), 'event_list'}.
+    """
+    pred = np.asarray(pred, dtype=np.int64)
+    ref = np.asarray(reference_labels, dtype=np.int64)
+    gt = np.asarray(gt, dtype=bool)
+    if not (len(pred) == len(ref) == len(gt)) or gt.shape != (len(pred), len(pred)):
+        raise ValueError(f"pred {pred.shape}, reference_labels {ref.shape} and gt {gt.shape} "
+                         f"must describe the same frames")
+    n_classes = int(max(pred.max(), ref.max()) + 1)
+    flags = run(pred, n_classes, threshold)
+    idx = np.arange(len(pred))
+    # true[t]: a loop partner of t (far in time) lies in the predicted spot
+    member = ref[None, :] == pred[:, None]                      # (T, T): frame i in spot pred[t]
+    far = np.abs(idx[:, None] - idx[None, :]) > exclude
+    true_at = (gt & member & far).any(1)
+    revisit = np.tril(gt, -1).any(1)
+    events = closure_events(pred, n_classes, threshold)
+    for e in events:
+        e["true"] = bool(true_at[e["frame"]])
+    starts = np.flatnonzero(revisit & ~np.r_[False, revisit[:-1]])
+    delays = []
+    for s in starts:
+        e = s
+        while e < len(revisit) and revisit[e]:
+            e += 1
+        hits = np.flatnonzero(flags[s:e] & true_at[s:e])
+        delays.append(int(hits[0]) if len(hits) else None)
+    return {"tau": int(threshold), "flagged": int(flags.sum()),
+            "true_frames": int((flags & true_at).sum()), "false_frames": int((flags & ~true_at).sum()),
+            "events": len(events), "true_events": sum(e["true"] for e in events),
+            "false_events": sum(not e["true"] for e in events),
+            "revisit_frames": int(revisit.sum()), "revisits_detected": int((flags & true_at & revisit).sum()),
+            "delays": delays, "event_list": events, "flags": flags}
