@@ -1,0 +1,287 @@
+"""Scoring a similarity matrix (or a detector's decisions) against ground-truth loops.
+
+What is measured, exactly
+-------------------------
+The ground truth is :func:`greenloop.groundtruth.loop_matrix` (Qi 2024 Eq. 5) or
+:func:`greenloop.groundtruth.loop_matrix_metric`: a symmetric (N, N) bool matrix; that module is
+the one place that defines when two frames are a loop. Here every **unordered pair of frames
+(i, j), i < j, with j - i > exclude** (default 150 frames, Qi 2024) is one sample, labelled by
+``GT[i, j]`` and scored by ``S[i, j]`` (row = earlier/database frame, column = later/query
+frame; higher = more similar). Pairs within ``exclude`` frames never count, whatever GT says.
+"AP" is scikit-learn's ``average_precision_score`` over those pairs: the **step-wise** sum
+``AP = sum_n (R_n - R_{n-1}) P_n`` over the distinct score thresholds, highest first (P_n, R_n
+the precision and recall of declaring every pair scored >= the n-th threshold a loop). It is
+*not* the trapezoidal area under the PR curve (``sklearn.metrics.auc(recall, precision)``),
+which interpolates linearly and is optimistic; it is also not a per-query mean (that is
+:func:`recall_at_k`'s place-recognition view). Numbers from tools that use another definition
+or another ground truth (other thresholds, ``exclude``, or pairs counted twice) are not comparable.
+
+Honest tuning
+-------------
+Any tuned knob (median-filter size, PCA dimension, a detector's threshold) is tuned on one part
+of the sequence and scored on another, never picked by its score on the evaluation ground
+truth. :func:`split_mask` gives two disjoint sets of *query* frames; every pair-based function
+takes ``queries=``: a (N,) bool mask, and pair (i, j), i < j, counts only when the later frame
+j is in the mask (the earlier frame i may be anywhere). Tune with ``queries=tune``, report with
+``queries=eval``.
+"""
+from __future__ import annotations
+
+import numpy as np
+from sklearn.metrics import average_precision_score, precision_recall_curve
+
+from greenloop.groundtruth import revisit_frames
+
+__all__ = [
+    "pair_mask", "pair_scores", "pr_curve", "average_precision", "recall_at_100_precision",
+    "recall_at_k", "operating_point", "split_mask",
+]
+
+_NO_LOOPS = ("the ground truth has no loops among the counted pairs (|i - j| > exclude={exclude}"
+             "{q}): use a larger pose threshold in greenloop.groundtruth.loop_matrix, a smaller "
+             "exclude, or other query frames; the sequence may not revisit any place")
+
+
+# ----------------------------------------------------------------------------------- checks
+def _check_exclude(exclude) -> int:
+    if isinstance(exclude, bool) or not isinstance(exclude, (int, np.integer)) or exclude < 0:
+        raise ValueError(f"exclude must be an integer >= 0 (frames), got {exclude!r}")
+    return int(exclude)
+
+
+def _check_gt(GT, name: str = "GT") -> np.ndarray:
+    G = np.asarray(GT)
+    if G.ndim != 2 or G.shape[0] != G.shape[1]:
+        raise ValueError(f"{name} must be a square (N, N) loop matrix from "
+                         f"greenloop.groundtruth.loop_matrix, got shape {G.shape}")
+    if G.dtype != bool:
+        if not np.issubdtype(G.dtype, np.number) or not np.all(np.isin(G, (0, 1))):
+            raise ValueError(f"{name} must be boolean (or 0/1), got dtype {G.dtype}")
+        G = G.astype(bool)
+    if not np.array_equal(G, G.T):
+        raise ValueError(f"{name} must be symmetric, as greenloop.groundtruth.loop_matrix returns; "
+                         f"for a one-triangle matrix pass `gt | gt.T`")
+    return G
+
+
+def _check_pair(S, GT):
+    S = np.asarray(S)
+    G = np.asarray(GT)
+    if S.ndim != 2 or G.ndim != 2 or S.shape != G.shape or S.shape[0] != S.shape[1]:
+        raise ValueError(f"S and GT must be square matrices of the same size (N, N): S has shape "
+                         f"{S.shape}, GT has shape {G.shape}; compute both from the same frames")
+    if not np.issubdtype(S.dtype, np.number) or np.iscomplexobj(S):
+        raise ValueError(f"S must be a real numeric similarity matrix, got dtype {S.dtype}")
+    G = _check_gt(G)
+    return S, G
+
+
+def _check_queries(queries, n: int):
+    if queries is None:
+        return None
+    q = np.asarray(queries)
+    if q.shape != (n,) or q.dtype != bool:
+        raise ValueError(f"queries must be a (N,) bool mask of query frames with N={n}, got "
+                         f"shape {q.shape} dtype {q.dtype} (see split_mask)")
+    return q
+
+
+def pair_mask(n: int, exclude: int = 150, queries=None) -> np.ndarray:
+    """The counted pairs: (n, n) bool, True at [i, j] iff i < j, j - i > exclude and
+    (queries is None or queries[j]). ``S[pair_mask(...)]`` lists them in row-major order,
+    the order used by :func:`pair_scores` and by a (P,) ``predicted`` in :func:`operating_point`.
+    """
+    exclude = _check_exclude(exclude)
+    q = _check_queries(queries, n)
+    idx = np.arange(n)
+    m = (idx[None, :] - idx[:, None]) > exclude
+    if q is not None:
+        m &= q[None, :]
+    return m
+
+
+# ------------------------------------------------------------------------------ scores
+def pair_scores(S, GT, exclude: int = 150, queries=None):
+    """Labels and scores of the counted pairs, ready for scikit-learn metrics.
+
+    S: (N, N) similarity matrix, higher = more similar; S[i, j], i < j, is used (earlier frame
+       as database row, later frame as query column).
+    GT: (N, N) bool symmetric ground truth from :mod:`greenloop.groundtruth`.
+    exclude: pairs with |i - j| <= exclude frames are left out even where GT is True.
+    queries: optional (N,) bool; only pairs whose later frame j is in it count (module doc).
+    Returns (y_true (P,) bool, y_score (P,) float) over pairs i < j, j - i > exclude, each
+    unordered pair once, in row-major order.
+    Raises ValueError if the shapes differ, S has NaN, or no counted pair is a loop.
+    """
+    S, G = _check_pair(S, GT)
+    m = pair_mask(S.shape[0], exclude, queries)
+    y_true, y_score = G[m], S[m]
+    if y_score.size == 0:
+        raise ValueError(f"no pairs to score: N={S.shape[0]} frames with exclude={exclude} "
+                         f"(and the query mask) leave no pair with j - i > exclude")
+    if not np.all(np.isfinite(y_score)):
+        raise ValueError("S contains NaN or inf among the counted pairs; fix the similarity")
+    if not y_true.any():
+        raise ValueError(_NO_LOOPS.format(exclude=exclude,
+                                          q="" if queries is None else ", in the query mask"))
+    return y_true, y_score
+
+
+def pr_curve(S, GT, exclude: int = 150, queries=None):
+    """Precision-recall curve over the counted pairs (sklearn.metrics.precision_recall_curve).
+
+    Arguments as in :func:`pair_scores`. Returns (precision, recall, thresholds) exactly as
+    scikit-learn does: thresholds (T,) are the distinct scores in increasing order; precision
+    and recall have T + 1 entries, the last being precision 1, recall 0 (no threshold).
+    Declaring pairs with S >= thresholds[k] loops gives precision[k], recall[k].
+    """
+    y_true, y_score = pair_scores(S, GT, exclude, queries)
+    return precision_recall_curve(y_true, y_score)
+
+
+def average_precision(S, GT, exclude: int = 150, queries=None) -> float:
+    """Average precision over the counted pairs (sklearn.metrics.average_precision_score).
+
+    Step-wise: AP = sum_n (R_n - R_{n-1}) P_n over the distinct thresholds, highest first;
+    NOT the trapezoidal area under the PR curve. Arguments as in :func:`pair_scores`.
+    Returns a float in [0, 1]; a random score gives about the fraction of loop pairs.
+    """
+    y_true, y_score = pair_scores(S, GT, exclude, queries)
+    return float(average_precision_score(y_true, y_score))
+
+
+def recall_at_100_precision(S, GT, exclude: int = 150, queries=None) -> float:
+    """The largest recall reached with precision exactly 1 (no false loop declared).
+
+    Arguments as in :func:`pair_scores`. Thresholds are the distinct scores, so tied pairs are
+    declared together: 0.0 if the top-scored pair (or any pair tied with it) is not a loop.
+    """
+    precision, recall, _ = pr_curve(S, GT, exclude, queries)
+    return float(recall[precision == 1.0].max())
+
+
+def recall_at_k(S, GT, k: int = 1, exclude: int = 150, queries=None) -> float:
+    """Place-recognition recall@k (per query, not per pair).
+
+    Definition: a query is a frame j with at least one ground-truth loop partner among the
+    earlier frames i with j - i > exclude (and, if given, queries[j] True). Its candidates are
+    exactly those earlier frames i < j - exclude, ranked by S[i, j] from high to low (ties: the
+    earlier frame first). The query succeeds if any of its top k candidates is a loop (GT[i, j]).
+    Returns the fraction of queries that succeed, a float in [0, 1].
+
+    S: (N, N) similarity, higher = more similar (column j = query). GT: (N, N) bool symmetric.
+    k: integer >= 1. Raises ValueError if no frame is a query (no loops).
+    """
+    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
+        raise ValueError(f"k must be an integer >= 1, got {k!r}")
+    S, G = _check_pair(S, GT)
+    n = S.shape[0]
+    cand = pair_mask(n, exclude, queries)               # [i, j]: i is a candidate of query j
+    true = G & cand
+    is_query = true.any(0)
+    if not is_query.any():
+        raise ValueError(_NO_LOOPS.format(exclude=exclude,
+                                          q="" if queries is None else ", in the query mask"))
+    Sq = np.asarray(S[:, is_query], dtype=np.float64)
+    cq, tq = cand[:, is_query], true[:, is_query]
+    if not np.all(np.isfinite(Sq[cq])):
+        raise ValueError("S contains NaN or inf among the candidate pairs; fix the similarity")
+    # rank of the best-placed true loop = candidates ranked before it; success iff rank < k
+    best = np.where(tq, Sq, -np.inf).max(0)                            # (Q,)
+    rows = np.arange(n)[:, None]
+    first = np.where(tq & (Sq == best), rows, n).min(0)               # earliest true loop at best
+    ahead = cq & ((Sq > best) | ((Sq == best) & (rows < first)))
+    return float(np.mean(ahead.sum(0) < k))
+
+
+# -------------------------------------------------------------------- decision detectors
+def operating_point(predicted, GT, exclude: int = 150, queries=None) -> dict:
+    """Precision and recall of a detector that outputs loop decisions, not scores.
+
+    predicted: either an (N, N) bool matrix of declared loop pairs (a pair i < j counts as
+        declared if predicted[i, j] or predicted[j, i], so a detector may fill either triangle,
+        e.g. row = query, column = matched earlier frame), or a (P,) bool vector aligned with
+        the counted pairs of :func:`pair_scores` (row-major order of :func:`pair_mask`).
+    GT, exclude, queries: as in :func:`pair_scores`; only counted pairs are scored.
+    Returns dict(precision, recall, tp, fp, fn, ignored): counts over counted pairs;
+    precision = tp / (tp + fp) (NaN if nothing was declared: undefined, not 1), recall =
+    tp / (tp + fn); ``ignored`` = declared pairs not counted (within ``exclude`` frames or
+    outside ``queries``), reported so that they are not silently lost.
+    The point can be drawn on the axes of :func:`pr_curve` (x = recall, y = precision).
+    """
+    G = _check_gt(GT)
+    n = G.shape[0]
+    m = pair_mask(n, exclude, queries)
+    P = np.asarray(predicted)
+    if P.dtype != bool:
+        raise ValueError(f"predicted must be boolean decisions, got dtype {P.dtype}")
+    if P.ndim == 2:
+        if P.shape != G.shape:
+            raise ValueError(f"predicted and GT must have the same shape: predicted has shape "
+                             f"{P.shape}, GT has shape {G.shape}")
+        declared = np.triu(P | P.T, 1)
+        ignored = int((declared & ~m).sum())
+        pred = declared[m]
+    elif P.ndim == 1:
+        n_pairs = int(m.sum())
+        if P.shape[0] != n_pairs:
+            raise ValueError(f"a 1-D predicted must have one entry per counted pair: expected "
+                             f"shape ({n_pairs},) for N={n}, exclude={exclude}, got {P.shape}")
+        pred, ignored = P, 0
+    else:
+        raise ValueError(f"predicted must be (N, N) or (P,) bool, got shape {P.shape}")
+    y = G[m]
+    if not y.any():
+        raise ValueError(_NO_LOOPS.format(exclude=exclude,
+                                          q="" if queries is None else ", in the query mask"))
+    tp = int(np.sum(pred & y))
+    fp = int(np.sum(pred & ~y))
+    fn = int(np.sum(~pred & y))
+    precision = tp / (tp + fp) if tp + fp else float("nan")
+    return dict(precision=float(precision), recall=tp / (tp + fn), tp=tp, fp=fp, fn=fn,
+                ignored=ignored)
+
+
+# ------------------------------------------------------------------------------ tuning
+def split_mask(n: int, fraction: float = 0.5, gt=None, gap: int = 0):
+    """Two disjoint, contiguous sets of query frames: tune on one, report on the other.
+
+    n: number of frames. fraction: share of the split that goes to the tuning part (0 < f < 1).
+    gt: optional (n, n) ground truth. Without it, the cut is at frame round(fraction * n).
+        With it, the cut puts ``fraction`` of the *revisit frames* (frames with a loop partner
+        earlier in the sequence, :func:`greenloop.groundtruth.revisit_frames`) in the tuning
+        part, and at least one in each part; use this when loops are rare or clustered (the
+        GreenHouse set revisits only in frames ~2068-2260, so a plain cut at n/2 would leave
+        the tuning part without any loop). Only labels are used, never scores.
+    gap: frames right after the cut that belong to neither part, so that near-duplicate
+        neighbours (and median-filter windows, use gap >= size) do not straddle it.
+    Returns (tune (n,) bool, evaluate (n,) bool): tune = frames before the cut, evaluate =
+    frames from cut + gap on. Pass them as ``queries=`` to the scoring functions.
+    """
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 2:
+        raise ValueError(f"n must be an integer >= 2 frames, got {n!r}")
+    if not 0 < fraction < 1:
+        raise ValueError(f"fraction must be strictly between 0 and 1, got {fraction}")
+    if isinstance(gap, bool) or not isinstance(gap, (int, np.integer)) or gap < 0:
+        raise ValueError(f"gap must be an integer >= 0 frames, got {gap!r}")
+    if gt is None:
+        cut = min(max(int(round(fraction * n)), 1), n - 1)
+    else:
+        G = _check_gt(gt)
+        if G.shape[0] != n:
+            raise ValueError(f"gt has shape {G.shape} but n={n}")
+        rev = np.flatnonzero(revisit_frames(G))
+        if rev.size < 2:
+            raise ValueError(f"the ground truth has {rev.size} revisit frame(s); a split needs at "
+                             f"least 2 (one per part): the sequence may not revisit any place")
+        m = min(max(int(round(fraction * rev.size)), 1), rev.size - 1)
+        cut = int(rev[m])                     # rev[:m] tune, rev[m:] evaluate
+    idx = np.arange(n)
+    tune = idx < cut
+    evaluate = idx >= cut + gap
+    if not evaluate.any():
+        raise ValueError(f"gap={gap} leaves no evaluation frames after the cut at frame {cut}")
+    if gt is not None and not np.any(evaluate[rev]):
+        raise ValueError(f"gap={gap} leaves no revisit frame in the evaluation part; use a "
+                         f"smaller gap or a smaller fraction")
+    return tune, evaluate

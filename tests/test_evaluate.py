@@ -1,0 +1,240 @@
+"""Unit tests of greenloop.evaluate: hand-made examples plus the real GreenHouse trajectory."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from greenloop import evaluate as ev
+from greenloop.groundtruth import loop_matrix, pose_error
+
+GREENHOUSE = Path(__file__).resolve().parents[2] / "shared" / "greenhouse"
+
+# --------------------------------------------------------------------- a hand-made example
+# 7 frames, exclude = 2: the counted pairs are i < j with j - i >= 3 (10 pairs).
+N, EXCL = 7, 2
+PAIRS = {  # (i, j): (score, is_loop)   ranked by score: + - + + - - - + - -
+    (0, 3): (0.95, True),
+    (1, 4): (0.90, False),
+    (0, 4): (0.85, True),
+    (1, 5): (0.80, True),
+    (2, 5): (0.70, False),
+    (0, 5): (0.60, False),
+    (1, 6): (0.50, False),
+    (3, 6): (0.40, True),
+    (0, 6): (0.30, False),
+    (2, 6): (0.20, False),
+}
+
+
+def hand_example():
+    S = np.zeros((N, N))
+    GT = np.zeros((N, N), dtype=bool)
+    for (i, j), (s, y) in PAIRS.items():
+        S[i, j] = S[j, i] = s
+        GT[i, j] = GT[j, i] = y
+    # inside the exclusion window: a "loop" with the top score, which must be ignored
+    S[2, 3] = S[3, 2] = 0.99
+    GT[2, 3] = GT[3, 2] = True
+    S[4, 5] = S[5, 4] = 0.98
+    return S, GT
+
+
+def stepwise_ap_by_hand(scores, labels):
+    """AP = sum over ranks n of (R_n - R_{n-1}) P_n, distinct scores, highest first."""
+    order = np.argsort(scores)[::-1]
+    lab = np.asarray(labels)[order]
+    tp = np.cumsum(lab)
+    precision = tp / np.arange(1, len(lab) + 1)
+    recall = tp / lab.sum()
+    prev = np.concatenate([[0.0], recall[:-1]])
+    return float(np.sum((recall - prev) * precision))
+
+
+def test_pair_scores_counts_each_far_pair_once_and_ignores_the_window():
+    S, GT = hand_example()
+    y, s = ev.pair_scores(S, GT, exclude=EXCL)
+    assert len(y) == len(PAIRS) == 10
+    assert sorted(s.tolist()) == sorted(v[0] for v in PAIRS.values())
+    assert 0.99 not in s and 0.98 not in s
+    assert y.sum() == 4
+    # the order is the row-major order of pair_mask
+    m = ev.pair_mask(N, EXCL)
+    assert np.array_equal(s, S[m]) and m.sum() == 10 and not np.any(np.tril(m))
+
+
+def test_average_precision_is_stepwise_not_trapezoid():
+    S, GT = hand_example()
+    scores, labels = zip(*PAIRS.values())
+    by_hand = stepwise_ap_by_hand(scores, labels)
+    # + - + + - - - + - - : precisions at the hits 1/1, 2/3, 3/4, 4/8
+    assert by_hand == pytest.approx((1 + 2 / 3 + 3 / 4 + 4 / 8) / 4)
+    ap = ev.average_precision(S, GT, exclude=EXCL)
+    assert ap == pytest.approx(by_hand, abs=1e-12)
+    p, r, _ = ev.pr_curve(S, GT, exclude=EXCL)
+    trapezoid = float(-np.trapezoid(p, r))
+    assert abs(trapezoid - ap) > 1e-3          # the two definitions differ on this example
+
+
+def test_recall_at_100_precision_hand_examples():
+    S, GT = hand_example()
+    assert ev.recall_at_100_precision(S, GT, exclude=EXCL) == pytest.approx(1 / 4)
+    S2 = S.copy()
+    S2[1, 4] = S2[4, 1] = 0.99                  # a false pair on top
+    assert ev.recall_at_100_precision(S2, GT, exclude=EXCL) == 0.0
+    S3 = S.copy()
+    S3[1, 4] = S3[4, 1] = 0.95                  # a false pair tied with the top true pair
+    assert ev.recall_at_100_precision(S3, GT, exclude=EXCL) == 0.0
+    S4 = S.copy()
+    S4[1, 4] = S4[4, 1] = 0.1                   # now the first three ranks are all true
+    assert ev.recall_at_100_precision(S4, GT, exclude=EXCL) == pytest.approx(3 / 4)
+
+
+def naive_recall_at_k(S, GT, k, exclude, queries=None):
+    hits, total = 0, 0
+    for j in range(len(S)):
+        if queries is not None and not queries[j]:
+            continue
+        cand = [i for i in range(j) if j - i > exclude]
+        if not any(GT[i, j] for i in cand):
+            continue
+        total += 1
+        ranked = sorted(cand, key=lambda i: (-S[i, j], i))   # ties: earlier frame first
+        hits += any(GT[i, j] for i in ranked[:k])
+    return hits / total
+
+
+def test_recall_at_k_hand_example():
+    S, GT = hand_example()
+    # queries with a loop: 3 (cand 0: loop), 4 (cand 0 .85 loop, 1 .90 no),
+    # 5 (cand 0 .60 no, 1 .80 loop, 2 .70 no), 6 (0 .30, 1 .50, 2 .20, 3 .40 loop)
+    assert ev.recall_at_k(S, GT, k=1, exclude=EXCL) == pytest.approx(2 / 4)   # 3, 5
+    assert ev.recall_at_k(S, GT, k=2, exclude=EXCL) == pytest.approx(4 / 4)
+    q = np.zeros(N, dtype=bool)
+    q[[4, 6]] = True
+    assert ev.recall_at_k(S, GT, k=1, exclude=EXCL, queries=q) == 0.0
+    assert ev.recall_at_k(S, GT, k=2, exclude=EXCL, queries=q) == 1.0
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_recall_at_k_matches_naive_loop_with_ties(seed):
+    rng = np.random.default_rng(seed)
+    n, exclude = 40, 5
+    S = np.round(rng.random((n, n)), 1)         # many ties
+    G = rng.random((n, n)) < 0.08
+    G = np.triu(G | G.T, exclude + 1)
+    G = G | G.T
+    q = rng.random(n) < 0.7
+    for k in (1, 2, 5):
+        got = ev.recall_at_k(S, G, k, exclude)
+        assert got == pytest.approx(naive_recall_at_k(S, G, k, exclude))
+        assert ev.recall_at_k(S, G, k, exclude, queries=q) == pytest.approx(
+            naive_recall_at_k(S, G, k, exclude, q))
+
+
+def test_queries_mask_restricts_pairs_by_later_frame():
+    S, GT = hand_example()
+    q = np.zeros(N, dtype=bool)
+    q[[5, 6]] = True
+    y, s = ev.pair_scores(S, GT, exclude=EXCL, queries=q)
+    keep = [(i, j) for (i, j) in PAIRS if q[j]]
+    assert sorted(s.tolist()) == sorted(PAIRS[p][0] for p in keep)
+    ap = ev.average_precision(S, GT, exclude=EXCL, queries=q)
+    scores, labels = zip(*(PAIRS[p] for p in keep))
+    assert ap == pytest.approx(stepwise_ap_by_hand(scores, labels))
+    with pytest.raises(ValueError, match="queries"):
+        ev.average_precision(S, GT, exclude=EXCL, queries=np.ones(N + 1, dtype=bool))
+
+
+def test_operating_point_hand_example():
+    S, GT = hand_example()
+    P = np.zeros((N, N), dtype=bool)
+    P[3, 0] = True          # tp, declared in the lower triangle (row = query)
+    P[4, 1] = True          # fp
+    P[1, 5] = P[5, 1] = True  # tp, both triangles: one pair
+    P[6, 0] = True          # fp
+    P[3, 2] = True          # inside the window: ignored
+    out = ev.operating_point(P, GT, exclude=EXCL)
+    assert out == dict(precision=0.5, recall=0.5, tp=2, fp=2, fn=2, ignored=1)
+    flat = np.triu(P | P.T, 1)[ev.pair_mask(N, EXCL)]
+    out1 = ev.operating_point(flat, GT, exclude=EXCL)
+    assert {k: out1[k] for k in ("tp", "fp", "fn")} == dict(tp=2, fp=2, fn=2)
+    none = ev.operating_point(np.zeros((N, N), dtype=bool), GT, exclude=EXCL)
+    assert np.isnan(none["precision"]) and none["recall"] == 0 and none["fn"] == 4
+    with pytest.raises(ValueError, match="bool"):
+        ev.operating_point(P.astype(int), GT, exclude=EXCL)
+    with pytest.raises(ValueError, match=r"\(10,\)"):
+        ev.operating_point(np.ones(3, dtype=bool), GT, exclude=EXCL)
+
+
+def test_errors_size_mismatch_no_loops_bad_input():
+    S, GT = hand_example()
+    with pytest.raises(ValueError, match=r"\(7, 7\).*\(6, 6\)"):
+        ev.average_precision(S, GT[:6, :6], exclude=EXCL)
+    with pytest.raises(ValueError, match="no loops"):
+        ev.average_precision(S, np.zeros_like(GT), exclude=EXCL)
+    only_near = np.zeros_like(GT)
+    only_near[2, 3] = only_near[3, 2] = True  # a loop, but inside the window
+    for f in (ev.pair_scores, ev.pr_curve, ev.average_precision, ev.recall_at_100_precision,
+              ev.recall_at_k):
+        with pytest.raises(ValueError, match="no loops"):
+            f(S, only_near, exclude=EXCL)
+    with pytest.raises(ValueError, match="symmetric"):
+        ev.average_precision(S, np.triu(GT), exclude=EXCL)
+    with pytest.raises(ValueError, match="exclude"):
+        ev.average_precision(S, GT, exclude=-1)
+    with pytest.raises(ValueError, match="no pairs"):
+        ev.average_precision(S, GT, exclude=N)
+    S_nan = S.copy()
+    S_nan[0, 3] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        ev.average_precision(S_nan, GT, exclude=EXCL)
+    with pytest.raises(ValueError, match="k must"):
+        ev.recall_at_k(S, GT, k=0, exclude=EXCL)
+
+
+def test_split_mask():
+    tune, evl = ev.split_mask(10, 0.3)
+    assert tune.tolist() == [True] * 3 + [False] * 7 and np.array_equal(evl, ~tune)
+    tune, evl = ev.split_mask(10, 0.5, gap=2)
+    assert tune.sum() == 5 and evl.sum() == 3 and not np.any(tune & evl)
+    S, GT = hand_example()
+    GT[2, 3] = GT[3, 2] = False              # loop_matrix never has pairs inside the window
+    tune, evl = ev.split_mask(N, 0.5, gt=GT)  # revisit frames 3, 4, 5, 6 -> 3, 4 | 5, 6
+    assert np.flatnonzero(tune).max() == 4 and np.flatnonzero(evl).min() == 5
+    assert ev.average_precision(S, GT, EXCL, queries=tune) > 0
+    with pytest.raises(ValueError, match="fraction"):
+        ev.split_mask(10, 1.0)
+    with pytest.raises(ValueError, match="revisit"):
+        ev.split_mask(N, 0.5, gt=np.zeros((N, N), dtype=bool))
+
+
+# ------------------------------------------------------------------- real GreenHouse poses
+@pytest.fixture(scope="module")
+def greenhouse_poses():
+    path = GREENHOUSE / "CameraTrajectory.txt"
+    if not path.is_file():
+        pytest.skip(f"real GreenHouse trajectory not found at {path}")
+    from greenloop.data import read_trajectory
+    _, poses = read_trajectory(path)
+    return poses
+
+
+def test_pose_similarity_is_perfect_on_greenhouse(greenhouse_poses):
+    poses = greenhouse_poses
+    GT = loop_matrix(poses, threshold=0.5, exclude=150)
+    S = -pose_error(poses)                     # the pose error itself as a similarity
+    assert ev.average_precision(S, GT, exclude=150) == pytest.approx(1.0)
+    assert ev.recall_at_100_precision(S, GT, exclude=150) == pytest.approx(1.0)
+    assert ev.recall_at_k(S, GT, k=1, exclude=150) == pytest.approx(1.0)
+    y, _ = ev.pair_scores(S, GT, exclude=150)
+    n = len(poses)
+    assert len(y) == (n - 151) * (n - 150) // 2
+    # a random similarity scores about the fraction of loop pairs
+    rng = np.random.default_rng(0)
+    R = rng.random((n, n)).astype(np.float32)
+    assert ev.average_precision(R, GT, exclude=150) < 0.05
+    # an honest split on the real set keeps loops on both sides
+    tune, evl = ev.split_mask(n, 0.5, gt=GT, gap=10)
+    assert ev.average_precision(S, GT, 150, queries=tune) == pytest.approx(1.0)
+    assert ev.average_precision(S, GT, 150, queries=evl) == pytest.approx(1.0)
+    assert np.flatnonzero(tune).max() > 2000      # the revisit is at the end of the sequence
