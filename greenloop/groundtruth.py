@@ -53,7 +53,9 @@ def pose_error(poses) -> np.ndarray:
     rot2 = np.maximum(6.0 - 2.0 * trace, 0.0)
     sq = np.einsum("ij,ij->i", t, t)
     trans2 = np.maximum(sq[:, None] + sq[None, :] - 2.0 * t @ t.T, 0.0)
-    return np.sqrt(rot2 + trans2)
+    e = np.sqrt(rot2 + trans2)
+    np.fill_diagonal(e, 0.0)
+    return e
 
 
 def loop_matrix(poses, threshold: float = 0.5, exclude: int = 150) -> np.ndarray:

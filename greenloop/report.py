@@ -144,7 +144,9 @@ def assemble_tables(results_dir="results", out: str | Path | None = None) -> Pat
              "Assembled by `make` from the notebooks' own outputs; nothing here is typed by hand. "
              f"Paper values appear only in the `{PAPER}` column, beside the value measured in "
              f"`{RUN}`.\n"]
-    for folder in sorted(p for p in results_dir.iterdir() if p.is_dir() and p.name[:2].isdigit()):
+    folders = sorted(p for p in results_dir.iterdir() if p.is_dir() and p.name[:2].isdigit())
+    folders += [results_dir / "bench"] if (results_dir / "bench").is_dir() else []
+    for folder in folders:
         tables = sorted(folder.glob("*.md"))
         if not tables:
             continue

@@ -1,0 +1,93 @@
+import json
+
+import numpy as np
+import pytest
+
+from greenloop import cnn, spots
+
+
+def _toy(n=120, L=30, seed=0):
+    rng = np.random.default_rng(seed)
+    y = spots.group(n, L)
+    X = (rng.random((n, 32, 32, 1)) * 0.3 + (y[:, None, None, None] + 1) / 6).astype(np.float32)
+    return X, y
+
+
+def test_build_is_the_papers_model():
+    m = cnn.build(38)
+    kinds = [type(l).__name__ for l in m.layers]
+    assert kinds == ["Conv2D", "Flatten", "Dense", "Dense"]
+    conv, _, dense, out = m.layers
+    assert conv.filters == 32 and conv.kernel_size == (3, 3) and conv.activation.__name__ == "relu"
+    assert dense.units == 68 and out.units == 38 and out.activation.__name__ == "softmax"
+    assert m.count_params() == 320 + 30 * 30 * 32 * 68 + 68 + 68 * 38 + 38
+    assert m.optimizer.learning_rate.numpy() == pytest.approx(1e-3)
+    with pytest.raises(ValueError):
+        cnn.build(1)
+
+
+def test_random_split_sizes_match_paper():
+    tr, te = cnn.split_indices(spots.group(2260, 60), seed=0)
+    assert (len(tr), len(te)) == (1808, 452) and len(np.intersect1d(tr, te)) == 0
+
+
+def test_blocked_split_keeps_neighbours_out():
+    y = spots.group(600, 60)
+    tr, te = cnn.split_indices(y, seed=3, split="blocked", gap=5)
+    assert len(np.intersect1d(tr, te)) == 0
+    dist = np.abs(te[:, None] - tr[None, :]).min(1)
+    assert dist.min() > 5  # every test frame is more than `gap` frames from any training frame
+    assert set(np.unique(y[te])) == set(np.unique(y))  # every spot is tested
+    assert len(te) == 10 * 12
+    with pytest.raises(ValueError, match="split must be"):
+        cnn.split_indices(y, 0, split="stratified")
+
+
+def test_train_is_deterministic_and_learns(tmp_path):
+    X, y = _toy()
+    a = cnn.train(X, y, seed=1, epochs=3, cache=False, progress=False)
+    b = cnn.train(X, y, seed=1, epochs=3, cache=False, progress=False)
+    assert a[1]["val_loss"] == b[1]["val_loss"]
+    assert (a[2]["test"] == b[2]["test"]).all()
+    c = cnn.train(X, y, seed=2, epochs=3, cache=False, progress=False)
+    assert a[1]["val_loss"] != c[1]["val_loss"]
+    model, hist, split = cnn.train(X, y, seed=1, epochs=15, cache=False, progress=False)
+    assert hist["accuracy"][-1] > hist["accuracy"][0]
+    assert np.mean(cnn.predict(model, X[split["test"]]) == y[split["test"]]) > 0.5
+
+
+def test_cache_reuses_and_key_changes(tmp_path):
+    X, y = _toy()
+    base = dict(seed=0, epochs=2, batch_size=32, test_size=0.2, split="random", n_classes=4, fast=True, gap=None)
+    k0 = cnn.cache_key(X, y, **base)
+    for name, value in [("seed", 1), ("epochs", 3), ("batch_size", 16), ("test_size", 0.3),
+                        ("split", "blocked"), ("n_classes", 5), ("fast", False)]:
+        assert cnn.cache_key(X, y, **dict(base, **{name: value})) != k0, name
+    X2 = X.copy(); X2[0, 0, 0, 0] += 0.01
+    assert cnn.cache_key(X2, y, **base) != k0
+    assert cnn.cache_key(X, y[::-1].copy(), **base) != k0
+
+    m1, h1, s1 = cnn.train(X, y, seed=0, epochs=2, cache=tmp_path, progress=False)
+    folders = [p for p in tmp_path.iterdir() if p.is_dir()]
+    assert len(folders) == 1 and (folders[0] / "model.keras").is_file()
+    assert json.loads((folders[0] / "params.json").read_text())["epochs"] == 2
+    m2, h2, s2 = cnn.train(X, y, seed=0, epochs=2, cache=tmp_path, progress=False)
+    assert h2 == h1 and (s2["test"] == s1["test"]).all()
+    assert np.allclose(m2.predict(X[:4], verbose=0), m1.predict(X[:4], verbose=0))
+    assert not list(tmp_path.glob(".tmp-*"))
+
+
+def test_run_seeds_reports_accuracy(tmp_path):
+    X, y = _toy()
+    runs = cnn.run_seeds(X, y, [0, 1], epochs=2, cache=tmp_path, progress=False)
+    assert [r["seed"] for r in runs] == [0, 1]
+    for r in runs:
+        assert r["test_accuracy"] == pytest.approx(np.mean(r["test_pred"] == y[r["split"]["test"]]))
+
+
+def test_train_rejects_bad_input():
+    X, y = _toy()
+    with pytest.raises(ValueError, match="X must be"):
+        cnn.train(X[:, :, :, 0], y, seed=0, cache=False)
+    with pytest.raises(ValueError, match="epochs"):
+        cnn.train(X, y, seed=0, epochs=0, cache=False)
