@@ -86,6 +86,10 @@ sweep: ## papermill sweep of frames per spot (40..80) into results/sweep/
 	    PARAMS="-p frames_per_spot_list '[$$L]' $(PARAMS)" || exit 1; \
 	done
 
+bench: | $(STAMP) ## speed benchmark: streaming detector and training vs plain Keras -> results/bench/
+	$(BIN)/python -m greenloop.bench --out $(RESULTS)/bench --dataset $(DATASET)
+	$(BIN)/python -m greenloop.report $(RESULTS)
+
 test: | $(STAMP) ## run the test suite (unit tests and every notebook on tiny parameters)
 	$(BIN)/python -m pytest -q tests
 

@@ -155,7 +155,8 @@ def train(X: np.ndarray, y: np.ndarray, seed: int, epochs: int = 200, batch_size
         ``cache_key`` and written atomically under a file lock, so reruns and parallel ``make -j``
         jobs reuse a model instead of training it again.
     Returns (model, history, split): history maps 'accuracy', 'loss', 'val_accuracy', 'val_loss'
-    to per-epoch lists plus 'seconds' (training wall time); split = {'train': idx, 'test': idx}.
+    and 'epoch_seconds' to per-epoch lists, plus 'seconds' (training wall time);
+    split = {'train': idx, 'test': idx}.
     """
     X = np.asarray(X, dtype=np.float32)
     y = np.asarray(y, dtype=np.int64)
@@ -197,12 +198,17 @@ def _fit(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size, spli
     steps = int(np.ceil(len(train_idx) / batch_size)) if fast else 1
     model = build(n_classes, X.shape[1:], jit_compile=bool(fast), steps_per_execution=steps)
     Y = keras.utils.to_categorical(y, n_classes).astype(np.float32)
-    callbacks = [_epoch_bar(epochs, f"train seed {seed} ({split})")] if progress else []
+    epoch_seconds = []
+    clock = keras.callbacks.LambdaCallback(
+        on_epoch_begin=lambda e, logs: epoch_seconds.append(-time.perf_counter()),
+        on_epoch_end=lambda e, logs: epoch_seconds.__setitem__(-1, epoch_seconds[-1] + time.perf_counter()))
+    callbacks = [clock] + ([_epoch_bar(epochs, f"train seed {seed} ({split})")] if progress else [])
     t0 = time.perf_counter()
     h = model.fit(X[train_idx], Y[train_idx], epochs=epochs, batch_size=batch_size, shuffle=True,
                   validation_data=(X[test_idx], Y[test_idx]), verbose=0, callbacks=callbacks)
     history = {k: [float(v) for v in vals] for k, vals in h.history.items()}
     history["seconds"] = time.perf_counter() - t0
+    history["epoch_seconds"] = epoch_seconds  # wall time per epoch (the first includes compilation)
     return model, history, {"train": train_idx, "test": test_idx}
 
 

@@ -52,24 +52,38 @@ def list_frames(folder, subfolder: str = "rgb") -> list[Path]:
     return sorted(frames, key=_numeric_key)
 
 
-def _read_one(path: Path, size, gray: bool, flags: int) -> np.ndarray:
-    img = cv2.imread(str(path), flags)
+def preprocess_image(img: np.ndarray, size=(32, 32), gray: bool = True, color: str = "bgr") -> np.ndarray:
+    """One decoded frame -> the model's input, uint8 (the one preprocessing path of greenloop).
+
+    img: (H, W, 3) uint8 BGR as OpenCV decodes it (``color="rgb"`` for RGB), or (H, W) /
+    (H, W, 1) gray. size: (width, height) or None to keep the size. gray: convert to gray with
+    OpenCV's cvtColor (else return RGB).
+    Returns (h, w) uint8 gray or (h, w, 3) uint8 RGB, resized with INTER_AREA when shrinking and
+    INTER_LINEAR when enlarging. ``load_frames`` and ``greenloop.stream`` both call this, so a
+    frame from disk and the same frame from a live camera give identical model inputs.
+    """
+    if img.ndim == 3 and img.shape[2] == 1:
+        img = img[:, :, 0]
+    if img.ndim == 3:
+        code = {("bgr", True): cv2.COLOR_BGR2GRAY, ("rgb", True): cv2.COLOR_RGB2GRAY,
+                ("bgr", False): cv2.COLOR_BGR2RGB, ("rgb", False): None}[(color, bool(gray))]
+        img = img if code is None else cv2.cvtColor(img, code)
+    elif not gray:
+        img = cv2.cvtColor(img, cv2.COLOR_GRAY2RGB)
+    if size is not None:
+        h, w = img.shape[:2]
+        if (w, h) != (int(size[0]), int(size[1])):
+            interp = cv2.INTER_AREA if w > size[0] else cv2.INTER_LINEAR
+            img = cv2.resize(img, (int(size[0]), int(size[1])), interpolation=interp)
+    return img
+
+
+def _read_one(path: Path, size, gray: bool) -> np.ndarray:
+    img = cv2.imread(str(path), cv2.IMREAD_COLOR)
     if img is None:
         raise ValueError(f"cannot read image {path}: the file is missing, empty or not an image; "
                          f"replace or delete it")
-    if gray and img.ndim == 3:
-        img = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
-    elif not gray:
-        if img.ndim == 2:
-            img = cv2.cvtColor(img, cv2.COLOR_GRAY2RGB)
-        else:
-            img = cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
-    if size is not None:
-        h, w = img.shape[:2]
-        if (w, h) != tuple(size):
-            interp = cv2.INTER_AREA if w > size[0] else cv2.INTER_LINEAR
-            img = cv2.resize(img, tuple(size), interpolation=interp)
-    return img
+    return preprocess_image(img, size, gray)
 
 
 def load_frames(folder, size=(32, 32), gray: bool = True, limit: int | None = None,
@@ -90,7 +104,6 @@ def load_frames(folder, size=(32, 32), gray: bool = True, limit: int | None = No
         if limit < 1:
             raise ValueError(f"limit must be >= 1, got {limit}")
         paths = paths[:limit]
-    flags = cv2.IMREAD_GRAYSCALE if gray else cv2.IMREAD_COLOR
     if size is not None:
         size = (int(size[0]), int(size[1]))
         if min(size) < 1:
@@ -98,7 +111,7 @@ def load_frames(folder, size=(32, 32), gray: bool = True, limit: int | None = No
     workers = min(8, (os.cpu_count() or 1) * 2)
     show = len(paths) > 200 if progress is None else progress
     with ThreadPoolExecutor(workers) as pool:
-        it = pool.map(lambda p: _read_one(p, size, gray, flags), paths)
+        it = pool.map(lambda p: _read_one(p, size, gray), paths)
         if show:
             from tqdm.auto import tqdm
             it = tqdm(it, total=len(paths), desc=f"load {Path(folder).name}", unit="frame")

@@ -1,0 +1,318 @@
+"""Speed benchmark (issue #5): the paper's pipeline as written vs greenloop.stream, in one process.
+
+    python -m greenloop.bench [--out results/bench] [--dataset data/synthetic-greenhouse] [--quick]
+
+Measures, interleaving reference and candidates so that load from other jobs hits both alike:
+(a) 70-frame windows from raw uint8 frames: the reference (per-frame cv2 preprocessing, Keras
+    ``model.predict`` on the window, the Python ``LoopDetector.update`` loop) vs
+    ``Detector.update_many`` (numpy and tflite backends); frames/s and ratio, plus the paper's own
+    quantity (classification + dictionary, preprocessing excluded);
+(b) single frames, preprocessing included: median and p99 latency, reference (``model.predict`` on
+    one frame) vs ``Detector.update``;
+(c) training seconds per epoch: plain ``model.fit`` (``greenloop.cnn.train(fast=False)``) vs the
+    fast path (``fast=True``), and the test accuracy of both after the same epochs;
+(d) label agreement of every backend with Keras on all frames; and the accuracy change of a
+    dynamic-range quantised TFLite export.
+Writes ``<out>/bench.json`` (figures, machine, CPU, versions, date) and ``<out>/bench.md`` /
+``bench.csv`` (measurement | reference | ours | ratio | target | met?).
+If the dataset folder is missing, frames are random (said so in bench.json).
+"""
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
+
+import cv2  # noqa: E402
+import numpy as np  # noqa: E402
+
+WINDOW = 70
+FRAMES_PER_SPOT = 60
+RAW_SIZE = (640, 480)
+
+
+def _synthetic(n: int, n_raw: int, seed: int = 0):
+    """Random stand-in data: (raw (n_raw, 480, 640, 3) uint8 BGR noise frames for timing,
+    X (n, 32, 32, 1) float32 and y (n,) spot labels: each spot a random 32x32 gray template plus
+    per-frame noise, so a classifier can learn it)."""
+    from . import spots
+
+    rng = np.random.default_rng(seed)
+    raw = rng.integers(0, 256, (n_raw, RAW_SIZE[1], RAW_SIZE[0], 3), dtype=np.uint8)
+    y = spots.group(n, FRAMES_PER_SPOT)
+    templates = rng.integers(0, 256, (y.max() + 1, 32, 32)).astype(np.float32)
+    u8 = np.clip(templates[y] + rng.normal(0, 40, (n, 32, 32)), 0, 255).astype(np.uint8)
+    return raw, u8
+
+
+def _load(dataset: Path, quick: bool):
+    """(raw frames list for timing, u8 (N, 32, 32) preprocessed frames, y (N,), info dict)."""
+    from . import data, spots
+
+    n_raw = 2 * WINDOW
+    if dataset.is_dir():
+        paths = data.list_frames(dataset)
+        raw = [cv2.imread(str(p), cv2.IMREAD_COLOR) for p in paths[:n_raw]]
+        if any(r is None for r in raw):
+            raise ValueError(f"cannot read the first {n_raw} frames of {dataset}")
+        u8 = data.load_frames(dataset, dtype=np.uint8, progress=False)[..., 0]
+        info = {"dataset": str(dataset), "random_frames": False, **data.describe(dataset)}
+    else:
+        n = 2260
+        raw, u8 = _synthetic(n, n_raw)
+        raw = list(raw)
+        info = {"dataset": str(dataset), "random_frames": True,
+                "note": f"{dataset} missing: timing frames are uniform random 640x480 BGR noise; "
+                        f"training/agreement frames are random 32x32 per-spot templates plus noise "
+                        f"({n} frames, {FRAMES_PER_SPOT} per spot)"}
+    y = spots.group(len(u8), FRAMES_PER_SPOT)
+    return raw, u8, y, info
+
+
+def _stats(ts) -> dict:
+    ts = np.asarray(ts) * 1e3
+    return {"median_ms": float(np.median(ts)), "p99_ms": float(np.percentile(ts, 99)),
+            "mean_ms": float(ts.mean()), "n": int(len(ts))}
+
+
+def _reference_window(model, frames, detector) -> list:
+    """The paper's pipeline: preprocess each frame, model.predict the window, Python dict loop."""
+    from .stream import preprocess
+
+    X = np.stack([preprocess(f) for f in frames])[..., None]
+    labels = model.predict(X, batch_size=len(X), verbose=0).argmax(1)
+    return [detector.update(int(c)) for c in labels]
+
+
+def bench_windows(model, raw, dets, rounds: int) -> dict:
+    """(a) 70-frame windows from raw frames; all pipelines interleaved round by round."""
+    from .dictionary import LoopDetector
+    from .stream import preprocess
+
+    n_classes = int(model.output_shape[-1])
+    wins = [raw[i:i + WINDOW] for i in range(0, len(raw) - WINDOW + 1, WINDOW)]
+    pre = [np.stack([preprocess(f) for f in w])[..., None] for w in wins]
+    small = [(X[..., 0] * 255).round().astype(np.uint8) for X in pre]  # already 32x32 gray frames
+    times = {"reference": [], "reference_no_preprocessing": [], "preprocessing_only": [],
+             **{k: [] for k in dets}, **{f"{k}_preprocessed_input": [] for k in dets}}
+    ref_dict = LoopDetector(n_classes, 10 ** 9)
+    model.predict(pre[0], batch_size=WINDOW, verbose=0)
+    for d in dets.values():
+        d.update_many(wins[0])
+    for r in range(rounds):
+        w, X = wins[r % len(wins)], pre[r % len(pre)]
+        t = time.perf_counter(); _reference_window(model, w, ref_dict); times["reference"].append(time.perf_counter() - t)
+        t = time.perf_counter()
+        for c in model.predict(X, batch_size=WINDOW, verbose=0).argmax(1):
+            ref_dict.update(int(c))
+        times["reference_no_preprocessing"].append(time.perf_counter() - t)
+        t = time.perf_counter(); [preprocess(f) for f in w]; times["preprocessing_only"].append(time.perf_counter() - t)
+        for k, d in dets.items():
+            t = time.perf_counter(); d.update_many(w); times[k].append(time.perf_counter() - t)
+        for k, d in dets.items():
+            t = time.perf_counter(); d.update_many(small[r % len(small)])
+            times[f"{k}_preprocessed_input"].append(time.perf_counter() - t)
+    out = {}
+    for k, ts in times.items():
+        s = _stats(ts)
+        s["frames_per_s"] = WINDOW / (s["median_ms"] / 1e3)
+        out[k] = s
+    return out
+
+
+def bench_single(model, raw, dets, n_ref: int, n_ours: int) -> dict:
+    """(b) one frame at a time, preprocessing included; blocks of each pipeline interleaved."""
+    from .dictionary import LoopDetector
+    from .stream import preprocess
+
+    n_classes = int(model.output_shape[-1])
+    ref_dict = LoopDetector(n_classes, 10 ** 9)
+    times = {"reference": [], **{k: [] for k in dets}}
+    blocks = 5
+    for k, d in dets.items():
+        for f in raw[:20]:
+            d.update(f)
+    model.predict(preprocess(raw[0])[None, ..., None], verbose=0)
+    i = 0
+    for _ in range(blocks):
+        for _ in range(max(1, n_ref // blocks)):
+            f = raw[i % len(raw)]; i += 1
+            t = time.perf_counter()
+            c = model.predict(preprocess(f)[None, ..., None], batch_size=1, verbose=0).argmax(1)[0]
+            ref_dict.update(int(c))
+            times["reference"].append(time.perf_counter() - t)
+        for k, d in dets.items():
+            upd = d.update
+            for _ in range(max(1, n_ours // blocks)):
+                f = raw[i % len(raw)]; i += 1
+                t = time.perf_counter(); upd(f); times[k].append(time.perf_counter() - t)
+    return {k: _stats(v) for k, v in times.items()}
+
+
+def bench_training(X, y, seeds, epochs: int) -> dict:
+    """(c) seconds per epoch and test accuracy: cnn.train(fast=False) (plain model.fit) vs fast=True."""
+    from . import cnn
+
+    runs = {"plain": [], "fast": []}
+    for i, seed in enumerate(seeds):
+        order = ("plain", "fast") if i % 2 == 0 else ("fast", "plain")
+        for kind in order:
+            model, h, split = cnn.train(X, y, seed, epochs=epochs, fast=kind == "fast",
+                                        cache=False, progress=True)
+            ep = h["epoch_seconds"]
+            runs[kind].append({"seed": int(seed), "seconds": h["seconds"], "epoch_seconds": ep,
+                               "seconds_per_epoch": float(np.median(ep[1:] or ep)),
+                               "test_accuracy": float(h["val_accuracy"][-1]), "model": model,
+                               "split": split})
+    out = {}
+    for kind, rs in runs.items():
+        out[kind] = {"seconds_per_epoch": [r["seconds_per_epoch"] for r in rs],
+                     "epoch_seconds": [r["epoch_seconds"] for r in rs],
+                     "total_seconds": [r["seconds"] for r in rs],
+                     "test_accuracy": [r["test_accuracy"] for r in rs], "seeds": [r["seed"] for r in rs],
+                     "median_seconds_per_epoch": float(np.median([r["seconds_per_epoch"] for r in rs])),
+                     "mean_test_accuracy": float(np.mean([r["test_accuracy"] for r in rs]))}
+    out["epochs"] = int(epochs)
+    out["n_train_frames"] = int(len(runs["plain"][0]["split"]["train"]))
+    out["note"] = ("seconds_per_epoch: median wall time of epochs 2.. (the first holds the fast "
+                   "path's XLA compilation; total_seconds includes it), validation on the test split "
+                   "included")
+    return out, runs["fast"][0]
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m greenloop.bench", description=__doc__.split("\n")[0])
+    ap.add_argument("--out", default="results/bench", help="output folder (default results/bench)")
+    ap.add_argument("--dataset", default="data/synthetic-greenhouse",
+                    help="sequence folder (default data/synthetic-greenhouse; random frames if missing)")
+    ap.add_argument("--quick", action="store_true", help="fewer repetitions, 1 seed, 2 epochs (< 1 min)")
+    args = ap.parse_args(argv)
+    t_start = time.perf_counter()
+
+    import keras
+
+    from . import cnn, report
+    from .stream import Detector, export_tflite
+
+    quick = args.quick
+    raw, u8, y, info = _load(Path(args.dataset), quick)
+    X = (u8.astype(np.float32) / np.float32(255.0))[..., None]
+    n_classes = int(y.max() + 1)
+    print(f"[bench] {len(u8)} frames, {n_classes} spots, random={info['random_frames']}", flush=True)
+
+    # a quickly trained paper CNN (the timing is architecture-bound; agreement needs any weights)
+    keras.utils.set_random_seed(0)
+    model = cnn.build(n_classes, jit_compile=False)
+    Y = keras.utils.to_categorical(y, n_classes).astype(np.float32)
+    model.fit(X, Y, epochs=1, batch_size=32, verbose=0)
+    dets = {"numpy": Detector(model, 10 ** 9, backend="numpy"),
+            "tflite": Detector(model, 10 ** 9, backend="tflite")}
+
+    print("[bench] (a) windows", flush=True)
+    windows = bench_windows(model, raw, dets, rounds=8 if quick else 30)
+    print("[bench] (b) single frames", flush=True)
+    single = bench_single(model, raw, dets, n_ref=30 if quick else 150, n_ours=500 if quick else 3000)
+
+    print("[bench] (d) label agreement", flush=True)
+    ref_labels = cnn.predict(model, X)
+    agreement = {}
+    for k, d in dets.items():
+        lab = np.concatenate([d.predict(u8[i:i + 512]) for i in range(0, len(u8), 512)])
+        agreement[k] = {"frames": int(len(lab)), "same_labels": int((lab == ref_labels).sum()),
+                        "fraction": float(np.mean(lab == ref_labels))}
+
+    print("[bench] (c) training", flush=True)
+    seeds = [0] if quick else [0, 1, 2]
+    epochs = 2 if quick else 5
+    training, fast_run = bench_training(X, y, seeds, epochs)
+
+    # quantised export: accuracy change on the fast run's test split
+    import tempfile
+    test = fast_run["split"]["test"]
+    with tempfile.TemporaryDirectory() as tmp:
+        q = Detector(export_tflite(fast_run["model"], Path(tmp) / "q.tflite", quantize=True), 10 ** 9)
+        f = Detector(export_tflite(fast_run["model"], Path(tmp) / "f.tflite"), 10 ** 9)
+        acc_q = float(np.mean(q.predict(u8[test]) == y[test]))
+        acc_f = float(np.mean(f.predict(u8[test]) == y[test]))
+        acc_k = float(np.mean(cnn.predict(fast_run["model"], X[test]) == y[test]))
+    quant = {"test_frames": int(len(test)), "keras_accuracy": acc_k, "tflite_float_accuracy": acc_f,
+             "tflite_dynamic_range_accuracy": acc_q, "change_points": 100 * (acc_q - acc_k),
+             "model": f"fast-path model, seed {fast_run['seed']}, {epochs} epochs"}
+
+    best = min(("numpy", "tflite"), key=lambda k: windows[k]["median_ms"])
+    result = {
+        "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "machine": platform.node(), "platform": platform.platform(), "cpu": report.cpu_model(),
+        "versions": report.versions(), "quick": quick, "data": info, "window": WINDOW,
+        "n_classes": n_classes, "default_backend": Detector(model, 10 ** 9).backend,
+        "windows": windows, "single": single, "training": training, "agreement": agreement,
+        "quantized_tflite": quant,
+        "note": "timings on a machine shared with other jobs: reference and ours are interleaved in "
+                "one process; ratios are the robust figures",
+    }
+
+    import pandas as pd
+
+    ref_w = windows["reference"]
+    rows = []
+
+    def row(measure, ref, ours, ratio, target, met):
+        rows.append({"measurement": measure, "reference": ref, "ours": ours, "ratio": ratio,
+                     "target": target, "met?": met})
+
+    for k in ("numpy", "tflite"):
+        r = ref_w["median_ms"] / windows[k]["median_ms"]
+        row(f"70-frame window, frames/s, preprocessing included ({k})", f"{ref_w['frames_per_s']:.0f}",
+            f"{windows[k]['frames_per_s']:.0f}", f"{r:.1f}x", ">= 10x", "yes" if r >= 10 else "no")
+    rn = windows["reference_no_preprocessing"]
+    for k in ("numpy", "tflite"):
+        r = rn["median_ms"] / windows[k]["median_ms"]
+        row(f"70-frame window, frames/s: reference without preprocessing (paper's quantity) vs ours with ({k})",
+            f"{rn['frames_per_s']:.0f}", f"{windows[k]['frames_per_s']:.0f}", f"{r:.1f}x", "(info)", "")
+    for k in ("numpy", "tflite"):
+        o = windows[f"{k}_preprocessed_input"]
+        r = rn["median_ms"] / o["median_ms"]
+        row(f"70-frame window of 32x32 gray frames (no resize), frames/s, vs reference without preprocessing ({k})",
+            f"{rn['frames_per_s']:.0f}", f"{o['frames_per_s']:.0f}", f"{r:.1f}x", ">= 10x", "yes" if r >= 10 else "no")
+    row("preprocessing alone (cvtColor + INTER_AREA, 640x480 -> 32x32), ms/frame", "",
+        f"{windows['preprocessing_only']['median_ms'] / WINDOW:.3f}", "", "(info)", "")
+    for k in ("numpy", "tflite"):
+        s, sr = single[k], single["reference"]
+        row(f"single frame median latency, ms ({k})", f"{sr['median_ms']:.2f}", f"{s['median_ms']:.3f}",
+            f"{sr['median_ms'] / s['median_ms']:.0f}x", "<= 0.3 ms", "yes" if s["median_ms"] <= 0.3 else "no")
+        row(f"single frame p99 latency, ms ({k})", f"{sr['p99_ms']:.2f}", f"{s['p99_ms']:.3f}",
+            f"{sr['p99_ms'] / s['p99_ms']:.0f}x", "<= 1 ms", "yes" if s["p99_ms"] <= 1 else "no")
+    tp, tf_ = training["plain"], training["fast"]
+    row(f"training s/epoch ({training['n_train_frames']} frames, {len(seeds)} seed(s), {epochs} epochs)",
+        f"{tp['median_seconds_per_epoch']:.2f}", f"{tf_['median_seconds_per_epoch']:.2f}",
+        f"{tp['median_seconds_per_epoch'] / tf_['median_seconds_per_epoch']:.1f}x", "(info)", "")
+    row(f"test accuracy after {epochs} epochs (mean over seeds)", f"{tp['mean_test_accuracy']:.3f}",
+        f"{tf_['mean_test_accuracy']:.3f}", "", "same distribution", "")
+    for k in ("numpy", "tflite"):
+        a = agreement[k]
+        row(f"labels equal to Keras ({k})", "", f"{a['same_labels']}/{a['frames']}", "", "all",
+            "yes" if a["same_labels"] == a["frames"] else "no")
+    row("quantised (dynamic-range) TFLite test accuracy change, points", f"{acc_k:.3f}", f"{acc_q:.3f}",
+        f"{quant['change_points']:+.2f}", "|change| < 0.5", "yes" if abs(quant["change_points"]) < 0.5 else "no")
+    df = pd.DataFrame(rows)
+    out = Path(args.out)
+    result["wall_seconds"] = time.perf_counter() - t_start
+    report.write_json(out / "bench.json", result)
+    note = (f"Run {result['date']} on {result['cpu']}, {'random frames' if info['random_frames'] else info['dataset']}"
+            f"{', --quick' if quick else ''}. Reference: cv2 preprocessing + Keras model.predict + Python "
+            f"dictionary loop; ours: greenloop.stream.Detector (default backend {result['default_backend']}). "
+            f"Machine shared with other jobs; reference and ours interleaved in one process.")
+    md = report.write_table(df, out / "bench", title="Speed: reference vs greenloop.stream", note=note)
+    print(md.read_text())
+    print(f"[bench] wrote {out / 'bench.json'} in {result['wall_seconds']:.0f} s; fastest window backend: {best}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
