@@ -44,11 +44,12 @@ $(STAMP): environment.txt
 	$(BIN)/python -m ipykernel install --sys-prefix --name $(KERNEL) --display-name "Python (greenloop)" >/dev/null
 	@touch $@
 
-synthetic: $(SYNTHETIC)/.complete ## generate the embedded synthetic greenhouse sequence (2260 frames)
+synthetic: $(SYNTHETIC)/synthetic.json ## generate the embedded synthetic greenhouse sequence (2260 frames)
 
-$(SYNTHETIC)/.complete: | $(STAMP)
-	$(BIN)/python -m greenloop.synthetic $(SYNTHETIC)
-	@touch $@
+# The generator renders into a temporary folder and renames it at the end, so synthetic.json
+# in place means a complete sequence.
+$(SYNTHETIC)/synthetic.json: | $(STAMP)
+	$(BIN)/python -m greenloop.synthetic $(SYNTHETIC) --overwrite
 
 data: | $(STAMP) ## download the real GreenHouse set into data/greenhouse (resumable)
 	$(BIN)/python -m greenloop.download data/greenhouse
@@ -56,7 +57,7 @@ data: | $(STAMP) ## download the real GreenHouse set into data/greenhouse (resum
 # The dataset a run needs: the synthetic default is generated when missing; any other folder
 # must exist already.
 ifeq ($(DATASET),$(SYNTHETIC))
-DATA_DEP := $(SYNTHETIC)/.complete
+DATA_DEP := $(SYNTHETIC)/synthetic.json
 else
 DATA_DEP := $(DATASET)
 endif
@@ -65,7 +66,7 @@ all: $(HTML) $(RESULTS)/tables.md ## run every notebook into results/, render HT
 
 $(RESULTS)/%.ipynb: notebooks/%.ipynb $(SOURCES) $(DATA_DEP) | $(STAMP)
 	@mkdir -p $(@D)
-	@echo "== $* (log: $(RESULTS)/$*.log)"
+	@echo "== $*"
 	$(BIN)/papermill -k $(KERNEL) --execution-timeout $(TIMEOUT) --progress-bar \
 	    -p dataset $(DATASET) -p results_dir $(RESULTS) $(PARAMS) $< $(@D)/.tmp-$*.ipynb
 	@mv $(@D)/.tmp-$*.ipynb $@
