@@ -1,0 +1,328 @@
+"""greenloop.features: descriptor shapes, weights handling (offline-safe), input checks, and the
+weight-free descriptors (pixels, SIFT bag of words) and the main paper's CNN (spot_cnn).
+
+Small and fast: 8 frames, 32x32 CNN inputs, random-initialised networks (weights=None)."""
+from __future__ import annotations
+
+import warnings
+
+import cv2
+import numpy as np
+import pytest
+
+keras = pytest.importorskip("keras")
+from safetensors.numpy import save_file  # noqa: E402
+
+from greenloop import data, features as F, ghostnet as G  # noqa: E402
+
+SIZE = 32  # smallest input every Keras application accepts
+DIMS = {"vgg19": 512, "resnet50": 2048, "resnet101": 2048, "resnet152": 2048,
+        "efficientnetb0": 1280, "mobilenetv3small": 576, "ghostnet": 960}
+
+
+@pytest.fixture(autouse=True)
+def empty_keras_home(tmp_path, monkeypatch):
+    """No ImageNet weights visible: tests never depend on (or download) real weight files."""
+    home = tmp_path / "keras_home"
+    (home / "models").mkdir(parents=True)
+    monkeypatch.setenv("KERAS_HOME", str(home))
+    return home
+
+
+def shapes_frames(n=8, w=96, h=72, seed=0):
+    """Synthetic RGB uint8 frames with random filled shapes on a noisy background."""
+    rng = np.random.default_rng(seed)
+    out = np.empty((n, h, w, 3), np.uint8)
+    for i in range(n):
+        im = rng.integers(0, 60, (h, w, 3), dtype=np.uint8)
+        for _ in range(6):
+            colour = tuple(int(c) for c in rng.integers(60, 256, 3))
+            x, y = (int(v) for v in rng.integers(5, min(w, h) - 5, 2))
+            r = int(rng.integers(4, 14))
+            if rng.random() < 0.5:
+                cv2.circle(im, (x, y), r, colour, -1)
+            else:
+                cv2.rectangle(im, (x - r, y - r), (x + r, y + r // 2), colour, -1)
+        out[i] = im
+    return out
+
+
+@pytest.fixture(scope="module")
+def frames():
+    return shapes_frames()
+
+
+def write_sequence(folder, rgb, depth_m=None):
+    (folder / "rgb").mkdir(parents=True)
+    for i, im in enumerate(rgb):
+        cv2.imwrite(str(folder / "rgb" / f"{i}.png"), cv2.cvtColor(im, cv2.COLOR_RGB2BGR))
+    if depth_m is not None:
+        (folder / "depth").mkdir()
+        for i, d in enumerate(depth_m):
+            cv2.imwrite(str(folder / "depth" / f"{i}.png"),
+                        np.rint(d * data.DEPTH_SCALE).astype(np.uint16))
+    return folder
+
+
+# ---- names, dims ------------------------------------------------------------------------------
+
+def test_backbone_table():
+    assert set(F.BACKBONES) == set(DIMS) | {"sift_bovw", "pixels", "spot_cnn"}
+    for name, d in DIMS.items():
+        assert F.BACKBONES[name].dim == d
+        assert F.BACKBONES[name].input_size == (224, 224)
+        assert F.BACKBONES[name].weights_file
+    assert F.BACKBONES["pixels"].dim == 1024
+
+
+def test_unknown_backbone_lists_valid_names(frames):
+    with pytest.raises(ValueError, match="vgg19.*ghostnet"):
+        F.extract(frames, "alexnet")
+    with pytest.raises(ValueError, match="unknown backbone"):
+        F.weights_used("shufflenetv2", None)
+
+
+@pytest.mark.parametrize("backbone", ["vgg19", "resnet50", "efficientnetb0", "mobilenetv3small",
+                                      "ghostnet"])
+def test_cnn_descriptor_shapes(frames, backbone):
+    X, info = F.extract(frames, backbone, weights=None, input_size=SIZE, batch_size=len(frames),
+                        progress=False, return_info=True)
+    assert X.shape == (len(frames), DIMS[backbone]) and X.dtype == np.float32
+    assert np.isfinite(X).all()
+    assert info.weights == "random init" and info.label == f"{backbone} (random init)"
+    assert info.dim == DIMS[backbone] and info.input_size == (SIZE, SIZE)
+    assert info.seconds_per_image > 0
+
+
+@pytest.mark.parametrize("backbone", ["resnet101", "resnet152"])
+def test_deep_resnets_build(backbone):
+    """Same code path as resnet50; building (not running) them keeps the suite fast."""
+    model = F._cnn_model(backbone, None, (SIZE, SIZE))
+    assert model.output_shape == (None, DIMS[backbone])
+    F.clear_cache()
+
+
+def test_partial_batches(frames):
+    full = F.extract(frames, "mobilenetv3small", None, input_size=SIZE, batch_size=8,
+                     progress=False)
+    np.testing.assert_allclose(F.extract(frames, "mobilenetv3small", None, input_size=SIZE,
+                                         batch_size=3, progress=False), full, rtol=1e-5, atol=1e-6)
+
+
+def test_random_init_is_deterministic(frames):
+    a = F.extract(frames, "ghostnet", None, input_size=SIZE, progress=False)
+    F.clear_cache()  # rebuild from scratch
+    b = F.extract(frames, "ghostnet", None, input_size=SIZE, progress=False)
+    np.testing.assert_array_equal(a, b)
+    assert not np.allclose(a[0], a[1])  # different frames, different descriptors
+
+
+def test_input_forms_agree(frames):
+    """uint8, float [0, 1], other sizes (resized) and single-channel frames are all accepted."""
+    kw = dict(backbone="mobilenetv3small", weights=None, input_size=SIZE, progress=False)
+    u8 = F.extract(frames, **kw)
+    fl = F.extract(frames.astype(np.float32) / 255, **kw)
+    np.testing.assert_allclose(fl, u8, rtol=1e-4, atol=1e-4)
+    small = np.stack([cv2.resize(f, (SIZE, SIZE), interpolation=cv2.INTER_AREA) for f in frames])
+    np.testing.assert_allclose(F.extract(small, **kw), u8, rtol=1e-5, atol=1e-5)
+    gray = frames[..., 1]
+    g2 = F.extract(gray, **kw)
+    np.testing.assert_array_equal(F.extract(gray[..., None], **kw), g2)
+    np.testing.assert_array_equal(F.extract(np.repeat(gray[..., None], 3, -1), **kw), g2)
+
+
+def test_folder_input(tmp_path, frames):
+    folder = write_sequence(tmp_path / "seq", frames)
+    kw = dict(backbone="mobilenetv3small", weights=None, input_size=SIZE, progress=False)
+    loaded = data.load_frames(folder, size=(SIZE, SIZE), gray=False, dtype=np.uint8)
+    np.testing.assert_array_equal(F.extract(folder, **kw), F.extract(loaded, **kw))
+    assert F.extract(folder, limit=3, **kw).shape == (3, 576)
+
+
+# ---- weights ----------------------------------------------------------------------------------
+
+def test_auto_falls_back_loudly_without_weights(frames):
+    assert F.imagenet_weights_path("ghostnet") is None
+    assert F.weights_used("ghostnet", "auto") == "random init"
+    with pytest.warns(UserWarning, match="RANDOM-INITIALISED.*ghostnet_100.in1k.safetensors"):
+        X, info = F.extract(frames, "ghostnet", "auto", input_size=SIZE, progress=False,
+                            return_info=True)
+    assert info.weights == "random init" and "random init" in info.label
+    np.testing.assert_array_equal(X, F.extract(frames, "ghostnet", None, input_size=SIZE,
+                                               progress=False))
+
+
+def test_auto_uses_local_imagenet_file(frames, empty_keras_home):
+    keras.utils.set_random_seed(7)
+    donor = G.build_ghostnet(input_shape=(None, None, 3), include_top=True)
+    path = empty_keras_home / "models" / G.WEIGHTS_FILENAME
+    save_file(G.export_timm_state_dict(donor), str(path))
+    assert F.imagenet_weights_path("ghostnet") == path
+    assert F.weights_used("ghostnet", "auto") == "imagenet"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)  # no fallback warning
+        X, info = F.extract(frames, "ghostnet", "auto", input_size=SIZE, progress=False,
+                            return_info=True)
+    assert info.weights == "imagenet"
+    by_path, info_p = F.extract(frames, "ghostnet", str(path), input_size=SIZE, progress=False,
+                                return_info=True)
+    assert info_p.weights == f"file:{G.WEIGHTS_FILENAME}"
+    np.testing.assert_allclose(X, by_path, rtol=1e-6, atol=1e-6)
+    assert not np.allclose(X, F.extract(frames, "ghostnet", None, input_size=SIZE, progress=False))
+
+
+def test_imagenet_ghostnet_offline_names_the_file(frames):
+    with pytest.raises(F.WeightsNotFoundError, match="ghostnet_100.in1k.safetensors"):
+        F.extract(frames, "ghostnet", "imagenet", input_size=SIZE, progress=False)
+    assert issubclass(F.WeightsNotFoundError, FileNotFoundError)
+
+
+def test_missing_weights_path(frames, tmp_path):
+    with pytest.raises(FileNotFoundError, match="not found"):
+        F.extract(frames, "vgg19", tmp_path / "nope.h5", input_size=SIZE, progress=False)
+    with pytest.raises(ValueError, match="weights must be"):
+        F.extract(frames, "vgg19", 3, input_size=SIZE, progress=False)
+
+
+def test_wrong_architecture_weights(frames, tmp_path):
+    inp = keras.Input((8, 8, 3))
+    tiny = keras.Model(inp, keras.layers.Conv2D(4, 3)(inp))
+    path = tmp_path / "tiny.weights.h5"
+    tiny.save_weights(str(path))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # Keras lists every layer it could not load
+        with pytest.raises(ValueError, match="does not fit mobilenetv3small"):
+            F.extract(frames, "mobilenetv3small", path, input_size=SIZE, progress=False)
+    wrong = tmp_path / "other.safetensors"
+    save_file({"conv_stem.weight": np.zeros((8, 3, 3, 3), np.float32)}, str(wrong))
+    with pytest.raises(ValueError, match="not timm's ghostnet_100"):
+        F.extract(frames, "ghostnet", wrong, input_size=SIZE, progress=False)
+
+
+# ---- bad frames -------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("bad, match", [
+    (np.zeros((4, 32, 32, 2), np.uint8), "shape"),
+    (np.zeros((32, 32, 3), np.uint8), "frames\\[None\\]"),
+    (np.zeros((0, 32, 32, 3), np.uint8), "N >= 1"),
+    (np.zeros((2, 32), np.uint8), "shape"),
+    (np.full((2, 32, 32, 3), 2.0, np.float32), "\\[0, 1\\]"),
+    (np.zeros((2, 32, 32), np.uint16), "dtype"),
+])
+def test_bad_frames(bad, match):
+    with pytest.raises(ValueError, match=match):
+        F.extract(bad, "pixels")
+
+
+def test_bad_arguments(frames):
+    with pytest.raises(ValueError, match="at least 32"):
+        F.extract(frames, "vgg19", None, input_size=16, progress=False)
+    with pytest.raises(ValueError, match="batch_size"):
+        F.extract(frames, "pixels", batch_size=0)
+    with pytest.raises(ValueError, match="no weights"):
+        F.extract(frames, "pixels", weights="imagenet")
+
+
+# ---- weight-free descriptors ------------------------------------------------------------------
+
+def test_pixels_is_the_main_papers_preprocessing(tmp_path, frames):
+    X, info = F.extract(frames, "pixels", return_info=True)
+    assert X.shape == (len(frames), 1024) and info.weights == "none"
+    assert 0.0 <= X.min() and X.max() <= 1.0
+    expected = np.stack([cv2.resize(cv2.cvtColor(f, cv2.COLOR_RGB2GRAY), (32, 32),
+                                    interpolation=cv2.INTER_AREA) for f in frames])
+    np.testing.assert_allclose(X, expected.reshape(len(frames), -1) / 255.0, atol=1e-6)
+    folder = write_sequence(tmp_path / "seq", frames)
+    Xf = F.extract(folder, "pixels", progress=False)
+    np.testing.assert_array_equal(Xf, data.load_frames(folder).reshape(len(frames), -1))
+    assert np.abs(Xf - X).max() <= 1 / 255 + 1e-6  # gray from file vs from RGB array: rounding only
+
+
+def test_sift_bovw(frames):
+    X, info = F.extract(frames, "sift_bovw", vocab_size=24, seed=0, progress=False,
+                        return_info=True)
+    V = info.extra["vocabulary"]
+    assert X.shape == (len(frames), len(V)) and V.shape[1] == 128 and 1 <= len(V) <= 24
+    assert info.dim == len(V) and info.weights == "none" and info.extra["vocabulary_fitted_on_input"]
+    assert np.isfinite(X).all() and (X >= 0).all() and (X.sum(1) > 0).all()
+    # deterministic, and a passed vocabulary reproduces the features
+    np.testing.assert_array_equal(X, F.extract(frames, "sift_bovw", vocab_size=24, seed=0,
+                                               progress=False))
+    np.testing.assert_allclose(F.extract(frames, "sift_bovw", vocabulary=V, progress=False), X,
+                               rtol=1e-6)
+    # the same frame twice gives the same row; another frame a different one
+    twice = np.concatenate([frames[:3], frames[:1]])
+    Y = F.extract(twice, "sift_bovw", vocabulary=V, progress=False)
+    np.testing.assert_array_equal(Y[0], Y[3])
+    assert not np.allclose(Y[0], Y[1])
+    V2 = F.fit_vocabulary(frames, size=24, seed=0)
+    assert V2.shape == V.shape
+    with pytest.raises(ValueError, match="vocabulary"):
+        F.extract(frames, "sift_bovw", vocabulary=np.zeros((5, 64)), progress=False)
+    with pytest.raises(ValueError, match="no SIFT keypoints"):
+        F.extract(np.zeros((2, 40, 40, 3), np.uint8), "sift_bovw", progress=False)
+
+
+# ---- the main paper's CNN ---------------------------------------------------------------------
+
+def paper_cnn(n_classes=5):
+    """The architecture of greenloop.cnn.build: Conv2D(32, 3x3, relu) -> Flatten -> Dense(68, relu)
+    -> Dense(n, softmax) on (32, 32, 1); fewer filters here to stay fast."""
+    keras.utils.set_random_seed(3)
+    inp = keras.Input((32, 32, 1))
+    x = keras.layers.Conv2D(4, 3, activation="relu")(inp)
+    x = keras.layers.Flatten()(x)
+    feat = keras.layers.Dense(68, activation="relu", name="dense_68")(x)
+    out = keras.layers.Dense(n_classes, activation="softmax")(feat)
+    return keras.Model(inp, out), feat
+
+
+def test_spot_cnn_penultimate_layer(frames, tmp_path):
+    model, _ = paper_cnn()
+    X, info = F.extract(frames, "spot_cnn", weights=model, progress=False, return_info=True)
+    assert X.shape == (len(frames), 68) and (X >= 0).all()
+    assert info.weights == f"model:{model.name}"
+    gray = F.extract(frames, "pixels").reshape(-1, 32, 32, 1)
+    ref = keras.Model(model.input, model.get_layer("dense_68").output).predict_on_batch(gray)
+    np.testing.assert_allclose(X, np.asarray(ref), rtol=1e-5, atol=1e-6)
+    path = tmp_path / "cnn.keras"
+    model.save(str(path))
+    Xp, info_p = F.extract(frames, "spot_cnn", weights=path, progress=False, return_info=True)
+    np.testing.assert_allclose(Xp, X, rtol=1e-5, atol=1e-6)
+    assert info_p.weights == "file:cnn.keras"
+    with pytest.raises(ValueError, match="trained model"):
+        F.extract(frames, "spot_cnn")
+    with pytest.raises(FileNotFoundError):
+        F.extract(frames, "spot_cnn", weights=tmp_path / "missing.keras")
+
+
+# ---- RGB-D, timing ----------------------------------------------------------------------------
+
+def test_depth_to_uint8():
+    d = np.array([[[0.0, 2.5, 10.0, 30.0, np.nan]]], np.float32)
+    np.testing.assert_array_equal(F.depth_to_uint8(d), [[[0, 64, 255, 255, 0]]])
+    with pytest.raises(ValueError):
+        F.depth_to_uint8(d, max_depth=0)
+
+
+def test_extract_rgbd(tmp_path, frames):
+    rng = np.random.default_rng(1)
+    depth = rng.uniform(0.3, 6.0, frames.shape[:3]).astype(np.float32)
+    folder = write_sequence(tmp_path / "seq", frames, depth)
+    X, info = F.extract_rgbd(folder, "mobilenetv3small", weights=None, input_size=SIZE,
+                             progress=False, return_info=True)
+    assert X.shape == (len(frames), 2 * 576) and info.dim == 2 * 576
+    rgb = F.extract(folder, "mobilenetv3small", None, input_size=SIZE, progress=False)
+    np.testing.assert_array_equal(X[:, :576], rgb)
+    d8 = F.depth_to_uint8(data.load_depth(folder, size=(SIZE, SIZE)))
+    np.testing.assert_array_equal(X[:, 576:], F.extract(d8, "mobilenetv3small", None,
+                                                        input_size=SIZE, progress=False))
+    with pytest.raises(FileNotFoundError, match="depth"):
+        F.extract_rgbd(write_sequence(tmp_path / "rgb_only", frames), "pixels")
+
+
+def test_time_per_image():
+    t = F.time_per_image("mobilenetv3small", weights=None, input_size=SIZE, n_images=6,
+                         batch_size=4)
+    assert 0 < t < 5
+    assert F.time_per_image("pixels", n_images=4) > 0
