@@ -67,7 +67,7 @@ all: $(HTML) $(RESULTS)/tables.md ## run every notebook into results/, render HT
 $(RESULTS)/%.ipynb: notebooks/%.ipynb $(SOURCES) $(DATA_DEP) | $(STAMP)
 	@mkdir -p $(@D)
 	@echo "== $*"
-	$(BIN)/papermill -k $(KERNEL) --execution-timeout $(TIMEOUT) --progress-bar \
+	$(BIN)/papermill -k $(KERNEL) --execution-timeout $(TIMEOUT) --log-output --progress-bar \
 	    -p dataset $(DATASET) -p results_dir $(RESULTS) $(PARAMS) $< $(@D)/.tmp-$*.ipynb
 	@mv $(@D)/.tmp-$*.ipynb $@
 
@@ -91,7 +91,19 @@ bench: | $(STAMP) ## speed benchmark: streaming detector and training vs plain K
 	$(BIN)/python -m greenloop.bench --out $(RESULTS)/bench --dataset $(DATASET)
 	$(BIN)/python -m greenloop.report $(RESULTS)
 
-test: | $(STAMP) ## run the test suite (unit tests and every notebook on tiny parameters)
+# Optional, for the GhostNet-vs-timm check only: a CPU torch wheel where the machine has one
+# (never the multi-GB CUDA build from PyPI), and timm without its torchvision dependency.
+TORCH_WHEEL := $(firstword $(wildcard /opt/wheels/torch-2.13.0*cpu*.whl))
+$(VENV)/.timm: $(STAMP)
+ifneq ($(TORCH_WHEEL),)
+	$(BIN)/python -m pip install -q $(TORCH_WHEEL)
+	$(BIN)/python -m pip install -q --no-deps timm==1.0.31
+else
+	@echo "no local CPU torch wheel: the GhostNet-vs-timm test will be skipped"
+endif
+	@touch $@
+
+test: $(VENV)/.timm | $(STAMP) ## run the test suite (unit tests and every notebook on tiny parameters)
 	$(BIN)/python -m pytest -q tests
 
 clean-results: ## remove executed notebooks and tables (keeps the model cache)

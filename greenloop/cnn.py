@@ -104,7 +104,7 @@ def cache_key(X: np.ndarray, y: np.ndarray, **params) -> str:
 def _epoch_bar(epochs: int, desc: str):
     """A Keras callback showing one tqdm bar per training run (epochs), not per-batch output."""
     import keras
-    from tqdm.auto import tqdm
+    from tqdm import tqdm  # text bars: readable in terminals and in executed notebooks
 
     class EpochBar(keras.callbacks.Callback):
         def on_train_begin(self, logs=None):
@@ -225,7 +225,7 @@ def run_seeds(X: np.ndarray, y: np.ndarray, seeds, progress: bool = True, **trai
     Returns one dict per seed: {'seed', 'model', 'history', 'split', 'test_accuracy',
     'test_pred' (n_test,) predicted labels of split['test']}.
     """
-    from tqdm.auto import tqdm
+    from tqdm import tqdm  # text bars: readable in terminals and in executed notebooks
 
     out = []
     for seed in tqdm(list(seeds), desc="seeds", unit="seed", disable=not progress):

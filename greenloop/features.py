@@ -451,7 +451,7 @@ def _batches(n, batch_size):
 
 
 def _progress(total, desc, progress):
-    from tqdm.auto import tqdm
+    from tqdm import tqdm  # text bars: readable in terminals and in executed notebooks
     return tqdm(total=total, desc=desc, unit="img", disable=not progress)
 
 
@@ -562,7 +562,7 @@ def _sift_descriptors(gray_frames, progress=False):
 
 
 def _iter_progress(items, desc, progress):
-    from tqdm.auto import tqdm
+    from tqdm import tqdm  # text bars: readable in terminals and in executed notebooks
     return tqdm(items, desc=desc, unit="img", disable=not progress)
 
 
