@@ -52,6 +52,13 @@ def list_frames(folder, subfolder: str = "rgb") -> list[Path]:
     return sorted(frames, key=_numeric_key)
 
 
+def _select(paths: list, limit, step: int) -> list:
+    """Every ``step``-th path, then the first ``limit`` of those."""
+    if int(step) != step or step < 1:
+        raise ValueError(f"step must be an integer >= 1, got {step}")
+    return paths[::int(step)][:limit]
+
+
 def preprocess_image(img: np.ndarray, size=(32, 32), gray: bool = True, color: str = "bgr") -> np.ndarray:
     """One decoded frame -> the model's input, uint8 (the one preprocessing path of greenloop).
 
@@ -87,23 +94,23 @@ def _read_one(path: Path, size, gray: bool) -> np.ndarray:
 
 
 def load_frames(folder, size=(32, 32), gray: bool = True, limit: int | None = None,
-                progress: bool | None = None, dtype=np.float32) -> np.ndarray:
+                progress: bool | None = None, dtype=np.float32, step: int = 1) -> np.ndarray:
     """Load and preprocess the frames of a sequence (the main paper's preprocessing by default).
 
     folder: sequence folder or folder of images (see ``list_frames``).
     size: (width, height) in pixels to resize to, or None to keep the native size (all frames
         must then share one size).
     gray: grayscale (the paper) or RGB.
-    limit: load only the first ``limit`` frames.
+    limit: load only the first ``limit`` frames. step: load every ``step``-th frame (0, step, ...),
+        applied before ``limit``.
     Returns float32 in [0, 1] of shape (N, H, W, 1) for gray or (N, H, W, 3) RGB for colour
     (``dtype=np.uint8`` returns the raw 0..255 values instead). Decoding runs in parallel threads
     (OpenCV releases the GIL), with a progress bar for loads of more than 200 frames.
     """
-    paths = list_frames(folder)
+    paths = _select(list_frames(folder), limit, step)
     if limit is not None:
         if limit < 1:
             raise ValueError(f"limit must be >= 1, got {limit}")
-        paths = paths[:limit]
     if size is not None:
         size = (int(size[0]), int(size[1]))
         if min(size) < 1:
@@ -130,7 +137,7 @@ def load_frames(folder, size=(32, 32), gray: bool = True, limit: int | None = No
     return (X.astype(np.float32) / np.float32(255.0)).astype(dtype, copy=False)
 
 
-def load_depth(folder, size=None, limit: int | None = None) -> np.ndarray:
+def load_depth(folder, size=None, limit: int | None = None, step: int = 1) -> np.ndarray:
     """Depth frames of a sequence in metres, float32 of shape (N, H, W); 0 = no reading.
 
     Reads ``depth/*.png`` (uint16, metres = value / 5000). Raises FileNotFoundError when the
@@ -139,7 +146,7 @@ def load_depth(folder, size=None, limit: int | None = None) -> np.ndarray:
     folder = Path(folder)
     if not (folder / "depth").is_dir():
         raise FileNotFoundError(f"{folder} has no depth/ folder: RGB-D experiments need depth/0.png, ...")
-    paths = list_frames(folder, subfolder="depth")[:limit]
+    paths = _select(list_frames(folder, subfolder="depth"), limit, step)
 
     def read(p):
         d = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)

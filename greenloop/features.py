@@ -419,13 +419,13 @@ def _gray_batch(a: np.ndarray, size, as_float: bool) -> np.ndarray:
     return g.astype(np.float32) / np.float32(255.0) if as_float else g
 
 
-def _load(frames_or_folder, size, gray: bool, limit):
+def _load(frames_or_folder, size, gray: bool, limit, step=1):
     """Folder -> array via greenloop.data.load_frames (uint8); array -> checked array."""
     if isinstance(frames_or_folder, (str, os.PathLike)):
         return _data.load_frames(frames_or_folder, size=size, gray=gray, limit=limit,
-                                 dtype=np.uint8)
+                                 dtype=np.uint8, step=step)
     a = _check_frames(frames_or_folder)
-    return a[:limit] if limit is not None else a
+    return a[::step][:limit]
 
 
 def depth_to_uint8(depth_m, max_depth: float = DEPTH_MAX_M) -> np.ndarray:
@@ -473,21 +473,22 @@ def _run_model(model, frames, batch_fn, batch_size, progress, desc):
     return np.concatenate(out).reshape(n, -1), dt / n
 
 
-def _extract_cnn(b, frames_or_folder, source, size, batch_size, progress, limit):
-    frames = _load(frames_or_folder, size, gray=False, limit=limit)
+def _extract_cnn(b, frames_or_folder, source, size, batch_size, progress, limit, step):
+    frames = _load(frames_or_folder, size, gray=False, limit=limit, step=step)
     model = _cnn_model(b.name, _source_key(source), size)
     pre = _preprocess_fn(b)
     return (*_run_model(model, frames, lambda a: pre(_rgb_batch(a, size)), batch_size, progress,
                         f"{b.name} features"), {})
 
 
-def _extract_pixels(frames_or_folder, size, progress, limit):
+def _extract_pixels(frames_or_folder, size, progress, limit, step):
     t0 = time.perf_counter()
     if isinstance(frames_or_folder, (str, os.PathLike)):
-        X = _data.load_frames(frames_or_folder, size=size, gray=True, limit=limit, progress=progress)
+        X = _data.load_frames(frames_or_folder, size=size, gray=True, limit=limit, progress=progress,
+                              step=step)
         X = X[..., 0]
     else:
-        a = _load(frames_or_folder, size, True, limit)
+        a = _load(frames_or_folder, size, True, limit, step)
         X = _gray_batch(a, size, as_float=True)
     dt = time.perf_counter() - t0
     return X.reshape(len(X), -1).astype(np.float32), dt / len(X), {}
@@ -528,7 +529,7 @@ def spot_feature_model(model):
     return keras.Model(inputs, feat, name=f"{model.name}_penultimate")
 
 
-def _extract_spot(frames_or_folder, source, batch_size, progress, limit):
+def _extract_spot(frames_or_folder, source, batch_size, progress, limit, step):
     model = source if not isinstance(source, Path) else _spot_model(
         str(source.resolve()), source.stat().st_mtime_ns)
     feat_model = spot_feature_model(model)
@@ -538,9 +539,9 @@ def _extract_spot(frames_or_folder, source, batch_size, progress, limit):
     size, channels = (shape[1], shape[0]), shape[-1]
     if isinstance(frames_or_folder, (str, os.PathLike)):
         a = _data.load_frames(frames_or_folder, size=size, gray=channels == 1, limit=limit,
-                              dtype=np.uint8, progress=progress)
+                              dtype=np.uint8, progress=progress, step=step)
     else:
-        a = _load(frames_or_folder, size, True, limit)
+        a = _load(frames_or_folder, size, True, limit, step)
 
     def batch(x):
         if channels == 1:
@@ -566,11 +567,11 @@ def _iter_progress(items, desc, progress):
     return tqdm(items, desc=desc, unit="img", disable=not progress)
 
 
-def _sift_gray(frames_or_folder, size, limit):
+def _sift_gray(frames_or_folder, size, limit, step=1):
     if isinstance(frames_or_folder, (str, os.PathLike)):
         return _data.load_frames(frames_or_folder, size=size, gray=True, limit=limit,
-                                 dtype=np.uint8)[..., 0]
-    return _gray_batch(_load(frames_or_folder, size, True, limit), size, as_float=False)
+                                 dtype=np.uint8, step=step)[..., 0]
+    return _gray_batch(_load(frames_or_folder, size, True, limit, step), size, as_float=False)
 
 
 def _fit_vocabulary(descriptors, size, seed, max_descriptors):
@@ -616,8 +617,8 @@ def _quantise(desc: np.ndarray, vocab: np.ndarray, c2: np.ndarray) -> np.ndarray
     return np.bincount(d2.argmin(1), minlength=len(vocab)).astype(np.float32)
 
 
-def _extract_sift(frames_or_folder, size, progress, limit, vocabulary, vocab_size, seed):
-    gray = _sift_gray(frames_or_folder, size, limit)
+def _extract_sift(frames_or_folder, size, progress, limit, step, vocabulary, vocab_size, seed):
+    gray = _sift_gray(frames_or_folder, size, limit, step)
     n = len(gray)
     t0 = time.perf_counter()
     descs = _sift_descriptors(gray, progress)
@@ -654,7 +655,7 @@ def _extract_sift(frames_or_folder, size, progress, limit, vocabulary, vocab_siz
 def extract(frames_or_folder, backbone: str, weights="auto", batch_size: int = 32,
             progress: bool = True, input_size=None, *, return_info: bool = False,
             limit: int | None = None, vocabulary=None, vocab_size: int = DEFAULT_VOCAB_SIZE,
-            seed: int = 0):
+            seed: int = 0, step: int = 1):
     """Describe every frame of a sequence with one vector.
 
     frames_or_folder: a sequence folder (its rgb/ frames are loaded with
@@ -668,7 +669,7 @@ def extract(frames_or_folder, backbone: str, weights="auto", batch_size: int = 3
     input_size: int S (S x S) or (width, height) fed to the extractor; None = the backbone default
         (224x224 for every CNN, 32x32 for pixels, native for sift_bovw, the model's for spot_cnn).
     return_info: also return an ExtractInfo (weights label, timing, dims).
-    limit: only the first ``limit`` frames.
+    limit: only the first ``limit`` frames. step: only every ``step``-th frame (applied first).
     vocabulary, vocab_size, seed: sift_bovw only: a (k, 128) vocabulary from fit_vocabulary, else
         one of vocab_size words is fitted on these frames themselves (k-means seeded by ``seed``).
     Returns features (N, D) float32, or (features, info) with return_info=True.
@@ -683,20 +684,22 @@ def extract(frames_or_folder, backbone: str, weights="auto", batch_size: int = 3
         raise ValueError(f"batch_size must be >= 1, got {batch_size}")
     if limit is not None and limit < 1:
         raise ValueError(f"limit must be >= 1, got {limit}")
+    if int(step) != step or step < 1:
+        raise ValueError(f"step must be an integer >= 1, got {step}")
     label, source = _resolve(b.name, weights)
     size = _size(input_size, b.input_size)
     if b.kind in ("keras", "ghostnet"):
         if min(size) < 32:
             raise ValueError(f"{b.name} needs an input of at least 32x32 pixels, got {size}")
         X, spi, extra = _extract_cnn(b, frames_or_folder, source, size, int(batch_size), progress,
-                                     limit)
+                                     limit, step)
     elif b.kind == "pixels":
-        X, spi, extra = _extract_pixels(frames_or_folder, size, progress, limit)
+        X, spi, extra = _extract_pixels(frames_or_folder, size, progress, limit, step)
     elif b.kind == "sift_bovw":
-        X, spi, extra = _extract_sift(frames_or_folder, size, progress, limit, vocabulary,
+        X, spi, extra = _extract_sift(frames_or_folder, size, progress, limit, step, vocabulary,
                                       vocab_size, seed)
     else:  # spot_cnn
-        X, spi, extra = _extract_spot(frames_or_folder, source, int(batch_size), progress, limit)
+        X, spi, extra = _extract_spot(frames_or_folder, source, int(batch_size), progress, limit, step)
         size = None
     X = np.ascontiguousarray(X, dtype=np.float32)
     if not return_info:
@@ -707,7 +710,7 @@ def extract(frames_or_folder, backbone: str, weights="auto", batch_size: int = 3
 
 def extract_rgbd(folder, backbone: str, weights="auto", batch_size: int = 32, progress: bool = True,
                  input_size=None, *, max_depth: float = DEPTH_MAX_M, return_info: bool = False,
-                 limit: int | None = None, **kwargs):
+                 limit: int | None = None, step: int = 1, **kwargs):
     """RGB-D descriptors as in Qi et al. 2024: RGB features and depth features, concatenated.
 
     folder: a sequence folder with rgb/ and depth/ (uint16, metres = value / 5000). Depth is read
@@ -722,9 +725,9 @@ def extract_rgbd(folder, backbone: str, weights="auto", batch_size: int = 32, pr
     """
     b = get_backbone(backbone)
     Xr, ir = extract(folder, b.name, weights, batch_size, progress, input_size, return_info=True,
-                     limit=limit, **kwargs)
+                     limit=limit, step=step, **kwargs)
     size = _size(input_size, b.input_size) if b.kind != "spot_cnn" else None
-    depth = _data.load_depth(folder, size=size, limit=limit)
+    depth = _data.load_depth(folder, size=size, limit=limit, step=step)
     if len(depth) != len(Xr):
         raise ValueError(f"{folder}: {len(Xr)} rgb frames but {len(depth)} depth frames; an RGB-D "
                          f"sequence needs one depth/N.png per rgb/N.png")

@@ -94,3 +94,12 @@ def test_read_camera(real_trajectory, tmp_path):
     (tmp_path / "camera.yaml").write_text("Camera.fx: 1\n")
     with pytest.raises(ValueError, match="lacks"):
         data.read_camera(tmp_path)
+
+
+def test_step_and_limit_select_frames(tmp_path):
+    write_frames(tmp_path, 10, size=(8, 8))
+    all_ = data.load_frames(tmp_path, size=None)
+    assert np.array_equal(data.load_frames(tmp_path, size=None, step=3), all_[::3])
+    assert np.array_equal(data.load_frames(tmp_path, size=None, step=3, limit=2), all_[[0, 3]])
+    with pytest.raises(ValueError, match="step"):
+        data.load_frames(tmp_path, step=0)

@@ -73,5 +73,53 @@ def _check_06(folder):
     assert s["repeats"] == TINY["repeats"] and s["frames_per_s"] > 0
 
 
+def _feature_backbones():
+    return list(TINY["backbones"])
+
+
+def _check_07(folder):
+    t = pd.read_csv(folder / "table2.csv")
+    assert t.backbone.tolist() == _feature_backbones()          # one row per backbone, in order
+    assert {"weights", "label"} <= set(t.columns)
+    assert (t.label == t.backbone + " (" + t.weights + ")").all()
+    assert t["AP_%"].between(0, 100).all() and t["R@100P_%"].between(0, 100).all()
+    assert (t.extract_s_per_image > 0).all() and (t.match_s_MxM > 0).all()
+    cnns = t[t.backbone.isin(["vgg19", "resnet50", "resnet101", "resnet152", "efficientnetb0", "ghostnet",
+                              "mobilenetv3small"])]
+    assert (cnns.weights == "random init").all()                 # tiny runs weights=None: never "imagenet"
+    if "sift_bovw" in t.backbone.values:
+        assert t.set_index("backbone").loc["sift_bovw", "R_a_%"] == 0
+    ops = pd.read_csv(folder / "dictionary_operating_points.csv")
+    assert ops.tau.tolist() == TINY["tau_list"]
+    assert ops.recall.between(0, 1).all()
+
+
+def _check_08(folder):
+    t = pd.read_csv(folder / "postprocessing.csv")
+    done = [b for b in _feature_backbones() if b != "spot_cnn"]
+    assert sorted(t.backbone.unique()) == sorted(done)
+    assert {"weights", "label"} <= set(t.columns)
+    assert {"raw", "L2", "ZCA, tuned dim"} <= set(t.variant)
+    assert t["AP_eval_%"].between(0, 100).all() and t["AP_tune_%"].between(0, 100).all()
+    assert set(t["size"]) <= set(TINY["median_sizes"])
+    tuning = pd.read_csv(folder / "tuning.csv")
+    assert (tuning.knob == "pca dim").any() and tuning.knob.str.startswith("median size").any()
+    m = json.loads((folder / "manifest.json").read_text())
+    assert m["parameters"]["tune_frames"] > 0 and m["parameters"]["eval_frames"] > 0
+
+
+def _check_09(folder):
+    t = pd.read_csv(folder / "rgbd.csv")
+    cnns = [b for b in _feature_backbones() if b not in ("sift_bovw", "pixels", "spot_cnn")]
+    assert t.backbone.tolist() == cnns
+    assert (t.weights == "random init").all()
+    for c in ("AP_RGB_%", "AP_depth_%", "AP_RGB-D_%"):
+        assert t[c].between(0, 100).all()
+    d = pd.read_csv(folder / "paper_vs_run.csv")
+    assert len(d) > 0
+
+
 CHECKS = {"01_spot_grouping": _check_01, "02_training_over_seeds": _check_02,
-          "03_confusion_matrix": _check_03, "05_dictionary_threshold": _check_05, "06_speed": _check_06}
+          "03_confusion_matrix": _check_03, "05_dictionary_threshold": _check_05, "06_speed": _check_06,
+          "07_feature_baselines": _check_07, "08_descriptor_postprocessing": _check_08,
+          "09_rgbd_features": _check_09}
