@@ -28,27 +28,20 @@ and by ``python -m greenloop.bench`` on every frame of the dataset)
     "keras":  ``model.predict`` (the reference; slow, for comparison only).
     "auto":   "tflite" when TensorFlow has tf.lite, else "numpy" (paper's architecture only).
 
-Why "auto" picks TFLite (measured on this project's 2-core AMD EPYC build machine while it was
-shared with other jobs, load average 5-9; reference and candidates interleaved in one process, so
-trust the ratios, not the absolute times). Forward pass only, 70-frame window, early quiet probe:
-Keras ``predict`` 73-110 ms, NumPy 5.7-5.8 ms, TFLite 5.3-6.0 ms (1 thread) / 3.5-5.0 ms
-(2 threads), XLA ``tf.function`` 10-12 ms; single frame: NumPy 0.20-0.22 ms, TFLite 0.17-0.19 ms
-(1 thread), XLA 0.74 ms. Full ``python -m greenloop.bench`` run (results/bench/bench.md): windows
-from raw 640x480 frames 3.7x (NumPy) / 4.7x (TFLite) the reference's frames/s; 32x32 windows vs
-the reference without preprocessing 8.9x / 10.7x; single-frame median 0.96 / 0.51 ms. TFLite is
-the fastest with identical labels (2260/2260), at the cost of a ~2 s conversion per Detector built
-from a Keras model and a deprecated API (``tf.lite.Interpreter``; its successor ``ai-edge-litert``
-is not a greenloop dependency); NumPy is the fallback when tf.lite is missing. Limits no backend
-removes: the 28800 x 68 dense layer means reading a 7.8 MB weight matrix per forward pass
-(2.2 MFLOP/frame), and the exact preprocessing of a 640x480 BGR frame (cvtColor + INTER_AREA)
-costs ~0.15 ms on a quiet core, half the single-frame budget and, for windows, enough on its own
-to cap the ratio against the reference near 5x. NumPy's BLAS runs on one thread
-(``_single_thread_blas``): with 2 threads on the shared machine a matmul stalls whenever one thread
-is preempted (median 5.3 ms per frame vs 0.35 ms).
+Why "auto" picks TFLite: measured with reference and candidates interleaved in one process
+(``python -m greenloop.bench``; figures in results/bench/bench.md), TFLite had the lowest window and
+single-frame times of the backends that give Keras's labels on every frame; XLA ``tf.function`` was
+slower than both, and NumPy is the dependency-free fallback. Costs no backend removes: the
+28800 x 68 dense layer means reading a 7.8 MB weight matrix per forward pass (2.2 MFLOP/frame), and
+the exact preprocessing of a 640x480 BGR frame (cvtColor + INTER_AREA) costs about as much as the
+network itself, which caps the window speed-up against a reference that also preprocesses. NumPy's
+BLAS runs on one thread inside these calls (``_single_thread_blas``): on a loaded 2-core machine a
+two-thread matmul stalls whenever one thread is pre-empted.
 """
 from __future__ import annotations
 
 import contextlib
+import functools
 import io
 import os
 import tempfile
@@ -61,6 +54,14 @@ from .data import preprocess_image
 from .dictionary import LoopDetector
 
 BACKENDS = ("auto", "numpy", "tflite", "keras")
+_POOL_WORKERS = max(1, min(4, os.cpu_count() or 1))
+
+
+@functools.lru_cache(maxsize=1)
+def _pool():
+    """Threads that preprocess the frames of a window in parallel (made once per process)."""
+    from concurrent.futures import ThreadPoolExecutor
+    return ThreadPoolExecutor(_POOL_WORKERS, thread_name_prefix="greenloop-preprocess")
 COLORS = ("bgr", "rgb")
 
 
@@ -414,11 +415,19 @@ class Detector:
                                  f"shape {frames.shape}")
         seq = list(frames)
         out = np.empty((len(seq), self.size[1], self.size[0]), np.uint8)
-        for i, f in enumerate(seq):
-            try:
-                out[i] = preprocess_u8(f, self.size, self.color)
-            except ValueError as e:
-                raise ValueError(f"frame {i} of the window: {e}") from None
+
+        def work(idx):  # OpenCV releases the GIL: chunks of the window run on all cores
+            for i in idx:
+                try:
+                    out[i] = preprocess_u8(seq[i], self.size, self.color)
+                except ValueError as e:
+                    raise ValueError(f"frame {i} of the window: {e}") from None
+
+        chunks = [c for c in np.array_split(np.arange(len(seq)), _POOL_WORKERS) if len(c)]
+        if len(seq) < 8 or len(chunks) < 2:
+            work(range(len(seq)))
+        else:
+            list(_pool().map(work, chunks))
         return out.astype(np.float32) / np.float32(255.0)
 
     def predict(self, frames) -> np.ndarray:
