@@ -91,3 +91,21 @@ def test_train_rejects_bad_input():
         cnn.train(X[:, :, :, 0], y, seed=0, cache=False)
     with pytest.raises(ValueError, match="epochs"):
         cnn.train(X, y, seed=0, epochs=0, cache=False)
+
+
+def _train_in_subprocess(cache):
+    X, y = _toy()
+    _, h, _ = cnn.train(X, y, seed=5, epochs=2, cache=cache, progress=False)
+    return h["val_loss"], h["seconds"]
+
+
+def test_concurrent_runs_share_one_cache_entry(tmp_path):
+    """Two processes asking for the same model at once (make -j2): one trains, the other waits on
+    the lock and loads it; the cache holds one complete entry and no temporary folders."""
+    import multiprocessing as mp
+
+    with mp.get_context("spawn").Pool(2) as pool:
+        a, b = pool.map(_train_in_subprocess, [tmp_path, tmp_path])
+    assert a == b  # identical histories, training seconds included: the second one loaded it
+    entries = [p for p in tmp_path.iterdir() if p.is_dir()]
+    assert len(entries) == 1 and not list(tmp_path.glob(".tmp-*"))
