@@ -1,0 +1,37 @@
+"""Classification metrics of the spot classifier, built on scikit-learn (Tables 2 and 4)."""
+from __future__ import annotations
+
+import numpy as np
+
+
+def per_class(y_true, y_pred, n_classes: int):
+    """Per-spot precision, recall, F1 and support (sklearn's classification_report).
+
+    y_true, y_pred: (N,) int spot labels 0..n_classes-1. Returns a DataFrame with one row per spot:
+    class (1-based, as the paper numbers them), precision, recall, f1 (rounded to 2 decimals, as
+    the paper prints them), support (frames of that spot in y_true). Spots absent from both get 0.
+    """
+    import pandas as pd
+    from sklearn.metrics import classification_report
+
+    y_true, y_pred = np.asarray(y_true), np.asarray(y_pred)
+    if y_true.shape != y_pred.shape or y_true.ndim != 1:
+        raise ValueError(f"y_true and y_pred must be (N,) arrays of one length, got {y_true.shape} and {y_pred.shape}")
+    rep = classification_report(y_true, y_pred, labels=np.arange(n_classes), output_dict=True, zero_division=0)
+    return pd.DataFrame([{"class": c + 1, "precision": round(rep[str(c)]["precision"], 2),
+                          "recall": round(rep[str(c)]["recall"], 2), "f1": round(rep[str(c)]["f1-score"], 2),
+                          "support": int(rep[str(c)]["support"])} for c in range(n_classes)])
+
+
+def error_summary(y_true, y_pred) -> dict:
+    """Misclassifications and how many fall on an adjacent spot (|predicted - true| = 1).
+
+    Returns {'frames', 'misclassified', 'accuracy', 'adjacent', 'adjacent_share' (None if no
+    errors)}.
+    """
+    y_true, y_pred = np.asarray(y_true), np.asarray(y_pred)
+    wrong = y_pred != y_true
+    adj = int((np.abs(y_pred - y_true)[wrong] == 1).sum())
+    return {"frames": int(len(y_true)), "misclassified": int(wrong.sum()),
+            "accuracy": float(1 - wrong.mean()) if len(y_true) else float("nan"),
+            "adjacent": adj, "adjacent_share": adj / int(wrong.sum()) if wrong.any() else None}
