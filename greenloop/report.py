@@ -119,10 +119,16 @@ def versions() -> dict:
 
 def manifest(folder, parameters: dict, dataset: str | Path | None = None, **extra) -> Path:
     """Write ``<folder>/manifest.json``: date, machine, CPU, library versions, parameters,
-    dataset path and fingerprint, plus any extra fields (e.g. wall_seconds)."""
+    dataset path and fingerprint, the wall time of this process so far (for a notebook executed by
+    papermill: its kernel, i.e. the notebook's run time), plus any extra fields."""
+    import time
+
+    import psutil
+
     from . import data
 
     info = {"date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+            "wall_seconds": round(time.time() - psutil.Process().create_time(), 1),
             "machine": platform.node(), "platform": platform.platform(), "cpu": cpu_model(),
             "versions": versions(), "parameters": parameters}
     if dataset is not None:
