@@ -211,8 +211,13 @@ def main(argv=None) -> int:
     model = cnn.build(n_classes, jit_compile=False)
     Y = keras.utils.to_categorical(y, n_classes).astype(np.float32)
     model.fit(X, Y, epochs=1, batch_size=32, verbose=0)
+    import tempfile
+    tmpdir = tempfile.TemporaryDirectory()
     dets = {"numpy": Detector(model, 10 ** 9, backend="numpy"),
-            "tflite": Detector(model, 10 ** 9, backend="tflite")}
+            "tflite": Detector(model, 10 ** 9, backend="tflite"),
+            # dynamic-range int8 weights: a quarter of the dense layer's bytes to read per frame;
+            # labels may differ from Keras, so it is judged by its test-accuracy change (row below)
+            "tflite-int8": Detector(export_tflite(model, Path(tmpdir.name) / "int8.tflite", quantize=True), 10 ** 9)}
 
     print("[bench] (a) windows", flush=True)
     windows = bench_windows(model, raw, dets, rounds=8 if quick else 30)
@@ -232,18 +237,23 @@ def main(argv=None) -> int:
     epochs = 2 if quick else 5
     training, fast_run = bench_training(X, y, seeds, epochs)
 
-    # quantised export: accuracy change on the fast run's test split
-    import tempfile
-    test = fast_run["split"]["test"]
-    with tempfile.TemporaryDirectory() as tmp:
-        q = Detector(export_tflite(fast_run["model"], Path(tmp) / "q.tflite", quantize=True), 10 ** 9)
-        f = Detector(export_tflite(fast_run["model"], Path(tmp) / "f.tflite"), 10 ** 9)
-        acc_q = float(np.mean(q.predict(u8[test]) == y[test]))
-        acc_f = float(np.mean(f.predict(u8[test]) == y[test]))
-        acc_k = float(np.mean(cnn.predict(fast_run["model"], X[test]) == y[test]))
+    # quantised export: accuracy change on a model trained with the paper's full protocol (seed 0,
+    # 200 epochs: the notebooks' cached model when it exists, else trained here; --quick: the
+    # short fast-path run), on its own test split
+    if quick:
+        q_model, q_split, q_desc = fast_run["model"], fast_run["split"], f"fast-path model, seed {fast_run['seed']}, {epochs} epochs"
+    else:
+        q_model, _, q_split = cnn.train(X, y, 0, epochs=200)
+        q_desc = "paper protocol, seed 0, 200 epochs (greenloop.cnn cache)"
+    test = q_split["test"]
+    q = Detector(export_tflite(q_model, Path(tmpdir.name) / "q.tflite", quantize=True), 10 ** 9)
+    f = Detector(export_tflite(q_model, Path(tmpdir.name) / "f.tflite"), 10 ** 9)
+    acc_q = float(np.mean(q.predict(u8[test]) == y[test]))
+    acc_f = float(np.mean(f.predict(u8[test]) == y[test]))
+    acc_k = float(np.mean(cnn.predict(q_model, X[test]) == y[test]))
     quant = {"test_frames": int(len(test)), "keras_accuracy": acc_k, "tflite_float_accuracy": acc_f,
              "tflite_dynamic_range_accuracy": acc_q, "change_points": 100 * (acc_q - acc_k),
-             "model": f"fast-path model, seed {fast_run['seed']}, {epochs} epochs"}
+             "model": q_desc}
 
     best = min(("numpy", "tflite"), key=lambda k: windows[k]["median_ms"])
     result = {
@@ -253,8 +263,8 @@ def main(argv=None) -> int:
         "n_classes": n_classes, "default_backend": Detector(model, 10 ** 9).backend,
         "windows": windows, "single": single, "training": training, "agreement": agreement,
         "quantized_tflite": quant,
-        "note": "timings on a machine shared with other jobs: reference and ours are interleaved in "
-                "one process; ratios are the robust figures",
+        "note": "reference and ours are interleaved in one process, so load from other jobs hits "
+                "both alike; ratios are the robust figures",
     }
 
     import pandas as pd
@@ -266,7 +276,7 @@ def main(argv=None) -> int:
         rows.append({"measurement": measure, "reference": ref, "ours": ours, "ratio": ratio,
                      "target": target, "met?": met})
 
-    for k in ("numpy", "tflite"):
+    for k in dets:
         r = ref_w["median_ms"] / windows[k]["median_ms"]
         row(f"70-frame window, frames/s, preprocessing included ({k})", f"{ref_w['frames_per_s']:.0f}",
             f"{windows[k]['frames_per_s']:.0f}", f"{r:.1f}x", ">= 10x", "yes" if r >= 10 else "no")
@@ -282,7 +292,7 @@ def main(argv=None) -> int:
             f"{rn['frames_per_s']:.0f}", f"{o['frames_per_s']:.0f}", f"{r:.1f}x", ">= 10x", "yes" if r >= 10 else "no")
     row("preprocessing alone (cvtColor + INTER_AREA, 640x480 -> 32x32), ms/frame", "",
         f"{windows['preprocessing_only']['median_ms'] / WINDOW:.3f}", "", "(info)", "")
-    for k in ("numpy", "tflite"):
+    for k in dets:
         s, sr = single[k], single["reference"]
         row(f"single frame median latency, ms ({k})", f"{sr['median_ms']:.2f}", f"{s['median_ms']:.3f}",
             f"{sr['median_ms'] / s['median_ms']:.0f}x", "<= 0.3 ms", "yes" if s["median_ms"] <= 0.3 else "no")
@@ -308,7 +318,8 @@ def main(argv=None) -> int:
     note = (f"Run {result['date']} on {result['cpu']}, {'random frames' if info['random_frames'] else info['dataset']}"
             f"{', --quick' if quick else ''}. Reference: cv2 preprocessing + Keras model.predict + Python "
             f"dictionary loop; ours: greenloop.stream.Detector (default backend {result['default_backend']}). "
-            f"Machine shared with other jobs; reference and ours interleaved in one process.")
+            f"Reference and ours interleaved in one process; tflite-int8 is the dynamic-range quantised "
+            f"export, judged by its test-accuracy change, not by label equality.")
     md = report.write_table(df, out / "bench", title="Speed: reference vs greenloop.stream", note=note)
     print(md.read_text())
     print(f"[bench] wrote {out / 'bench.json'} in {result['wall_seconds']:.0f} s; fastest window backend: {best}")
