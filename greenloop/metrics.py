@@ -35,3 +35,18 @@ def error_summary(y_true, y_pred) -> dict:
     return {"frames": int(len(y_true)), "misclassified": int(wrong.sum()),
             "accuracy": float(1 - wrong.mean()) if len(y_true) else float("nan"),
             "adjacent": adj, "adjacent_share": adj / int(wrong.sum()) if wrong.any() else None}
+
+
+def same_place_errors(frames, y_pred, labels, gt) -> int:
+    """Errors that name the spot of the same place seen at another time.
+
+    frames: (M,) frame indices that were classified; y_pred: (M,) predicted spots; labels: (N,)
+    spot of every frame; gt: (N, N) bool ground-truth loops (greenloop.groundtruth). Counts the
+    misclassified frames f whose predicted spot holds a ground-truth loop partner of f: with spots
+    made by frame index, a revisit is a different class from the place it revisits, so these
+    "errors" are the classifier recognising the place.
+    """
+    frames, y_pred, labels = np.asarray(frames), np.asarray(y_pred), np.asarray(labels)
+    gt = np.asarray(gt, dtype=bool)
+    wrong = y_pred != labels[frames]
+    return int(sum(gt[f, labels == c].any() for f, c in zip(frames[wrong], y_pred[wrong])))
