@@ -22,7 +22,6 @@ def _detect(args) -> int:
     from pathlib import Path
 
     import cv2
-    import numpy as np
 
     from .data import list_frames
     from .stream import Detector

@@ -64,7 +64,7 @@ def write_table(df, path, title: str | None = None, note: str | None = None) -> 
     return _atomic_write(path.with_suffix(".md"), lambda p: p.write_text(md))
 
 
-def paper_vs_run(rows) -> "pandas.DataFrame":
+def paper_vs_run(rows):
     """A table with the paper's value only as a reference column beside the measured one.
 
     rows: iterable of (quantity, paper value or None, measured value[, note]).

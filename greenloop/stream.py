@@ -47,7 +47,6 @@ import os
 import tempfile
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from .data import preprocess_image
