@@ -363,8 +363,10 @@ def main(argv=None) -> int:
         row(f"test accuracy after 200 epochs, mean ± sd [per seed], seeds {ap_['seeds']}", fmt(ap_["test_accuracy"]),
             fmt(af["test_accuracy"]), "", "same distribution", "")
         tp2, tf2 = np.median(ap_["training_seconds"]), np.median(af["training_seconds"])
-        row("one 200-epoch training, s (median over seeds; measured when each was trained, not interleaved)",
-            f"{tp2:.0f}", f"{tf2:.0f}", f"{tp2 / tf2:.1f}x", ">= 2x", "yes" if tp2 >= 2 * tf2 else "no")
+        # not judged: each time was recorded when its model was trained (another hour, other load;
+        # epoch times on the shared build machine drift 2x over a day); the interleaved s/epoch row is
+        row("one 200-epoch training, s (median over seeds; recorded when each was trained, NOT interleaved)",
+            f"{tp2:.0f}", f"{tf2:.0f}", f"{tp2 / tf2:.1f}x", "(info)", "")
     for k in ("numpy", "tflite"):
         a = agreement[k]
         row(f"labels equal to Keras ({k})", "", f"{a['same_labels']}/{a['frames']}", "", "all",
