@@ -55,7 +55,7 @@ def _synthetic(n: int, n_raw: int, seed: int = 0):
     return raw, u8
 
 
-def _load(dataset: Path, quick: bool):
+def _load(dataset: Path):
     """(raw frames list for timing, u8 (N, 32, 32) preprocessed frames, y (N,), info dict)."""
     from . import data, spots
 
@@ -98,13 +98,13 @@ def _gray_pass(frames) -> None:
     """The cheapest step every exact pipeline needs: one cv2.cvtColor pass over each raw frame (it
     reads every byte once), split over the detector's preprocessing threads. Its time is a floor
     for a window, so reference / floor bounds the speed-up any backend can reach on this machine."""
-    from .stream import _POOL_WORKERS, _pool
+    from .stream import run_chunked
 
     def work(idx):
         for i in idx:
             cv2.cvtColor(frames[i], cv2.COLOR_BGR2GRAY)
 
-    list(_pool().map(work, [c for c in np.array_split(np.arange(len(frames)), _POOL_WORKERS) if len(c)]))
+    run_chunked(work, len(frames))
 
 
 def bench_windows(model, raw, dets, rounds: int) -> dict:
@@ -243,7 +243,7 @@ def main(argv=None) -> int:
     from .stream import Detector, export_tflite
 
     quick = args.quick
-    raw, u8, y, info = _load(Path(args.dataset), quick)
+    raw, u8, y, info = _load(Path(args.dataset))
     X = (u8.astype(np.float32) / np.float32(255.0))[..., None]
     n_classes = int(y.max() + 1)
     print(f"[bench] {len(u8)} frames, {n_classes} spots, random={info['random_frames']}", flush=True)

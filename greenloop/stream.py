@@ -59,12 +59,25 @@ BACKENDS = ("auto", "numpy", "tflite", "keras")
 _POOL_WORKERS = max(1, min(4, os.cpu_count() or 1))
 
 
+COLORS = ("bgr", "rgb")
+
+
 @functools.lru_cache(maxsize=1)
 def _pool():
     """Threads that preprocess the frames of a window in parallel (made once per process)."""
     from concurrent.futures import ThreadPoolExecutor
     return ThreadPoolExecutor(_POOL_WORKERS, thread_name_prefix="greenloop-preprocess")
-COLORS = ("bgr", "rgb")
+
+
+def run_chunked(work, n: int, min_parallel: int = 8) -> None:
+    """Call ``work(indices)`` on contiguous chunks of range(n), one chunk per preprocessing thread
+    (OpenCV releases the GIL, so chunks of a window run on all cores); inline when n < min_parallel
+    or there is one core. Exceptions raised by ``work`` propagate."""
+    chunks = [c for c in np.array_split(np.arange(n), _POOL_WORKERS) if len(c)]
+    if n < min_parallel or len(chunks) < 2:
+        work(range(n))
+    else:
+        list(_pool().map(work, chunks))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -419,18 +432,14 @@ class Detector:
         seq = list(frames)
         out = np.empty((len(seq), self.size[1], self.size[0]), np.uint8)
 
-        def work(idx):  # OpenCV releases the GIL: chunks of the window run on all cores
+        def work(idx):
             for i in idx:
                 try:
                     out[i] = preprocess_u8(seq[i], self.size, self.color)
                 except ValueError as e:
                     raise ValueError(f"frame {i} of the window: {e}") from None
 
-        chunks = [c for c in np.array_split(np.arange(len(seq)), _POOL_WORKERS) if len(c)]
-        if len(seq) < 8 or len(chunks) < 2:
-            work(range(len(seq)))
-        else:
-            list(_pool().map(work, chunks))
+        run_chunked(work, len(seq))
         return out.astype(np.float32) / np.float32(255.0)
 
     def predict(self, frames) -> np.ndarray:
