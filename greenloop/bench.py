@@ -12,7 +12,8 @@ Measures, interleaving reference and candidates so that load from other jobs hit
 (b) single frames, preprocessing included: median and p99 latency, reference (``model.predict`` on
     one frame) vs ``Detector.update``;
 (c) training seconds per epoch: plain ``model.fit`` (``greenloop.cnn.train(fast=False)``) vs the
-    fast path (``fast=True``), and the test accuracy of both after the same epochs;
+    fast path (``fast=True``: the fused numba trainer on a CPU) and XLA ``model.fit``
+    (``fast="xla"``), and the test accuracy of each after the same epochs;
 (c') the full 200-epoch protocol over seeds, plain vs fast: both accuracy distributions and the
     training wall times (through the model cache; skipped with --quick);
 (d) label agreement of every backend with Keras on all frames; and the accuracy change of a
@@ -98,7 +99,7 @@ def _gray_pass(frames) -> None:
     """The cheapest step every exact pipeline needs: one cv2.cvtColor pass over each raw frame (it
     reads every byte once), split over the detector's preprocessing threads. Its time is a floor
     for a window, so reference / floor bounds the speed-up any backend can reach on this machine."""
-    from .stream import run_chunked
+    from .kernels import run_chunked
 
     def work(idx):
         for i in idx:
@@ -174,14 +175,16 @@ def bench_single(model, raw, dets, n_ref: int, n_ours: int) -> dict:
 
 
 def bench_training(X, y, seeds, epochs: int) -> dict:
-    """(c) seconds per epoch and test accuracy: cnn.train(fast=False) (plain model.fit) vs fast=True."""
+    """(c) seconds per epoch and test accuracy: cnn.train(fast=False) (plain model.fit) vs fast=True
+    vs fast="xla", interleaved seed by seed (the first trainer rotates)."""
     from . import cnn
 
-    runs = {"plain": [], "fast": []}
+    runs = {"plain": [], "fast": [], "xla": []}
+    trainers = {"plain": False, "fast": True, "xla": "xla"}
     for i, seed in enumerate(seeds):
-        order = ("plain", "fast") if i % 2 == 0 else ("fast", "plain")
+        order = list(runs)[i % 3:] + list(runs)[:i % 3]  # rotate who goes first
         for kind in order:
-            model, h, split = cnn.train(X, y, seed, epochs=epochs, fast=kind == "fast",
+            model, h, split = cnn.train(X, y, seed, epochs=epochs, fast=trainers[kind],
                                         cache=False, progress=True)
             ep = h["epoch_seconds"]
             runs[kind].append({"seed": int(seed), "seconds": h["seconds"], "epoch_seconds": ep,
@@ -198,9 +201,10 @@ def bench_training(X, y, seeds, epochs: int) -> dict:
                      "mean_test_accuracy": float(np.mean([r["test_accuracy"] for r in rs]))}
     out["epochs"] = int(epochs)
     out["n_train_frames"] = int(len(runs["plain"][0]["split"]["train"]))
-    out["note"] = ("seconds_per_epoch: median wall time of epochs 2.. (the first holds the fast "
-                   "path's XLA compilation; total_seconds includes it), validation on the test split "
-                   "included")
+    out["trainer"] = cnn.trainer(True)
+    out["note"] = ("seconds_per_epoch: median wall time of epochs 2.. (the first holds XLA or numba "
+                   "compilation; total_seconds includes it), validation on the test split included; "
+                   "fast = cnn.train(fast=True), xla = model.fit with XLA and one call per epoch")
     return out, runs["fast"][0]
 
 
@@ -351,10 +355,15 @@ def main(argv=None) -> int:
         row(f"single frame p99 latency, ms ({k})", f"{sr['p99_ms']:.2f}", f"{s['p99_ms']:.3f}",
             f"{sr['p99_ms'] / s['p99_ms']:.0f}x", "<= 1 ms", "yes" if s["p99_ms"] <= 1 else "no")
     tp, tf_ = training["plain"], training["fast"]
-    row(f"training s/epoch ({training['n_train_frames']} frames, {len(seeds)} seed(s), {epochs} epochs)",
+    row(f"training s/epoch ({training['n_train_frames']} frames, {len(seeds)} seed(s), {epochs} epochs; "
+        f"ours: the {training['trainer']} trainer)",
         f"{tp['median_seconds_per_epoch']:.2f}", f"{tf_['median_seconds_per_epoch']:.2f}",
         f"{tp['median_seconds_per_epoch'] / tf_['median_seconds_per_epoch']:.1f}x", ">= 2x",
         "yes" if tp['median_seconds_per_epoch'] >= 2 * tf_['median_seconds_per_epoch'] else "no")
+    tx = training["xla"]
+    row("training s/epoch, XLA model.fit (the fast path where Keras has a GPU) vs plain",
+        f"{tp['median_seconds_per_epoch']:.2f}", f"{tx['median_seconds_per_epoch']:.2f}",
+        f"{tp['median_seconds_per_epoch'] / tx['median_seconds_per_epoch']:.1f}x", "(info)", "")
     row(f"test accuracy after {epochs} epochs (mean over seeds)", f"{tp['mean_test_accuracy']:.3f}",
         f"{tf_['mean_test_accuracy']:.3f}", "", "same distribution", "")
     if accuracy is not None:

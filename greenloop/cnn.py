@@ -142,15 +142,22 @@ def _load_cached(folder: Path):
 
 def train(X: np.ndarray, y: np.ndarray, seed: int, epochs: int = 200, batch_size: int = 32,
           test_size: float = 0.2, split: str = "random", n_classes: int | None = None,
-          fast: bool = True, cache: bool | str | Path = True, progress: bool = True, gap: int = 5):
+          fast: bool | str = True, cache: bool | str | Path = True, progress: bool = True, gap: int = 5):
     """Train the paper's CNN on frames X with spot labels y; the test split is the validation data.
 
     X: (N, H, W, C) float32 in [0, 1]. y: (N,) int spot labels. seed: seeds the split, the weight
     initialisation and the shuffling (same seed, same numbers on CPU).
     split: "random" (the paper's 80/20) or "blocked" (see ``split_indices``).
     n_classes: defaults to y.max() + 1.
-    fast: compile the train step with XLA and run a whole epoch per call (steps_per_execution);
-        the same protocol (batch 32, Adam 1e-3, shuffling) as a plain ``model.fit``.
+    fast: which trainer runs the same protocol (batch 32, Adam 1e-3, categorical cross-entropy,
+        a fresh shuffle every epoch, the same seeded Keras initial weights):
+        False or "plain": ``model.fit`` as the paper's code would call it (the reference);
+        "xla": ``model.fit`` with the train step compiled by XLA and one call per epoch
+        (steps_per_execution), the fast path on an accelerator or without numba;
+        "fused": gradients written out in NumPy, the dense layer's backward pass and Adam update
+        fused in one numba kernel (``_fit_fused``), the fastest on a CPU;
+        True: "fused" when numba is installed and Keras sees no GPU, else "xla".
+        The trainer is part of the cache key.
     cache: True (results/models/ or $GREENLOOP_CACHE), a folder, or False. Runs are keyed by
         ``cache_key`` and written atomically under a file lock, so reruns and parallel ``make -j``
         jobs reuse a model instead of training it again.
@@ -165,8 +172,12 @@ def train(X: np.ndarray, y: np.ndarray, seed: int, epochs: int = 200, batch_size
     if epochs < 1 or batch_size < 1:
         raise ValueError(f"epochs and batch_size must be >= 1, got {epochs}, {batch_size}")
     n_classes = int(n_classes or y.max() + 1)
+    fast = trainer(fast)
+    if fast == "fused" and X.shape[3] != 1:
+        raise ValueError(f"the fused trainer needs gray frames (N, H, W, 1), got {X.shape}; "
+                         f"use fast='xla' or fast='plain'")
     params = dict(seed=int(seed), epochs=int(epochs), batch_size=int(batch_size),
-                  test_size=float(test_size), split=split, n_classes=n_classes, fast=bool(fast),
+                  test_size=float(test_size), split=split, n_classes=n_classes, fast=fast,
                   gap=int(gap) if split == "blocked" else None)
     key = cache_key(X, y, **params)
     folder = None
@@ -190,13 +201,49 @@ def train(X: np.ndarray, y: np.ndarray, seed: int, epochs: int = 200, batch_size
     return _fit(X, y, progress, **params)
 
 
+TRAINERS = ("plain", "xla", "fused")
+
+
+def trainer(fast: bool | str = True) -> str:
+    """The trainer ``train(fast=...)`` runs: "plain", "xla" or "fused" (see ``train``)."""
+    if fast is False or fast == "plain":
+        return "plain"
+    if fast is True:
+        from . import kernels
+        return "fused" if kernels.available() and not _accelerator() else "xla"
+    if fast not in TRAINERS:
+        raise ValueError(f"fast must be True, False or one of {TRAINERS}, got {fast!r}")
+    return fast
+
+
+def _accelerator() -> bool:
+    """True when the Keras backend computes on a GPU/TPU (then XLA beats the CPU kernels)."""
+    import keras
+
+    backend = keras.backend.backend()
+    if backend == "jax":
+        import jax
+        return jax.default_backend() != "cpu"
+    if backend == "tensorflow":
+        import tensorflow as tf
+        return bool(tf.config.list_physical_devices("GPU"))
+    if backend == "torch":
+        import torch
+        return bool(torch.cuda.is_available())
+    return False
+
+
 def _fit(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size, split, fast, gap, **_):
+    if fast == "fused":
+        return _fit_fused(X, y, progress, n_classes=n_classes, seed=seed, epochs=epochs,
+                          batch_size=batch_size, test_size=test_size, split=split, gap=gap)
     import keras
 
     train_idx, test_idx = split_indices(y, seed, test_size, split, gap or 0)
     keras.utils.set_random_seed(seed)
-    steps = int(np.ceil(len(train_idx) / batch_size)) if fast else 1
-    model = build(n_classes, X.shape[1:], jit_compile=bool(fast), steps_per_execution=steps)
+    xla = fast == "xla"
+    steps = int(np.ceil(len(train_idx) / batch_size)) if xla else 1
+    model = build(n_classes, X.shape[1:], jit_compile=xla, steps_per_execution=steps)
     Y = keras.utils.to_categorical(y, n_classes).astype(np.float32)
     epoch_seconds = []
     clock = keras.callbacks.LambdaCallback(
@@ -209,6 +256,115 @@ def _fit(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size, spli
     history = {k: [float(v) for v in vals] for k, vals in h.history.items()}
     history["seconds"] = time.perf_counter() - t0
     history["epoch_seconds"] = epoch_seconds  # wall time per epoch (the first includes compilation)
+    return model, history, {"train": train_idx, "test": test_idx}
+
+
+def _logits(Xg, Kc, bc, Wd, bd, Wo, bo):
+    """Forward pass on gray frames Xg (n, H, W): (A (n, positions*f), Z2 (n, 68), Z3 (n, C))."""
+    from . import kernels
+
+    A = kernels.conv_relu(Xg, Kc, bc)
+    Z2 = kernels.matmul(A, Wd)
+    Z2 += bd
+    Z3 = np.maximum(Z2, 0) @ Wo
+    Z3 += bo
+    return A, Z2, Z3
+
+
+def _softmax_loss(Z3, y):
+    """Softmax cross-entropy: (probabilities (n, C), per-frame loss (n,)) from logits (n, C)."""
+    Z = Z3 - Z3.max(1, keepdims=True)
+    E = np.exp(Z)
+    S = E.sum(1, keepdims=True)
+    loss = np.log(S[:, 0]) - Z[np.arange(len(y)), y]
+    return E / S, loss
+
+
+def _fit_fused(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size, split, gap):
+    """The paper's protocol (batch 32, Adam 1e-3, softmax cross-entropy, a new shuffle of the
+    training frames every epoch, the test split as validation data after each epoch) with the
+    gradients written out in float32, like Keras computes them:
+    conv + ReLU (``kernels.conv_relu``) -> dense (BLAS, split over the cores) -> output layer and
+    softmax (NumPy); backward: the dense layer's two products and Adam's update of its 2 M
+    weights, split over the cores by rows (``kernels.dense_backward_adam``), then the conv's
+    gradients (``kernels.conv_grad``) and Adam on the small arrays (``kernels.adam``).
+    The weights start from the seeded ``build`` model (Keras's own initialisers) and are written
+    back into it at the end, so the model returned and cached is the ordinary Keras model.
+    The shuffle comes from numpy's generator seeded with ``seed`` (not Keras's), so the batches
+    differ from ``model.fit``'s; tests/test_kernels.py checks both trainers reach the same weights
+    when the batch is the whole training set. Same history keys as ``model.fit``."""
+    from tqdm import tqdm
+
+    from . import kernels
+
+    train_idx, test_idx = split_indices(y, seed, test_size, split, gap or 0)
+    import keras
+    keras.utils.set_random_seed(seed)
+    model = build(n_classes, X.shape[1:], jit_compile=False)
+    conv, dense, out = (model.get_layer(n) for n in ("conv", "dense", "output"))
+    wc, bc = conv.get_weights()
+    kh, kw, _, nf = wc.shape
+    f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
+    params = [f32(wc.reshape(kh, kw, nf)), f32(bc), *map(f32, dense.get_weights()), *map(f32, out.get_weights())]
+    moments = [(np.zeros_like(p), np.zeros_like(p)) for p in params]
+    Kc, bc, Wd, bd, Wo, bo = params
+    Xg = np.ascontiguousarray(X[..., 0], dtype=np.float32)
+    dW = np.empty_like(Wd)
+    dA = np.empty((batch_size, Wd.shape[0]), np.float32)
+    y = np.asarray(y, np.int64)
+    rng = np.random.default_rng(seed)
+    history = {k: [] for k in ("accuracy", "loss", "val_accuracy", "val_loss")}
+    epoch_seconds = []
+    t0 = time.perf_counter()
+    step = 0
+    bar = tqdm(total=epochs, desc=f"train seed {seed} ({split})", unit="epoch", leave=False, disable=not progress)
+    # one BLAS thread per call: kernels.run_slices spreads the work over the cores itself
+    from threadpoolctl import threadpool_limits
+    with threadpool_limits(limits=1, user_api="blas"):
+        for _ in range(epochs):
+            t_epoch = time.perf_counter()
+            order = train_idx[rng.permutation(len(train_idx))]
+            correct = loss_sum = 0.0
+            for s in range(0, len(order), batch_size):
+                idx = order[s:s + batch_size]
+                b = len(idx)
+                Xb = Xg[idx]
+                A, Z2, Z3 = _logits(Xb, Kc, bc, Wd, bd, Wo, bo)
+                prob, loss = _softmax_loss(Z3, y[idx])
+                correct += float((Z3.argmax(1) == y[idx]).sum())
+                loss_sum += float(loss.sum())
+                dZ3 = prob
+                dZ3[np.arange(b), y[idx]] -= 1.0
+                dZ3 /= np.float32(b)
+                H = np.maximum(Z2, 0)
+                dZ2 = (dZ3 @ Wo.T) * (Z2 > 0)
+                grads = {3: dZ2.sum(0), 4: H.T @ dZ3, 5: dZ3.sum(0)}
+                step += 1
+                t = np.float32(step)
+                alpha = np.float32(1e-3) * np.sqrt(np.float32(1) - np.float32(0.999) ** t) / (np.float32(1) - np.float32(0.9) ** t)
+                kernels.dense_backward_adam(A, dZ2, Wd, *moments[2], alpha, dW, dA[:b])  # Wd updated
+                grads[0], grads[1] = kernels.conv_grad(Xb, dA[:b], A, (kh, kw))
+                for i, g in grads.items():
+                    kernels.adam(params[i], np.ascontiguousarray(g, np.float32), *moments[i], alpha)
+            val_loss = val_correct = 0.0
+            for s in range(0, len(test_idx), 256):
+                idx = test_idx[s:s + 256]
+                Z3 = _logits(Xg[idx], Kc, bc, Wd, bd, Wo, bo)[2]
+                val_loss += float(_softmax_loss(Z3, y[idx])[1].sum())
+                val_correct += float((Z3.argmax(1) == y[idx]).sum())
+            history["accuracy"].append(correct / len(order))
+            history["loss"].append(loss_sum / len(order))
+            history["val_accuracy"].append(val_correct / max(1, len(test_idx)))
+            history["val_loss"].append(val_loss / max(1, len(test_idx)))
+            epoch_seconds.append(time.perf_counter() - t_epoch)
+            bar.update(1)
+            bar.set_postfix(val_acc=f"{history['val_accuracy'][-1]:.3f}", refresh=False)
+    bar.close()
+    conv.set_weights([Kc[:, :, None, :], bc])
+    dense.set_weights([Wd, bd])
+    out.set_weights([Wo, bo])
+    history["seconds"] = time.perf_counter() - t0
+    history["epoch_seconds"] = epoch_seconds
     return model, history, {"train": train_idx, "test": test_idx}
 
 

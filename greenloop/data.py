@@ -19,6 +19,8 @@ import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from . import kernels
+
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 DEPTH_SCALE = 5000.0  # D435i convention: metres = value / DEPTH_SCALE
 TRAJECTORY_NAMES = ("CameraTrajectory.txt",)
@@ -80,6 +82,11 @@ def preprocess_image(img: np.ndarray, size=(32, 32), gray: bool = True, color: s
     if size is not None:
         h, w = img.shape[:2]
         if (w, h) != (int(size[0]), int(size[1])):
+            # integer shrink factors of a gray frame (640x480 -> 32x32): the same bytes as
+            # cv2.resize(INTER_AREA), 4x faster (greenloop.kernels.area_shrink)
+            small = kernels.area_shrink(img, size) if w > size[0] else None
+            if small is not None:
+                return small
             interp = cv2.INTER_AREA if w > size[0] else cv2.INTER_LINEAR
             img = cv2.resize(img, (int(size[0]), int(size[1])), interpolation=interp)
     return img

@@ -44,7 +44,6 @@ two-thread matmul stalls whenever one thread is pre-empted.
 from __future__ import annotations
 
 import contextlib
-import functools
 import io
 import os
 import tempfile
@@ -54,30 +53,10 @@ import numpy as np
 
 from .data import preprocess_image
 from .dictionary import LoopDetector
+from .kernels import run_chunked
 
 BACKENDS = ("auto", "numpy", "tflite", "keras")
-_POOL_WORKERS = max(1, min(4, os.cpu_count() or 1))
-
-
 COLORS = ("bgr", "rgb")
-
-
-@functools.lru_cache(maxsize=1)
-def _pool():
-    """Threads that preprocess the frames of a window in parallel (made once per process)."""
-    from concurrent.futures import ThreadPoolExecutor
-    return ThreadPoolExecutor(_POOL_WORKERS, thread_name_prefix="greenloop-preprocess")
-
-
-def run_chunked(work, n: int, min_parallel: int = 8) -> None:
-    """Call ``work(indices)`` on contiguous chunks of range(n), one chunk per preprocessing thread
-    (OpenCV releases the GIL, so chunks of a window run on all cores); inline when n < min_parallel
-    or there is one core. Exceptions raised by ``work`` propagate."""
-    chunks = [c for c in np.array_split(np.arange(n), _POOL_WORKERS) if len(c)]
-    if n < min_parallel or len(chunks) < 2:
-        work(range(n))
-    else:
-        list(_pool().map(work, chunks))
 
 
 # ---------------------------------------------------------------------------------------------

@@ -1,0 +1,303 @@
+"""The CPU speed paths' building blocks (issue #5): a thread helper and small numba kernels.
+
+* ``run_chunked``: split a range over a few threads (BLAS calls, OpenCV and the numba kernels
+  here release the GIL). One mechanism for every parallel loop of greenloop's speed paths, so no
+  second thread pool (OpenBLAS's, numba's) spins on a core that another one needs: on the 2-core
+  build machine a two-thread OpenBLAS call followed by a numba ``prange`` ran 2-3x slower than
+  either alone.
+* ``conv_relu`` / ``conv_grad``: the paper CNN's 3x3 convolution (valid, stride 1, one input
+  channel) forward with its ReLU, and its kernel and bias gradients.
+* ``adam``: Keras's Adam update of one float32 array, in place, in one pass over memory.
+* ``area_shrink``: OpenCV's INTER_AREA shrink of a gray uint8 image by integer factors (the
+  main paper's 640x480 -> 32x32 is 20 x 15), bit-identical to ``cv2.resize`` and 4x faster than
+  it (OpenCV runs a scalar loop for factors other than 2); ``greenloop.data.preprocess_image``
+  uses it after checking it against OpenCV once per image shape.
+
+Each kernel is checked against the library it replaces in tests/test_kernels.py. numba is imported
+lazily; ``available()`` says whether it is installed, and callers fall back to plain
+NumPy / OpenCV / Keras when it is not. Kernels compile on first use (a few seconds) and are cached
+on disk next to this file (numba's ``cache=True``).
+"""
+from __future__ import annotations
+
+import functools
+import os
+
+import numpy as np
+
+WORKERS = max(1, min(4, os.cpu_count() or 1))
+
+
+@functools.lru_cache(maxsize=1)
+def available() -> bool:
+    """True when numba imports."""
+    try:
+        import numba  # noqa: F401
+    except Exception:  # pragma: no cover - depends on the install
+        return False
+    return True
+
+
+# ---------------------------------------------------------------------------------------------
+# threads
+# ---------------------------------------------------------------------------------------------
+@functools.lru_cache(maxsize=1)
+def _pool():
+    """Helper threads, made once per process (the calling thread takes a chunk too)."""
+    from concurrent.futures import ThreadPoolExecutor
+    return ThreadPoolExecutor(max(1, WORKERS - 1), thread_name_prefix="greenloop")
+
+
+def run_chunked(work, n: int, min_parallel: int = 8, parts: int | None = None) -> None:
+    """Call ``work(indices)`` on contiguous chunks of range(n) (numpy int arrays), one chunk per
+    thread, the calling thread taking the last; inline when n < min_parallel or there is one
+    core. ``parts`` caps the number of chunks (default: ``WORKERS``, at most 4). Exceptions raised
+    by ``work`` propagate."""
+    chunks = [c for c in np.array_split(np.arange(n), min(parts or WORKERS, WORKERS)) if len(c)]
+    if n < min_parallel or len(chunks) < 2:
+        work(np.arange(n))
+        return
+    futures = [_pool().submit(work, c) for c in chunks[:-1]]
+    work(chunks[-1])
+    for f in futures:
+        f.result()
+
+
+def split_rows(n: int, parts: int | None = None) -> list[slice]:
+    """range(n) cut into ``parts`` (default ``WORKERS``) contiguous slices of nearly equal size."""
+    parts = max(1, min(parts or WORKERS, n))
+    edges = np.linspace(0, n, parts + 1).round().astype(int)
+    return [slice(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
+
+
+def run_slices(work, slices) -> None:
+    """Call ``work(s)`` for every slice in ``slices``, in parallel threads (the caller takes the
+    last). Exceptions propagate."""
+    slices = list(slices)
+    futures = [_pool().submit(work, s) for s in slices[:-1]]
+    if slices:
+        work(slices[-1])
+    for f in futures:
+        f.result()
+
+
+# ---------------------------------------------------------------------------------------------
+# compiled kernels
+# ---------------------------------------------------------------------------------------------
+@functools.lru_cache(maxsize=1)
+def _compiled():
+    from numba import njit
+
+    # Serial kernels that release the GIL; ``run_slices`` spreads them over the cores, so numba's
+    # own thread pool is never started (once started, its workers slowed the BLAS calls on the
+    # other core 2x on the 2-core build machine). What makes LLVM vectorise them (checked in the
+    # assembly): error_model="numpy" (numba's default "python" model tests every division for
+    # zero, which keeps Adam scalar: 2.6x slower), inner loops over 1-D views indexed by plain
+    # range() variables (an offset index makes numba test it for negative wraparound), and
+    # accumulators in local arrays. fastmath: reassociation and FMA contraction only (no
+    # nnan/ninf), so sums may be reordered as any BLAS does while NaNs and infinities behave as in
+    # NumPy.
+    opts = dict(fastmath={"reassoc", "contract"}, error_model="numpy", cache=True, nogil=True)
+
+    @njit(**opts)
+    def conv3_relu(X, K, bias, out):
+        n, h, w = X.shape
+        kh, kw, nf = K.shape
+        ho, wo = h - kh + 1, w - kw + 1
+        acc = np.empty(nf, np.float32)
+        for b in range(n):
+            o = out[b]
+            x = X[b]
+            for r in range(ho):
+                for c in range(wo):
+                    for f in range(nf):
+                        acc[f] = bias[f]
+                    for dy in range(kh):
+                        for dx in range(kw):
+                            v = x[r + dy, c + dx]
+                            k = K[dy, dx]
+                            for f in range(nf):
+                                acc[f] += v * k[f]
+                    dst = o[(r * wo + c) * nf:(r * wo + c + 1) * nf]
+                    for f in range(nf):
+                        dst[f] = acc[f] if acc[f] > 0.0 else np.float32(0.0)
+        return out
+
+    @njit(**opts)
+    def conv3_grad(X, dZ, A, kh, kw, total):
+        n, h, w = X.shape
+        ho, wo = h - kh + 1, w - kw + 1
+        nf = total.shape[1]
+        acc = np.zeros((kh * kw + 1, nf), np.float32)
+        g = np.empty(nf, np.float32)
+        for b in range(n):
+            d = dZ[b]
+            a = A[b]
+            x = X[b]
+            for r in range(ho):
+                for c in range(wo):
+                    db = d[(r * wo + c) * nf:(r * wo + c + 1) * nf]
+                    ab = a[(r * wo + c) * nf:(r * wo + c + 1) * nf]
+                    for f in range(nf):
+                        g[f] = db[f] if ab[f] > 0.0 else np.float32(0.0)
+                    for dy in range(kh):
+                        for dx in range(kw):
+                            v = x[r + dy, c + dx]
+                            t = acc[dy * kw + dx]
+                            for f in range(nf):
+                                t[f] += v * g[f]
+                    t = acc[kh * kw]
+                    for f in range(nf):
+                        t[f] += g[f]
+        total[:, :] = acc
+        return total
+
+    @njit(**opts)
+    def adam1d(w, g, m, v, alpha, one_minus_b1, one_minus_b2, eps):
+        for i in range(w.shape[0]):
+            mi = m[i] + (g[i] - m[i]) * one_minus_b1
+            vi = v[i] + (g[i] * g[i] - v[i]) * one_minus_b2
+            m[i] = mi
+            v[i] = vi
+            w[i] -= (mi * alpha) / (np.sqrt(vi) + eps)
+
+    @njit(cache=True, nogil=True)
+    def area_u8(g, fy, fx, out):
+        h, w = g.shape
+        oh, ow = out.shape
+        scale = np.float32(1.0) / np.float32(fy * fx)
+        col = np.zeros(w, np.int32)
+        for by in range(oh):
+            col[:] = 0
+            for r in range(fy):
+                row = g[by * fy + r]
+                for x in range(w):
+                    col[x] += row[x]
+            for bx in range(ow):
+                blk = col[bx * fx:(bx + 1) * fx]
+                s = 0
+                for k in range(fx):
+                    s += blk[k]
+                # OpenCV's INTER_AREA for integer factors: saturate_cast<uchar>(sum * (1.f/area)),
+                # i.e. round half to even of a float32 product
+                out[by, bx] = np.uint8(np.rint(np.float32(s) * scale))
+        return out
+
+    return {"conv3_relu": conv3_relu, "conv3_grad": conv3_grad, "adam1d": adam1d, "area_u8": area_u8}
+
+
+def conv_relu(X: np.ndarray, K: np.ndarray, bias: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """relu(Conv2D(X)) of gray frames, valid padding, stride 1, flattened as Keras's Flatten does.
+
+    X: (N, H, W) float32 C-contiguous. K: (kh, kw, f) float32 (Conv2D's kernel without its
+    in-channel axis). bias: (f,) float32. Frames are split over the worker threads.
+    Returns (N, (H-kh+1)*(W-kw+1)*f) float32, ordered (row, column, filter).
+    """
+    n, h, w = X.shape
+    kh, kw, nf = K.shape
+    if out is None:
+        out = np.empty((n, (h - kh + 1) * (w - kw + 1) * nf), np.float32)
+    fn = _compiled()["conv3_relu"]
+    run_slices(lambda s: fn(X[s], K, bias, out[s]), split_rows(n))
+    return out
+
+
+def conv_grad(X: np.ndarray, dA: np.ndarray, A: np.ndarray, k=(3, 3)) -> tuple[np.ndarray, np.ndarray]:
+    """Gradients of the kernel and bias of ``A = relu(conv(X))`` (valid, stride 1).
+
+    X: (N, H, W) float32, the conv's input. dA: (N, Ho*Wo*f) float32, the loss gradient at A,
+    laid out like ``conv_relu``'s output; A: the same shape, the conv's output (its ReLU mask
+    A > 0 is applied here). k: (kh, kw). Frames are split over the worker threads.
+    Returns (dK (kh, kw, f), dbias (f,)) float32, summed over frames and positions.
+    """
+    kh, kw = k
+    n, h, w = X.shape
+    nf = dA.shape[1] // ((h - kh + 1) * (w - kw + 1))
+    parts = split_rows(n)
+    totals = np.zeros((len(parts), kh * kw + 1, nf), np.float32)
+    fn = _compiled()["conv3_grad"]
+    run_slices(lambda s: fn(X[s], dA[s], A[s], kh, kw, totals[parts.index(s)]), parts)
+    total = totals.sum(0)
+    return total[:-1].reshape(kh, kw, nf), total[-1]
+
+
+def adam(w: np.ndarray, g: np.ndarray, m: np.ndarray, v: np.ndarray, alpha: float,
+         beta_1: float = 0.9, beta_2: float = 0.999, epsilon: float = 1e-7) -> None:
+    """Keras's ``Adam.update_step`` on float32 C-contiguous arrays of one shape, in place:
+    m += (g - m)(1 - beta_1); v += (g^2 - v)(1 - beta_2); w -= m * alpha / (sqrt(v) + epsilon),
+    where alpha = lr * sqrt(1 - beta_2^t) / (1 - beta_1^t). Large arrays are split over the
+    worker threads."""
+    f32 = np.float32
+    fn = _compiled()["adam1d"]
+    w1, g1, m1, v1 = (a.reshape(-1) for a in (w, g, m, v))
+    run_slices(lambda s: fn(w1[s], g1[s], m1[s], v1[s], f32(alpha), f32(1.0 - beta_1),
+                            f32(1.0 - beta_2), f32(epsilon)),
+               split_rows(len(w1)) if len(w1) >= 65536 else [slice(None)])
+
+
+def dense_backward_adam(A: np.ndarray, G: np.ndarray, W: np.ndarray, M: np.ndarray, V: np.ndarray,
+                        alpha: float, dW: np.ndarray, dA: np.ndarray) -> None:
+    """Backward pass through ``Z = A @ W`` and Keras's Adam step on W, the rows of W split over
+    the worker threads: each computes its rows of dW = A^T G and its columns of dA = G W^T
+    (single-threaded BLAS), then runs ``adam`` on those rows while they are in cache.
+
+    A: (B, n_in), G: (B, n_out) the loss gradient at Z, all float32. W, M, V: (n_in, n_out)
+    float32 C-contiguous, updated in place (weights, Adam's moments); alpha as in ``adam``.
+    Writes the buffers dW (n_in, n_out) and dA (B, n_in); dA uses W *before* the update.
+    """
+    fn = _compiled()["adam1d"]
+    f32 = np.float32
+
+    def rows(s):
+        np.matmul(A[:, s].T, G, out=dW[s])
+        np.matmul(G, W[s].T, out=dA[:, s])
+        fn(W[s].reshape(-1), dW[s].reshape(-1), M[s].reshape(-1), V[s].reshape(-1), f32(alpha),
+           f32(1.0 - 0.9), f32(1.0 - 0.999), f32(1e-7))
+
+    run_slices(rows, split_rows(W.shape[0]))
+
+
+def matmul(A: np.ndarray, W: np.ndarray) -> np.ndarray:
+    """A @ W, the inner dimension split over the worker threads (single-threaded BLAS each).
+    A: (B, K), W: (K, N) float32. Returns (B, N) float32."""
+    parts = split_rows(W.shape[0])
+    out = np.empty((len(parts), A.shape[0], W.shape[1]), np.float32)
+    run_slices(lambda s: np.matmul(A[:, s], W[s], out=out[parts.index(s)]), parts)
+    return out.sum(0)
+
+
+def area_shrink(gray: np.ndarray, size) -> np.ndarray | None:
+    """``cv2.resize(gray, size, interpolation=cv2.INTER_AREA)`` for integer shrink factors.
+
+    gray: (H, W) uint8 C-contiguous. size: (width, height) dividing (W, H) exactly.
+    Returns (height, width) uint8, or None when the kernel does not apply (numba missing, factors
+    not integers, not uint8 2-D) so that the caller uses OpenCV.
+    """
+    h, w = gray.shape[:2]
+    ow, oh = int(size[0]), int(size[1])
+    if (gray.ndim != 2 or gray.dtype != np.uint8 or ow < 1 or oh < 1 or w % ow or h % oh
+            or (w == ow and h == oh) or not available()):
+        return None
+    fn = _checked_area((h, w, oh, ow))
+    if fn is None:
+        return None
+    return fn(np.ascontiguousarray(gray), h // oh, w // ow, np.empty((oh, ow), np.uint8))
+
+
+@functools.lru_cache(maxsize=64)
+def _checked_area(shape):
+    """The area kernel for one (h, w, oh, ow), or None if it disagrees with this OpenCV on a random
+    image of that shape (a future OpenCV could round differently; then OpenCV is used)."""
+    import warnings
+
+    import cv2
+
+    h, w, oh, ow = shape
+    fn = _compiled()["area_u8"]
+    img = np.random.default_rng(0).integers(0, 256, (h, w), dtype=np.uint8)
+    ours = fn(img, h // oh, w // ow, np.empty((oh, ow), np.uint8))
+    if not np.array_equal(ours, cv2.resize(img, (ow, oh), interpolation=cv2.INTER_AREA)):
+        warnings.warn(f"greenloop.kernels.area_shrink differs from cv2.resize on {w}x{h} -> {ow}x{oh}; "
+                      f"using OpenCV", RuntimeWarning, stacklevel=3)
+        return None
+    return fn

@@ -1,0 +1,147 @@
+"""greenloop.kernels against the libraries they replace, and the fused trainer against model.fit."""
+import cv2
+import numpy as np
+import pytest
+
+pytest.importorskip("numba")
+keras = pytest.importorskip("keras")
+
+from greenloop import cnn, data, kernels, spots  # noqa: E402
+
+
+@pytest.mark.parametrize("shape,size", [((480, 640), (32, 32)), ((120, 160), (32, 24)),
+                                        ((96, 96), (32, 32)), ((64, 128), (16, 8))])
+def test_area_shrink_is_bit_identical_to_opencv(shape, size):
+    rng = np.random.default_rng(shape[0])
+    for img in (rng.integers(0, 256, shape, dtype=np.uint8),
+                np.full(shape, 255, np.uint8),  # the largest sums
+                (np.indices(shape).sum(0) % 256).astype(np.uint8)):  # ramps: many exact halves
+        ref = cv2.resize(img, size, interpolation=cv2.INTER_AREA)
+        assert np.array_equal(kernels.area_shrink(img, size), ref)
+
+
+def test_area_shrink_declines_what_it_cannot_do():
+    img = np.zeros((100, 130), np.uint8)
+    assert kernels.area_shrink(img, (32, 32)) is None  # 130 / 32 is not an integer
+    assert kernels.area_shrink(img.astype(np.float32), (10, 10)) is None
+    assert kernels.area_shrink(np.zeros((64, 64, 3), np.uint8), (32, 32)) is None
+    # preprocess_image still gives OpenCV's bytes then
+    frame = np.random.default_rng(1).integers(0, 256, (100, 130, 3), dtype=np.uint8)
+    ref = cv2.resize(cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY), (32, 32), interpolation=cv2.INTER_AREA)
+    assert np.array_equal(data.preprocess_image(frame, (32, 32)), ref)
+
+
+def test_preprocess_image_matches_opencv_on_640x480_frames():
+    rng = np.random.default_rng(2)
+    for _ in range(5):
+        frame = rng.integers(0, 256, (480, 640, 3), dtype=np.uint8)
+        ref = cv2.resize(cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY), (32, 32), interpolation=cv2.INTER_AREA)
+        assert np.array_equal(data.preprocess_image(frame, (32, 32)), ref)
+
+
+def _conv_reference(X, K, b):
+    """Keras Conv2D (valid, ReLU) with the same weights, flattened as Flatten does."""
+    layer = keras.layers.Conv2D(K.shape[2], K.shape[:2], activation="relu")
+    layer.build((None, *X.shape[1:], 1))
+    layer.set_weights([K[:, :, None, :], b])
+    return np.asarray(layer(X[..., None])).reshape(len(X), -1)
+
+
+def test_conv_relu_and_its_gradients_match_keras():
+    import tensorflow as tf
+
+    rng = np.random.default_rng(3)
+    X = rng.random((5, 12, 10), dtype=np.float32)
+    K = rng.normal(0, 0.5, (3, 3, 4)).astype(np.float32)
+    b = rng.normal(0, 0.1, 4).astype(np.float32)
+    A = kernels.conv_relu(X, K, b)
+    assert A.shape == (5, 10 * 8 * 4)
+    np.testing.assert_allclose(A, _conv_reference(X, K, b), rtol=1e-5, atol=1e-6)
+    # gradients of sum(U * relu(conv(X))) w.r.t. kernel and bias, by TensorFlow autodiff
+    U = rng.normal(size=A.shape).astype(np.float32)
+    Kv, bv = tf.Variable(K[:, :, None, :]), tf.Variable(b)
+    with tf.GradientTape() as tape:
+        z = tf.nn.relu(tf.nn.conv2d(X[..., None], Kv, 1, "VALID") + bv)
+        loss = tf.reduce_sum(tf.reshape(z, (5, -1)) * U)
+    gK, gb = tape.gradient(loss, [Kv, bv])
+    dK, db = kernels.conv_grad(X, U, A)
+    np.testing.assert_allclose(dK, gK.numpy()[:, :, 0, :], rtol=1e-4, atol=1e-5)
+    np.testing.assert_allclose(db, gb.numpy(), rtol=1e-4, atol=1e-5)
+
+
+def test_dense_backward_adam_and_matmul_match_numpy():
+    rng = np.random.default_rng(4)
+    A = np.maximum(rng.normal(size=(7, 3000)), 0).astype(np.float32)
+    G = rng.normal(size=(7, 11)).astype(np.float32)
+    W0 = rng.normal(size=(3000, 11)).astype(np.float32)
+    W, M, V = W0.copy(), np.zeros_like(W0), np.zeros_like(W0)
+    dW, dA = np.empty_like(W), np.empty_like(A)
+    np.testing.assert_allclose(kernels.matmul(A, W), A @ W, rtol=1e-4, atol=1e-3)
+    kernels.dense_backward_adam(A, G, W, M, V, 1e-3, dW, dA)
+    np.testing.assert_allclose(dW, A.T @ G, rtol=1e-4, atol=1e-4)
+    np.testing.assert_allclose(dA, G @ W0.T, rtol=1e-4, atol=1e-4)  # with the weights before the step
+    w, m, v = W0.copy(), np.zeros_like(W0), np.zeros_like(W0)
+    kernels.adam(w, dW, m, v, 1e-3)
+    np.testing.assert_allclose(W, w, rtol=1e-6, atol=1e-7)
+    assert np.abs(W - W0).max() > 1e-4  # it moved
+
+
+def test_adam_matches_keras_adam():
+    rng = np.random.default_rng(5)
+    w0 = rng.normal(size=(40, 3)).astype(np.float32)
+    grads = [rng.normal(size=w0.shape).astype(np.float32) for _ in range(4)]
+    var = keras.Variable(w0.copy())
+    opt = keras.optimizers.Adam(learning_rate=1e-3)
+    w, m, v = w0.copy(), np.zeros_like(w0), np.zeros_like(w0)
+    for t, g in enumerate(grads, 1):
+        opt.apply_gradients([(keras.ops.convert_to_tensor(g), var)])
+        alpha = 1e-3 * np.sqrt(1 - 0.999 ** t) / (1 - 0.9 ** t)
+        kernels.adam(w, g, m, v, alpha)
+    np.testing.assert_allclose(w, np.asarray(var), rtol=1e-6, atol=1e-7)
+
+
+def test_run_chunked_covers_the_range_and_raises():
+    seen = np.zeros(50, int)
+
+    def work(idx):
+        seen[idx] += 1
+
+    kernels.run_chunked(work, 50)
+    assert (seen == 1).all()
+
+    def boom(idx):
+        if 0 in idx:
+            raise RuntimeError("chunk failed")
+
+    with pytest.raises(RuntimeError, match="chunk failed"):
+        kernels.run_chunked(boom, 50)
+
+
+def _toy(n=64, L=16, seed=0):
+    rng = np.random.default_rng(seed)
+    y = spots.group(n, L)
+    X = (rng.random((n, 32, 32, 1)) * 0.4 + (y[:, None, None, None] + 1) / 8).astype(np.float32)
+    return X, y
+
+
+def test_fused_trainer_follows_model_fit():
+    """With one batch per epoch the shuffle order cannot matter, so the fused trainer and a plain
+    model.fit from the same seeded initial weights must land on the same weights and history."""
+    X, y = _toy()
+    n_train = len(cnn.split_indices(y, 0)[0])
+    kw = dict(seed=0, epochs=4, batch_size=n_train, cache=False, progress=False)
+    fused, hf, sf = cnn.train(X, y, fast="fused", **kw)
+    plain, hp, sp = cnn.train(X, y, fast="plain", **kw)
+    assert (sf["test"] == sp["test"]).all()
+    for a, b in zip(fused.get_weights(), plain.get_weights()):
+        np.testing.assert_allclose(a, b, rtol=1e-3, atol=2e-5)
+    for k in ("loss", "val_loss", "accuracy", "val_accuracy"):
+        np.testing.assert_allclose(hf[k], hp[k], rtol=1e-3, atol=1e-4, err_msg=k)
+    assert type(fused).__name__ == "Sequential" and fused.get_layer("conv").kernel.shape == (3, 3, 1, 32)
+
+
+def test_trainer_choice():
+    assert cnn.trainer(False) == "plain" and cnn.trainer("xla") == "xla"
+    assert cnn.trainer(True) == "fused"  # numba present, no GPU on the build machine
+    with pytest.raises(ValueError, match="fast must be"):
+        cnn.trainer("turbo")
