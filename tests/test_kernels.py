@@ -145,3 +145,20 @@ def test_trainer_choice():
     assert cnn.trainer(True) == "fused"  # numba present, no GPU on the build machine
     with pytest.raises(ValueError, match="fast must be"):
         cnn.trainer("turbo")
+
+
+def test_fused_trainer_matches_model_fit_batch_by_batch():
+    """One epoch of mini-batches in the fused trainer's own order, fed to a plain model.fit with
+    shuffle=False from the same initial weights: the same 32-frame steps, so the same weights."""
+    X, y = _toy(n=150, L=50)
+    tr, te = cnn.split_indices(y, 0)
+    order = tr[np.random.default_rng(0).permutation(len(tr))]  # the fused trainer's epoch-1 order
+    fused, hf, _ = cnn.train(X, y, seed=0, epochs=1, fast="fused", cache=False, progress=False)
+    keras.utils.set_random_seed(0)
+    plain = cnn.build(int(y.max() + 1), jit_compile=False)
+    Y = keras.utils.to_categorical(y, int(y.max() + 1)).astype(np.float32)
+    h = plain.fit(X[order], Y[order], epochs=1, batch_size=32, shuffle=False, verbose=0)
+    assert len(order) % 32 != 0  # the last, partial batch is covered too
+    for a, b in zip(fused.get_weights(), plain.get_weights()):
+        np.testing.assert_allclose(a, b, rtol=1e-3, atol=2e-5)
+    np.testing.assert_allclose(hf["loss"][0], h.history["loss"][0], rtol=1e-4)
