@@ -91,9 +91,9 @@ def _compiled():
 
     # Serial kernels that release the GIL; ``run_slices`` spreads them over the cores, so numba's
     # own thread pool is never started (once started, its workers slowed the BLAS calls on the
-    # other core 2x on the 2-core build machine). What makes LLVM vectorise them (checked in the
+    # other core 2.6x on the 2-core build machine). What makes LLVM vectorise them (checked in the
     # assembly): error_model="numpy" (numba's default "python" model tests every division for
-    # zero, which keeps Adam scalar: 2.6x slower), inner loops over 1-D views indexed by plain
+    # zero, which keeps Adam scalar: about 3x slower), inner loops over 1-D views indexed by plain
     # range() variables (an offset index makes numba test it for negative wraparound), and
     # accumulators in local arrays. fastmath: reassociation and FMA contraction only (no
     # nnan/ninf), so sums may be reordered as any BLAS does while NaNs and infinities behave as in

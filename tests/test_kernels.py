@@ -162,3 +162,20 @@ def test_fused_trainer_matches_model_fit_batch_by_batch():
     for a, b in zip(fused.get_weights(), plain.get_weights()):
         np.testing.assert_allclose(a, b, rtol=1e-3, atol=2e-5)
     np.testing.assert_allclose(hf["loss"][0], h.history["loss"][0], rtol=1e-4)
+
+
+def test_fused_trainer_matches_model_fit_over_epochs():
+    """Five epochs: the fused trainer's per-epoch orders, concatenated, fed to model.fit as one
+    unshuffled epoch (128 training frames = 4 whole batches, so the batch boundaries agree)."""
+    X, y = _toy(n=160, L=40)
+    tr, te = cnn.split_indices(y, 0)
+    assert len(tr) % 32 == 0
+    rng = np.random.default_rng(0)
+    order = np.concatenate([tr[rng.permutation(len(tr))] for _ in range(5)])
+    fused, hf, _ = cnn.train(X, y, seed=0, epochs=5, fast="fused", cache=False, progress=False)
+    keras.utils.set_random_seed(0)
+    plain = cnn.build(int(y.max() + 1), jit_compile=False)
+    Y = keras.utils.to_categorical(y, int(y.max() + 1)).astype(np.float32)
+    plain.fit(X[order], Y[order], epochs=1, batch_size=32, shuffle=False, verbose=0)
+    for a, b in zip(fused.get_weights(), plain.get_weights()):
+        np.testing.assert_allclose(a, b, rtol=2e-3, atol=5e-5)
