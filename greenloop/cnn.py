@@ -154,10 +154,12 @@ def train(X: np.ndarray, y: np.ndarray, seed: int, epochs: int = 200, batch_size
         False or "plain": ``model.fit`` as the paper's code would call it (the reference);
         "xla": ``model.fit`` with the train step compiled by XLA and one call per epoch
         (steps_per_execution), the fast path on an accelerator or without numba;
-        "fused": gradients written out in NumPy, the dense layer's backward pass and Adam update
-        fused in one numba kernel (``_fit_fused``), the fastest on a CPU;
+        "fused": gradients written out (``_fit_fused``: numba kernels and single-threaded BLAS
+        split over the cores by ``greenloop.kernels``), the fastest on a CPU;
         True: "fused" when numba is installed and Keras sees no GPU, else "xla".
-        The trainer is part of the cache key.
+        The trainer is part of the cache key. Caveat (results/bench/bench.md): "fused" shuffles with
+        NumPy, not Keras, so a seed sees other batches than under ``model.fit``; over seeds 0-9 of
+        the 60-frame protocol 3 fused runs got stuck (86, 57, 1 %) against none of the plain ones.
     cache: True (results/models/ or $GREENLOOP_CACHE), a folder, or False. Runs are keyed by
         ``cache_key`` and written atomically under a file lock, so reruns and parallel ``make -j``
         jobs reuse a model instead of training it again.
@@ -291,14 +293,15 @@ def _fit_fused(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size
     The weights start from the seeded ``build`` model (Keras's own initialisers) and are written
     back into it at the end, so the model returned and cached is the ordinary Keras model.
     The shuffle comes from numpy's generator seeded with ``seed`` (not Keras's), so the batches
-    differ from ``model.fit``'s; tests/test_kernels.py checks both trainers reach the same weights
-    when the batch is the whole training set. Same history keys as ``model.fit``."""
+    differ from ``model.fit``'s; tests/test_kernels.py checks that ``model.fit`` fed the same
+    batches reaches the same weights. Same history keys as ``model.fit``."""
+    import keras
+    from threadpoolctl import threadpool_limits
     from tqdm import tqdm
 
     from . import kernels
 
     train_idx, test_idx = split_indices(y, seed, test_size, split, gap or 0)
-    import keras
     keras.utils.set_random_seed(seed)
     model = build(n_classes, X.shape[1:], jit_compile=False)
     conv, dense, out = (model.get_layer(n) for n in ("conv", "dense", "output"))
@@ -319,7 +322,6 @@ def _fit_fused(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size
     step = 0
     bar = tqdm(total=epochs, desc=f"train seed {seed} ({split})", unit="epoch", leave=False, disable=not progress)
     # one BLAS thread per call: kernels.run_slices spreads the work over the cores itself
-    from threadpoolctl import threadpool_limits
     with threadpool_limits(limits=1, user_api="blas"):
         for _ in range(epochs):
             t_epoch = time.perf_counter()

@@ -6,7 +6,8 @@ import pytest
 pytest.importorskip("numba")
 keras = pytest.importorskip("keras")
 
-from greenloop import cnn, data, kernels, spots  # noqa: E402
+from greenloop import cnn, data, kernels  # noqa: E402
+from test_cnn import _toy  # noqa: E402  (the toy frames of the CNN tests)
 
 
 @pytest.mark.parametrize("shape,size", [((480, 640), (32, 32)), ((120, 160), (32, 24)),
@@ -117,17 +118,10 @@ def test_run_chunked_covers_the_range_and_raises():
         kernels.run_chunked(boom, 50)
 
 
-def _toy(n=64, L=16, seed=0):
-    rng = np.random.default_rng(seed)
-    y = spots.group(n, L)
-    X = (rng.random((n, 32, 32, 1)) * 0.4 + (y[:, None, None, None] + 1) / 8).astype(np.float32)
-    return X, y
-
-
 def test_fused_trainer_follows_model_fit():
     """With one batch per epoch the shuffle order cannot matter, so the fused trainer and a plain
     model.fit from the same seeded initial weights must land on the same weights and history."""
-    X, y = _toy()
+    X, y = _toy(n=64, L=16)
     n_train = len(cnn.split_indices(y, 0)[0])
     kw = dict(seed=0, epochs=4, batch_size=n_train, cache=False, progress=False)
     fused, hf, sf = cnn.train(X, y, fast="fused", **kw)
