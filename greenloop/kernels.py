@@ -49,37 +49,29 @@ def _pool():
     return ThreadPoolExecutor(max(1, WORKERS - 1), thread_name_prefix="greenloop")
 
 
-def run_chunked(work, n: int, min_parallel: int = 8, parts: int | None = None) -> None:
-    """Call ``work(indices)`` on contiguous chunks of range(n) (numpy int arrays), one chunk per
-    thread, the calling thread taking the last; inline when n < min_parallel or there is one
-    core. ``parts`` caps the number of chunks (default: ``WORKERS``, at most 4). Exceptions raised
-    by ``work`` propagate."""
-    chunks = [c for c in np.array_split(np.arange(n), min(parts or WORKERS, WORKERS)) if len(c)]
-    if n < min_parallel or len(chunks) < 2:
-        work(np.arange(n))
-        return
-    futures = [_pool().submit(work, c) for c in chunks[:-1]]
-    work(chunks[-1])
-    for f in futures:
-        f.result()
-
-
-def split_rows(n: int, parts: int | None = None) -> list[slice]:
-    """range(n) cut into ``parts`` (default ``WORKERS``) contiguous slices of nearly equal size."""
-    parts = max(1, min(parts or WORKERS, n))
-    edges = np.linspace(0, n, parts + 1).round().astype(int)
+def split_rows(n: int) -> list[slice]:
+    """range(n) cut into ``WORKERS`` (at most n) contiguous slices of nearly equal size."""
+    edges = np.linspace(0, n, max(1, min(WORKERS, n)) + 1).round().astype(int)
     return [slice(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
 
 
 def run_slices(work, slices) -> None:
-    """Call ``work(s)`` for every slice in ``slices``, in parallel threads (the caller takes the
-    last). Exceptions propagate."""
+    """Call ``work(k, s)`` for the k-th slice s of ``slices``, in parallel threads (the caller
+    takes the last). Exceptions propagate."""
     slices = list(slices)
-    futures = [_pool().submit(work, s) for s in slices[:-1]]
+    futures = [_pool().submit(work, k, s) for k, s in enumerate(slices[:-1])]
     if slices:
-        work(slices[-1])
+        work(len(slices) - 1, slices[-1])
     for f in futures:
         f.result()
+
+
+def run_chunked(work, n: int, min_parallel: int = 8) -> None:
+    """Call ``work(indices)`` on contiguous chunks of range(n) (numpy int arrays), one chunk per
+    thread (``run_slices``); inline when n < min_parallel. Exceptions raised by ``work``
+    propagate."""
+    idx = np.arange(n)
+    run_slices(lambda k, s: work(idx[s]), split_rows(n) if n >= min_parallel else [slice(None)])
 
 
 # ---------------------------------------------------------------------------------------------
@@ -208,7 +200,7 @@ def conv_relu(X: np.ndarray, K: np.ndarray, bias: np.ndarray, out: np.ndarray | 
     if out is None:
         out = np.empty((n, (h - kh + 1) * (w - kw + 1) * nf), np.float32)
     fn = _compiled()["conv3_relu"]
-    run_slices(lambda s: fn(X[s], K, bias, out[s]), split_rows(n))
+    run_slices(lambda k, s: fn(X[s], K, bias, out[s]), split_rows(n))
     return out
 
 
@@ -226,7 +218,7 @@ def conv_grad(X: np.ndarray, dA: np.ndarray, A: np.ndarray, k=(3, 3)) -> tuple[n
     parts = split_rows(n)
     totals = np.zeros((len(parts), kh * kw + 1, nf), np.float32)
     fn = _compiled()["conv3_grad"]
-    run_slices(lambda s: fn(X[s], dA[s], A[s], kh, kw, totals[parts.index(s)]), parts)
+    run_slices(lambda k, s: fn(X[s], dA[s], A[s], kh, kw, totals[k]), parts)
     total = totals.sum(0)
     return total[:-1].reshape(kh, kw, nf), total[-1]
 
@@ -237,12 +229,16 @@ def adam(w: np.ndarray, g: np.ndarray, m: np.ndarray, v: np.ndarray, alpha: floa
     m += (g - m)(1 - beta_1); v += (g^2 - v)(1 - beta_2); w -= m * alpha / (sqrt(v) + epsilon),
     where alpha = lr * sqrt(1 - beta_2^t) / (1 - beta_1^t). Large arrays are split over the
     worker threads."""
-    f32 = np.float32
-    fn = _compiled()["adam1d"]
     w1, g1, m1, v1 = (a.reshape(-1) for a in (w, g, m, v))
-    run_slices(lambda s: fn(w1[s], g1[s], m1[s], v1[s], f32(alpha), f32(1.0 - beta_1),
-                            f32(1.0 - beta_2), f32(epsilon)),
+    run_slices(lambda k, s: _adam_rows(w1[s], g1[s], m1[s], v1[s], alpha, beta_1, beta_2, epsilon),
                split_rows(len(w1)) if len(w1) >= 65536 else [slice(None)])
+
+
+def _adam_rows(w, g, m, v, alpha, beta_1=0.9, beta_2=0.999, epsilon=1e-7) -> None:
+    """``adam`` on one thread (the compiled loop over flattened C-contiguous arrays)."""
+    f32 = np.float32
+    _compiled()["adam1d"](w.reshape(-1), g.reshape(-1), m.reshape(-1), v.reshape(-1), f32(alpha),
+                          f32(1.0 - beta_1), f32(1.0 - beta_2), f32(epsilon))
 
 
 def dense_backward_adam(A: np.ndarray, G: np.ndarray, W: np.ndarray, M: np.ndarray, V: np.ndarray,
@@ -255,14 +251,10 @@ def dense_backward_adam(A: np.ndarray, G: np.ndarray, W: np.ndarray, M: np.ndarr
     float32 C-contiguous, updated in place (weights, Adam's moments); alpha as in ``adam``.
     Writes the buffers dW (n_in, n_out) and dA (B, n_in); dA uses W *before* the update.
     """
-    fn = _compiled()["adam1d"]
-    f32 = np.float32
-
-    def rows(s):
+    def rows(k, s):
         np.matmul(A[:, s].T, G, out=dW[s])
         np.matmul(G, W[s].T, out=dA[:, s])
-        fn(W[s].reshape(-1), dW[s].reshape(-1), M[s].reshape(-1), V[s].reshape(-1), f32(alpha),
-           f32(1.0 - 0.9), f32(1.0 - 0.999), f32(1e-7))
+        _adam_rows(W[s], dW[s], M[s], V[s], alpha)
 
     run_slices(rows, split_rows(W.shape[0]))
 
@@ -272,7 +264,7 @@ def matmul(A: np.ndarray, W: np.ndarray) -> np.ndarray:
     A: (B, K), W: (K, N) float32. Returns (B, N) float32."""
     parts = split_rows(W.shape[0])
     out = np.empty((len(parts), A.shape[0], W.shape[1]), np.float32)
-    run_slices(lambda s: np.matmul(A[:, s], W[s], out=out[parts.index(s)]), parts)
+    run_slices(lambda k, s: np.matmul(A[:, s], W[s], out=out[k]), parts)
     return out.sum(0)
 
 
