@@ -150,16 +150,15 @@ def train(X: np.ndarray, y: np.ndarray, seed: int, epochs: int = 200, batch_size
     split: "random" (the paper's 80/20) or "blocked" (see ``split_indices``).
     n_classes: defaults to y.max() + 1.
     fast: which trainer runs the same protocol (batch 32, Adam 1e-3, categorical cross-entropy,
-        a fresh shuffle every epoch, the same seeded Keras initial weights):
+        ``model.fit``'s shuffled batches, the same seeded Keras initial weights):
         False or "plain": ``model.fit`` as the paper's code would call it (the reference);
         "xla": ``model.fit`` with the train step compiled by XLA and one call per epoch
         (steps_per_execution), the fast path on an accelerator or without numba;
         "fused": gradients written out (``_fit_fused``: numba kernels and single-threaded BLAS
         split over the cores by ``greenloop.kernels``), the fastest on a CPU;
         True: "fused" when numba is installed and Keras sees no GPU, else "xla".
-        The trainer is part of the cache key. Caveat (results/bench/bench.md): "fused" shuffles with
-        NumPy, not Keras, so a seed sees other batches than under ``model.fit``; over seeds 0-9 of
-        the 60-frame protocol 3 fused runs got stuck (86, 57, 1 %) against none of the plain ones.
+        Every trainer visits the frames in ``model.fit``'s order (``fit_orders``). The trainer is
+        part of the cache key.
     cache: True (results/models/ or $GREENLOOP_CACHE), a folder, or False. Runs are keyed by
         ``cache_key`` and written atomically under a file lock, so reruns and parallel ``make -j``
         jobs reuse a model instead of training it again.
@@ -181,6 +180,8 @@ def train(X: np.ndarray, y: np.ndarray, seed: int, epochs: int = 200, batch_size
     params = dict(seed=int(seed), epochs=int(epochs), batch_size=int(batch_size),
                   test_size=float(test_size), split=split, n_classes=n_classes, fast=fast,
                   gap=int(gap) if split == "blocked" else None)
+    if fast == "fused":  # keys fused runs apart from those of the first fused trainer (NumPy's order)
+        params["batch_order"] = "model.fit"
     key = cache_key(X, y, **params)
     folder = None
     if cache:
@@ -261,6 +262,30 @@ def _fit(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size, spli
     return model, history, {"train": train_idx, "test": test_idx}
 
 
+def fit_orders(n: int, batch_size: int):
+    """The order in which ``model.fit(x, y, batch_size, shuffle=True)`` visits n training frames,
+    epoch after epoch: an endless iterator of (n,) int64 index arrays, the batches being
+    consecutive runs of ``batch_size`` (the last one partial).
+
+    The orders come from Keras's own array data adapter for the active backend, so call this where
+    ``model.fit`` would start: after ``keras.utils.set_random_seed`` and ``build``. On the
+    TensorFlow backend the shuffle is a seeded ``tf.random.shuffle`` that is re-seeded each time
+    the epoch's dataset is iterated, so a seeded ``model.fit`` (Keras 3.15, TF 2.21) visits the
+    frames in the same order in every epoch; on the JAX backend it draws a new
+    ``np.random.permutation`` each epoch. tests/test_kernels.py checks the orders against
+    ``model.fit`` itself."""
+    import keras
+    from keras.src.trainers.data_adapters.array_data_adapter import ArrayDataAdapter
+
+    adapter = ArrayDataAdapter(np.arange(n), batch_size=batch_size, shuffle=True)
+    if keras.backend.backend() == "tensorflow":
+        dataset = adapter.get_tf_dataset()  # created once per fit, iterated once per epoch
+        while True:
+            yield np.concatenate([np.asarray(b) for b in dataset])
+    while True:
+        yield np.concatenate(list(adapter.get_numpy_iterator()))
+
+
 def _logits(Xg, Kc, bc, Wd, bd, Wo, bo):
     """Forward pass on gray frames Xg (n, H, W): (A (n, positions*f), Z2 (n, 68), Z3 (n, C))."""
     from . import kernels
@@ -283,18 +308,18 @@ def _softmax_loss(Z3, y):
 
 
 def _fit_fused(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size, split, gap):
-    """The paper's protocol (batch 32, Adam 1e-3, softmax cross-entropy, a new shuffle of the
-    training frames every epoch, the test split as validation data after each epoch) with the
-    gradients written out in float32, like Keras computes them:
+    """The paper's protocol (batch 32, Adam 1e-3, softmax cross-entropy, shuffled batches, the
+    test split as validation data after each epoch) with the gradients written out in float32,
+    like Keras computes them:
     conv + ReLU (``kernels.conv_relu``) -> dense (BLAS, split over the cores) -> output layer and
     softmax (NumPy); backward: the dense layer's two products and Adam's update of its 2 M
     weights, split over the cores by rows (``kernels.dense_backward_adam``), then the conv's
     gradients (``kernels.conv_grad``) and Adam on the small arrays (``kernels.adam``).
     The weights start from the seeded ``build`` model (Keras's own initialisers) and are written
     back into it at the end, so the model returned and cached is the ordinary Keras model.
-    The shuffle comes from numpy's generator seeded with ``seed`` (not Keras's), so the batches
-    differ from ``model.fit``'s; tests/test_kernels.py checks that ``model.fit`` fed the same
-    batches reaches the same weights. Same history keys as ``model.fit``."""
+    The batches are those ``model.fit`` would draw (``fit_orders``), so each seed takes the same
+    steps as under ``model.fit``, up to float rounding; tests/test_kernels.py checks the weights
+    against ``model.fit``'s. Same history keys as ``model.fit``."""
     import keras
     from threadpoolctl import threadpool_limits
     from tqdm import tqdm
@@ -315,7 +340,7 @@ def _fit_fused(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size
     dW = np.empty_like(Wd)
     dA = np.empty((batch_size, Wd.shape[0]), np.float32)
     y = np.asarray(y, np.int64)
-    rng = np.random.default_rng(seed)
+    orders = fit_orders(len(train_idx), batch_size)
     history = {k: [] for k in ("accuracy", "loss", "val_accuracy", "val_loss")}
     epoch_seconds = []
     t0 = time.perf_counter()
@@ -325,7 +350,7 @@ def _fit_fused(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size
     with threadpool_limits(limits=1, user_api="blas"):
         for _ in range(epochs):
             t_epoch = time.perf_counter()
-            order = train_idx[rng.permutation(len(train_idx))]
+            order = train_idx[next(orders)]
             correct = loss_sum = 0.0
             for s in range(0, len(order), batch_size):
                 idx = order[s:s + batch_size]

@@ -141,35 +141,47 @@ def test_trainer_choice():
         cnn.trainer("turbo")
 
 
-def test_fused_trainer_matches_model_fit_batch_by_batch():
-    """One epoch of mini-batches in the fused trainer's own order, fed to a plain model.fit with
-    shuffle=False from the same initial weights: the same 32-frame steps, so the same weights."""
+def _fit_epochwise(X, Y, tr, orders, n_classes):
+    """A plain Keras model from seed 0, fitted one unshuffled epoch per given order."""
+    keras.utils.set_random_seed(0)
+    model = cnn.build(n_classes, jit_compile=False)
+    for o in orders:
+        model.fit(X[tr[o]], Y[tr[o]], epochs=1, batch_size=32, shuffle=False, verbose=0)
+    return model
+
+
+def test_fit_orders_are_the_orders_of_model_fit():
+    """model.fit(shuffle=True) over 3 epochs and model.fit fed cnn.fit_orders' orders unshuffled
+    reach bit-identical weights; a different epoch-2 order does not (so the check can fail)."""
     X, y = _toy(n=150, L=50)
-    tr, te = cnn.split_indices(y, 0)
-    order = tr[np.random.default_rng(0).permutation(len(tr))]  # the fused trainer's epoch-1 order
-    fused, hf, _ = cnn.train(X, y, seed=0, epochs=1, fast="fused", cache=False, progress=False)
+    C = int(y.max() + 1)
+    tr, _ = cnn.split_indices(y, 0)
+    assert len(tr) % 32 != 0  # a partial last batch
+    plain, _, _ = cnn.train(X, y, seed=0, epochs=3, fast="plain", cache=False, progress=False)
     keras.utils.set_random_seed(0)
-    plain = cnn.build(int(y.max() + 1), jit_compile=False)
-    Y = keras.utils.to_categorical(y, int(y.max() + 1)).astype(np.float32)
-    h = plain.fit(X[order], Y[order], epochs=1, batch_size=32, shuffle=False, verbose=0)
-    assert len(order) % 32 != 0  # the last, partial batch is covered too
-    for a, b in zip(fused.get_weights(), plain.get_weights()):
-        np.testing.assert_allclose(a, b, rtol=1e-3, atol=2e-5)
-    np.testing.assert_allclose(hf["loss"][0], h.history["loss"][0], rtol=1e-4)
+    cnn.build(C, jit_compile=False)  # fit_orders starts where model.fit would: after the build
+    it = cnn.fit_orders(len(tr), 32)
+    orders = [next(it) for _ in range(3)]
+    assert all(sorted(o) == list(range(len(tr))) for o in orders)
+    assert any((o != np.arange(len(tr))).any() for o in orders)
+    Y = keras.utils.to_categorical(y, C).astype(np.float32)
+    same = _fit_epochwise(X, Y, tr, orders, C)
+    for a, b in zip(plain.get_weights(), same.get_weights()):
+        np.testing.assert_array_equal(a, b)
+    other = _fit_epochwise(X, Y, tr, [orders[0], orders[1][::-1], orders[2]], C)
+    assert max(float(np.abs(a - b).max()) for a, b in zip(plain.get_weights(), other.get_weights())) > 1e-4
 
 
-def test_fused_trainer_matches_model_fit_over_epochs():
-    """Five epochs: the fused trainer's per-epoch orders, concatenated, fed to model.fit as one
-    unshuffled epoch (128 training frames = 4 whole batches, so the batch boundaries agree)."""
-    X, y = _toy(n=160, L=40)
-    tr, te = cnn.split_indices(y, 0)
-    assert len(tr) % 32 == 0
-    rng = np.random.default_rng(0)
-    order = np.concatenate([tr[rng.permutation(len(tr))] for _ in range(5)])
-    fused, hf, _ = cnn.train(X, y, seed=0, epochs=5, fast="fused", cache=False, progress=False)
-    keras.utils.set_random_seed(0)
-    plain = cnn.build(int(y.max() + 1), jit_compile=False)
-    Y = keras.utils.to_categorical(y, int(y.max() + 1)).astype(np.float32)
-    plain.fit(X[order], Y[order], epochs=1, batch_size=32, shuffle=False, verbose=0)
+@pytest.mark.parametrize("n, L, epochs", [(150, 50, 1), (160, 40, 5)])
+def test_fused_trainer_matches_model_fit(n, L, epochs):
+    """The fused trainer and model.fit, both as cnn.train runs them (same seed, same split, same
+    batch order): the same weights and history to float rounding, with a partial last batch
+    (150 frames) and over five epochs (160)."""
+    X, y = _toy(n=n, L=L)
+    kw = dict(seed=0, epochs=epochs, cache=False, progress=False)
+    fused, hf, _ = cnn.train(X, y, fast="fused", **kw)
+    plain, hp, _ = cnn.train(X, y, fast="plain", **kw)
     for a, b in zip(fused.get_weights(), plain.get_weights()):
         np.testing.assert_allclose(a, b, rtol=2e-3, atol=5e-5)
+    for k in ("loss", "val_loss", "accuracy", "val_accuracy"):
+        np.testing.assert_allclose(hf[k], hp[k], rtol=1e-3, atol=1e-4, err_msg=k)
