@@ -7,9 +7,12 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 pytest.importorskip("keras")
+
+from greenloop import bench  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -34,3 +37,12 @@ def test_bench_quick_writes_figures_and_backends_agree(tiny_sequence, tmp_path):
     assert res["accuracy_200_epochs"] is None  # --quick skips the 200-epoch comparison
     table = (out / "bench.md").read_text()
     assert "floor: one cvtColor pass" in table and "labels equal to Keras (tflite)" in table
+
+
+def test_same_distribution_tells_apart_what_differs():
+    rng = np.random.default_rng(0)
+    plain = 0.93 + 0.02 * rng.standard_normal(10)
+    shifted = bench.same_distribution(plain, plain - 0.3)
+    assert shifted["mann_whitney_p"] < 0.001 and shifted["mean_difference_points"] == pytest.approx(-30)
+    same = bench.same_distribution(plain, 0.93 + 0.02 * rng.standard_normal(10))
+    assert same["mann_whitney_p"] > 0.05
