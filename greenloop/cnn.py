@@ -271,8 +271,9 @@ def fit_orders(n: int, batch_size: int):
     ``model.fit`` would start: after ``keras.utils.set_random_seed`` and ``build``. On the
     TensorFlow backend the shuffle is a seeded ``tf.random.shuffle`` that is re-seeded each time
     the epoch's dataset is iterated, so a seeded ``model.fit`` (Keras 3.15, TF 2.21) visits the
-    frames in the same order in every epoch; on the JAX backend it draws a new
-    ``np.random.permutation`` each epoch. tests/test_kernels.py checks the orders against
+    frames in the same order in every epoch (unseeded, a new one each epoch); on the JAX backend
+    it draws a new ``np.random.permutation`` each epoch (followed from Keras's source; only the
+    TensorFlow backend is tested here). tests/test_kernels.py checks the orders against
     ``model.fit`` itself."""
     import keras
     from keras.src.trainers.data_adapters.array_data_adapter import ArrayDataAdapter
