@@ -218,7 +218,7 @@ def conv_grad(X: np.ndarray, dA: np.ndarray, A: np.ndarray, k=(3, 3)) -> tuple[n
     parts = split_rows(n)
     totals = np.zeros((len(parts), kh * kw + 1, nf), np.float32)
     fn = _compiled()["conv3_grad"]
-    run_slices(lambda k, s: fn(X[s], dA[s], A[s], kh, kw, totals[k]), parts)
+    run_slices(lambda i, s: fn(X[s], dA[s], A[s], kh, kw, totals[i]), parts)
     total = totals.sum(0)
     return total[:-1].reshape(kh, kw, nf), total[-1]
 

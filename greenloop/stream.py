@@ -40,7 +40,7 @@ layer means reading a 7.8 MB weight matrix per forward pass (2.2 MFLOP/frame), a
 preprocessing of a 640x480 BGR frame must read its 921,600 bytes (cvtColor). The 20x15 area shrink
 after it runs in ``greenloop.kernels.area_shrink`` (the same bytes as OpenCV, whose loop for this
 factor is scalar, 4x faster). The bench's floor row (one cvtColor pass over the window's frames on
-all cores) bounds the window speed-up any exact pipeline can reach on a machine. NumPy's
+all cores) bounds the window speed-up of any pipeline that converts colour with OpenCV. NumPy's
 BLAS runs on one thread inside these calls (``_single_thread_blas``): on a loaded 2-core machine a
 two-thread matmul stalls whenever one thread is pre-empted.
 """
