@@ -95,7 +95,8 @@ def closure_events(labels, n_classes: int, threshold: int) -> list[dict]:
     return events
 
 
-def score_closures(pred, reference_labels, gt, threshold: int, exclude: int = 150) -> dict:
+def score_closures(pred, reference_labels, gt, threshold: int, exclude: int = 150,
+                   queries=None) -> dict:
     """Score the detector's closures against pose ground truth.
 
     pred: (T,) labels predicted for frames 0..T-1 in capture order.
@@ -105,8 +106,15 @@ def score_closures(pred, reference_labels, gt, threshold: int, exclude: int = 15
     |i - t| > exclude is a ground-truth loop partner of t, else FALSE. The first flag of each spot is
     a closure event. Detection delay: for each maximal run of revisit frames (frames with an earlier
     loop partner), frames from its start to its first true closure.
+    reference_labels may hold -1 for frames that belong to no spot (e.g. frames after the first
+    traversal when the places were learnt from it).
+    queries: optional (T,) bool mask; the counts, precision and recall then cover only the frames
+    in it (the stream, and so the running counts, still start at frame 0): tune tau on one part,
+    score on another (greenloop.evaluate.split_mask).
     Returns {'tau', 'flagged', 'true_frames', 'false_frames', 'events', 'true_events',
-    'false_events', 'revisit_frames', 'revisits_detected', 'delays' (list), 'event_list'}.
+    'false_events', 'revisit_frames', 'revisits_detected', 'delays' (list), 'event_list',
+    'flags' (T,), 'precision' (true / flagged frames, NaN when none flagged),
+    'recall' (revisit frames flagged true / revisit frames)}.
     """
     pred = np.asarray(pred, dtype=np.int64)
     ref = np.asarray(reference_labels, dtype=np.int64)
@@ -122,9 +130,14 @@ def score_closures(pred, reference_labels, gt, threshold: int, exclude: int = 15
     far = np.abs(idx[:, None] - idx[None, :]) > exclude
     true_at = (gt & member & far).any(1)
     revisit = np.tril(gt, -1).any(1)
-    events = closure_events(pred, n_classes, threshold)
+    q = np.ones(len(pred), dtype=bool) if queries is None else np.asarray(queries, dtype=bool)
+    if q.shape != pred.shape:
+        raise ValueError(f"queries must be a (T,) bool mask, got shape {q.shape} for T={len(pred)}")
+    events = [e for e in closure_events(pred, n_classes, threshold) if q[e["frame"]]]
     for e in events:
         e["true"] = bool(true_at[e["frame"]])
+    flags_all, flags = flags, flags & q
+    revisit = revisit & q
     starts = np.flatnonzero(revisit & ~np.r_[False, revisit[:-1]])
     delays = []
     for s in starts:
@@ -138,4 +151,29 @@ def score_closures(pred, reference_labels, gt, threshold: int, exclude: int = 15
             "events": len(events), "true_events": sum(e["true"] for e in events),
             "false_events": sum(not e["true"] for e in events),
             "revisit_frames": int(revisit.sum()), "revisits_detected": int((flags & true_at & revisit).sum()),
-            "delays": delays, "event_list": events, "flags": flags}
+            "delays": delays, "event_list": events, "flags": flags_all,
+            "precision": float((flags & true_at).sum() / flags.sum()) if flags.any() else float("nan"),
+            "recall": float((flags & true_at & revisit).sum() / max(int(revisit.sum()), 1))}
+
+
+def choose_threshold(pred, reference_labels, gt, taus, tune, exclude: int = 150):
+    """Pick tau on a tuning part only: the tau with the highest frame-level F1 there.
+
+    pred, reference_labels, gt, exclude: as in :func:`score_closures`. taus: candidate thresholds
+    (ints >= 1). tune: (T,) bool mask of the tuning frames (greenloop.evaluate.split_mask); the
+    scoring frames must not be in it. F1 = 2PR / (P + R) of :func:`score_closures`' frame-level
+    precision and recall on the tuning frames (0 where nothing is flagged); ties go to the larger
+    tau (the more conservative detector).
+    Returns (tau, rows): the chosen tau and one dict per candidate (tau, precision, recall, f1).
+    """
+    taus = [int(t) for t in taus]
+    if not taus or min(taus) < 1:
+        raise ValueError(f"taus must be a non-empty list of thresholds >= 1, got {taus}")
+    rows = []
+    for tau in taus:
+        s = score_closures(pred, reference_labels, gt, tau, exclude, queries=tune)
+        p, r = s["precision"], s["recall"]
+        f1 = 0.0 if not np.isfinite(p) or p + r == 0 else 2 * p * r / (p + r)
+        rows.append({"tau": tau, "precision": p, "recall": r, "f1": f1})
+    best = max(rows, key=lambda row: (row["f1"], row["tau"]))
+    return best["tau"], rows

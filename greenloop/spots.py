@@ -46,3 +46,51 @@ def by_place(frames_per_spot: int, gt: np.ndarray) -> np.ndarray:
     remap = np.empty(labels.max() + 1, dtype=np.int64)
     remap[np.unique(labels)[order]] = np.arange(len(order))
     return remap[labels]
+
+
+def first_revisit(gt: np.ndarray) -> int:
+    """The first frame that revisits an earlier one: min j such that gt[j, i] for some i < j.
+
+    gt: (N, N) bool ground-truth loop matrix (neighbours already excluded, as
+    greenloop.groundtruth makes it). Frames 0 .. first_revisit(gt) - 1 are the *first traversal*:
+    every place the robot can later recognise was first seen there.
+    Raises ValueError when the sequence has no revisit.
+    """
+    gt = np.asarray(gt, dtype=bool)
+    if gt.ndim != 2 or gt.shape[0] != gt.shape[1]:
+        raise ValueError(f"gt must be a square (N, N) loop matrix, got shape {gt.shape}")
+    later = np.flatnonzero(np.tril(gt, -1).any(1))
+    if not later.size:
+        raise ValueError("the ground truth has no loop pairs: the sequence never revisits a place, "
+                         "so there is no first traversal to learn places from")
+    return int(later[0])
+
+
+def revisit_targets(labels: np.ndarray, gt: np.ndarray, n_reference: int):
+    """Which spots a revisiting frame may be named: the spots of its loop partners.
+
+    labels: (n_reference,) spot labels of the reference frames 0 .. n_reference - 1 (the first
+    traversal, e.g. ``group(n_reference, L)``). gt: (N, N) bool loop matrix of the whole sequence,
+    N > n_reference. A *query* is a frame t >= n_reference with at least one loop partner among
+    the reference frames.
+    Returns (queries (Q,) int64 frame indices in capture order, acceptable (Q, K) bool with
+    K = labels.max() + 1: acceptable[q, c] is True when spot c holds a loop partner of query q).
+    A prediction for query q is correct when ``acceptable[q, pred[q]]``.
+    """
+    labels = np.asarray(labels, dtype=np.int64)
+    gt = np.asarray(gt, dtype=bool)
+    if gt.ndim != 2 or gt.shape[0] != gt.shape[1]:
+        raise ValueError(f"gt must be a square (N, N) loop matrix, got shape {gt.shape}")
+    if labels.shape != (n_reference,) or not 0 < n_reference < len(gt):
+        raise ValueError(f"labels must be (n_reference,) with 0 < n_reference < N={len(gt)}, got "
+                         f"labels {labels.shape}, n_reference={n_reference}")
+    partners = gt[n_reference:, :n_reference]                 # (N - n_ref, n_ref)
+    queries = np.flatnonzero(partners.any(1))
+    if not queries.size:
+        raise ValueError(f"no frame after frame {n_reference} has a loop partner before it: the "
+                         f"sequence does not revisit its first traversal")
+    K = int(labels.max()) + 1
+    onehot = np.zeros((n_reference, K), dtype=bool)
+    onehot[np.arange(n_reference), labels] = True
+    acceptable = (partners[queries].astype(np.int32) @ onehot.astype(np.int32)) > 0
+    return queries + n_reference, acceptable

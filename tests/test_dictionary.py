@@ -53,3 +53,28 @@ def test_score_closures_against_ground_truth():
     assert s["delays"] == [1] and s["revisit_frames"] == 10 and s["true_frames"] == 9
     s2 = dictionary.score_closures(pred, ref, gt, threshold=3, exclude=5)
     assert s2["false_events"] == 3  # spots 0, 1, 2 fire on their own first traversal
+
+
+def test_score_closures_on_a_query_mask_and_choose_threshold():
+    # spots 0, 1 of 3 frames; frames 6..11 revisit 0..5 and are predicted correctly
+    n = 12
+    gt = np.zeros((n, n), bool)
+    for k in range(6):
+        gt[k, 6 + k] = gt[6 + k, k] = True
+    ref = np.r_[np.repeat([0, 1], 3), -np.ones(6, int)]
+    pred = np.r_[np.repeat([0, 1], 3), np.repeat([0, 1], 3)]
+    full = dictionary.score_closures(pred, ref, gt, 5, exclude=2)   # flags frames 7, 8, 10, 11
+    assert full["flagged"] == 4 and full["true_frames"] == 4 and full["precision"] == 1.0
+    assert full["recall"] == pytest.approx(4 / 6)
+    late = np.arange(n) >= 9
+    part = dictionary.score_closures(pred, ref, gt, 5, exclude=2, queries=late)
+    assert part["flagged"] == 2 and part["revisit_frames"] == 3 and part["recall"] == pytest.approx(2 / 3)
+    assert part["flags"].sum() == 4                  # the stream itself is not cut
+    tau, rows = dictionary.choose_threshold(pred, ref, gt, [2, 3, 4, 7], np.arange(n) < 9, exclude=2)
+    # tau = 2, 3 flag first-traversal frames (false), tau = 7 never fires: tau = 4 wins
+    assert [r["tau"] for r in rows] == [2, 3, 4, 7] and rows[-1]["f1"] == 0.0
+    assert tau == 4
+    with pytest.raises(ValueError, match="queries"):
+        dictionary.score_closures(pred, ref, gt, 4, queries=np.ones(3, bool))
+    with pytest.raises(ValueError, match="taus"):
+        dictionary.choose_threshold(pred, ref, gt, [], late)
