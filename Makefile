@@ -9,6 +9,8 @@ BIN      := $(VENV)/bin
 DATASET  ?= data/synthetic-greenhouse
 RESULTS  ?= results
 PARAMS   ?=
+# a dataset's own budget, applied before PARAMS: params/datasets/<folder name>.yaml when it exists
+DATASET_PARAMS := $(wildcard params/datasets/$(notdir $(DATASET)).yaml)
 TIMEOUT  ?= 7200
 KERNEL   := greenloop
 export PYTHONPATH := $(CURDIR)
@@ -68,7 +70,7 @@ $(RESULTS)/%.ipynb: notebooks/%.ipynb $(SOURCES) $(DATA_DEP) | $(STAMP)
 	@mkdir -p $(@D)
 	@echo "== $*"
 	$(BIN)/papermill -k $(KERNEL) --execution-timeout $(TIMEOUT) --log-output --progress-bar \
-	    -p dataset $(DATASET) -p results_dir $(RESULTS) $(PARAMS) $< $(@D)/.tmp-$*.ipynb
+	    -p dataset $(DATASET) -p results_dir $(RESULTS) $(DATASET_PARAMS:%=-f %) $(PARAMS) $< $(@D)/.tmp-$*.ipynb
 	@mv $(@D)/.tmp-$*.ipynb $@
 
 $(RESULTS)/%.html: $(RESULTS)/%.ipynb
