@@ -64,7 +64,12 @@ else
 DATA_DEP := $(DATASET)
 endif
 
-all: $(HTML) $(RESULTS)/tables.md ## run every notebook into results/, render HTML, assemble results/tables.md
+all: $(HTML) $(RESULTS)/tables.md results/datasets.md ## run every notebook into results/, render HTML, assemble results/tables.md
+
+# One table across every dataset that has results: results/ (synthetic) and results/<name>/.
+DATASET_RESULTS := results $(patsubst %/07_feature_baselines/,%,$(wildcard results/*/07_feature_baselines/))
+results/datasets.md: $(wildcard $(DATASET_RESULTS:%=%/*/summary.json)) $(RESULTS)/tables.md
+	$(BIN)/python -m greenloop.report --datasets $@ $(DATASET_RESULTS)
 
 $(RESULTS)/%.ipynb: notebooks/%.ipynb $(SOURCES) $(DATA_DEP) | $(STAMP)
 	@mkdir -p $(@D)

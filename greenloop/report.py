@@ -2,7 +2,8 @@
 
 Every notebook writes under ``<results_dir>/<notebook stem>/``; ``make`` assembles the ``*.md``
 tables there into ``results/tables.md`` without re-executing anything
-(``python -m greenloop.report results``).
+(``python -m greenloop.report results``), and the results of several datasets into one table
+(``python -m greenloop.report --datasets results/datasets.md results results/nordland``).
 """
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 
 PAPER, RUN = "paper", "this run"
 
@@ -167,5 +169,77 @@ def assemble_tables(results_dir="results", out: str | Path | None = None) -> Pat
     return _atomic_write(out, lambda p: p.write_text("".join(parts)))
 
 
+def _json(path: Path):
+    return json.loads(path.read_text()) if path.is_file() else None
+
+
+def _dataset_rows(folder: Path) -> list[dict]:
+    """One results folder's headline numbers as long rows (method, metric, value)."""
+    rows = []
+    s07 = _json(folder / "07_feature_baselines" / "summary.json")
+    for r in (s07 or {}).get("table", []):
+        for metric in ("AP_%", "R@100P_%", "R@1_%"):
+            if metric in r:
+                rows.append({"method": f"{r['label']}, cosine", "metric": metric, "value": r[metric]})
+    s01 = _json(folder / "01_spot_grouping" / "summary.json")
+    for r in (s01 or {}).get("table1", []):
+        rows.append({"method": f"paper's CNN, L = {r['frames_per_spot']}, random 80/20 split (Table 1)",
+                     "metric": "accuracy_%", "value": f"{r['acc_mean_%']:.1f} ± {r['acc_std_%']:.1f} ({r['seeds']} seeds)"})
+    s12 = _json(folder / "12_revisit_protocol" / "summary.json")
+    if s12:
+        ps = pd.DataFrame(s12["per_seed"])
+        for split, g in ps.groupby("split"):
+            for col, what in (("in_traversal_test_acc_%", "first traversal, test split"),
+                              ("revisit_acc_%", "revisit frames")):
+                rows.append({"method": f"paper's CNN trained on the first traversal ({split} split), "
+                                       f"scored on the {what}", "metric": "accuracy_%",
+                             "value": f"{g[col].mean():.1f} ± {g[col].std():.1f} ({len(g)} seeds)"})
+        d = pd.DataFrame(s12["dictionary"])
+        for rule, g in d.groupby("tau_rule"):
+            rows.append({"method": f"paper's CNN + dictionary, τ {rule}", "metric": "precision / recall",
+                         "value": f"{g.precision.mean():.3f} / {g.recall.mean():.3f} (τ {sorted(set(g.tau))})"})
+    return rows
+
+
+def cross_dataset(results_dirs) -> pd.DataFrame:
+    """One table across datasets: each method's headline numbers side by side.
+
+    results_dirs: results folders (``results``, ``results/nordland``, ...), each holding the
+    outputs of ``make all`` on one dataset; the dataset name is read from its manifests.
+    Returns a DataFrame: one row per (method, metric), one column per dataset (missing: blank).
+    """
+    frames = []
+    for folder in map(Path, results_dirs):
+        man = next((m for m in sorted(folder.glob("[0-9][0-9]_*/manifest.json"))), None)
+        if man is None:
+            continue
+        name = Path(json.loads(man.read_text()).get("dataset", folder.name)).name
+        rows = _dataset_rows(folder)
+        if rows:
+            frames.append(pd.DataFrame(rows).assign(dataset=name))
+    if not frames:
+        raise FileNotFoundError(f"none of {list(map(str, results_dirs))} holds notebook results: "
+                                f"run `make all` (and `make all DATASET=... RESULTS=...`) first")
+    long = pd.concat(frames)
+    wide = long.pivot_table(index=["method", "metric"], columns="dataset", values="value",
+                            aggfunc="first", sort=False)
+    return wide.reset_index().fillna("")
+
+
+def write_cross_dataset(results_dirs, out) -> Path:
+    """Write :func:`cross_dataset` as ``out`` (.md and .csv)."""
+    table = cross_dataset(results_dirs)
+    return write_table(table, Path(out).with_suffix(""), title="One table across datasets",
+                       note="Assembled from each dataset's notebook outputs (07: descriptors with "
+                            "cosine similarity, scored against that dataset's ground truth; 01: the "
+                            "main paper's Table 1 protocol; 12: the CNN trained on the first traversal "
+                            "and scored on the revisit). Every weight label is in the method name.")
+
+
 if __name__ == "__main__":
-    print(assemble_tables(*(sys.argv[1:2] or ["results"])))
+    # python -m greenloop.report [RESULTS]               -> RESULTS/tables.md
+    # python -m greenloop.report --datasets OUT DIR ...  -> OUT (.md, .csv) across datasets
+    if sys.argv[1:2] == ["--datasets"]:
+        print(write_cross_dataset(sys.argv[3:], sys.argv[2]))
+    else:
+        print(assemble_tables(*(sys.argv[1:2] or ["results"])))

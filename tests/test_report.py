@@ -1,6 +1,7 @@
 import json
 
 import pandas as pd
+import pytest
 
 from greenloop import report
 
@@ -23,3 +24,27 @@ def test_manifest_records_machine_and_versions(tmp_path):
     m = json.loads((tmp_path / "manifest.json").read_text())
     assert m["parameters"] == {"epochs": 3} and "numpy" in m["versions"] and m["cpu"]
     assert m["dataset_fingerprint"].startswith("unavailable")
+
+
+def test_cross_dataset_table_puts_datasets_side_by_side(tmp_path):
+    for name, ap in (("synthetic", 40.0), ("nordland", 12.5)):
+        folder = tmp_path / name / "07_feature_baselines"
+        report.write_json(folder / "summary.json", {"table": [
+            {"label": "pixels (none)", "AP_%": ap, "R@100P_%": 1.0, "R@1_%": 50.0}]})
+        report.write_json(folder / "manifest.json", {"dataset": f"data/{name}"})
+        report.write_json(tmp_path / name / "01_spot_grouping" / "summary.json", {"table1": [
+            {"frames_per_spot": 60, "acc_mean_%": 93.0, "acc_std_%": 2.0, "seeds": 5}]})
+    report.write_json(tmp_path / "nordland" / "12_revisit_protocol" / "summary.json", {
+        "per_seed": [{"split": "random", "seed": 0, "in_traversal_test_acc_%": 99.0, "revisit_acc_%": 20.0},
+                     {"split": "random", "seed": 1, "in_traversal_test_acc_%": 97.0, "revisit_acc_%": 30.0}],
+        "dictionary": [{"tau_rule": "chosen", "tau": 65, "precision": 0.5, "recall": 0.25}]})
+    t = report.cross_dataset([tmp_path / "synthetic", tmp_path / "nordland", tmp_path / "absent"])
+    assert list(t.columns) == ["method", "metric", "synthetic", "nordland"]
+    ap = t[(t.method == "pixels (none), cosine") & (t.metric == "AP_%")].iloc[0]
+    assert (ap.synthetic, ap.nordland) == (40.0, 12.5)
+    rev = t[t.method.str.contains("revisit frames")].iloc[0]
+    assert rev.nordland == "25.0 ± 7.1 (2 seeds)" and rev.synthetic == ""
+    out = report.write_cross_dataset([tmp_path / "synthetic", tmp_path / "nordland"], tmp_path / "datasets.md")
+    assert "| pixels (none), cosine" in out.read_text()
+    with pytest.raises(FileNotFoundError, match="make all"):
+        report.cross_dataset([tmp_path / "absent"])
