@@ -15,7 +15,8 @@ Probe sequences (both start with the query's own bucket):
 * **QDP** (query-directed probing, Lv et al. 2007 "Multi-probe LSH", Sec. 4.3-4.4): bit j costs
   the query's distance to hyperplane j (``qdp_costs``); a perturbation set (the bits flipped)
   costs the sum of its bits' costs; the ``M`` cheapest sets are generated in cost order by the
-  shift/expand min-heap over the bits sorted by cost (``perturbation_sets``). ``M`` follows the
+  shift/expand min-heap over the bits sorted by cost (``perturbation_sets``; compiled with numba
+  where it is installed, else Python's heapq: the same sets in the same order). ``M`` follows the
   paper's rule on the number of non-empty buckets N1 (``qdp_n_probes``).
 
 Matching as a robot runs it (``incremental_match``): frame t queries the frames stored so far,
@@ -48,7 +49,7 @@ from .similarity import l2_normalise
 __all__ = [
     "MAX_BITS", "METHODS", "hyperplanes", "codes", "hamming_masks", "probe_order_swp", "qdp_costs",
     "perturbation_sets", "probe_order_qdp", "qdp_n_probes", "BucketIndex", "build_index", "insert",
-    "MatchResult", "incremental_match", "static_match", "scanned_matrix",
+    "MatchResult", "incremental_match", "query_index", "static_match", "scanned_matrix",
     "best_match_matrix",
 ]
 
@@ -179,24 +180,11 @@ def qdp_costs(q, H, score: str = "margin", theta: float = np.pi / 4) -> np.ndarr
     raise ValueError(f"score must be 'margin' or 'log_odds', got {score!r}")
 
 
-def perturbation_sets(costs, n_sets: int):
-    """The ``n_sets`` cheapest non-empty sets of bits to flip, in non-decreasing total cost.
-
-    costs: (k,) float >= 0, the cost of flipping each bit (:func:`qdp_costs`). Generated as in
-    Lv et al. 2007 (Fig. 5): sort the bits by cost; start the min-heap with {1st cheapest};
-    each pop yields a set A and pushes shift(A) (its largest position replaced by the next) and
-    expand(A) (the next position added). Every non-empty subset is reached exactly once, so
-    ``n_sets`` is capped at 2**k - 1.
-    Returns (flips (n,) uint32 XOR masks over the original bit positions, scores (n,) float64).
-    """
-    c = np.asarray(costs, dtype=np.float64)
-    if c.ndim != 1 or not 1 <= c.size <= MAX_BITS or np.any(~np.isfinite(c)) or np.any(c < 0):
-        raise ValueError(f"costs must be (k,) finite values >= 0 with 1 <= k <= {MAX_BITS}, got "
-                         f"shape {c.shape}")
-    k = c.size
-    n = min(_int(n_sets, "n_sets", 0), (1 << k) - 1)
-    order = np.argsort(c, kind="stable")
+def _heap_python(c: np.ndarray, order: np.ndarray, n: int):
+    """The shift/expand min-heap over the costs c (k,) sorted by ``order``: the n cheapest
+    sets as (flips (n,) uint32 XOR masks over the bits, scores (n,) float64)."""
     z = c[order].tolist()
+    k = len(z)
     heap, pos_masks, scores = [(z[0], 0, 1)], [], []
     push, replace, pop = heapq.heappush, heapq.heapreplace, heapq.heappop
     for _ in range(n):
@@ -209,10 +197,95 @@ def perturbation_sets(costs, n_sets: int):
             push(heap, (s + z1, top + 1, mask | nxt))                              # expand
         else:
             pop(heap)
-    pm = np.array(pos_masks, dtype=np.uint64)
+    pm = np.array(pos_masks, dtype=np.uint64)               # sets of sorted positions -> bits
     bits = (pm[:, None] >> np.arange(k, dtype=np.uint64)) & np.uint64(1)
     flips = bits @ np.left_shift(np.uint64(1), order.astype(np.uint64))
     return flips.astype(np.uint32), np.array(scores, dtype=np.float64)
+
+
+@lru_cache(maxsize=1)
+def _heap_compiled():
+    """The same heap compiled with numba (arrays instead of tuples; the pop order is that of
+    the tuples (score, largest position, set), a strict total order, so it is identical), or
+    None without numba. Compiled and run once here, so no timed query pays the compilation."""
+    from . import kernels
+    if not kernels.available():
+        return None
+    from numba import njit
+
+    @njit(cache=True, nogil=True)
+    def sets(z, order, n, out_flip, out_score):
+        # heap entries: score hs, tie key hk = top << 32 | mask (the tuple order (score, top, mask))
+        k, low = z.size, (np.int64(1) << 32) - 1
+        hs, hk = np.empty(n + 2), np.empty(n + 2, np.int64)
+        hs[0], hk[0], size = z[0], 1, 1
+        for i in range(n):
+            s, top, mask = hs[0], hk[0] >> 32, hk[0] & low
+            flip = np.int64(0)
+            for p in range(top + 1):
+                if (mask >> p) & 1:
+                    flip |= np.int64(1) << order[p]
+            out_flip[i], out_score[i] = flip, s
+            grow = top + 1 < k
+            if grow:                                   # root := shift(A); expand(A) pushed below
+                nxt, z1 = np.int64(1) << (top + 1), z[top + 1]
+                shifted = (mask ^ (np.int64(1) << top)) | nxt
+                hs[0], hk[0] = s - z[top] + z1, ((top + 1) << 32) | shifted
+            else:                                      # root := last entry
+                size -= 1
+                hs[0], hk[0] = hs[size], hk[size]
+            j = 0                                      # sift the root down
+            while 2 * j + 1 < size:
+                c = 2 * j + 1
+                d = c + 1
+                if d < size and (hs[d] < hs[c] or (hs[d] == hs[c] and hk[d] < hk[c])):
+                    c = d
+                if not (hs[c] < hs[j] or (hs[c] == hs[j] and hk[c] < hk[j])):
+                    break
+                hs[c], hs[j], hk[c], hk[j] = hs[j], hs[c], hk[j], hk[c]
+                j = c
+            if grow:                                   # push expand(A) and sift it up
+                j = size
+                hs[j], hk[j] = s + z1, ((top + 1) << 32) | mask | nxt
+                size += 1
+                while j > 0:
+                    u = (j - 1) // 2
+                    if not (hs[j] < hs[u] or (hs[j] == hs[u] and hk[j] < hk[u])):
+                        break
+                    hs[u], hs[j], hk[u], hk[j] = hs[j], hs[u], hk[j], hk[u]
+                    j = u
+
+    def run(c: np.ndarray, order: np.ndarray, n: int):
+        out_flip, out_score = np.empty(n, np.int64), np.empty(n)
+        sets(c[order], order.astype(np.int64), n, out_flip, out_score)
+        return out_flip.astype(np.uint32), out_score
+
+    run(np.array([0.3, 0.1, 0.2]), np.array([1, 2, 0]), 7)
+    return run
+
+
+def perturbation_sets(costs, n_sets: int, compiled: bool | None = None):
+    """The ``n_sets`` cheapest non-empty sets of bits to flip, in non-decreasing total cost.
+
+    costs: (k,) float >= 0, the cost of flipping each bit (:func:`qdp_costs`). Generated as in
+    Lv et al. 2007 (Fig. 5): sort the bits by cost; start the min-heap with {1st cheapest};
+    each pop yields a set A and pushes shift(A) (its largest position replaced by the next) and
+    expand(A) (the next position added). Every non-empty subset is reached exactly once, so
+    ``n_sets`` is capped at 2**k - 1. compiled: None = the numba heap where numba is installed,
+    else Python's heapq; True / False force one (same output).
+    Returns (flips (n,) uint32 XOR masks over the original bit positions, scores (n,) float64).
+    """
+    c = np.asarray(costs, dtype=np.float64)
+    if c.ndim != 1 or not 1 <= c.size <= MAX_BITS or np.any(~np.isfinite(c)) or np.any(c < 0):
+        raise ValueError(f"costs must be (k,) finite values >= 0 with 1 <= k <= {MAX_BITS}, got "
+                         f"shape {c.shape}")
+    k = c.size
+    n = min(_int(n_sets, "n_sets", 0), (1 << k) - 1)
+    order = np.argsort(c, kind="stable")
+    fast = _heap_compiled() if compiled in (None, True) else None
+    if compiled and fast is None:
+        raise ValueError("compiled=True needs numba, which is not installed")
+    return (fast or _heap_python)(c, order, n)
 
 
 def probe_order_qdp(code: int, costs, n_probes: int):
@@ -291,8 +364,9 @@ def build_index(X, H, n_stored: int | None = None, offset=None) -> BucketIndex:
     if offset is not None:
         offset = _check_X(np.asarray(offset, np.float32).reshape(1, -1), H, "offset")[0]
     c = codes(Xn, H, offset)
+    dense = np.zeros(1 << H.shape[1], bool) if H.shape[1] <= DENSE_BITS else None
     idx = BucketIndex(H=H, H32=H.astype(np.float32), Xn=Xn, codes=c, n_stored=n, offset=offset,
-                      occupied=np.zeros(1 << H.shape[1], bool) if H.shape[1] <= DENSE_BITS else None)
+                      occupied=dense)
     if n:
         order = np.argsort(c[:n], kind="stable")
         uniq, starts = np.unique(c[order], return_index=True)
@@ -395,7 +469,7 @@ class MatchResult:
     int64 buckets probed (0 for brute/sklearn). n_buckets: (Q,) int64 non-empty buckets N1 then.
     candidates: None, or a list of Q entries, each the (k,) int64 rows scanned or None meaning
     "all stored rows" (brute/sklearn). params: the options used (``mode`` "incremental" or
-    "static", ``build_seconds`` for static).
+    "static"). Arrays are shorter than Q when a time budget stopped the queries early.
     """
     method: str
     best: np.ndarray
@@ -421,15 +495,17 @@ class MatchResult:
         return float(self.seconds[t].mean() * 1e3) if t.any() else float("nan")
 
 
-def _run(index: BucketIndex, queries: np.ndarray, o: dict, keep: bool, exclude: int | None):
+def _run(index: BucketIndex, queries: np.ndarray, o: dict, keep: bool, exclude: int | None,
+         max_seconds: float | None = None):
     """Query every row of the unit float32 (Q, D) queries; with ``exclude`` (incremental mode)
-    row t - exclude - 1 is stored before query t. Returns the per-query arrays."""
+    row t - exclude - 1 is stored before query t. With ``max_seconds`` stop once the queries so
+    far took that long (at least one query). Returns the per-query arrays."""
     Q = queries.shape[0]
     best = np.full(Q, NO_MATCH, np.int64)
     score = np.full(Q, -np.inf, np.float32)
     secs, probe_secs = np.zeros(Q), np.zeros(Q)
     n_stored, n_cand, n_probe, n_buck = (np.zeros(Q, np.int64) for _ in range(4))
-    kept = [] if keep else None
+    kept, spent, done = ([] if keep else None), 0.0, Q
     with _single_thread_blas():
         for t in range(Q):
             if exclude is not None and t - exclude - 1 >= 0:
@@ -441,8 +517,13 @@ def _run(index: BucketIndex, queries: np.ndarray, o: dict, keep: bool, exclude: 
             best[t], score[t], n_cand[t], n_probe[t], probe_secs[t] = b, s, nc, npb, tp
             if keep:
                 kept.append(cand)
-    return dict(best=best, score=score, seconds=secs, probe_seconds=probe_secs, n_stored=n_stored, n_candidates=n_cand,
-                n_probes=n_probe, n_buckets=n_buck, candidates=kept)
+            spent += secs[t]
+            if max_seconds is not None and spent >= max_seconds:
+                done = t + 1
+                break
+    arrays = dict(best=best, score=score, seconds=secs, probe_seconds=probe_secs,
+                  n_stored=n_stored, n_candidates=n_cand, n_probes=n_probe, n_buckets=n_buck)
+    return {**{k: v[:done] for k, v in arrays.items()}, "candidates": kept}
 
 
 def incremental_match(X, method: str = "swp", exclude: int = 0, n_bits: int = 16, seed: int = 0,
@@ -480,31 +561,43 @@ def incremental_match(X, method: str = "swp", exclude: int = 0, n_bits: int = 16
         o, mode="incremental", exclude=exclude, n_bits=n_bits, seed=seed, centre_frames=k))
 
 
-def static_match(X_db, Q, method: str = "swp", n_bits: int = 16, seed: int = 0, radius: int = 4,
-                 qdp_probes=(1000, 1500, 500), qdp_score: str = "margin",
-                 theta: float = np.pi / 4, offset=None) -> MatchResult:
-    """Query Q (M, D) against a database X_db (N, D) stored all at once (the scaling test).
+def query_index(index: BucketIndex, Q, method: str = "swp", radius: int = 4,
+                qdp_probes=(1000, 1500, 500), qdp_score: str = "margin", theta: float = np.pi / 4,
+                max_seconds: float | None = None) -> MatchResult:
+    """Query Q (M, D) against the rows stored in ``index`` (nothing is added to it).
 
-    Same methods and options as :func:`incremental_match` (offset: as in :func:`build_index`,
-    instead of centre_frames); the table (and for "sklearn" the
-    fitted NearestNeighbors) is built before timing starts: ``params["build_seconds"]``.
-    Returns a :class:`MatchResult` over the M queries (best = row of X_db).
+    Same methods and options as :func:`incremental_match`. For "sklearn" the NearestNeighbors
+    is fitted before timing starts (``params["fit_seconds"]``). max_seconds: stop after the
+    queries so far took this many seconds in all (at least one query; None: all M).
+    Returns a :class:`MatchResult` over the queries run (best = stored row).
     """
     o = _options(method, radius, qdp_probes, qdp_score, theta)
+    if max_seconds is not None and not max_seconds > 0:
+        raise ValueError(f"max_seconds must be > 0 or None, got {max_seconds}")
+    Qn = np.ascontiguousarray(l2_normalise(_check_X(Q, index.H, "Q").astype(np.float32)))
+    fit = 0.0
+    if method == "sklearn" and index.nn_rows != index.n_stored and index.n_stored:
+        from sklearn.neighbors import NearestNeighbors
+        t0 = time.perf_counter()
+        index.nn = NearestNeighbors(n_neighbors=1, metric="cosine", algorithm="brute")
+        index.nn.fit(index.Xn[:index.n_stored])
+        index.nn_rows, fit = index.n_stored, time.perf_counter() - t0
+    out = _run(index, Qn, o, False, None, max_seconds)
+    return MatchResult(method=method, **out, params=dict(
+        o, mode="static", n_bits=index.n_bits, fit_seconds=fit))
+
+
+def static_match(X_db, Q, method: str = "swp", n_bits: int = 16, seed: int = 0, radius: int = 4,
+                 qdp_probes=(1000, 1500, 500), qdp_score: str = "margin",
+                 theta: float = np.pi / 4, offset=None, max_seconds: float | None = None):
+    """Query Q (M, D) against a database X_db (N, D) stored all at once: :func:`build_index`
+    (hyperplanes ``n_bits``/``seed``, ``offset``), then :func:`query_index` with the rest.
+    Returns a :class:`MatchResult` over the queries (best = row of X_db)."""
     X_db = np.asarray(X_db)
     if X_db.ndim != 2:
         raise ValueError(f"X_db must be (N, D) descriptors, got shape {X_db.shape}")
-    t0 = time.perf_counter()
     index = build_index(X_db, hyperplanes(X_db.shape[1], n_bits, seed), offset=offset)
-    if method == "sklearn":
-        from sklearn.neighbors import NearestNeighbors
-        index.nn = NearestNeighbors(n_neighbors=1, metric="cosine", algorithm="brute").fit(index.Xn)
-        index.nn_rows = index.n_stored
-    build = time.perf_counter() - t0
-    Qn = np.ascontiguousarray(l2_normalise(_check_X(Q, index.H, "Q").astype(np.float32)))
-    out = _run(index, Qn, o, False, None)
-    return MatchResult(method=method, **out, params=dict(
-        o, mode="static", n_bits=n_bits, seed=seed, build_seconds=build))
+    return query_index(index, Q, method, radius, qdp_probes, qdp_score, theta, max_seconds)
 
 
 # ------------------------------------------------------------------- score matrices for AP

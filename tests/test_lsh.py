@@ -128,6 +128,20 @@ def test_perturbation_sets_are_exactly_the_cheapest_subsets():
     assert np.allclose(scores, all_scores[:100])
 
 
+def test_compiled_heap_gives_the_python_heaps_sets_in_the_same_order():
+    from greenloop import kernels
+    if not kernels.available():
+        pytest.skip("numba is not installed: only the Python heap runs")
+    rng = np.random.default_rng(6)
+    for trial in range(40):
+        k = int(rng.integers(1, 17))
+        costs = rng.random(k) if trial % 2 else np.round(rng.random(k), 1)   # with ties
+        n = int(rng.integers(0, 2000))
+        fast = lsh.perturbation_sets(costs, n, compiled=True)
+        slow = lsh.perturbation_sets(costs, n, compiled=False)
+        assert np.array_equal(fast[0], slow[0]) and np.array_equal(fast[1], slow[1])
+
+
 def test_log_odds_costs_rank_bits_like_margins():
     rng = np.random.default_rng(3)
     H = lsh.hyperplanes(D, BITS, 0)
@@ -227,3 +241,16 @@ def test_centre_frames_move_only_the_buckets():
 def test_bad_input_raises_value_error(call, match):
     with pytest.raises(ValueError, match=match):
         call()
+
+
+def test_query_index_stops_at_the_time_budget_and_matches_static_match():
+    rng = np.random.default_rng(8)
+    db, Q = unit(rng, 300), unit(rng, 40)
+    index = lsh.build_index(db, lsh.hyperplanes(D, BITS, 0))
+    full = lsh.query_index(index, Q, "swp")
+    assert np.array_equal(full.best, lsh.static_match(db, Q, "swp").best)
+    short = lsh.query_index(index, Q, "qdp", max_seconds=1e-9)
+    assert short.best.shape == (1,) and short.seconds.shape == (1,)
+    nn = lsh.query_index(index, Q, "sklearn")
+    assert np.array_equal(nn.best, lsh.query_index(index, Q, "brute").best)
+    assert index.n_stored == 300                                    # queries store nothing
