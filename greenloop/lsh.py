@@ -396,6 +396,8 @@ def _options(method, radius, qdp_probes, qdp_score, theta) -> dict:
         raise ValueError(f"qdp_probes must be (small, large, threshold) for qdp_n_probes, got "
                          f"{qdp_probes!r}")
     qdp_n_probes(0, *qdp_probes)                       # validates the three integers
+    if method == "qdp":
+        _heap_compiled()                               # load/compile now, not in a timed query
     if qdp_score not in ("margin", "log_odds") or not 0 < theta < np.pi / 2:
         raise ValueError(f"qdp_score must be 'margin' or 'log_odds' and theta in (0, pi/2), got "
                          f"{qdp_score!r}, {theta}")

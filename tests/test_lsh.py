@@ -254,3 +254,9 @@ def test_query_index_stops_at_the_time_budget_and_matches_static_match():
     nn = lsh.query_index(index, Q, "sklearn")
     assert np.array_equal(nn.best, lsh.query_index(index, Q, "brute").best)
     assert index.n_stored == 300                                    # queries store nothing
+
+
+def test_no_query_pays_the_heap_compilation():
+    lsh._heap_compiled.cache_clear()
+    r = lsh.incremental_match(walk(60), "qdp", exclude=5)
+    assert r.seconds.max() < 0.5                                    # loading numba takes seconds
