@@ -7,6 +7,9 @@ through the origin (normals ``H[:, j]`` drawn from N(0, I), Qi 2024 Sec. 2.2): b
 ``x . H[:, j] >= 0`` and the frame's code is the integer ``sum_j bit_j << j`` (uint32). Frames with
 the same code share a bucket of a dict-of-lists table. A query probes a sequence of buckets and
 scans the frames it finds there linearly by cosine similarity; its match is the best-scoring one.
+Beyond the paper, ``offset`` (``centre_frames`` in ``incremental_match``) moves every hyperplane
+to pass through a given point, e.g. the mean of the first frames: non-negative descriptors all
+lie in one orthant, where planes through the origin separate few of them.
 
 Probe sequences (both start with the query's own bucket):
 
@@ -22,7 +25,8 @@ Probe sequences (both start with the query's own bucket):
 Matching as a robot runs it (``incremental_match``): frame t queries the frames stored so far,
 never its recent neighbours ``|i - t| <= exclude``, and is then stored. The exact baselines are a
 NumPy brute-force cosine scan (the arithmetic of ``similarity.cosine_matrix``) and scikit-learn's
-``NearestNeighbors(metric="cosine", algorithm="brute")``.
+``NearestNeighbors(metric="cosine", algorithm="brute")``. ``query_index`` / ``static_match`` query
+a table filled all at once (the scaling test). Every query is timed on one BLAS thread.
 
 Why this module exists: no maintained Python library does what the paper describes. FALCONN has
 hyperplane LSH with multi-probe but its last release (2017) ships no wheel for current Pythons;
