@@ -119,7 +119,39 @@ def _check_09(folder):
     assert len(d) > 0
 
 
+def _check_11(folder):
+    t = pd.read_csv(folder / "table6.csv")
+    done = [b for b in _feature_backbones() if b != "spot_cnn"]
+    assert t.backbone.unique().tolist() == done
+    assert (t.label == t.backbone + " (" + t.weights + ")").all()
+    variants = ["brute force", "NearestNeighbors (sklearn)", "SWP-RHLSH", "QDP-RHLSH", "SWP-RHLSH, centred",
+                "QDP-RHLSH, centred"]
+    assert (t.groupby("backbone", sort=False).variant.apply(list) == pd.Series([variants] * len(done), done)).all()
+    for c in ("AP_pairs_%", "AP_best_%", "R@1_%", "NN_agree_%", "scanned_%"):
+        assert t[c].between(0, 100).all(), c
+    assert (t.ms_per_query > 0).all()
+    s = json.loads((folder / "summary.json").read_text())
+    by = t.set_index(["backbone", "variant"])
+    for b in done:                                  # exact methods: the full matrix's AP, every frame scanned
+        for v in ("brute force", "NearestNeighbors (sklearn)"):
+            assert abs(by.loc[(b, v), "AP_pairs_%"] - s["ap_full_%"][b]) < 1e-3
+            assert by.loc[(b, v), "scanned_%"] == 100 and by.loc[(b, v), "NN_agree_%"] == 100
+        assert by.loc[(b, "brute force"), "R_a_%"] == 0
+        assert by.loc[(b, "SWP-RHLSH"), "probes_per_query"] == 2517           # 16 bits, radius 4
+        assert by.loc[(b, "QDP-RHLSH"), "probes_per_query"] <= 1501
+    seeds = pd.read_csv(folder / "per_seed.csv")
+    assert sorted(seeds[seeds.variant == "SWP-RHLSH"].seed.unique()) == TINY["lsh_seeds"]
+    sc = pd.read_csv(folder / "scaling.csv")
+    assert sorted(sc.stored.unique()) == TINY["scaling_sizes"]
+    assert sorted(sc.method.unique()) == ["brute", "qdp", "sklearn", "swp"]
+    assert (sc.queries_timed >= 1).all() and (sc.queries_timed <= TINY["scaling_queries"]).all()
+    assert (sc.ms_per_query > 0).all()
+    assert (sc[sc.method.isin(["brute", "sklearn"])]["planted_found_%"] == 100).all()
+    assert (sc[sc.method == "swp"]["scanned_%"] < 100).all()
+    assert (folder / "figure7_pr_curves.png").is_file() and (folder / "scaling.png").is_file()
+
+
 CHECKS = {"01_spot_grouping": _check_01, "02_training_over_seeds": _check_02,
           "03_confusion_matrix": _check_03, "05_dictionary_threshold": _check_05, "06_speed": _check_06,
           "07_feature_baselines": _check_07, "08_descriptor_postprocessing": _check_08,
-          "09_rgbd_features": _check_09}
+          "09_rgbd_features": _check_09, "11_lsh_matching": _check_11}
