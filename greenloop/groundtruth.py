@@ -215,7 +215,7 @@ def definition(folder, threshold: float = 0.5, exclude: int = 150) -> str:
         p = data.read_loop_pairs(folder)
         tol = f"{p[:, 2].min()}" if len(p) and p[:, 2].min() == p[:, 2].max() else (
             f"{p[:, 2].min()}-{p[:, 2].max()}" if len(p) else "-")
-        return (f"loop pairs from {data.GROUND_TRUTH_NAME} ({len(p)} pairs, tolerance {tol} frames), "
+        return (f"loop pairs from {data.GROUND_TRUTH_NAME} ({len(p)} rows, tolerance {tol} frames), "
                 f"|i - j| > {exclude} frames")
     return "none: the folder has no poses and no loop-pair file"
 

@@ -65,7 +65,7 @@ def test_real_trajectory_start_end_revisit(real_trajectory):
 # ------------------------------------------------------------------ ground truth from loop pairs
 def _pair_folder(tmp_path, n, lines, name="seq"):
     """A pose-less sequence folder of n tiny frames with ground_truth.csv holding `lines`."""
-    from tests.conftest import write_frames
+    from conftest import write_frames
     folder = write_frames(tmp_path / name, n, size=(8, 6))
     (folder / data.GROUND_TRUTH_NAME).write_text("\n".join(lines) + "\n")
     return folder
@@ -84,7 +84,7 @@ def test_pairs_tolerance_symmetry_and_exclusion(tmp_path):
     # the file's pairs are what data.read_loop_pairs returns, tolerance 0 where absent
     assert data.read_loop_pairs(folder).tolist() == [[2, 30, 1], [5, 20, 0], [10, 12, 0]]
     assert data.describe(folder)["ground_truth"] == "pairs"
-    assert "3 pairs, tolerance 0-1 frames" in groundtruth.definition(folder, exclude=5)
+    assert "3 rows, tolerance 0-1 frames" in groundtruth.definition(folder, exclude=5)
 
 
 def test_pairs_on_a_subset_of_frames(tmp_path):
@@ -104,7 +104,7 @@ def test_pairs_on_a_subset_of_frames(tmp_path):
 
 
 def test_poses_come_first_and_match_loop_matrix(tmp_path):
-    from tests.conftest import write_frames
+    from conftest import write_frames
     n = 100
     fwd = _line_poses(n // 2)
     P = np.concatenate([fwd, fwd[::-1]])
@@ -163,3 +163,14 @@ def test_write_loop_pairs_round_trip(tmp_path):
     assert data.read_loop_pairs(path, n_frames=13).tolist() == [[0, 10, 0], [3, 12, 0]]
     with pytest.raises(ValueError, match="outside"):
         data.read_loop_pairs(path, n_frames=12)
+
+
+def test_pair_file_reproduces_the_pose_ground_truth(tiny_sequence, tiny_pairs_sequence):
+    info = data.describe(tiny_pairs_sequence)
+    assert info["ground_truth"] == "pairs" and not info["trajectory"] and not info["depth"]
+    pairs = data.read_loop_pairs(tiny_pairs_sequence)
+    assert (pairs[:, 2] > 0).any(), "the fixture should exercise tolerances"
+    for frames, exclude in ((None, 20), (np.arange(0, 200, 3), 20), (None, 10)):
+        a = groundtruth.for_sequence(tiny_pairs_sequence, frames, exclude=exclude)
+        b = groundtruth.for_sequence(tiny_sequence, frames, threshold=0.5, exclude=exclude)
+        assert b.any() and (a == b).all()
