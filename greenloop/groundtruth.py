@@ -20,12 +20,12 @@ tolerance widens j only: list every i you want counted (see :func:`pair_matrix`)
 
 Poses are close by one of two criteria:
 
-   * ``loop_matrix`` (Qi 2024, Eq. 5): ``e = ||T_i^-1 T_j - I||_F < threshold``, the Frobenius
-     norm of the relative pose minus identity. It mixes units: the translation part is in metres,
-     the rotation part is ``2*sqrt(2)*|sin(theta/2)|`` for a rotation by theta about one axis
-     (0.5 is about 10 degrees, or 0.5 m).
-   * ``loop_matrix_metric``: translation distance < ``max_distance`` metres **and** viewing
-     direction difference < ``max_angle`` degrees. Easier to argue about.
+* ``loop_matrix`` (Qi 2024, Eq. 5): ``e = ||T_i^-1 T_j - I||_F < threshold``, the Frobenius
+  norm of the relative pose minus identity. It mixes units: the translation part is in metres,
+  the rotation part is ``2*sqrt(2)*|sin(theta/2)|`` for a rotation by theta about one axis
+  (0.5 is about 10 degrees, or 0.5 m).
+* ``loop_matrix_metric``: translation distance < ``max_distance`` metres **and** viewing
+  direction difference < ``max_angle`` degrees. Easier to argue about.
 
 The matrix is symmetric with a False diagonal; evaluations count each unordered pair once.
 """

@@ -8,7 +8,8 @@ summer and frame k of winter show the same place. ``build`` writes (see ``greenl
 
     rgb/0.png ... rgb/n-1.png      summer, in numeric order of the source names
     rgb/n.png ... rgb/2n-1.png     winter: winter frame k is frame n + k
-    ground_truth.csv               the alignment, rows (k, n + k, TOLERANCE) for k = 0 ... n-1
+    ground_truth.csv               the alignment: summer frame k is a loop with winter frames
+                                   n + k +- TOLERANCE, never with summer frames (alignment_pairs)
     nordland.json                  source, counts, traversal boundaries [0, n) and [n, 2n)
 
 Read in order, the second half revisits the first: a loop-closure sequence without poses or
@@ -38,6 +39,7 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import cv2
+import numpy as np
 
 from . import data
 
@@ -101,6 +103,29 @@ def check_source(src) -> tuple[list[Path], list[Path], tuple[int, int]]:
     return summer, winter, first
 
 
+def alignment_pairs(n: int, tolerance: int) -> np.ndarray:
+    """ground_truth.csv rows for two aligned traversals of n frames each: summer frame k is a
+    loop with winter frames n + k - tolerance ... n + k + tolerance, clipped to the winter
+    traversal (its start is not a place near the end of summer).
+
+    Returns (P, 3) int64 rows (i, j, tolerance): (k, n + k, tolerance) where the window does
+    not reach back into summer (past the end of winter there are no frames to clip); for
+    k < tolerance the clipped window [n, min(2n - 1, n + k + tolerance)] as its centre and
+    half-width, plus its last frame alone when its length is even.
+    """
+    rows = []
+    for k in range(n):
+        if k >= tolerance:
+            rows.append((k, n + k, tolerance))
+            continue
+        hi = min(2 * n - 1, n + k + tolerance)        # window [n, hi]
+        half = (hi - n) // 2
+        rows.append((k, n + half, half))
+        if (hi - n) % 2:
+            rows.append((k, hi, 0))
+    return np.asarray(rows, dtype=np.int64).reshape(-1, 3)
+
+
 def _write(tmp: Path, summer, winter, tolerance: int, meta: dict, progress: bool) -> None:
     """Copy the frames (summer then winter) and write ground_truth.csv and nordland.json."""
     from tqdm import tqdm  # text bars: readable in terminals and in executed notebooks
@@ -110,7 +135,7 @@ def _write(tmp: Path, summer, winter, tolerance: int, meta: dict, progress: bool
     for k, p in enumerate(tqdm(frames, desc="nordland", unit="frame", disable=not progress)):
         shutil.copyfile(p, tmp / "rgb" / f"{k}{p.suffix.lower()}")
     n = len(summer)
-    data.write_loop_pairs(tmp / data.GROUND_TRUTH_NAME, [(k, n + k, tolerance) for k in range(n)])
+    data.write_loop_pairs(tmp / data.GROUND_TRUTH_NAME, alignment_pairs(n, tolerance))
     (tmp / "nordland.json").write_text(json.dumps(meta, indent=1, sort_keys=True) + "\n")
 
 
@@ -141,7 +166,8 @@ def build(out, src, tolerance: int = TOLERANCE, overwrite: bool = False, progres
             "n_frames": 2 * n, "width": w, "height": h,
             "traversals": {"summer": [0, n], "winter": [n, 2 * n]},
             "source_names": [summer[0].name, summer[-1].name],
-            "ground_truth": {"file": data.GROUND_TRUTH_NAME, "pairs": "(k, n + k)",
+            "ground_truth": {"file": data.GROUND_TRUTH_NAME,
+                             "pairs": "summer k with winter n + k +- tolerance, clipped to winter",
                              "tolerance_frames": tolerance,
                              "default_tolerance": f"{SAMPLE_TOLERANCE} x {SAMPLE_STEP}: the source's "
                              f"sample_ground_truth.csv tolerance, in frames of every {SAMPLE_STEP}th image"}}

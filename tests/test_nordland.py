@@ -40,7 +40,9 @@ def test_build_order_ground_truth_and_metadata(tmp_path):
     assert [p.name for p in frames] == [f"{k}.png" for k in range(2 * n)]
     # summer in numeric order of the names, then winter: winter frame k is frame n + k
     assert [_code(p) for p in frames] == [(0, v) for v in NAMES] + [(1, v) for v in NAMES]
-    assert data.read_loop_pairs(out, n_frames=2 * n).tolist() == [[k, n + k, 2] for k in range(n)]
+    # (k, n + k, 2), the first two windows clipped at the start of winter: [n, n + 2], [n, n + 3]
+    assert data.read_loop_pairs(out, n_frames=2 * n).tolist() == (
+        [[0, n + 1, 1], [1, n + 1, 1], [1, n + 3, 0]] + [[k, n + k, 2] for k in range(2, n)])
     meta = json.loads((out / "nordland.json").read_text())
     assert meta["frames_per_season"] == n and meta["n_frames"] == 2 * n
     assert meta["traversals"] == {"summer": [0, n], "winter": [n, 2 * n]}
@@ -49,13 +51,17 @@ def test_build_order_ground_truth_and_metadata(tmp_path):
     assert info["ground_truth"] == "pairs" and info["n_frames"] == 2 * n and not info["depth"]
     gt = groundtruth.for_sequence(out, exclude=1)
     assert gt[0, n] and gt[0, n + 2] and not gt[0, n + 3] and gt[n + 1, 0]
+    assert not gt[:n, :n].any() and not gt[n:, n:].any()        # loops only across the seasons
+    k = np.arange(n)[:, None]
+    assert (gt[:n, n:] == (np.abs(np.arange(n)[None, :] - k) <= 2)).all()
     assert not list(tmp_path.glob(".nordland.tmp*")), "temporary folder left behind"
 
 
 def test_build_from_a_repository_clone_layout(tmp_path):
     _fake_source(tmp_path / "seqslam" / nordland.SOURCE_SUBDIR, names=[10, 20])
     out = nordland.build(tmp_path / "out", tmp_path / "seqslam", progress=False)
-    assert data.read_loop_pairs(out).tolist() == [[0, 2, nordland.TOLERANCE], [1, 3, nordland.TOLERANCE]]
+    gt = groundtruth.for_sequence(out, exclude=0)
+    assert gt[0, 2] and gt[0, 3] and gt[1, 2] and gt[1, 3] and not gt[0, 1] and not gt[2, 3]
 
 
 def test_bad_sources_fail_clearly_and_leave_nothing(tmp_path):
@@ -89,14 +95,15 @@ def test_offline_clone_fails_at_once_with_the_fix(tmp_path, capsys):
 
 
 def test_make_all_builds_nordland_first(tmp_path):
-    """`make all DATASET=data/nordland` must depend on the build (dry run, nothing executed)."""
-    venv = Path(sys.prefix)
-    r = subprocess.run(["make", "-n", "all", "DATASET=data/nordland", f"VENV={venv}",
-                        f"RESULTS={tmp_path}", "NORDLAND_SRC=/some/copy"],
+    """`make all DATASET=data/nordland` must build the folder first when it is missing (dry run,
+    nothing executed; NORDLAND points at a missing folder whatever this checkout holds)."""
+    venv, target = Path(sys.prefix), tmp_path / "nordland"
+    r = subprocess.run(["make", "-n", "all", f"DATASET={target}/", f"NORDLAND={target}", f"VENV={venv}",
+                        f"RESULTS={tmp_path / 'results'}", "NORDLAND_SRC=/some/copy"],
                        cwd=ROOT, capture_output=True, text=True, timeout=60)
     assert r.returncode == 0, r.stderr
     lines = r.stdout.splitlines()
-    build = [k for k, ln in enumerate(lines) if "greenloop.nordland data/nordland" in ln]
+    build = [k for k, ln in enumerate(lines) if f"greenloop.nordland {target}" in ln]
     runs = [k for k, ln in enumerate(lines) if "papermill" in ln]
     assert build and runs and build[0] < runs[0]
     assert "--src /some/copy" in " ".join(lines[build[0]:build[0] + 2])
@@ -113,3 +120,13 @@ def test_default_tolerance_matches_the_source_sample():
     assert (rows[:, 0] == rows[:, 1]).all() and (rows[:, 0] == np.arange(1, len(rows) + 1)).all()
     assert (rows[:, 2] == nordland.SAMPLE_TOLERANCE).all()
     assert nordland.TOLERANCE == nordland.SAMPLE_TOLERANCE * nordland.SAMPLE_STEP
+
+
+@pytest.mark.parametrize("n, tolerance", [(7, 2), (2, 150), (10, 3), (300, 150), (5, 0)])
+def test_alignment_pairs_are_exactly_the_clipped_band(n, tolerance):
+    """Summer k with winter n + k +- tolerance, never across the boundary into summer."""
+    G = groundtruth.pair_matrix(nordland.alignment_pairs(n, tolerance), 2 * n, exclude=0)
+    k = np.arange(n)
+    ref = np.zeros((2 * n, 2 * n), bool)
+    ref[:n, n:] = np.abs(k[None, :] - k[:, None]) <= tolerance
+    assert (G == (ref | ref.T)).all()
