@@ -23,8 +23,12 @@ HTML      := $(EXECUTED:.ipynb=.html)
 SOURCES   := $(wildcard greenloop/*.py)
 STAMP     := $(VENV)/.installed
 SYNTHETIC := data/synthetic-greenhouse
+NORDLAND  := data/nordland
+# a local copy of the Nordland source (summer/, winter/); empty: clone it from NORDLAND_URL
+NORDLAND_SRC ?= $(if $(wildcard ../shared/real/nordland/summer),../shared/real/nordland,)
+NORDLAND_URL ?= https://github.com/TimQuelch/seqslam
 
-.PHONY: all help venv synthetic data test quick sweep bench clean-results
+.PHONY: all help venv synthetic data nordland test quick sweep bench clean-results
 .DEFAULT_GOAL := help
 
 help: ## this list
@@ -36,6 +40,7 @@ help: ## this list
 	@echo "  PARAMS='-p epochs 50'   extra papermill arguments for every notebook"
 	@echo "  TIMEOUT=$(TIMEOUT)   per-cell execution timeout, seconds"
 	@echo "  PYTHON=$(PYTHON)   interpreter used to create $(VENV)"
+	@echo "  NORDLAND_SRC=$(NORDLAND_SRC)   local Nordland source for make nordland (empty: clone it)"
 
 venv: $(STAMP) ## create .venv from environment.txt (and register the Jupyter kernel)
 
@@ -56,10 +61,21 @@ $(SYNTHETIC)/synthetic.json: | $(STAMP)
 data: | $(STAMP) ## download the real GreenHouse set into data/greenhouse (resumable)
 	$(BIN)/python -m greenloop.download data/greenhouse
 
-# The dataset a run needs: the synthetic default is generated when missing; any other folder
-# must exist already.
-ifeq ($(DATASET),$(SYNTHETIC))
+nordland: $(NORDLAND)/nordland.json ## build data/nordland: Nordland summer then winter, loop pairs as ground truth
+
+# Built in a temporary folder and renamed at the end, so nordland.json in place means a complete
+# folder. From NORDLAND_SRC when set, else from a shallow clone of NORDLAND_URL (fails at once
+# offline, naming the fix).
+$(NORDLAND)/nordland.json: | $(STAMP)
+	$(BIN)/python -m greenloop.nordland $(NORDLAND) --overwrite \
+	    $(if $(NORDLAND_SRC),--src $(NORDLAND_SRC),--url $(NORDLAND_URL))
+
+# The dataset a run needs: the synthetic default and data/nordland are built when missing; any
+# other folder must exist already.
+ifeq ($(patsubst %/,%,$(DATASET)),$(SYNTHETIC))
 DATA_DEP := $(SYNTHETIC)/synthetic.json
+else ifeq ($(patsubst %/,%,$(DATASET)),$(NORDLAND))
+DATA_DEP := $(NORDLAND)/nordland.json
 else
 DATA_DEP := $(DATASET)
 endif

@@ -5,7 +5,21 @@ A sequence folder is laid out like the real GreenHouse set::
     rgb/0.png ... rgb/N-1.png   colour frames in capture order (sorted numerically: 2 < 10)
     depth/0.png ...             optional uint16 depth, metres = value / 5000
     CameraTrajectory.txt        optional TUM poses ``t tx ty tz qx qy qz qw`` (t = frame number)
+    ground_truth.csv            optional loop pairs, for sequences without poses (below)
     camera.yaml / D435i.yaml    optional intrinsics (``Camera.fx: ...``)
+
+Ground truth comes from the poses when ``CameraTrajectory.txt`` exists, else from
+``ground_truth.csv`` (``greenloop.groundtruth.for_sequence`` reads either). That file is a header
+line, then one loop pair per line::
+
+    i,j,tolerance
+    0,3576,150
+    1,3577,150
+
+``i`` and ``j`` are 0-based frame numbers (``rgb/0.png`` is frame 0); the third column is
+optional (0 when absent) and in frames: frame ``i`` is a loop with every frame ``j'`` with
+``|j' - j| <= tolerance``, and the relation is symmetric. Blank lines and lines starting with
+``#`` are skipped.
 """
 from __future__ import annotations
 
@@ -24,6 +38,7 @@ from . import kernels
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 DEPTH_SCALE = 5000.0  # D435i convention: metres = value / DEPTH_SCALE
 TRAJECTORY_NAMES = ("CameraTrajectory.txt",)
+GROUND_TRUTH_NAME = "ground_truth.csv"
 CAMERA_NAMES = ("camera.yaml", "D435i.yaml")
 
 
@@ -222,6 +237,86 @@ def write_trajectory(path, frame_ids, poses) -> None:
     Path(path).write_text("\n".join(lines) + "\n")
 
 
+def _pair_fields(path: Path, lineno: int, line: str) -> list[int]:
+    """One data line of ground_truth.csv -> [i, j, tolerance] (ValueError naming the line)."""
+    parts = [p.strip() for p in line.split(",")]
+    try:
+        vals = [int(p) for p in parts]
+    except ValueError:
+        vals = []
+    if len(vals) not in (2, 3):
+        raise ValueError(f"{path}:{lineno}: expected `i,j` or `i,j,tolerance` (integer frame "
+                         f"numbers), got {line[:80]!r}; fix or remove that line")
+    if len(vals) == 3 and vals[2] < 0:
+        raise ValueError(f"{path}:{lineno}: tolerance must be >= 0 frames, got {vals[2]}; "
+                         f"fix that line")
+    return vals + [0] * (3 - len(vals))
+
+
+def read_loop_pairs(path, n_frames: int | None = None) -> np.ndarray:
+    """Read ``ground_truth.csv``: a header line, then ``i,j[,tolerance]`` per line (module doc).
+
+    path: the file, or a sequence folder holding ``ground_truth.csv``.
+    n_frames: if given, every i and j must lie in 0..n_frames-1 (raises ValueError otherwise).
+    Returns (P, 3) int64: columns i, j (0-based frame numbers) and tolerance (frames, >= 0; 0
+    where the line has no third column), in file order. Raises FileNotFoundError when the file
+    is missing and ValueError, naming the line, for a missing header or a malformed line.
+    """
+    path = Path(path)
+    if path.is_dir():
+        path = path / GROUND_TRUTH_NAME
+    if not path.is_file():
+        raise FileNotFoundError(f"loop-pair file {path} not found: a sequence folder without poses "
+                                f"needs {GROUND_TRUTH_NAME} (header, then `i,j[,tolerance]` lines)")
+    lines = [(k, ln.strip()) for k, ln in enumerate(path.read_text().splitlines(), 1)]
+    lines = [(k, ln) for k, ln in lines if ln and not ln.startswith("#")]
+    if not lines:
+        raise ValueError(f"{path} is empty: write the header `i,j,tolerance`, then one pair a line")
+    k, header = lines[0]
+    if header.split(",")[0].strip().lstrip("+-").isdigit():
+        raise ValueError(f"{path}:{k}: the first line must be the header `i,j,tolerance` (or "
+                         f"`i,j`), got the numbers {header[:80]!r}; add the header line")
+    rows = [_pair_fields(path, k, ln) for k, ln in lines[1:]]
+    pairs = np.asarray(rows, dtype=np.int64).reshape(-1, 3)
+    if n_frames is not None and len(pairs):
+        bad = np.flatnonzero((pairs[:, :2] < 0).any(1) | (pairs[:, :2] >= n_frames).any(1))
+        if bad.size:
+            k, ln = lines[1 + int(bad[0])]
+            raise ValueError(f"{path}:{k}: pair {ln!r} is outside the sequence's frames 0..{n_frames - 1} "
+                             f"({len(bad)} such lines): frame numbers are 0-based (rgb/0.png is "
+                             f"frame 0) and must name frames that exist")
+    return pairs
+
+
+def write_loop_pairs(path, pairs) -> Path:
+    """Write ``ground_truth.csv``: the header ``i,j,tolerance`` and one line per row of pairs.
+
+    pairs: (P, 2) or (P, 3) integers (i, j[, tolerance]); a missing tolerance is written as 0.
+    Returns the path written.
+    """
+    a = np.asarray(pairs, dtype=np.int64)
+    if a.ndim != 2 or a.shape[1] not in (2, 3):
+        raise ValueError(f"pairs must have shape (P, 2) or (P, 3), got {a.shape}")
+    if a.shape[1] == 2:
+        a = np.column_stack([a, np.zeros(len(a), np.int64)])
+    if (a[:, 2] < 0).any():
+        raise ValueError("tolerances must be >= 0 frames")
+    path = Path(path)
+    path.write_text("i,j,tolerance\n" + "".join(f"{i},{j},{t}\n" for i, j, t in a))
+    return path
+
+
+def ground_truth_kind(folder) -> str | None:
+    """Which ground truth a sequence folder carries: 'poses' (CameraTrajectory.txt, the first
+    choice), 'pairs' (ground_truth.csv), or None."""
+    folder = Path(folder)
+    if (folder / TRAJECTORY_NAMES[0]).is_file():
+        return "poses"
+    if (folder / GROUND_TRUTH_NAME).is_file():
+        return "pairs"
+    return None
+
+
 def read_camera(path) -> dict:
     """Intrinsics from an ORB-SLAM style yaml (``Camera.fx: 602.897``).
 
@@ -253,7 +348,8 @@ def read_camera(path) -> dict:
 
 def fingerprint(folder, limit: int | None = None) -> str:
     """Short content hash of a sequence (names, sizes and mtimes-free bytes of the first/last
-    frames plus the frame count and trajectory), stable across copies of the same data.
+    frames plus the frame count, trajectory and loop-pair file), stable across copies of the same
+    data.
 
     Returns a 12-character hex string used to key caches and results manifests.
     """
@@ -263,16 +359,18 @@ def fingerprint(folder, limit: int | None = None) -> str:
     for p in sample:
         h.update(p.name.encode())
         h.update(p.read_bytes())
-    traj = Path(folder) / TRAJECTORY_NAMES[0]
-    if traj.is_file():
-        h.update(traj.read_bytes())
+    for name in (TRAJECTORY_NAMES[0], GROUND_TRUTH_NAME):
+        if (Path(folder) / name).is_file():
+            h.update((Path(folder) / name).read_bytes())
     return h.hexdigest()[:12]
 
 
 def describe(folder) -> dict:
     """What a sequence folder holds: {'path', 'kind', 'n_frames', 'width', 'height', 'depth',
-    'trajectory', 'camera'}. kind is 'synthetic' when the folder carries the generator's
-    ``synthetic.json`` (greenloop.synthetic), else 'real or user-provided'."""
+    'trajectory', 'camera', 'ground_truth'}. kind is 'synthetic' when the folder carries the
+    generator's ``synthetic.json`` (greenloop.synthetic), else 'real or user-provided'.
+    ground_truth is what ``greenloop.groundtruth.for_sequence`` will use: 'poses'
+    (CameraTrajectory.txt), 'pairs' (ground_truth.csv) or None (no ground truth)."""
     folder = Path(folder)
     frames = list_frames(folder)
     img = cv2.imread(str(frames[0]), cv2.IMREAD_UNCHANGED)
@@ -283,4 +381,5 @@ def describe(folder) -> dict:
             "n_frames": len(frames), "width": int(img.shape[1]), "height": int(img.shape[0]),
             "depth": (folder / "depth").is_dir(),
             "trajectory": (folder / TRAJECTORY_NAMES[0]).is_file(),
-            "camera": any((folder / n).is_file() for n in CAMERA_NAMES)}
+            "camera": any((folder / n).is_file() for n in CAMERA_NAMES),
+            "ground_truth": ground_truth_kind(folder)}

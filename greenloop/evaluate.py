@@ -2,9 +2,11 @@
 
 What is measured, exactly
 -------------------------
-The ground truth is :func:`greenloop.groundtruth.loop_matrix` (Qi 2024 Eq. 5) or
-:func:`greenloop.groundtruth.loop_matrix_metric`: a symmetric (N, N) bool matrix; that module is
-the one place that defines when two frames are a loop. Here every **unordered pair of frames
+The ground truth is a symmetric (N, N) bool matrix from :mod:`greenloop.groundtruth`, the one
+place that defines when two frames are a loop: get a sequence's with
+:func:`greenloop.groundtruth.for_sequence` (its poses by Qi 2024 Eq. 5 where it has them, its
+``ground_truth.csv`` loop pairs otherwise), or from poses with ``loop_matrix`` /
+``loop_matrix_metric``. Here every **unordered pair of frames
 (i, j), i < j, with j - i > exclude** (default 150 frames, Qi 2024) is one sample, labelled by
 ``GT[i, j]`` and scored by ``S[i, j]`` (row = earlier/database frame, column = later/query
 frame; higher = more similar). Pairs within ``exclude`` frames never count, whatever GT says.
@@ -38,8 +40,9 @@ __all__ = [
 ]
 
 _NO_LOOPS = ("the ground truth has no loops among the counted pairs (|i - j| > exclude={exclude}"
-             "{q}): use a larger pose threshold in greenloop.groundtruth.loop_matrix, a smaller "
-             "exclude, or other query frames; the sequence may not revisit any place")
+             "{q}): use a larger pose threshold (greenloop.groundtruth.for_sequence), a larger "
+             "tolerance in ground_truth.csv, a smaller exclude, or other query frames; the "
+             "sequence may not revisit any place")
 
 
 # ----------------------------------------------------------------------------------- checks
@@ -53,13 +56,13 @@ def _check_gt(GT, name: str = "GT") -> np.ndarray:
     G = np.asarray(GT)
     if G.ndim != 2 or G.shape[0] != G.shape[1]:
         raise ValueError(f"{name} must be a square (N, N) loop matrix from "
-                         f"greenloop.groundtruth.loop_matrix, got shape {G.shape}")
+                         f"greenloop.groundtruth.for_sequence, got shape {G.shape}")
     if G.dtype != bool:
         if not np.issubdtype(G.dtype, np.number) or not np.all(np.isin(G, (0, 1))):
             raise ValueError(f"{name} must be boolean (or 0/1), got dtype {G.dtype}")
         G = G.astype(bool)
     if not np.array_equal(G, G.T):
-        raise ValueError(f"{name} must be symmetric, as greenloop.groundtruth.loop_matrix returns; "
+        raise ValueError(f"{name} must be symmetric, as greenloop.groundtruth.for_sequence returns; "
                          f"for a one-triangle matrix pass `gt | gt.T`")
     return G
 

@@ -1,25 +1,45 @@
-"""Ground-truth loop closures from camera poses.
+"""Ground-truth loop closures: from camera poses, or from a file of loop pairs.
+
+Get a sequence's ground truth with :func:`for_sequence` (every notebook does): it reads the
+poses (``CameraTrajectory.txt``) where the folder has them, and the loop pairs
+(``ground_truth.csv``) otherwise, and raises :class:`NoGroundTruthError` when it has neither.
 
 The one definition every evaluation in greenloop uses
 ----------------------------------------------------
 Frames i and j form a ground-truth loop when both hold:
 
 1. they are far apart in time: ``|i - j| > exclude`` (default 150 frames, the Qi 2024 rule that
-   ignores the trivially similar neighbours of a frame), and
-2. their poses are close, by one of two criteria:
+   ignores the trivially similar neighbours of a frame; always in original frame numbers), and
+2. the folder's poses say they are close, or its loop-pair file lists them.
 
-   * ``loop_matrix`` (Qi 2024, Eq. 5): ``e = ||T_i^-1 T_j - I||_F < threshold``, the Frobenius
-     norm of the relative pose minus identity. It mixes units: the translation part is in metres,
-     the rotation part is ``2*sqrt(2)*|sin(theta/2)|`` for a rotation by theta about one axis
-     (0.5 is about 10 degrees, or 0.5 m).
-   * ``loop_matrix_metric``: translation distance < ``max_distance`` metres **and** viewing
-     direction difference < ``max_angle`` degrees. Easier to argue about.
+Loop pairs (``ground_truth.csv``, for sequences without poses, such as two traversals of one
+route aligned frame by frame) are a header line, then ``i,j`` or ``i,j,tolerance`` per line:
+0-based frame numbers, and a tolerance in frames (0 when absent): frame i is a loop with every
+frame j' with ``|j' - j| <= tolerance``, and the relation is symmetric (j' with i as well). The
+tolerance widens j only: list every i you want counted (see :func:`pair_matrix`).
+
+Poses are close by one of two criteria:
+
+* ``loop_matrix`` (Qi 2024, Eq. 5): ``e = ||T_i^-1 T_j - I||_F < threshold``, the Frobenius
+  norm of the relative pose minus identity. It mixes units: the translation part is in metres,
+  the rotation part is ``2*sqrt(2)*|sin(theta/2)|`` for a rotation by theta about one axis
+  (0.5 is about 10 degrees, or 0.5 m).
+* ``loop_matrix_metric``: translation distance < ``max_distance`` metres **and** viewing
+  direction difference < ``max_angle`` degrees. Easier to argue about.
 
 The matrix is symmetric with a False diagonal; evaluations count each unordered pair once.
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
+
+from . import data
+
+
+class NoGroundTruthError(FileNotFoundError):
+    """A sequence folder has neither poses (CameraTrajectory.txt) nor loop pairs (ground_truth.csv)."""
 
 
 def _check(poses, threshold_name: str, threshold: float, exclude: int) -> np.ndarray:
@@ -89,6 +109,115 @@ def loop_matrix_metric(poses, max_distance: float = 1.0, max_angle: float = 30.0
     cos = np.clip(z @ z.T, -1.0, 1.0)
     close = (d2 < max_distance ** 2) & (cos > np.cos(np.radians(max_angle)))
     return close & _far_in_time(len(poses), exclude)
+
+
+def _check_frames(frames, n_frames: int) -> np.ndarray:
+    """frames -> (M,) int64 original frame numbers, strictly increasing, within 0..n_frames-1."""
+    if frames is None:
+        return np.arange(n_frames, dtype=np.int64)
+    f = np.asarray(frames)
+    if f.ndim != 1 or f.size == 0 or not np.issubdtype(f.dtype, np.integer):
+        raise ValueError(f"frames must be a non-empty 1-D array of integer frame numbers (e.g. "
+                         f"np.arange(0, N, step)), got shape {f.shape} dtype {f.dtype}")
+    f = f.astype(np.int64)
+    if f[0] < 0 or f[-1] >= n_frames or np.any(np.diff(f) <= 0):
+        raise ValueError(f"frames must be strictly increasing frame numbers within 0..{n_frames - 1}, "
+                         f"got {f[:3].tolist()} ... {f[-3:].tolist()}")
+    return f
+
+
+def _far_frames(frames: np.ndarray, exclude) -> np.ndarray:
+    """(M, M) bool: |frames[a] - frames[b]| > exclude, exclude in original frames.
+
+    frames must be sorted; built from each row's band of near columns, without an (M, M)
+    integer difference matrix (M = 7152 frames would need 400 MB for it)."""
+    if isinstance(exclude, bool) or not isinstance(exclude, (int, np.integer)) or exclude < 0:
+        raise ValueError(f"exclude must be an integer >= 0 (original frames), got {exclude!r}")
+    lo = np.searchsorted(frames, frames - exclude, side="left")
+    hi = np.searchsorted(frames, frames + exclude, side="right")
+    cols = np.arange(len(frames))
+    return (cols[None, :] < lo[:, None]) | (cols[None, :] >= hi[:, None])
+
+
+def pair_matrix(pairs, n_frames: int, frames=None, exclude: int = 150) -> np.ndarray:
+    """Ground-truth loops from loop pairs (module doc), over a chosen subset of frames.
+
+    pairs: (P, 2) or (P, 3) integers (i, j[, tolerance]), 0-based frame numbers, tolerance in
+        frames (>= 0), as ``greenloop.data.read_loop_pairs`` returns them.
+    n_frames: frames in the sequence (every i, j must lie in 0..n_frames-1).
+    frames: (M,) strictly increasing original frame numbers of the described frames (default:
+        all). A pair counts when its i is among them; its j' are those of them within the
+        tolerance of j.
+    exclude: pairs of frames at most ``exclude`` original frames apart are never loops.
+    Returns (M, M) bool, symmetric, False on the diagonal (the kind ``loop_matrix`` returns).
+    """
+    f = _check_frames(frames, n_frames)
+    far = _far_frames(f, exclude)
+    p = np.asarray(pairs, dtype=np.int64)
+    if p.size == 0:
+        p = p.reshape(0, 3)
+    if p.ndim != 2 or p.shape[1] not in (2, 3):
+        raise ValueError(f"pairs must have shape (P, 2) or (P, 3) (i, j[, tolerance]), got {p.shape}")
+    i, j = p[:, 0], p[:, 1]
+    tol = p[:, 2] if p.shape[1] == 3 else np.zeros_like(i)
+    if np.any((p[:, :2] < 0) | (p[:, :2] >= n_frames)):
+        raise ValueError(f"pairs name frames outside 0..{n_frames - 1}: frame numbers are 0-based")
+    if np.any(tol < 0):
+        raise ValueError("tolerances must be >= 0 frames")
+    pos = np.minimum(np.searchsorted(f, i), len(f) - 1)
+    keep = f[pos] == i                                  # pairs whose i is a described frame
+    lo = np.searchsorted(f, j - tol, side="left")
+    hi = np.searchsorted(f, j + tol, side="right")
+    G = np.zeros((len(f), len(f)), dtype=bool)
+    for a, l, h in zip(pos[keep], lo[keep], hi[keep]):
+        G[a, l:h] = True
+    return (G | G.T) & far
+
+
+def for_sequence(folder, frames=None, threshold: float = 0.5, exclude: int = 150) -> np.ndarray:
+    """The ground-truth loop matrix of a sequence folder: the one call notebooks and users make.
+
+    folder: a sequence folder (greenloop.data). Its poses (CameraTrajectory.txt, one per frame)
+        are used where they exist (``loop_matrix``, Qi 2024 Eq. 5 < ``threshold``), its loop
+        pairs (ground_truth.csv, ``pair_matrix``) otherwise.
+    frames: (M,) strictly increasing original frame numbers of the described frames, e.g.
+        ``np.arange(0, N, step)``; None = every frame.
+    threshold: the Eq. 5 threshold (mixed units, module doc); unused for loop pairs.
+    exclude: pairs at most ``exclude`` ORIGINAL frames apart are never loops, whatever the subset.
+    Returns (M, M) bool, symmetric, False on the diagonal; row/column a is frame frames[a].
+    Raises NoGroundTruthError (a FileNotFoundError) when the folder has neither file, and
+    ValueError for a malformed file or a trajectory that does not match the frames.
+    """
+    folder = Path(folder)
+    kind = data.ground_truth_kind(folder)
+    n = len(data.list_frames(folder))
+    if kind is None:
+        raise NoGroundTruthError(
+            f"{folder} has no ground truth: add {data.TRAJECTORY_NAMES[0]} (TUM poses, one per frame) "
+            f"or {data.GROUND_TRUTH_NAME} (a header line, then `i,j[,tolerance]` loop pairs of 0-based "
+            f"frame numbers) to the folder")
+    f = _check_frames(frames, n)
+    if kind == "poses":
+        _, poses = data.read_trajectory(folder, n_frames=n)
+        return loop_matrix(poses[f], threshold, 0) & _far_frames(f, exclude)
+    return pair_matrix(data.read_loop_pairs(folder, n_frames=n), n, f, exclude)
+
+
+def definition(folder, threshold: float = 0.5, exclude: int = 150) -> str:
+    """One line saying which ground truth ``for_sequence(folder, ..., threshold, exclude)`` uses,
+    for table notes and printouts (names the file and, for pairs, their count and tolerances)."""
+    folder = Path(folder)
+    kind = data.ground_truth_kind(folder)
+    if kind == "poses":
+        return (f"Qi 2024 Eq. 5 on the poses ({data.TRAJECTORY_NAMES[0]}): ||T_i^-1 T_j - I||_F < "
+                f"{threshold}, |i - j| > {exclude} frames")
+    if kind == "pairs":
+        p = data.read_loop_pairs(folder)
+        tol = f"{p[:, 2].min()}" if len(p) and p[:, 2].min() == p[:, 2].max() else (
+            f"{p[:, 2].min()}-{p[:, 2].max()}" if len(p) else "-")
+        return (f"loop pairs from {data.GROUND_TRUTH_NAME} ({len(p)} rows, tolerance {tol} frames), "
+                f"|i - j| > {exclude} frames")
+    return "none: the folder has no poses and no loop-pair file"
 
 
 def loop_pairs(gt: np.ndarray) -> np.ndarray:

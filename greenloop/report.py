@@ -121,8 +121,9 @@ def versions() -> dict:
 
 def manifest(folder, parameters: dict, dataset: str | Path | None = None, **extra) -> Path:
     """Write ``<folder>/manifest.json``: date, machine, CPU, library versions, parameters,
-    dataset path and fingerprint, the wall time of this process so far (for a notebook executed by
-    papermill: its kernel, i.e. the notebook's run time), plus any extra fields."""
+    dataset path, fingerprint and ground-truth kind ('poses', 'pairs' or None), the wall time of
+    this process so far (for a notebook executed by papermill: its kernel, i.e. the notebook's
+    run time), plus any extra fields."""
     import time
 
     import psutil
@@ -139,6 +140,7 @@ def manifest(folder, parameters: dict, dataset: str | Path | None = None, **extr
             info["dataset_fingerprint"] = data.fingerprint(dataset)
         except (FileNotFoundError, ValueError) as e:
             info["dataset_fingerprint"] = f"unavailable: {e}"
+        info["dataset_ground_truth"] = data.ground_truth_kind(dataset)
     info.update(extra)
     return write_json(Path(folder) / "manifest.json", info)
 

@@ -34,3 +34,34 @@ def tiny_sequence(tmp_path_factory):
     from greenloop import synthetic
     folder = tmp_path_factory.mktemp("seq") / "tiny-greenhouse"
     return synthetic.make_greenhouse(folder, n_frames=200, size=(160, 120), seed=0, progress=False)
+
+
+def pose_loops_as_pairs(poses, threshold=0.5, exclude=10) -> np.ndarray:
+    """The Eq. 5 loops of some poses as ground_truth.csv rows (i, j, tolerance), i < j: each run
+    of consecutive partners j of a frame i becomes one row (its centre, half its length), so the
+    file exercises tolerances and reads back to exactly the pose ground truth."""
+    from greenloop import groundtruth
+    gt = np.triu(groundtruth.loop_matrix(poses, threshold, exclude), 1)
+    rows = []
+    for i in np.flatnonzero(gt.any(1)):
+        js = np.flatnonzero(gt[i])
+        for run in np.split(js, np.flatnonzero(np.diff(js) > 1) + 1):
+            if len(run) % 2 == 0:                         # an even run: its first frame on its own
+                rows.append((i, run[0], 0))
+                run = run[1:]
+            rows.append((i, run[len(run) // 2], len(run) // 2))
+    return np.asarray(rows, dtype=np.int64).reshape(-1, 3)
+
+
+@pytest.fixture(scope="session")
+def tiny_pairs_sequence(tiny_sequence, tmp_path_factory):
+    """tiny_sequence's 200 frames (160x120) with NO poses and NO depth: its ground truth only as
+    loop pairs in ground_truth.csv (the pose loops, |i - j| > 10, with tolerances)."""
+    import shutil
+
+    from greenloop import data
+    folder = tmp_path_factory.mktemp("seq") / "tiny-pairs"
+    shutil.copytree(tiny_sequence / "rgb", folder / "rgb")
+    _, poses = data.read_trajectory(tiny_sequence)
+    data.write_loop_pairs(folder / data.GROUND_TRUTH_NAME, pose_loops_as_pairs(poses))
+    return folder

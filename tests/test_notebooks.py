@@ -1,6 +1,7 @@
 """Every notebook, executed by papermill on tiny parameters, must run and write its results."""
 import json
 import os
+import re
 from pathlib import Path
 
 import pandas as pd
@@ -17,8 +18,8 @@ def results(tmp_path_factory):
     return tmp_path_factory.mktemp("results")
 
 
-@pytest.mark.parametrize("notebook", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
-def test_notebook_runs_and_writes_results(notebook, tiny_sequence, results, tmp_path_factory, monkeypatch):
+def _run(notebook, dataset, results, monkeypatch) -> Path:
+    """Execute one notebook on `dataset` into `results`; check what every notebook must write."""
     import papermill
 
     monkeypatch.setenv("PYTHONPATH", str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
@@ -26,19 +27,45 @@ def test_notebook_runs_and_writes_results(notebook, tiny_sequence, results, tmp_
     monkeypatch.setenv("TF_CPP_MIN_LOG_LEVEL", "2")
     out = results / notebook.name
     papermill.execute_notebook(str(notebook), str(out), kernel_name="greenloop", cwd=str(ROOT),
-                               parameters=dict(TINY, dataset=str(tiny_sequence), results_dir=str(results)),
+                               parameters=dict(TINY, dataset=str(dataset), results_dir=str(results)),
                                execution_timeout=600, progress_bar=False)
     folder = results / notebook.stem
     assert (folder / "manifest.json").is_file()
     manifest = json.loads((folder / "manifest.json").read_text())
-    assert manifest["dataset"] == str(tiny_sequence)
+    assert manifest["dataset"] == str(dataset)
     assert list(folder.glob("*.md")), "the notebook wrote no table"
     assert list(folder.glob("*.png")), "the notebook saved no figure"
     if (folder / "paper_vs_run.csv").is_file():
         table = pd.read_csv(folder / "paper_vs_run.csv")
         assert list(table.columns[:3]) == ["quantity", "paper", "this run"]
         assert table["this run"].notna().all()
+    return folder
+
+
+@pytest.mark.parametrize("notebook", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
+def test_notebook_runs_and_writes_results(notebook, tiny_sequence, results, monkeypatch):
+    folder = _run(notebook, tiny_sequence, results, monkeypatch)
     CHECKS.get(notebook.stem, lambda f: None)(folder)
+
+
+@pytest.fixture(scope="module")
+def pair_results(tmp_path_factory):
+    return tmp_path_factory.mktemp("results-pairs")
+
+
+# the notebooks whose code branches on what the folder holds (poses, depth, ground truth); the
+# others read the ground truth through the same groundtruth.for_sequence call or need none
+BRANCHING = [p for p in NOTEBOOKS
+             if re.search(r'info\[\\"(ground_truth|trajectory|depth)\\"\]', p.read_text())]
+
+
+@pytest.mark.parametrize("notebook", BRANCHING, ids=[p.stem for p in BRANCHING])
+def test_notebook_runs_without_poses_or_depth(notebook, tiny_pairs_sequence, pair_results, monkeypatch):
+    """The same notebooks on a sequence whose ground truth is only ground_truth.csv (no poses,
+    no depth): the parts that need poses or depth are skipped, the rest runs and writes."""
+    folder = _run(notebook, tiny_pairs_sequence, pair_results, monkeypatch)
+    assert json.loads((folder / "manifest.json").read_text())["dataset_ground_truth"] == "pairs"
+    {**CHECKS, **PAIR_CHECKS}.get(notebook.stem, lambda f: None)(folder)
 
 
 def _check_01(folder):
@@ -155,3 +182,31 @@ CHECKS = {"01_spot_grouping": _check_01, "02_training_over_seeds": _check_02,
           "03_confusion_matrix": _check_03, "05_dictionary_threshold": _check_05, "06_speed": _check_06,
           "07_feature_baselines": _check_07, "08_descriptor_postprocessing": _check_08,
           "09_rgbd_features": _check_09, "11_lsh_matching": _check_11}
+
+
+def _check_00_pairs(folder):
+    from greenloop import data, groundtruth
+    row = pd.read_csv(folder / "dataset.csv").iloc[0]
+    assert row.ground_truth == "pairs" and pd.isna(row.path_m)
+    dataset = json.loads((folder / "manifest.json").read_text())["dataset"]
+    gt = groundtruth.for_sequence(dataset, exclude=TINY["exclude"])
+    assert row.loop_pairs == len(groundtruth.loop_pairs(gt)) > 0
+    assert (folder / "groundtruth.png").is_file() and not (folder / "trajectory_groundtruth.png").is_file()
+    assert data.GROUND_TRUTH_NAME in (folder / "dataset.md").read_text()
+
+
+def _check_03_pairs(folder):
+    _check_03(folder)
+    e = pd.read_csv(folder / "errors_per_seed.csv")
+    assert e.errors_on_same_place_other_time.notna().all()      # the pair ground truth is used
+
+
+def _check_09_pairs(folder):
+    t = pd.read_csv(folder / "rgbd.csv")
+    assert t.status.str.startswith("skipped").all() and not any(c.startswith("AP_") for c in t.columns)
+    d = pd.read_csv(folder / "paper_vs_run.csv")
+    assert (d["this run"] == "skipped").all()
+
+
+PAIR_CHECKS = {"00_dataset": _check_00_pairs, "03_confusion_matrix": _check_03_pairs,
+               "09_rgbd_features": _check_09_pairs}
