@@ -765,7 +765,8 @@ def extract(frames_or_folder, backbone: str, weights="auto", batch_size: int = 3
         keras Model or its .keras path; ignored ('auto'/None only) for pixels and sift_bovw.
     batch_size: frames per forward pass. progress: tqdm bar.
     input_size: int S (S x S) or (width, height) fed to the extractor; None = the backbone default
-        (224x224 for every CNN, 32x32 for pixels, native for sift_bovw, the model's for spot_cnn).
+        (224x224 for every CNN, 32x32 for pixels, native for sift_bovw, the model's for spot_cnn;
+        mobilenetv1/v2 accept only their fixed 224x224).
     return_info: also return an ExtractInfo (weights label, timing, dims).
     limit: only the first ``limit`` frames. step: only every ``step``-th frame (applied first).
     vocabulary, vocab_size, seed: sift_bovw only: a (k, 128) vocabulary from fit_vocabulary, else
@@ -846,10 +847,14 @@ def extract_rgbd(folder, backbone: str, weights="auto", batch_size: int = 32, pr
                           extra={"rgb": ir.extra, "depth": idp.extra, "max_depth_m": max_depth})
 
 
-def time_per_image(backbone: str, weights=None, input_size=None, n_images: int = 64,
+def time_per_image(backbone: str, weights="auto", input_size=None, n_images: int = 64,
                    batch_size: int = 32, seed: int = 0, frames=None) -> float:
     """Extraction seconds per image of a backbone, after a warm-up batch.
 
+    weights: as ``extract`` (default 'auto': what extract runs by default, with its fallback
+    warning). A Keras network costs the same with any weights, but mobilenetv1/v2 with their
+    ImageNet files run the uint8 TFLite graph and with weights=None the float Keras control: two
+    different programs with different times.
     frames: the frames to time on (array or folder); default ``n_images`` random RGB uint8 frames at
     the input size (a fair timing for CNNs, whose cost does not depend on content; for sift_bovw
     pass real frames). Returns ``extract(..., return_info=True)[1].seconds_per_image``.

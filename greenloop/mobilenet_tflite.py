@@ -20,11 +20,15 @@ Keras's ``mobilenet.preprocess_input``) and quantised with the input tensor's ow
 point (round half up, clipped to the dtype's range); for these graphs (scale 1/128, zero point 128)
 that is the pixel value itself below 128 and one level above it from 128 on.
 
-Interpreter settings: TFLite's built-in kernels without the default XNNPACK delegate
-(``BUILTIN_WITHOUT_DEFAULT_DELEGATES``), because only then is every intermediate tensor guaranteed to
-be kept (XNNPACK fuses whole subgraphs and rounds differently); one thread per usable core. Frames are
-batched with ``resize_tensor_input`` where the graph allows it (v1); the v2 classifier reshapes to a
-fixed (1, 1001), so it runs one frame per ``invoke``.
+Interpreter settings: the interpreter's defaults (its XNNPACK delegate for the quantised
+convolutions), one thread per usable core, and ``experimental_preserve_all_tensors`` so that the
+feature map is not overwritten by later tensors once ``invoke`` returns. XNNPACK leaves the graphs'
+average pools to the built-in kernels, so the feature map is a delegate output and is written out;
+tests/test_pretrained.py checks that its mean equals the graph's own AvgPool output. (The built-in
+kernels alone, ``BUILTIN_WITHOUT_DEFAULT_DELEGATES``, round some layers differently: descriptors
+shift slightly, and with several threads they ran per-frame graphs far slower on a busy machine.)
+Frames are batched with ``resize_tensor_input`` where the graph allows it (v1); the v2 classifier
+reshapes to a fixed (1, 1001), so it runs one frame per ``invoke``.
 
 Getting the files: ``https://github.com/google-coral/test_data/raw/master/<file>`` (``SOURCE_URL``);
 put them in one folder and point ``GREENLOOP_WEIGHTS`` at it (or place them in
@@ -82,7 +86,7 @@ def _threads() -> int:
 def load_interpreter(path, batch: int = 1):
     """A ready ``tf.lite.Interpreter`` for a graph file, its input resized to ``batch`` frames.
 
-    Built-in kernels, every tensor preserved, one thread per core (see module doc). Returns
+    Default kernels (XNNPACK), every tensor preserved, one thread per core (see module doc). Returns
     ``(interpreter, batch_used)``: batch_used is 1 when the graph cannot be resized (fixed reshapes).
     Raises FileNotFoundError for a missing file and ValueError for a file that is not a TFLite graph.
     """
@@ -96,11 +100,8 @@ def load_interpreter(path, batch: int = 1):
         with warnings.catch_warnings():  # deprecation notice and "for debugging" notice
             warnings.filterwarnings("ignore", message=r"(?s).*(deprecated|preserve_all_tensors)",
                                     category=UserWarning)
-            return tf.lite.Interpreter(
-                model_path=str(path), num_threads=_threads(),
-                experimental_op_resolver_type=tf.lite.experimental.OpResolverType
-                .BUILTIN_WITHOUT_DEFAULT_DELEGATES,
-                experimental_preserve_all_tensors=True)
+            return tf.lite.Interpreter(model_path=str(path), num_threads=_threads(),
+                                       experimental_preserve_all_tensors=True)
 
     try:
         interp = make()

@@ -89,9 +89,9 @@ def weights_env(tflite_dir, tmp_path, monkeypatch):
 
 @pytest.mark.parametrize("file", T.CLASSIFIERS)
 def test_tflite_classifier_top1(file, tflite_dir, images, labels, cat_classes):
-    """greenloop's interpreter path (built-in kernels, its own input quantisation) names a cat on
-    cat.bmp, and on both images the class the interpreter gives with its default settings (XNNPACK)
-    on the raw uint8 pixels, as Google's examples feed it."""
+    """greenloop's interpreter path (its own input quantisation, all tensors kept) names a cat on
+    cat.bmp, and on both images the class a plain interpreter gives on the raw uint8 pixels, as
+    Google's examples feed them."""
     import tensorflow as tf
     path = tflite_dir / file
     if not path.is_file():
