@@ -63,8 +63,9 @@ Weights (CNN backbones), the ``weights`` argument:
 
 Every result can and should be labelled: ``weights_used(backbone, weights)`` returns ``"imagenet"``,
 ``"imagenet, tflite uint8"`` (the quantised MobileNet graphs), ``"random init"``, ``"file:<name>"``
-(``"model:<name>"`` for an in-memory spot_cnn, ``"none"`` for the weight-free backbones), and ``extract(..., return_info=True)`` returns it in ``info.weights`` and
-``info.label`` (e.g. ``"ghostnet (random init)"``) for table rows and legends.
+(``"model:<name>"`` for an in-memory spot_cnn, ``"none"`` for the weight-free backbones), and
+``extract(..., return_info=True)`` returns it in ``info.weights`` and ``info.label`` (e.g.
+``"ghostnet (random init)"``, ``"mobilenetv1 (imagenet, tflite uint8)"``) for table rows and legends.
 
 Timing: ``extract(..., return_info=True)`` also measures ``info.seconds_per_image``: wall-clock seconds
 per frame of the whole timed pass (resize + preprocess + network, not reading files from disk),
