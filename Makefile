@@ -13,6 +13,11 @@ PARAMS   ?=
 DATASET_PARAMS := $(wildcard params/datasets/$(notdir $(DATASET)).yaml)
 TIMEOUT  ?= 7200
 KERNEL   := greenloop
+# Folder(s) of real ImageNet weight files that greenloop.features' weights="auto" looks in first
+# (os.pathsep-separated): here the MobileNet TFLite graphs beside the repo, when they exist. Point it
+# at the files downloaded from github.com/google-coral/test_data (see greenloop.mobilenet_tflite).
+GREENLOOP_WEIGHTS ?= $(abspath $(wildcard ../shared/weights/mobilenet-tflite))
+export GREENLOOP_WEIGHTS
 export PYTHONPATH := $(CURDIR)
 export TF_CPP_MIN_LOG_LEVEL := 2
 export PYTHONUNBUFFERED := 1
@@ -41,6 +46,7 @@ help: ## this list
 	@echo "  TIMEOUT=$(TIMEOUT)   per-cell execution timeout, seconds"
 	@echo "  PYTHON=$(PYTHON)   interpreter used to create $(VENV)"
 	@echo "  NORDLAND_SRC=$(NORDLAND_SRC)   local Nordland source for make nordland (empty: clone it)"
+	@echo "  GREENLOOP_WEIGHTS=$(GREENLOOP_WEIGHTS)   folder(s) of ImageNet weight files (weights=\"auto\")"
 
 venv: $(STAMP) ## create .venv from environment.txt (and register the Jupyter kernel)
 
@@ -114,15 +120,17 @@ bench: | $(STAMP) ## speed benchmark: streaming detector and training vs plain K
 	$(BIN)/python -m greenloop.bench --out $(RESULTS)/bench --dataset $(DATASET)
 	$(BIN)/python -m greenloop.report $(RESULTS)
 
-# Optional, for the GhostNet-vs-timm check only: a CPU torch wheel where the machine has one
-# (never the multi-GB CUDA build from PyPI), and timm without its torchvision dependency.
+# Optional, for the cross-checks against the torch originals only (GhostNet vs timm, the Lite0 port
+# and checkpoint reader vs efficientnet_lite_pytorch and torch.load): a CPU torch wheel where the
+# machine has one (never the multi-GB CUDA build from PyPI), timm without its torchvision dependency,
+# and the Lite0 model code without its (unpinned) torch requirement.
 TORCH_WHEEL := $(firstword $(wildcard /opt/wheels/torch-2.13.0*cpu*.whl))
 $(VENV)/.timm: $(STAMP)
 ifneq ($(TORCH_WHEEL),)
 	$(BIN)/python -m pip install -q $(TORCH_WHEEL)
-	$(BIN)/python -m pip install -q --no-deps timm==1.0.31
+	$(BIN)/python -m pip install -q --no-deps timm==1.0.31 efficientnet-lite-pytorch==0.1.0
 else
-	@echo "no local CPU torch wheel: the GhostNet-vs-timm test will be skipped"
+	@echo "no local CPU torch wheel: the checks against timm and torch will be skipped"
 endif
 	@touch $@
 

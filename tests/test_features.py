@@ -17,15 +17,19 @@ from greenloop import data, features as F, ghostnet as G  # noqa: E402
 
 SIZE = 32  # smallest input every Keras application accepts
 DIMS = {"vgg19": 512, "resnet50": 2048, "resnet101": 2048, "resnet152": 2048,
-        "efficientnetb0": 1280, "mobilenetv3small": 576, "ghostnet": 960}
+        "efficientnetb0": 1280, "mobilenetv3small": 576, "ghostnet": 960,
+        "mobilenetv1": 1024, "mobilenetv2": 1280, "efficientnetlite0": 1280}
 
 
 @pytest.fixture(autouse=True)
 def empty_keras_home(tmp_path, monkeypatch):
-    """No ImageNet weights visible: tests never depend on (or download) real weight files."""
+    """No ImageNet weights visible: tests never depend on (or download) real weight files (the
+    GREENLOOP_WEIGHTS folders and the installed Lite0 weights package are hidden too)."""
     home = tmp_path / "keras_home"
     (home / "models").mkdir(parents=True)
     monkeypatch.setenv("KERAS_HOME", str(home))
+    monkeypatch.delenv(F.WEIGHTS_ENV, raising=False)
+    monkeypatch.setattr(F._lite, "package_weights_path", lambda: None)
     return home
 
 
@@ -83,7 +87,7 @@ def test_unknown_backbone_lists_valid_names(frames):
 
 
 @pytest.mark.parametrize("backbone", ["vgg19", "resnet50", "efficientnetb0", "mobilenetv3small",
-                                      "ghostnet"])
+                                      "ghostnet", "efficientnetlite0"])
 def test_cnn_descriptor_shapes(frames, backbone):
     X, info = F.extract(frames, backbone, weights=None, input_size=SIZE, batch_size=len(frames),
                         progress=False, return_info=True)
@@ -217,6 +221,10 @@ def test_bad_frames(bad, match):
 def test_bad_arguments(frames):
     with pytest.raises(ValueError, match="at least 32"):
         F.extract(frames, "vgg19", None, input_size=16, progress=False)
+    for name in ("mobilenetv1", "mobilenetv2"):  # the TFLite graphs' size, with or without them
+        assert F.BACKBONES[name].fixed_input
+        with pytest.raises(ValueError, match="fixed 224x224.*input_size=None"):
+            F.extract(frames, name, None, input_size=SIZE, progress=False)
     with pytest.raises(ValueError, match="batch_size"):
         F.extract(frames, "pixels", batch_size=0)
     with pytest.raises(ValueError, match="no weights"):
