@@ -812,6 +812,31 @@ def extract(frames_or_folder, backbone: str, weights="auto", batch_size: int = 3
                           input_size=size, layer=b.layer, seconds_per_image=float(spi), extra=extra)
 
 
+def split_spec(spec: str, weights="auto"):
+    """A notebook's backbone-list entry -> (backbone name, weights).
+
+    ``"name"`` takes ``weights`` (the notebook's choice); ``"name:random"`` forces random
+    initialisation (``weights=None``), the untrained control of the same architecture, so a table
+    can show a pretrained row beside it; ``"name:imagenet"`` forces ``"imagenet"``.
+    Raises ValueError for another suffix or an unknown name.
+    """
+    name, _, tag = str(spec).partition(":")
+    get_backbone(name)
+    if tag and tag not in ("random", "imagenet"):
+        raise ValueError(f"backbone entry {spec!r}: the suffix must be ':random' or ':imagenet'")
+    return name, {"": weights, "random": None, "imagenet": "imagenet"}[tag]
+
+
+def extract_spec(frames_or_folder, spec: str, weights="auto", input_size=None, **kw):
+    """``extract`` for a backbone-list entry (:func:`split_spec`): ``input_size`` applies to the CNN
+    backbones whose input is not fixed (the TFLite MobileNets always run at 224x224); ``kw`` go to
+    ``extract`` (``return_info``, ``step``, ``vocab_size``, ...). Returns what ``extract`` returns."""
+    name, w = split_spec(spec, weights)
+    b = BACKBONES[name]
+    size = input_size if b.kind in CNN_KINDS and not b.fixed_input else None
+    return extract(frames_or_folder, name, weights=w, input_size=size, **kw)
+
+
 def extract_rgbd(folder, backbone: str, weights="auto", batch_size: int = 32, progress: bool = True,
                  input_size=None, *, max_depth: float = DEPTH_MAX_M, return_info: bool = False,
                  limit: int | None = None, step: int = 1, **kwargs):

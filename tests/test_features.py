@@ -334,3 +334,23 @@ def test_time_per_image():
                          batch_size=4)
     assert 0 < t < 5
     assert F.time_per_image("pixels", n_images=4) > 0
+
+
+def test_backbone_entries_name_their_weights():
+    assert F.split_spec("vgg19", "auto") == ("vgg19", "auto")
+    assert F.split_spec("mobilenetv2:random", "auto") == ("mobilenetv2", None)
+    assert F.split_spec("resnet50:imagenet", None) == ("resnet50", "imagenet")
+    with pytest.raises(ValueError, match="suffix"):
+        F.split_spec("vgg19:pretrained")
+    with pytest.raises(ValueError):
+        F.split_spec("alexnet")
+
+
+def test_extract_spec_keeps_fixed_inputs_and_forces_random_init():
+    frames = np.random.default_rng(0).integers(0, 255, (2, 40, 48, 3), dtype=np.uint8)
+    X, info = F.extract_spec(frames, "mobilenetv2:random", "auto", input_size=64,
+                                    return_info=True, progress=False)
+    assert X.shape == (2, 1280) and info.weights == "random init" and info.input_size == (224, 224)
+    X, info = F.extract_spec(frames, "pixels", "auto", input_size=64, return_info=True,
+                                    progress=False)
+    assert X.shape == (2, 1024)

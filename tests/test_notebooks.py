@@ -108,9 +108,13 @@ def _check_07(folder):
     t = pd.read_csv(folder / "table2.csv")
     assert t.backbone.tolist() == _feature_backbones()          # one row per backbone, in order
     assert {"weights", "label"} <= set(t.columns)
-    assert (t.label == t.backbone + " (" + t.weights + ")").all()
+    assert (t.label == t.backbone.str.split(":").str[0] + " (" + t.weights + ")").all()
     assert t["AP_%"].between(0, 100).all() and t["R@100P_%"].between(0, 100).all()
+    assert t["R@1_%"].between(0, 100).all()
     assert (t.extract_s_per_image > 0).all() and (t.match_s_MxM > 0).all()
+    controls = t[t.backbone.str.endswith(":random")]
+    assert len(controls) and (controls.weights == "random init").all()
+    assert (controls[controls.backbone.str.startswith("mobilenet")].input == "224x224").all()   # fixed input
     cnns = t[t.backbone.isin(["vgg19", "resnet50", "resnet101", "resnet152", "efficientnetb0", "ghostnet",
                               "mobilenetv3small"])]
     assert (cnns.weights == "random init").all()                 # tiny runs weights=None: never "imagenet"
@@ -150,7 +154,7 @@ def _check_11(folder):
     t = pd.read_csv(folder / "table6.csv")
     done = [b for b in _feature_backbones() if b != "spot_cnn"]
     assert t.backbone.unique().tolist() == done
-    assert (t.label == t.backbone + " (" + t.weights + ")").all()
+    assert (t.label == t.backbone.str.split(":").str[0] + " (" + t.weights + ")").all()
     variants = ["brute force", "NearestNeighbors (sklearn)", "SWP-RHLSH", "QDP-RHLSH", "SWP-RHLSH, centred",
                 "QDP-RHLSH, centred"]
     assert (t.groupby("backbone", sort=False).variant.apply(list) == pd.Series([variants] * len(done), done)).all()
