@@ -55,6 +55,10 @@ $(STAMP): environment.txt
 	$(BIN)/python -m pip install -q --upgrade pip
 	$(BIN)/python -m pip install -q -r environment.txt
 	$(BIN)/python -m ipykernel install --sys-prefix --name $(KERNEL) --display-name "Python (greenloop)" >/dev/null
+	@# the kernel does not copy low-level output (TensorFlow's C++ logs, progress bars on the real
+	@# stderr) into executed notebooks: it goes to the terminal that runs make (greenloop.progress)
+	@mkdir -p $(VENV)/etc/ipython
+	@echo "c.IPKernelApp.capture_fd_output = False" > $(VENV)/etc/ipython/ipython_kernel_config.py
 	@touch $@
 
 synthetic: $(SYNTHETIC)/synthetic.json ## generate the embedded synthetic greenhouse sequence (2260 frames)

@@ -14,6 +14,7 @@ import os
 import shutil
 import tempfile
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -104,7 +105,7 @@ def cache_key(X: np.ndarray, y: np.ndarray, **params) -> str:
 def _epoch_bar(epochs: int, desc: str):
     """A Keras callback showing one tqdm bar per training run (epochs), not per-batch output."""
     import keras
-    from tqdm import tqdm  # text bars: readable in terminals and in executed notebooks
+    from .progress import bar as tqdm  # in the terminal, not in the notebook
 
     class EpochBar(keras.callbacks.Callback):
         def on_train_begin(self, logs=None):
@@ -134,7 +135,9 @@ def _locked(path: Path):
 def _load_cached(folder: Path):
     import keras
 
-    model = keras.models.load_model(folder / "model.keras")
+    with warnings.catch_warnings():   # the optimizer state is not saved for reuse: cached models only predict
+        warnings.filterwarnings("ignore", message="Skipping variable loading for optimizer", category=UserWarning)
+        model = keras.models.load_model(folder / "model.keras")
     history = json.loads((folder / "history.json").read_text())
     split = dict(np.load(folder / "split.npz"))
     return model, history, split
@@ -323,7 +326,7 @@ def _fit_fused(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size
     against ``model.fit``'s. Same history keys as ``model.fit``."""
     import keras
     from threadpoolctl import threadpool_limits
-    from tqdm import tqdm
+    from .progress import bar as tqdm  # in the terminal, not in the notebook
 
     from . import kernels
 
@@ -397,8 +400,20 @@ def _fit_fused(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size
 
 
 def predict(model, X: np.ndarray, batch_size: int = 512) -> np.ndarray:
-    """Predicted spot labels (N,) int64 for frames X (N, H, W, C), via ``model.predict``."""
-    p = model.predict(np.asarray(X, dtype=np.float32), batch_size=batch_size, verbose=0)
+    """Predicted spot labels (N,) int64 for frames X (N, H, W, C), via ``model.predict``.
+
+    TensorFlow's "triggered tf.function retracing" warning (each new model or input size traces
+    the predict step again, which is expected here) is silenced for the call.
+    """
+    import logging
+
+    tf_log = logging.getLogger("tensorflow")
+    level = tf_log.level
+    tf_log.setLevel(logging.ERROR)
+    try:
+        p = model.predict(np.asarray(X, dtype=np.float32), batch_size=batch_size, verbose=0)
+    finally:
+        tf_log.setLevel(level)
     return p.argmax(1).astype(np.int64)
 
 
@@ -409,7 +424,7 @@ def run_seeds(X: np.ndarray, y: np.ndarray, seeds, progress: bool = True, **trai
     Returns one dict per seed: {'seed', 'model', 'history', 'split', 'test_accuracy',
     'test_pred' (n_test,) predicted labels of split['test']}.
     """
-    from tqdm import tqdm  # text bars: readable in terminals and in executed notebooks
+    from .progress import bar as tqdm  # in the terminal, not in the notebook
 
     out = []
     for seed in tqdm(list(seeds), desc="seeds", unit="seed", disable=not progress):

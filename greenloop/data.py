@@ -142,7 +142,7 @@ def load_frames(folder, size=(32, 32), gray: bool = True, limit: int | None = No
     with ThreadPoolExecutor(workers) as pool:
         it = pool.map(lambda p: _read_one(p, size, gray), paths)
         if show:
-            from tqdm import tqdm  # text bars: readable in terminals and in executed notebooks
+            from .progress import bar as tqdm  # in the terminal, not in the notebook
             it = tqdm(it, total=len(paths), desc=f"load {Path(folder).name}", unit="frame")
         images = list(it)
     shapes = {im.shape for im in images}

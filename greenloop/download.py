@@ -71,7 +71,7 @@ def download(folder="data/greenhouse", base_url: str = BASE_URL, n_frames: int =
         except (urllib.error.URLError, OSError, TimeoutError) as e:
             raise RuntimeError(MANUAL.format(url=todo[0][0], err=e, repo=REPO, folder=folder)) from e
         todo = todo[1:]
-    from tqdm import tqdm  # text bars: readable in terminals and in executed notebooks
+    from .progress import bar as tqdm  # in the terminal, not in the notebook
 
     with ThreadPoolExecutor(workers) as pool, tqdm(total=len(jobs), initial=len(jobs) - len(todo),
                                                  desc="GreenHouse", unit="file", disable=not progress) as bar:

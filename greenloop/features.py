@@ -541,7 +541,7 @@ def _batches(n, batch_size):
 
 
 def _progress(total, desc, progress):
-    from tqdm import tqdm  # text bars: readable in terminals and in executed notebooks
+    from .progress import bar as tqdm  # in the terminal, not in the notebook
     return tqdm(total=total, desc=desc, unit="img", disable=not progress)
 
 
@@ -662,7 +662,7 @@ def _sift_descriptors(gray_frames, progress=False):
 
 
 def _iter_progress(items, desc, progress):
-    from tqdm import tqdm  # text bars: readable in terminals and in executed notebooks
+    from .progress import bar as tqdm  # in the terminal, not in the notebook
     return tqdm(items, desc=desc, unit="img", disable=not progress)
 
 

@@ -130,7 +130,7 @@ def alignment_pairs(n: int, tolerance: int) -> np.ndarray:
 
 def _write(tmp: Path, summer, winter, tolerance: int, meta: dict, progress: bool) -> None:
     """Copy the frames (summer then winter) and write ground_truth.csv and nordland.json."""
-    from tqdm import tqdm  # text bars: readable in terminals and in executed notebooks
+    from .progress import bar as tqdm  # in the terminal, not in the notebook
 
     (tmp / "rgb").mkdir(parents=True)
     frames = summer + winter

@@ -1143,7 +1143,7 @@ def make_greenhouse(folder, n_frames: int = DEFAULT_FRAMES, size=DEFAULT_SIZE, s
         (tmp / "depth").mkdir()
         chunk = 8
         chunks = [list(range(i, min(i + chunk, n))) for i in range(0, n, chunk)]
-        from tqdm import tqdm  # text bars: readable in terminals and in executed notebooks
+        from .progress import bar as tqdm  # in the terminal, not in the notebook
         bar = tqdm(total=n, desc=f"render {folder.name}", unit="frame", disable=not progress)
         try:
             if workers == 1:

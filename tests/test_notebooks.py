@@ -18,6 +18,21 @@ def results(tmp_path_factory):
     return tmp_path_factory.mktemp("results")
 
 
+NOISE = re.compile(r"it/s\]|s/it\]|\d+%\|[#\u2588 ]|oneDNN|cuInit|cudart|Skipping variable loading|retracing"
+                   r"|site-packages/")
+
+
+def _noise(path) -> list[str]:
+    """Lines of an executed notebook's outputs that are progress bars, library logs or paths into
+    the environment: a reader must not scroll past them (they belong in the terminal)."""
+    lines = []
+    for cell in json.loads(Path(path).read_text())["cells"]:
+        for o in cell.get("outputs", []):
+            text = "".join(o.get("text", "")) + "".join(o.get("traceback", []))
+            lines += [line[:160] for line in text.splitlines() if NOISE.search(line)]
+    return lines
+
+
 def _run(notebook, dataset, results, monkeypatch) -> Path:
     """Execute one notebook on `dataset` into `results`; check what every notebook must write."""
     import papermill
@@ -29,6 +44,8 @@ def _run(notebook, dataset, results, monkeypatch) -> Path:
     papermill.execute_notebook(str(notebook), str(out), kernel_name="greenloop", cwd=str(ROOT),
                                parameters=dict(TINY, dataset=str(dataset), results_dir=str(results)),
                                execution_timeout=600, progress_bar=False)
+    noise = _noise(out)
+    assert not noise, f"progress bars or log lines in the executed notebook: {noise[:3]}"
     folder = results / notebook.stem
     assert (folder / "manifest.json").is_file()
     manifest = json.loads((folder / "manifest.json").read_text())
