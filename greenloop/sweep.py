@@ -574,7 +574,7 @@ def _numeric(v):
     return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else None
 
 
-def figure(points: list[dict], table, metric: str, x: str | None = None):
+def figure(points: list[dict], table, metric: str, x: str | None = None, title: str = ""):
     """The swept quantity ``x`` (default: the first grid name with numeric values) against column
     ``metric`` of ``table``, one line per setting of the other grid names, error bars from the
     metric's spread column. Failed points are left out (the title counts them)."""
@@ -604,10 +604,13 @@ def figure(points: list[dict], table, metric: str, x: str | None = None):
         ax.errorbar(xs, ys, yerr=es if sd else None, marker="o", capsize=4, label=other or None)
     if not numeric:
         ax.set_xticks(range(len(labels)), labels, rotation=20)
+    elif len(labels) <= 12:
+        ax.set_xticks(sorted({_numeric(p["values"][x]) for p in points}))
     ax.set_xlabel(x)
     ax.set_ylabel(metric + (f" (error bars: {sd})" if sd else ""))
     failed = int((table["status"] != "ok").sum())
-    ax.set_title(f"{len(table)} points" + (f", {failed} failed (not shown)" if failed else ""))
+    ax.set_title(f"{title}{': ' if title else ''}{len(table)} points"
+                 + (f", {failed} failed (not shown)" if failed else ""))
     if any(series):
         ax.legend(fontsize="small")
     ax.grid(alpha=0.3)
@@ -630,8 +633,11 @@ def write_outputs(points, table, out: Path, notebook, metric: str | None, x: str
     if len(failed):
         note += f" {len(failed)} point(s) failed; their error is in the `error` column and point.json."
     md = report.write_table(table, Path(out) / "sweep", title=f"Sweep of {Path(notebook).stem}", note=note)
+    png = Path(out) / "sweep.png"
     if metric in table.columns and pd.api.types.is_numeric_dtype(table[metric]):
-        report.save_figure(figure(points, table, metric, x), Path(out) / "sweep")
+        report.save_figure(figure(points, table, metric, x, title=Path(notebook).stem), png)
+    else:  # nothing to plot (every point failed): no figure of an earlier run left beside the table
+        png.unlink(missing_ok=True)
     return md
 
 
@@ -653,6 +659,8 @@ def run_sweep(notebook, grid: dict, out, *, base: dict | None = None, dataset=DE
         raise FileNotFoundError(f"notebook {notebook} not found: pass a notebook path such as "
                                 f"notebooks/01_spot_grouping.ipynb")
     check_grid(grid, notebook_parameters(notebook), notebook)
+    if x is not None and x not in grid:
+        raise ValueError(f"--x {x!r} is not swept: choose one of {', '.join(grid)}")
     out = Path(out).resolve()
     points = plan(grid, out, base, dataset)
     todo = [p for p in points if force or not is_complete(p, notebook)]

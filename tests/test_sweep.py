@@ -100,6 +100,7 @@ def test_two_worker_sweep_matches_the_points_run_one_after_another(tiny_sequence
     loop = []
     for values in ({"frames_per_spot_list": L, "epochs": e} for L in ([40], [50]) for e in (1, 2)):
         folder = tmp_path / "loop" / sweep.point_name(values)
+        folder.mkdir(parents=True)
         papermill.execute_notebook(str(NB01), str(folder / "nb.ipynb"), kernel_name="greenloop", cwd=str(ROOT),
                                    parameters=dict(base, **values, dataset=str(tiny_sequence),
                                                    results_dir=str(folder)), progress_bar=False)
