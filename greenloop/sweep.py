@@ -324,6 +324,14 @@ def default_workers() -> int:
     return max(1, (os.cpu_count() or 1) // 4)
 
 
+def check_scheduler(scheduler: str) -> None:
+    """Raise ValueError unless ``scheduler`` is local, slurm, pbs or an address (tcp://host:port)."""
+    if scheduler not in ("local", *JOBQUEUE) and "://" not in scheduler \
+            and not re.fullmatch(r"[\w.\-]+:\d+", scheduler):
+        raise ValueError(f"unknown --scheduler {scheduler!r}: use local, slurm, pbs or a scheduler "
+                         f"address such as tcp://host:8786")
+
+
 @contextlib.contextmanager
 def connect(scheduler: str = "local", workers: int | None = None, options: dict | None = None):
     """Yield ``(client, resources)`` for ``scheduler``: "local" (a LocalCluster of ``workers``
@@ -341,9 +349,8 @@ def connect(scheduler: str = "local", workers: int | None = None, options: dict 
     elif scheduler in JOBQUEUE:
         cluster, resources = jobqueue_cluster(scheduler, options), {"point": 1}
         cluster.scale(workers or 1)
-    elif "://" not in scheduler and not re.fullmatch(r"[\w.\-]+:\d+", scheduler):
-        raise ValueError(f"unknown --scheduler {scheduler!r}: use local, slurm, pbs or a scheduler "
-                         f"address such as tcp://host:8786")
+    else:
+        check_scheduler(scheduler)
     client = Client(cluster if cluster is not None else scheduler)
     try:
         yield client, resources
@@ -659,14 +666,15 @@ def run_sweep(notebook, grid: dict, out, *, base: dict | None = None, dataset=DE
         raise FileNotFoundError(f"notebook {notebook} not found: pass a notebook path such as "
                                 f"notebooks/01_spot_grouping.ipynb")
     check_grid(grid, notebook_parameters(notebook), notebook)
+    check_scheduler(scheduler)
     if x is not None and x not in grid:
         raise ValueError(f"--x {x!r} is not swept: choose one of {', '.join(grid)}")
     out = Path(out).resolve()
     points = plan(grid, out, base, dataset)
     todo = [p for p in points if force or not is_complete(p, notebook)]
     if progress:
-        print(f"sweep: {len(points)} points of {notebook.name} into {out}; {len(points) - len(todo)} "
-              f"complete already, {len(todo)} to run", file=sys.stderr, flush=True)
+        print(f"sweep: {len(points)} point{'s' * (len(points) != 1)} of {notebook.name} into {out}; "
+              f"{len(points) - len(todo)} complete already, {len(todo)} to run", file=sys.stderr, flush=True)
     if todo:
         out.mkdir(parents=True, exist_ok=True)
         env = point_env(cache)

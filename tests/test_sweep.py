@@ -50,6 +50,10 @@ def test_grid_names_and_shapes_are_checked_against_the_notebook():
         sweep.check_grid({"frames_per_spot_list": [40, 50]}, params, NB01)
     with pytest.raises(ValueError, match="results_dir"):
         sweep.check_grid({"results_dir": ["a"]}, params, NB01)
+    for ok in ("local", "slurm", "pbs", "tcp://10.0.0.1:8786", "node7:8786"):
+        sweep.check_scheduler(ok)
+    with pytest.raises(ValueError, match="unknown --scheduler"):
+        sweep.check_scheduler("slrum")
 
 
 def test_metric_specs_read_summary_scalars_and_csv_cells(tmp_path):
