@@ -87,34 +87,44 @@ def test_slurm_jobs_run_one_point_each_with_this_checkout():
 
 # --------------------------------------------------------------------------- a real notebook on 2 workers
 
-def test_two_worker_sweep_matches_the_points_run_one_after_another(tiny_sequence, tmp_path, monkeypatch):
+def _plain_loop(points, base, dataset, folder):
+    """The points one after another, each a plain papermill run (no Dask), into folder/<point>/."""
     import papermill
 
+    for values in points:
+        out = folder / sweep.point_name(values)
+        out.mkdir(parents=True)
+        papermill.execute_notebook(str(NB01), str(out / "nb.ipynb"), kernel_name="greenloop", cwd=str(ROOT),
+                                   parameters=dict(base, **values, dataset=str(dataset), results_dir=str(out)),
+                                   progress_bar=False)
+
+
+def test_two_worker_sweep_matches_the_points_run_one_after_another(tiny_sequence, tmp_path, monkeypatch):
+    from concurrent.futures import ThreadPoolExecutor
+
     grid = {"frames_per_spot_list": [[40], [50]], "epochs": [1, 2]}
+    points = [{"frames_per_spot_list": L, "epochs": e} for L in ([40], [50]) for e in (1, 2)]
     base = dict(TINY, seeds=[0], seeds_per_grouping=[0])
-    out = tmp_path / "sweep"
-    table = sweep.run_sweep(NB01, grid, out, base=base, dataset=tiny_sequence, workers=2,
-                            cache=tmp_path / "cache-sweep", metrics=["table1.csv:acc_mean_%"], progress=False)
+    out, loop = tmp_path / "sweep", tmp_path / "loop"
+    # the plain loop has a model cache of its own and runs beside the sweep (two cores, both busy)
+    monkeypatch.setenv("PYTHONPATH", str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    monkeypatch.setenv("GREENLOOP_CACHE", str(tmp_path / "cache-loop"))
+    with ThreadPoolExecutor(1) as pool:
+        looped = pool.submit(_plain_loop, points, base, tiny_sequence, loop)
+        table = sweep.run_sweep(NB01, grid, out, base=base, dataset=tiny_sequence, workers=2,
+                                cache=tmp_path / "cache-sweep", metrics=["table1.csv:acc_mean_%"],
+                                progress=False)
+        looped.result()
     assert (table.status == "ok").all() and len(table) == 4
     assert table.frames_per_spot_list.tolist() == ["[40]", "[40]", "[50]", "[50]"]
     assert table.epochs.tolist() == [1, 2, 1, 2]
-    # the same points, one after another in a plain loop, with a model cache of their own
-    monkeypatch.setenv("PYTHONPATH", str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    monkeypatch.setenv("GREENLOOP_CACHE", str(tmp_path / "cache-loop"))
-    loop = []
-    for values in ({"frames_per_spot_list": L, "epochs": e} for L in ([40], [50]) for e in (1, 2)):
-        folder = tmp_path / "loop" / sweep.point_name(values)
-        folder.mkdir(parents=True)
-        papermill.execute_notebook(str(NB01), str(folder / "nb.ipynb"), kernel_name="greenloop", cwd=str(ROOT),
-                                   parameters=dict(base, **values, dataset=str(tiny_sequence),
-                                                   results_dir=str(folder)), progress_bar=False)
-        mine = pd.read_csv(folder / "01_spot_grouping" / "table1.csv")
-        theirs = pd.read_csv(out / folder.name / "01_spot_grouping" / "table1.csv")
+    for values, (_, row) in zip(points, table.iterrows()):
+        name = sweep.point_name(values)
+        mine = pd.read_csv(loop / name / "01_spot_grouping" / "table1.csv")
+        theirs = pd.read_csv(out / name / "01_spot_grouping" / "table1.csv")
         pd.testing.assert_frame_equal(theirs, mine)
         assert mine.frames_per_spot.tolist() == values["frames_per_spot_list"]
-        loop.append(mine.iloc[0])
-    assert table["acc_mean_%"].tolist() == [r["acc_mean_%"] for r in loop]
-    assert table["acc_std_%"].tolist() == [r["acc_std_%"] for r in loop]
+        assert (row["acc_mean_%"], row["acc_std_%"]) == (mine["acc_mean_%"][0], mine["acc_std_%"][0])
     on_disk = pd.read_csv(out / "sweep.csv")
     assert on_disk["acc_mean_%"].tolist() == table["acc_mean_%"].tolist()
     assert (out / "sweep.md").read_text().count("\n| [") == 4 and (out / "sweep.png").stat().st_size > 0
