@@ -82,10 +82,15 @@ def _sweep(args) -> int:
         base[name] = yaml.safe_load(value)
     options = dict(queue=args.queue, cores=args.cores, memory=args.memory, walltime=args.walltime,
                    account=args.account, job_extra_directives=args.job_extra)
-    table = run_sweep(args.notebook, parse_grid(args.grid), args.out, base=base, dataset=args.dataset,
-                      scheduler=args.scheduler, workers=args.workers, cache=args.cache,
-                      metrics=args.metric, x=args.x, force=args.force, timeout=args.timeout,
-                      kernel=args.kernel, retries=args.retries, cluster_options=options)
+    try:
+        table = run_sweep(args.notebook, parse_grid(args.grid), args.out, base=base, dataset=args.dataset,
+                          scheduler=args.scheduler, workers=args.workers, cache=args.cache,
+                          metrics=args.metric, x=args.x, force=args.force, timeout=args.timeout,
+                          kernel=args.kernel, retries=args.retries, cluster_options=options)
+    except KeyboardInterrupt:
+        print(f"sweep: interrupted; the finished points in {args.out} are kept: run the same command "
+              f"again to resume", file=sys.stderr)
+        return 130
     return 0 if (table.status == "ok").all() else 1
 
 

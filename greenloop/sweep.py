@@ -82,6 +82,11 @@ def parse_grid(specs) -> dict[str, list]:
                              f"strings that hold commas or colons, e.g. {name}='a,b'") from None
         if not values:
             raise ValueError(f"grid {name!r} has no values: write {name}=V1,V2,...")
+        texts = [flow(v) for v in values]
+        twice = [v for i, v in enumerate(values) if texts[i] in texts[:i]]
+        if twice:
+            raise ValueError(f"grid {name!r} has the value {flow(twice[0])} twice: each point runs once, "
+                             f"list each value once")
         grid[name] = values
     if not grid:
         raise ValueError("no --grid given: name at least one parameter, e.g. --grid epochs=50,100")

@@ -23,7 +23,7 @@ def test_grid_values_are_yaml_scalars():
     g = sweep.parse_grid(["epochs=20,50", "lr=0.5", "seeds=[0,1],[2]", "weights=null,imagenet"])
     assert g == {"epochs": [20, 50], "lr": [0.5], "seeds": [[0, 1], [2]], "weights": [None, "imagenet"]}
     assert list(g) == ["epochs", "lr", "seeds", "weights"]
-    for bad in (["epochs"], ["epochs="], ["1x=2"], ["epochs=1", "epochs=2"], ["a=[1"], []):
+    for bad in (["epochs"], ["epochs="], ["1x=2"], ["epochs=1", "epochs=2"], ["a=[1"], ["x=1,2,1"], []):
         with pytest.raises(ValueError):
             sweep.parse_grid(bad)
 
