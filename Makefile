@@ -18,6 +18,12 @@ KERNEL   := greenloop
 # at the files downloaded from github.com/google-coral/test_data (see greenloop.mobilenet_tflite).
 GREENLOOP_WEIGHTS ?= $(abspath $(wildcard ../shared/weights/mobilenet-tflite))
 export GREENLOOP_WEIGHTS
+SWEEP_NOTEBOOK ?= notebooks/01_spot_grouping.ipynb
+SWEEP_GRID     ?= frames_per_spot_list=[40],[50],[60],[70],[80]
+SWEEP_METRIC   ?= table1.csv:acc_mean_%
+SWEEP_OUT      ?= $(RESULTS)/sweep/$(basename $(notdir $(SWEEP_NOTEBOOK)))
+SCHEDULER      ?= local
+WORKERS        ?=
 export PYTHONPATH := $(CURDIR)
 export TF_CPP_MIN_LOG_LEVEL := 2
 export PYTHONUNBUFFERED := 1
@@ -47,6 +53,9 @@ help: ## this list
 	@echo "  PYTHON=$(PYTHON)   interpreter used to create $(VENV)"
 	@echo "  NORDLAND_SRC=$(NORDLAND_SRC)   local Nordland source for make nordland (empty: clone it)"
 	@echo "  GREENLOOP_WEIGHTS=$(GREENLOOP_WEIGHTS)   folder(s) of ImageNet weight files (weights=\"auto\")"
+	@echo "  make sweep: SWEEP_NOTEBOOK=$(SWEEP_NOTEBOOK)  SWEEP_GRID='$(SWEEP_GRID)' (space-separated grids)"
+	@echo "              SWEEP_METRIC='$(SWEEP_METRIC)'  SWEEP_OUT=$(SWEEP_OUT)"
+	@echo "              SCHEDULER=$(SCHEDULER) (local | tcp://host:8786 | slurm | pbs)  WORKERS=N  PARAMS='-f params/quick.yaml'"
 
 venv: $(STAMP) ## create .venv from environment.txt (and register the Jupyter kernel)
 
@@ -114,11 +123,12 @@ $(RESULTS)/tables.md: $(EXECUTED)
 quick: ## the same notebooks with few epochs and seeds into results/quick/ (minutes)
 	$(MAKE) all RESULTS=results/quick PARAMS="-f params/quick.yaml $(PARAMS)"
 
-sweep: ## papermill sweep of frames per spot (40..80) into results/sweep/
-	@for L in 40 50 60 70 80; do \
-	  $(MAKE) --no-print-directory results/sweep/L$$L/01_spot_grouping.ipynb RESULTS=results/sweep/L$$L \
-	    PARAMS="-p frames_per_spot_list '[$$L]' $(PARAMS)" || exit 1; \
-	done
+# `make sweep`: greenloop.sweep over Dask (python -m greenloop sweep --help). Each --grid is one
+# word of SWEEP_GRID; points whose point.json says ok are skipped, so an interrupted sweep resumes.
+sweep: $(DATA_DEP) | $(STAMP) ## Dask sweep of SWEEP_GRID over SWEEP_NOTEBOOK (default L = 40..80 in 01) -> results/sweep/
+	$(BIN)/python -m greenloop sweep $(SWEEP_NOTEBOOK) $(foreach g,$(SWEEP_GRID),--grid '$(g)') \
+	    --dataset $(DATASET) --out $(SWEEP_OUT) --scheduler $(SCHEDULER) $(if $(WORKERS),--workers $(WORKERS)) \
+	    $(if $(SWEEP_METRIC),--metric '$(SWEEP_METRIC)') --timeout $(TIMEOUT) $(PARAMS)
 
 bench: | $(STAMP) ## speed benchmark: streaming detector and training vs plain Keras -> results/bench/
 	$(BIN)/python -m greenloop.bench --out $(RESULTS)/bench --dataset $(DATASET)

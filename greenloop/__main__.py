@@ -5,6 +5,10 @@ Commands
         run a trained model (.keras or .tflite) over a recording (a sequence folder or a folder of
         .jpg/.png frames of any size, in numeric order) and print each declared loop closure and a
         summary (frames, closures, frames/s).
+    sweep NOTEBOOK --grid NAME=V1,V2,... [--grid ...] --out OUT [-f PARAMS.yaml] [-p NAME VALUE]
+          [--dataset DIR] [--scheduler local|tcp://HOST:8786|slurm|pbs] [--workers N] [--metric SPEC]
+        run the notebook once per point of the grids' cross product on Dask (greenloop.sweep) and
+        write OUT/sweep.csv, sweep.md and sweep.png; complete points are not run again.
 """
 from __future__ import annotations
 
@@ -62,6 +66,81 @@ def _detect(args) -> int:
     return 0
 
 
+def _sweep(args) -> int:
+    """``sweep``: one papermill run per grid point on Dask; 0 when every point is ok, else 1."""
+    import yaml
+
+    from .sweep import parse_grid, run_sweep
+
+    base = {}
+    for path in args.parameters_file:
+        if not os.path.isfile(path):
+            raise FileNotFoundError(f"parameters file {path} not found: pass a YAML file such as "
+                                    f"params/quick.yaml")
+        base.update(yaml.safe_load(open(path)) or {})
+    for name, value in args.parameter:
+        base[name] = yaml.safe_load(value)
+    options = dict(queue=args.queue, cores=args.cores, memory=args.memory, walltime=args.walltime,
+                   account=args.account, job_extra_directives=args.job_extra)
+    try:
+        table = run_sweep(args.notebook, parse_grid(args.grid), args.out, base=base, dataset=args.dataset,
+                          scheduler=args.scheduler, workers=args.workers, cache=args.cache,
+                          metrics=args.metric, x=args.x, force=args.force, timeout=args.timeout,
+                          kernel=args.kernel, retries=args.retries, cluster_options=options)
+    except KeyboardInterrupt:
+        print(f"sweep: interrupted; the finished points in {args.out} are kept: run the same command "
+              f"again to resume", file=sys.stderr)
+        return 130
+    return 0 if (table.status == "ok").all() else 1
+
+
+def _sweep_parser(sub) -> None:
+    """The ``sweep`` subcommand's arguments."""
+    from .sweep import DEFAULT_DATASET
+
+    s = sub.add_parser("sweep", help="run a notebook over a parameter grid on Dask (local or cluster)",
+                       description="Run NOTEBOOK once per point of the cross product of the grids, "
+                                   "each point a papermill run on a Dask worker, into OUT/<point>/; "
+                                   "assemble OUT/sweep.csv, sweep.md and sweep.png. Points whose "
+                                   "point.json says ok are not run again (an interrupted sweep resumes).")
+    s.add_argument("notebook", metavar="NOTEBOOK", help="notebook with a cell tagged 'parameters'")
+    s.add_argument("--grid", action="append", required=True, metavar="NAME=V1,V2,...",
+                   help="a swept parameter; values are YAML (20, 0.5, null, [0,1], text); repeat for a "
+                        "cross product")
+    s.add_argument("--out", required=True, help="sweep folder, e.g. results/sweep/NAME")
+    s.add_argument("-f", "--parameters-file", action="append", default=[], metavar="YAML",
+                   help="parameters for every point (e.g. params/quick.yaml); repeatable")
+    s.add_argument("-p", "--parameter", action="append", nargs=2, default=[], metavar=("NAME", "VALUE"),
+                   help="one parameter for every point (VALUE read as YAML); repeatable")
+    s.add_argument("--dataset", default=str(DEFAULT_DATASET),
+                   help="sequence folder injected as `dataset` (default data/synthetic-greenhouse)")
+    s.add_argument("--scheduler", default="local",
+                   help="local (a LocalCluster, default), a scheduler address (tcp://host:8786), or "
+                        "slurm / pbs (dask-jobqueue; see --queue ...)")
+    s.add_argument("--workers", type=int, default=None,
+                   help="local: worker processes (default one per 4 cores); slurm/pbs: jobs")
+    s.add_argument("--metric", action="append", default=[], metavar="SPEC",
+                   help="numbers for the table: a summary.json key (a.b), FILE.csv:COLUMN or "
+                        "FILE.csv[KEY=VALUE]:COLUMN; the first is plotted; repeatable")
+    s.add_argument("--x", default=None, help="swept parameter on the figure's x axis (default: the "
+                                             "first numeric one)")
+    s.add_argument("--cache", default=None, help="model cache shared by every point (default "
+                                                 "$GREENLOOP_CACHE or results/models)")
+    s.add_argument("--force", action="store_true", help="run complete points again")
+    s.add_argument("--retries", type=int, default=1, help="reruns of a failed point (default 1)")
+    s.add_argument("--timeout", type=int, default=7200, help="per-cell timeout, s (default 7200)")
+    s.add_argument("--kernel", default="greenloop", help="Jupyter kernel (default greenloop)")
+    q = s.add_argument_group("slurm / pbs jobs (default: the dask config jobqueue.<kind>.*)")
+    q.add_argument("--queue", help="partition / queue")
+    q.add_argument("--cores", type=int, help="cores per job (one point runs per job at a time)")
+    q.add_argument("--memory", help="memory per job, e.g. 16GB")
+    q.add_argument("--walltime", help="job wall time, e.g. 04:00:00")
+    q.add_argument("--account", help="account / project to charge")
+    q.add_argument("--job-extra", action="append", default=None, metavar="DIRECTIVE",
+                   help="extra job-script directive, e.g. --job-extra=--gres=gpu:1; repeatable")
+    s.set_defaults(func=_sweep)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser: one subparser per command (add new commands here)."""
     ap = argparse.ArgumentParser(prog="python -m greenloop",
@@ -85,6 +164,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="inference backend (default auto)")
     d.add_argument("--window", type=int, default=70, help="frames per batch (default 70)")
     d.set_defaults(func=_detect)
+    _sweep_parser(sub)
     return ap
 
 
