@@ -62,9 +62,14 @@ RGB-D fusion (``FUSIONS``; RGB-D input is one (N, H, W, 4) array: RGB, then dept
 * ``early``: one stream on the 4-channel RGB+D input (Fig. 5).
 * ``mid``: an RGB stream and a depth stream (separate weights) up to and including the layer
   ``fusion_layer`` (one of ``LAYERS``, Table 2's columns), where the two feature maps have the
-  same size; they are joined there and one trunk continues (Fig. 6). The paper does not say how
-  they are joined; ``merge="concat"`` (default) concatenates the channels, so the next layer
-  weighs both streams' features, ``merge="sum"`` adds them.
+  same size; they are joined there and one trunk continues (Fig. 6). The paper says only that
+  the streams "are fused at intermediate layers with the same size of feature maps", which an
+  element-wise join needs: ``merge="sum"`` (default) adds the two maps, so every layer after the
+  join has the single-stream network's shape. ``merge="concat"`` stacks their channels instead;
+  then fusing just before or just after a max pooling is one and the same network (pooling acts
+  on each channel alone, so pool(concat(a, b)) = concat(pool(a), pool(b)), and the seeded
+  weights are the same), and Table 2's conv1/pool1, conv2/pool2 and conv5/pool5 columns repeat
+  each other. With a sum they are eight different networks.
 * ``late``: an RGB network and a depth network trained side by side, each with its own
   supervision and no weight or loss shared (which is training them separately, on the same
   pairs); the descriptor is the average of their two fc7 descriptors (Fig. 7), so D is unchanged.
@@ -206,7 +211,7 @@ def _stream(x, prefix, width, stop=None):
 
 
 def embedding(input_shape=(64, 64, 3), fusion: str = "none", fusion_layer: str | None = None,
-              width: float = 1.0, merge: str = "concat"):
+              width: float = 1.0, merge: str = "sum"):
     """One branch of the Siamese network: frames -> (N, DESCRIPTOR_DIM) fc7 descriptors.
 
     input_shape: (H, W, C); C = 4 (RGB, then depth) for every fusion other than "none".
@@ -245,7 +250,7 @@ def embedding(input_shape=(64, 64, 3), fusion: str = "none", fusion_layer: str |
 
 def build(n_classes: int | None, input_shape=(64, 64, 3), supervision: str = "multitask",
           fusion: str = "none", fusion_layer: str | None = None, margin: float = MARGIN,
-          lam: float = LAMBDA, width: float = 1.0, merge: str = "concat",
+          lam: float = LAMBDA, width: float = 1.0, merge: str = "sum",
           optimizer: str = "adam", learning_rate: float | None = None,
           weight_decay: float = WEIGHT_DECAY):
     """The Siamese network, compiled, and its descriptor branch.
@@ -474,13 +479,13 @@ def _fit(X, labels, progress, *, seed, supervision, fusion, fusion_layer, epochs
     keras.utils.set_random_seed(seed)
     n_classes = int(labels.max()) + 1
     siamese, descriptor = build(n_classes, X.shape[1:], supervision, fusion, fusion_layer, margin,
-                                lam, width, merge or "concat", optimizer, learning_rate, weight_decay)
+                                lam, width, merge or "sum", optimizer, learning_rate, weight_decay)
     keys = _output_keys(supervision, fusion)
     rng = np.random.default_rng(seed)
     steps = -(-int(n_pairs) // batch_size)
     history = {"loss": [], "epoch_seconds": []}
     all_pairs, all_same = [], []
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     for _ in tqdm(range(epochs), desc=descriptor.name, unit="epoch", leave=False, disable=not progress):
         t_epoch = time.perf_counter()
         pairs, same = make_pairs(labels, steps * batch_size, rng, positive_fraction)
@@ -498,6 +503,7 @@ def _fit(X, labels, progress, *, seed, supervision, fusion, fusion_layer, epochs
         history["loss"].append(float(np.mean(losses)))
         history["epoch_seconds"].append(time.perf_counter() - t_epoch)
     history["seconds"] = time.perf_counter() - t0
+    history["cpu_seconds"] = time.process_time() - c0     # all threads of this process
     history["n_classes"] = n_classes
     history["n_train_frames"] = int((labels >= 0).sum())
     return descriptor, history, {"pairs": np.concatenate(all_pairs), "same": np.concatenate(all_same)}
@@ -514,7 +520,7 @@ def _load(folder: Path):
 def train(X, labels, seed: int = 0, supervision: str = "multitask", fusion: str = "none",
           fusion_layer: str | None = None, epochs: int = 10, n_pairs: int = 1000,
           batch_size: int = 100, positive_fraction: float = 0.5, margin: float = MARGIN,
-          lam: float = LAMBDA, width: float = 1.0, merge: str = "concat",
+          lam: float = LAMBDA, width: float = 1.0, merge: str = "sum",
           optimizer: str = "adam", learning_rate: float | None = None,
           weight_decay: float = WEIGHT_DECAY, cache=True, progress: bool = False):
     """Train a Siamese network on pairs of the labelled frames (cached on disk).
@@ -529,7 +535,7 @@ def train(X, labels, seed: int = 0, supervision: str = "multitask", fusion: str 
     progress: a tqdm bar on stderr.
     Returns (descriptor, history, pairs): the descriptor model (frames -> (N, DESCRIPTOR_DIM));
     history with per-epoch 'loss' and 'epoch_seconds', 'seconds' (training wall time),
-    'n_classes', 'n_train_frames'; pairs = {'pairs': (epochs*P, 2) int64, 'same': bool}, every
+    'cpu_seconds' (CPU time of all threads), 'n_classes', 'n_train_frames'; pairs = {'pairs': (epochs*P, 2) int64, 'same': bool}, every
     pair trained on.
     """
     X = np.asarray(X, dtype=np.float32)

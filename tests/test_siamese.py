@@ -107,7 +107,7 @@ def test_each_fusion_gives_n_by_d_descriptors(fusion, channels, layer):
 
 @pytest.mark.parametrize("layer", sm.LAYERS)
 def test_mid_fusion_joins_at_the_named_layer(layer):
-    _, desc = sm.build(None, (S, S, 4), "contrastive", "mid", layer, width=W)
+    _, desc = sm.build(None, (S, S, 4), "contrastive", "mid", layer, width=W, merge="concat")
     fuse = desc.get_layer(f"fuse_{layer}")
     rgb, dep = desc.get_layer(f"rgb_{layer}"), desc.get_layer(f"depth_{layer}")
     assert tuple(fuse.output.shape[1:3]) == tuple(rgb.output.shape[1:3]) == tuple(dep.output.shape[1:3])
@@ -118,8 +118,25 @@ def test_mid_fusion_joins_at_the_named_layer(layer):
     assert not any(f"rgb_{n}" in names for n in sm.LAYERS[len(upto):])         # one trunk after it
     assert {n for n in sm.LAYERS[len(upto):]} <= names
     assert sm.describe(desc, _frames(3, 4)).shape == (3, sm.DESCRIPTOR_DIM)
-    _, summed = sm.build(None, (S, S, 4), "contrastive", "mid", layer, width=W, merge="sum")
+    _, summed = sm.build(None, (S, S, 4), "contrastive", "mid", layer, width=W)     # the default: sum
     assert summed.get_layer(f"fuse_{layer}").output.shape[-1] == rgb.output.shape[-1]
+
+
+def _seeded_mid(layer, merge):
+    import keras
+    keras.utils.set_random_seed(7)
+    return sm.embedding((S, S, 4), "mid", layer, width=W, merge=merge)[0]
+
+
+@pytest.mark.parametrize("conv,pool", [("conv1", "pool1"), ("conv5", "pool5")])
+def test_concat_before_or_after_a_max_pool_is_one_network_a_sum_is_not(conv, pool):
+    X = _frames(6, 4, 3)
+    a, b = _seeded_mid(conv, "concat"), _seeded_mid(pool, "concat")
+    assert [w.shape for w in a.weights] == [w.shape for w in b.weights]
+    assert np.allclose(sm.describe(a, X), sm.describe(b, X), atol=1e-5)   # pool(concat) = concat(pool)
+    a, b = _seeded_mid(conv, "sum"), _seeded_mid(pool, "sum")
+    assert all(np.array_equal(u, v) for u, v in zip(a.get_weights(), b.get_weights()))   # same weights,
+    assert not np.allclose(sm.describe(a, X), sm.describe(b, X), atol=1e-3)             # other network
 
 
 def test_bad_input_raises_value_error():
