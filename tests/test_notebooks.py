@@ -119,7 +119,59 @@ def _check_09(folder):
     assert len(d) > 0
 
 
+def _check_10(folder):
+    sup = pd.read_csv(folder / "supervisions.csv")
+    trained = sup[sup.train_pairs > 0]
+    assert trained.supervision.tolist() == ["softmax", "contrastive", "multitask"]
+    assert (trained.weights == "trained here").all() and (trained.label.str.endswith("(trained here)")).all()
+    assert (trained.train_pairs == TINY["siamese_epochs"] * TINY["siamese_pairs"]).all()
+    assert (trained.dim == 128).all() and (trained.train_s > 0).all()
+    assert set(sup.weights) == {"trained here", "random init", "none"}      # + untrained and pixels rows
+    assert sup["AP_%"].between(0, 100).all() and sup["R@100P_%"].between(0, 100).all()
+    fus = pd.read_csv(folder / "fusions.csv")
+    assert fus[fus.fusion == "mid"].layer.tolist() == TINY["mid_layers"]
+    assert {"early", "late", "RGB only", "late (rgb stream)", "late (depth stream)"} <= set(fus.fusion)
+    assert (fus.weights == "trained here").all() and fus["AP_%"].between(0, 100).all()
+    t2 = pd.read_csv(folder / "table2_mid_level_layers.csv")
+    assert t2.quantity.str.endswith(tuple(TINY["mid_layers"])).all() and len(t2) == len(TINY["mid_layers"])
+    assert pd.to_numeric(t2["this run"]).between(0, 1).all() and t2.paper.notna().all()
+    t = pd.read_csv(folder / "timing.csv")
+    assert (t.s_per_image_batched > 0).all() and (t.s_per_image_one_at_a_time > 0).all()
+    s = json.loads((folder / "summary.json").read_text())
+    assert s["labelled_frames_near_heldout"] == 0 and s["last_train_frame"] < s["first_heldout_frame"]
+    assert s["networks_trained"] == 3 + 2 + len(TINY["mid_layers"])
+
+
 CHECKS = {"01_spot_grouping": _check_01, "02_training_over_seeds": _check_02,
           "03_confusion_matrix": _check_03, "05_dictionary_threshold": _check_05, "06_speed": _check_06,
           "07_feature_baselines": _check_07, "08_descriptor_postprocessing": _check_08,
-          "09_rgbd_features": _check_09}
+          "09_rgbd_features": _check_09, "10_siamese_rgbd": _check_10}
+
+
+def test_10_siamese_rgbd_without_depth(tiny_sequence, tmp_path, monkeypatch):
+    """On a folder without depth/ notebook 10 says it skips the fusions, and still writes its tables,
+    figures and manifest."""
+    import shutil
+
+    import papermill
+
+    seq = tmp_path / "no-depth"
+    shutil.copytree(tiny_sequence, seq, ignore=shutil.ignore_patterns("depth"))
+    monkeypatch.setenv("PYTHONPATH", str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    monkeypatch.setenv("GREENLOOP_CACHE", str(tmp_path / "models"))
+    monkeypatch.setenv("TF_CPP_MIN_LOG_LEVEL", "2")
+    out = tmp_path / "10.ipynb"
+    papermill.execute_notebook(str(ROOT / "notebooks" / "10_siamese_rgbd.ipynb"), str(out), kernel_name="greenloop",
+                               cwd=str(ROOT), parameters=dict(TINY, dataset=str(seq), results_dir=str(tmp_path),
+                                                              supervisions=["multitask"]),
+                               execution_timeout=600, progress_bar=False)
+    folder = tmp_path / "10_siamese_rgbd"
+    text = out.read_text()
+    assert "has no depth/ folder: the RGB-D fusion section is SKIPPED" in text
+    assert json.loads((folder / "manifest.json").read_text())["parameters"]["has_depth"] is False
+    assert (folder / "figure8_supervisions.png").is_file() and (folder / "figure9_skipped.png").is_file()
+    assert pd.read_csv(folder / "fusions.csv").status.str.startswith("skipped").all()
+    assert (pd.read_csv(folder / "table2_mid_level_layers.csv")["this run"] == "skipped").all()
+    sup = pd.read_csv(folder / "supervisions.csv")
+    assert sup[sup.train_pairs > 0].supervision.tolist() == ["multitask"] and sup["AP_%"].between(0, 100).all()
+    assert json.loads((folder / "summary.json").read_text())["networks_trained"] == 1
