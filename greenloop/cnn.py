@@ -186,25 +186,41 @@ def train(X: np.ndarray, y: np.ndarray, seed: int, epochs: int = 200, batch_size
     if fast == "fused":  # keys fused runs apart from those of the first fused trainer (NumPy's order)
         params["batch_order"] = "model.fit"
     key = cache_key(X, y, **params)
-    folder = None
-    if cache:
-        root = CACHE_DIR if cache is True else Path(cache)
-        folder = root / key
-        with _locked(root / f"{key}.lock"):
-            if (folder / "model.keras").is_file():
-                return _load_cached(folder)
-            result = _fit(X, y, progress, **params)
-            tmp = Path(tempfile.mkdtemp(dir=root, prefix=f".tmp-{key}-"))
-            model, history, split_ = result
-            model.save(tmp / "model.keras")
-            (tmp / "history.json").write_text(json.dumps(history))
-            np.savez(tmp / "split.npz", **split_)
-            (tmp / "params.json").write_text(json.dumps(dict(params, key=key), indent=1))
-            if folder.exists():
-                shutil.rmtree(folder)
-            os.replace(tmp, folder)
-            return result
-    return _fit(X, y, progress, **params)
+
+    def save(folder, result):
+        model, history, split_ = result
+        model.save(folder / "model.keras")
+        (folder / "history.json").write_text(json.dumps(history))
+        np.savez(folder / "split.npz", **split_)
+        (folder / "params.json").write_text(json.dumps(dict(params, key=key), indent=1))
+
+    return cached(key, cache, lambda: _fit(X, y, progress, **params), save, _load_cached)
+
+
+def cached(key: str, cache, fit, save, load, marker: str = "model.keras"):
+    """Compute ``fit()`` once per ``key`` and keep it on disk (the model cache of every trainer).
+
+    key: e.g. ``cache_key(...)``. cache: True (results/models/ or $GREENLOOP_CACHE), a folder, or
+    False (just return fit()). save(folder, result) writes fit()'s result into an empty folder;
+    load(folder) reads it back; a key counts as cached when ``<root>/<key>/<marker>`` exists.
+    The folder is written under a temporary name and renamed, all under a file lock on
+    ``<root>/<key>.lock``, so parallel ``make -j`` jobs compute each key once and never read a
+    half-written folder. Returns fit()'s result, or load(folder) when the key was cached.
+    """
+    if not cache:
+        return fit()
+    root = CACHE_DIR if cache is True else Path(cache)
+    folder = root / key
+    with _locked(root / f"{key}.lock"):
+        if (folder / marker).is_file():
+            return load(folder)
+        result = fit()
+        tmp = Path(tempfile.mkdtemp(dir=root, prefix=f".tmp-{key}-"))
+        save(tmp, result)
+        if folder.exists():
+            shutil.rmtree(folder)
+        os.replace(tmp, folder)
+        return result
 
 
 TRAINERS = ("plain", "xla", "fused")

@@ -199,10 +199,33 @@ def _check_11(folder):
     assert (folder / "figure7_pr_curves.png").is_file() and (folder / "scaling.png").is_file()
 
 
+def _check_10(folder):
+    sup = pd.read_csv(folder / "supervisions.csv")
+    trained = sup[sup.train_pairs > 0]
+    assert trained.supervision.tolist() == ["softmax", "contrastive", "multitask"]
+    assert (trained.weights == "trained here").all() and (trained.label.str.endswith("(trained here)")).all()
+    assert (trained.train_pairs == TINY["siamese_epochs"] * TINY["siamese_pairs"]).all()
+    assert (trained.dim == 128).all() and (trained.train_s > 0).all()
+    assert set(sup.weights) == {"trained here", "random init", "none"}      # + untrained and pixels rows
+    assert sup["AP_%"].between(0, 100).all() and sup["R@100P_%"].between(0, 100).all()
+    fus = pd.read_csv(folder / "fusions.csv")
+    assert fus[fus.fusion == "mid"].layer.tolist() == TINY["mid_layers"]
+    assert {"early", "late", "RGB only", "late (rgb stream)", "late (depth stream)"} <= set(fus.fusion)
+    assert (fus.weights == "trained here").all() and fus["AP_%"].between(0, 100).all()
+    t2 = pd.read_csv(folder / "table2_mid_level_layers.csv")
+    assert t2.quantity.str.endswith(tuple(TINY["mid_layers"])).all() and len(t2) == len(TINY["mid_layers"])
+    assert pd.to_numeric(t2["this run"]).between(0, 1).all() and t2.paper.notna().all()
+    t = pd.read_csv(folder / "timing.csv")
+    assert (t.s_per_image_batched > 0).all() and (t.s_per_image_one_at_a_time > 0).all()
+    s = json.loads((folder / "summary.json").read_text())
+    assert s["labelled_frames_near_heldout"] == 0 and s["last_train_frame"] < s["first_heldout_frame"]
+    assert s["networks_trained"] == 3 + 2 + len(TINY["mid_layers"])
+
+
 CHECKS = {"01_spot_grouping": _check_01, "02_training_over_seeds": _check_02,
           "03_confusion_matrix": _check_03, "05_dictionary_threshold": _check_05, "06_speed": _check_06,
           "07_feature_baselines": _check_07, "08_descriptor_postprocessing": _check_08,
-          "09_rgbd_features": _check_09, "11_lsh_matching": _check_11}
+          "09_rgbd_features": _check_09, "10_siamese_rgbd": _check_10, "11_lsh_matching": _check_11}
 
 
 def _check_00_pairs(folder):
@@ -229,5 +252,17 @@ def _check_09_pairs(folder):
     assert (d["this run"] == "skipped").all()
 
 
+def _check_10_pairs(folder):
+    """Without depth/ notebook 10 skips the fusions and still writes its tables and figures."""
+    assert json.loads((folder / "manifest.json").read_text())["parameters"]["has_depth"] is False
+    assert (folder / "figure8_supervisions.png").is_file() and (folder / "figure9_skipped.png").is_file()
+    assert pd.read_csv(folder / "fusions.csv").status.str.startswith("skipped").all()
+    assert (pd.read_csv(folder / "table2_mid_level_layers.csv")["this run"] == "skipped").all()
+    sup = pd.read_csv(folder / "supervisions.csv")
+    assert sup[sup.train_pairs > 0].supervision.tolist() == ["softmax", "contrastive", "multitask"]
+    assert sup["AP_%"].between(0, 100).all()
+    assert json.loads((folder / "summary.json").read_text())["networks_trained"] == 3
+
+
 PAIR_CHECKS = {"00_dataset": _check_00_pairs, "03_confusion_matrix": _check_03_pairs,
-               "09_rgbd_features": _check_09_pairs}
+               "09_rgbd_features": _check_09_pairs, "10_siamese_rgbd": _check_10_pairs}
