@@ -1,4 +1,4 @@
-"""Speed benchmark (issue #5): the paper's pipeline as written vs greenloop.stream, in one process.
+"""Speed benchmark: the paper's pipeline as written vs greenloop.stream, in one process.
 
     python -m greenloop.bench [--out results/bench] [--dataset data/synthetic-greenhouse] [--quick]
                               [--accuracy-seeds 10]

@@ -1,4 +1,4 @@
-"""The CPU speed paths' building blocks (issue #5): a thread helper and small numba kernels.
+"""The CPU speed paths' building blocks: a thread helper and small numba kernels.
 
 * ``run_chunked``: split a range over a few threads (BLAS calls, OpenCV and the numba kernels
   here release the GIL). One mechanism for every parallel loop of greenloop's speed paths, so no

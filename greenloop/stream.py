@@ -1,4 +1,4 @@
-"""Streaming loop-closure detection: raw camera frames in, closure events out (issue #5, speed).
+"""Streaming loop-closure detection: raw camera frames in, closure events out (the speed path).
 
 ``Detector`` takes raw frames one at a time (``update``) or in windows (``update_many``), applies
 the main paper's preprocessing (gray, 32x32, [0, 1]), classifies them with the paper's CNN and
