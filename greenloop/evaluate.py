@@ -30,13 +30,13 @@ j is in the mask (the earlier frame i may be anywhere). Tune with ``queries=tune
 from __future__ import annotations
 
 import numpy as np
-from sklearn.metrics import average_precision_score, precision_recall_curve
+from sklearn.metrics import average_precision_score, precision_recall_curve, roc_curve
 
 from greenloop.groundtruth import revisit_frames
 
 __all__ = [
     "pair_mask", "pair_scores", "pr_curve", "average_precision", "recall_at_100_precision",
-    "recall_at_k", "operating_point", "split_mask",
+    "recall_at_k", "operating_point", "split_mask", "mean_per_class_accuracy", "mpca_threshold",
 ]
 
 _NO_LOOPS = ("the ground truth has no loops among the counted pairs (|i - j| > exclude={exclude}"
@@ -195,6 +195,34 @@ def recall_at_k(S, GT, k: int = 1, exclude: int = 150, queries=None) -> float:
     first = np.where(tq & (Sq == best), rows, n).min(0)               # earliest true loop at best
     ahead = cq & ((Sq > best) | ((Sq == best) & (rows < first)))
     return float(np.mean(ahead.sum(0) < k))
+
+
+# -------------------------------------------------------------- mean per-class accuracy
+def mean_per_class_accuracy(S, GT, threshold: float, exclude: int = 150, queries=None) -> float:
+    """Mean per-class accuracy (MPCA) of declaring every counted pair with S >= threshold a loop.
+
+    The two classes are the counted pairs (:func:`pair_scores`) that are loops and those that
+    are not; MPCA = (recall on loop pairs + recall on non-loop pairs) / 2, scikit-learn's
+    balanced accuracy. 0.5 is chance, 1 is perfect. The ResNet/Inception/ZCA paper reports it
+    (Table III) without stating its threshold; pick one with :func:`mpca_threshold` on a tuning
+    part and score it here on another. S, GT, exclude, queries as in :func:`pair_scores`;
+    threshold in the units of S. Returns a float in [0, 1].
+    """
+    y_true, y_score = pair_scores(S, GT, exclude, queries)
+    declared = y_score >= threshold
+    return float((declared[y_true].mean() + (~declared[~y_true]).mean()) / 2)
+
+
+def mpca_threshold(S, GT, exclude: int = 150, queries=None) -> float:
+    """The threshold on S that maximises :func:`mean_per_class_accuracy` over the counted pairs
+    (the point of the ROC curve furthest above the diagonal, max TPR - FPR). Arguments as in
+    :func:`pair_scores`; call it with the tuning part's ``queries``. Returns a float in S's units
+    (``inf`` would declare nothing; it is never returned, since declaring the top pair is at
+    least as good)."""
+    y_true, y_score = pair_scores(S, GT, exclude, queries)
+    fpr, tpr, thr = roc_curve(y_true, y_score)
+    k = int(np.argmax(tpr - fpr))
+    return float(thr[k]) if np.isfinite(thr[k]) else float(thr[1])
 
 
 # -------------------------------------------------------------------- decision detectors

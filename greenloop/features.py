@@ -7,11 +7,17 @@ Backbones (``BACKBONES[name].dim`` is D)::
 
     name              D     descriptor                                              default input
     vgg19             512   block5_pool (max-pooled block5_conv4), global avg pool  224x224
+    vgg19_fc1         4096  fc1 of the whole VGG19 classifier (Zhang 2017's fully   224x224
+                            connected descriptor, OverFeat's nearest stand-in)      (fixed)
     resnet50/101/152  2048  conv5_block3_out (last residual block), global avg pool  224x224
+    inceptionv3       2048  mixed10 (last Inception block), global avg pool; the     224x224
+                            closest Keras network to Inception-v4 (not in Keras)
     efficientnetb0    1280  top_activation (1x1 conv 320->1280, BN, swish), GAP      224x224
     mobilenetv3small  576   hard-swish after conv_1 (1x1 conv 96->576, BN), GAP      224x224
     ghostnet          960   blocks.9 (1x1 ConvBnAct 160->960, ReLU), GAP; timm
                             ghostnet_100 rebuilt in greenloop.ghostnet               224x224
+    shufflenetv2      1024  conv5 (1x1 conv 464->1024, BN, ReLU) of ShuffleNet v2    224x224
+                            1.0x (greenloop.shufflenet), GAP; random init only
     mobilenetv1       1024  Conv2d_13_pointwise (last 7x7 map) of Google's uint8     224x224
                             TFLite MobileNet v1 1.0 embedding graph, dequantised,    (fixed)
                             GAP in float32 (greenloop.mobilenet_tflite)
@@ -25,8 +31,7 @@ Backbones (``BACKBONES[name].dim`` is D)::
     spot_cnn          68    penultimate layer (Dense 68, ReLU) of the main paper's   the model's
                             trained CNN (greenloop.cnn.build)                         (32x32 gray)
 
-ShuffleNet v2, the fourth network of Qi et al. 2024, is not offered: Keras ships no ShuffleNet and
-no ImageNet weights for one. "GAP" is global average pooling of the last feature map (the classifier head is dropped:
+"GAP" is global average pooling of the last feature map (the classifier head is dropped:
 ``include_top=False``), so every CNN descriptor is independent of the input size. Each Keras
 backbone gets its own ``keras.applications.<module>.preprocess_input`` on RGB 0..255 (VGG/ResNet:
 caffe-style BGR mean subtraction; EfficientNet and MobileNetV3 normalise inside the model); GhostNet
@@ -34,7 +39,7 @@ gets timm's ImageNet mean/std; MobileNet v1/v2 ``x / 127.5 - 1`` (quantised to t
 input with its scale and zero point); EfficientNet-Lite0 ``(x - 127) / 128``, as the TensorFlow Lite
 models were trained. The TFLite graphs take only 224x224: mobilenetv1/v2 refuse another
 ``input_size``, with pretrained and random-init weights alike, so a result never depends on whether
-the files were found. Frames are resized to the input size with OpenCV (INTER_AREA when
+the files were found; so does vgg19_fc1, whose fully connected layer takes a 224x224 input's 7x7 map. Frames are resized to the input size with OpenCV (INTER_AREA when
 shrinking, bilinear when enlarging), as ``greenloop.data.load_frames`` does.
 
 Weights (CNN backbones), the ``weights`` argument:
@@ -90,6 +95,7 @@ from . import data as _data
 from . import efficientnet_lite as _lite
 from . import ghostnet as _ghostnet
 from . import mobilenet_tflite as _tflite
+from . import shufflenet as _shufflenet
 
 DEFAULT_VOCAB_SIZE = 500       # SIFT bag-of-words vocabulary (visual words)
 DEPTH_MAX_M = 10.0             # depth -> uint8 mapping: 0 m -> 0, >= DEPTH_MAX_M -> 255 (linear)
@@ -118,12 +124,18 @@ class Backbone:
     app: str | None = None      # keras.applications constructor
     module: str | None = None   # keras.applications submodule holding preprocess_input
     fixed_input: bool = False
+    top_layer: str | None = None   # 'keras' only: build with the classifier, describe by this layer
 
 
 BACKBONES: dict[str, Backbone] = {b.name: b for b in (
     Backbone("vgg19", "keras", 512, (224, 224),
              "block5_pool (max-pooled block5_conv4), global average pooled",
              "vgg19_weights_tf_dim_ordering_tf_kernels_notop.h5", "VGG19", "vgg19"),
+    Backbone("vgg19_fc1", "keras", 4096, (224, 224),
+             "fc1 (first fully connected layer, 4096, ReLU) of the whole VGG19 classifier; the "
+             "nearest Keras stand-in for OverFeat's fully connected descriptor (Zhang 2017)",
+             "vgg19_weights_tf_dim_ordering_tf_kernels.h5", "VGG19", "vgg19", fixed_input=True,
+             top_layer="fc1"),
     Backbone("resnet50", "keras", 2048, (224, 224),
              "conv5_block3_out (last residual block), global average pooled",
              "resnet50_weights_tf_dim_ordering_tf_kernels_notop.h5", "ResNet50", "resnet"),
@@ -133,6 +145,11 @@ BACKBONES: dict[str, Backbone] = {b.name: b for b in (
     Backbone("resnet152", "keras", 2048, (224, 224),
              "conv5_block3_out (last residual block), global average pooled",
              "resnet152_weights_tf_dim_ordering_tf_kernels_notop.h5", "ResNet152", "resnet"),
+    Backbone("inceptionv3", "keras", 2048, (224, 224),
+             "mixed10 (last Inception block), global average pooled; the closest Keras network to "
+             "the ZCA paper's Inception-v4, which Keras does not ship",
+             "inception_v3_weights_tf_dim_ordering_tf_kernels_notop.h5", "InceptionV3",
+             "inception_v3"),
     Backbone("efficientnetb0", "keras", 1280, (224, 224),
              "top_activation (1x1 conv 320->1280, BN, swish), global average pooled",
              "efficientnetb0_notop.h5", "EfficientNetB0", "efficientnet"),
@@ -143,6 +160,9 @@ BACKBONES: dict[str, Backbone] = {b.name: b for b in (
     Backbone("ghostnet", "ghostnet", _ghostnet.NUM_FEATURES, (224, 224),
              "blocks.9 (1x1 ConvBnAct 160->960, ReLU; before conv_head), global average pooled",
              _ghostnet.WEIGHTS_FILENAME),
+    Backbone("shufflenetv2", "shufflenet", _shufflenet.NUM_FEATURES, (224, 224),
+             "conv5 (1x1 conv 464->1024, BN, ReLU) of ShuffleNet v2 1.0x, global average pooled; "
+             "random init only (no ImageNet weights for it offline)"),
     Backbone("mobilenetv1", "tflite", _tflite.GRAPHS["mobilenetv1"].dim, _tflite.INPUT_SIZE,
              "Conv2d_13_pointwise (last 7x7 map) of the uint8 TFLite MobileNet v1 1.0 embedding "
              "graph, dequantised, global average pooled",
@@ -162,7 +182,7 @@ BACKBONES: dict[str, Backbone] = {b.name: b for b in (
     Backbone("spot_cnn", "spot_cnn", None, None,
              "input of the last Dense layer (the main paper's Dense 68 ReLU)"),
 )}
-CNN_KINDS = ("keras", "ghostnet", "efficientnet_lite", "tflite")
+CNN_KINDS = ("keras", "ghostnet", "efficientnet_lite", "tflite", "shufflenet")
 CNN_BACKBONES = tuple(n for n, b in BACKBONES.items() if b.kind in CNN_KINDS)
 WEIGHTS_ENV = "GREENLOOP_WEIGHTS"   # folder(s) of ImageNet weight files, searched first
 TFLITE_LABEL = "imagenet, tflite uint8"
@@ -173,6 +193,7 @@ _PORTS = {
                  ".safetensors", _ghostnet.load_timm_weights),
     "efficientnet_lite": (lambda shape: _lite.build_efficientnet_lite0(input_shape=shape),
                           ".pth", _lite.load_weights),
+    "shufflenet": (lambda shape: _shufflenet.build_shufflenet_v2(input_shape=shape), None, None),
 }
 
 
@@ -266,6 +287,10 @@ def imagenet_weights_path(backbone: str) -> Path | None:
 
 
 def _missing_weights_message(b: Backbone) -> str:
+    if b.weights_file is None:
+        return (f"{b.name} has no ImageNet weights file anywhere greenloop can read (Keras ships none "
+                f"and there is no offline copy): pass weights=None for its random-init row, or the "
+                f"path of Keras weights (.weights.h5) saved from the same greenloop port")
     where = _ghostnet.keras_models_dir() / b.weights_file
     if b.kind == "ghostnet":
         how = ("download timm/ghostnet_100.in1k model.safetensors on a machine with internet "
@@ -370,7 +395,7 @@ def _cnn_model(name: str, source_key, size: tuple[int, int]):
         model = _seeded(lambda: build(shape))
         if source is not None:
             path = Path(source)
-            if path.suffix == suffix:
+            if suffix is not None and path.suffix == suffix:
                 load_native(model, path)  # ValueError on a wrong architecture
             else:
                 try:
@@ -381,20 +406,26 @@ def _cnn_model(name: str, source_key, size: tuple[int, int]):
                                      f"same port): {_short(e)}") from e
         return model
     ctor = getattr(keras.applications, b.app)
-    kwargs = dict(include_top=False, input_shape=shape, pooling="avg")
+    kwargs = dict(include_top=b.top_layer is not None, input_shape=shape)
+    if b.top_layer is None:
+        kwargs["pooling"] = "avg"
     if source is None:
-        return _seeded(lambda: ctor(weights=None, **kwargs))
-    if source == "download":
+        model = _seeded(lambda: ctor(weights=None, **kwargs))
+    elif source == "download":
         try:
-            return ctor(weights="imagenet", **kwargs)
+            model = ctor(weights="imagenet", **kwargs)
         except Exception as e:
             raise WeightsNotFoundError(f"{_missing_weights_message(b)}. Keras could not download "
                                        f"{b.weights_file}: {e}") from e
-    try:
-        return _seeded(lambda: ctor(weights=str(source), **kwargs))
-    except Exception as e:
-        raise ValueError(f"weights file {source} does not fit {b.name} ({b.app}, include_top=False): "
-                         f"{type(e).__name__}: {_short(e)}") from e
+    else:
+        try:
+            model = _seeded(lambda: ctor(weights=str(source), **kwargs))
+        except Exception as e:
+            raise ValueError(f"weights file {source} does not fit {b.name} ({b.app}, include_top="
+                             f"{kwargs['include_top']}): {type(e).__name__}: {_short(e)}") from e
+    if b.top_layer is None:
+        return model
+    return keras.Model(model.inputs, model.get_layer(b.top_layer).output, name=b.name)
 
 
 @functools.lru_cache(maxsize=8)
@@ -423,6 +454,8 @@ def _preprocess_fn(b: Backbone):
         return _ghostnet.preprocess_input
     if b.kind == "efficientnet_lite":
         return _lite.preprocess_input
+    if b.kind == "shufflenet":
+        return _shufflenet.preprocess_input
     import importlib
     module = importlib.import_module(f"keras.applications.{b.module}")
     return module.preprocess_input
@@ -788,9 +821,10 @@ def extract(frames_or_folder, backbone: str, weights="auto", batch_size: int = 3
         raise ValueError(f"step must be an integer >= 1, got {step}")
     size = _size(input_size, b.input_size)
     if b.fixed_input and size != b.input_size:
-        raise ValueError(f"{b.name} runs at its fixed {b.input_size[0]}x{b.input_size[1]} input (the "
-                         f"TFLite graph's; its random-init control uses the same), got input_size="
-                         f"{input_size!r}: pass input_size=None")
+        why = ("its fully connected layer takes the 7x7 map of a 224x224 input" if b.top_layer
+               else "the TFLite graph's; its random-init control uses the same")
+        raise ValueError(f"{b.name} runs at its fixed {b.input_size[0]}x{b.input_size[1]} input "
+                         f"({why}), got input_size={input_size!r}: pass input_size=None")
     label, source = _resolve(b.name, weights)
     if b.kind in CNN_KINDS:
         if min(size) < 32:

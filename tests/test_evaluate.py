@@ -89,6 +89,22 @@ def test_recall_at_100_precision_hand_examples():
     assert ev.recall_at_100_precision(S4, GT, exclude=EXCL) == pytest.approx(3 / 4)
 
 
+def test_mean_per_class_accuracy_hand_example():
+    S, GT = hand_example()
+    # declaring the top four (0.95 .. 0.80; + - + +): 3 of 4 loops, 5 of 6 non-loops
+    assert ev.mean_per_class_accuracy(S, GT, 0.80, exclude=EXCL) == pytest.approx((3 / 4 + 5 / 6) / 2)
+    # everything declared: all loops, no non-loop; nothing declared: the reverse (chance, 0.5)
+    assert ev.mean_per_class_accuracy(S, GT, 0.0, exclude=EXCL) == pytest.approx(0.5)
+    assert ev.mean_per_class_accuracy(S, GT, 1.0, exclude=EXCL) == pytest.approx(0.5)
+    # the best threshold over the ten pairs is the fourth score (the pairs inside the window,
+    # scored 0.99 and 0.98, must not move it)
+    assert ev.mpca_threshold(S, GT, exclude=EXCL) == pytest.approx(0.80)
+    # a query mask: only pairs whose later frame is 6 (scores .50 -, .40 +, .30 -, .20 -)
+    q = np.arange(N) == 6
+    assert ev.mpca_threshold(S, GT, exclude=EXCL, queries=q) == pytest.approx(0.40)
+    assert ev.mean_per_class_accuracy(S, GT, 0.40, exclude=EXCL, queries=q) == pytest.approx((1 + 2 / 3) / 2)
+
+
 def naive_recall_at_k(S, GT, k, exclude, queries=None):
     hits, total = 0, 0
     for j in range(len(S)):

@@ -18,7 +18,8 @@ from greenloop import data, features as F, ghostnet as G  # noqa: E402
 SIZE = 32  # smallest input every Keras application accepts
 DIMS = {"vgg19": 512, "resnet50": 2048, "resnet101": 2048, "resnet152": 2048,
         "efficientnetb0": 1280, "mobilenetv3small": 576, "ghostnet": 960,
-        "mobilenetv1": 1024, "mobilenetv2": 1280, "efficientnetlite0": 1280}
+        "mobilenetv1": 1024, "mobilenetv2": 1280, "efficientnetlite0": 1280,
+        "inceptionv3": 2048, "vgg19_fc1": 4096, "shufflenetv2": 1024}
 
 
 @pytest.fixture(autouse=True)
@@ -75,7 +76,7 @@ def test_backbone_table():
     for name, d in DIMS.items():
         assert F.BACKBONES[name].dim == d
         assert F.BACKBONES[name].input_size == (224, 224)
-        assert F.BACKBONES[name].weights_file
+        assert F.BACKBONES[name].weights_file or name == "shufflenetv2"   # no weights exist offline
     assert F.BACKBONES["pixels"].dim == 1024
 
 
@@ -83,7 +84,7 @@ def test_unknown_backbone_lists_valid_names(frames):
     with pytest.raises(ValueError, match="vgg19.*ghostnet"):
         F.extract(frames, "alexnet")
     with pytest.raises(ValueError, match="unknown backbone"):
-        F.weights_used("shufflenetv2", None)
+        F.weights_used("shufflenetv3", None)
 
 
 @pytest.mark.parametrize("backbone", ["vgg19", "resnet50", "efficientnetb0", "mobilenetv3small",
@@ -103,6 +104,28 @@ def test_deep_resnets_build(backbone):
     """Same code path as resnet50; building (not running) them keeps the suite fast."""
     model = F._cnn_model(backbone, None, (SIZE, SIZE))
     assert model.output_shape == (None, DIMS[backbone])
+    F.clear_cache()
+
+
+def test_inception_and_vgg19_fc1_build():
+    """InceptionV3 (Inception-v4's stand-in) needs >= 75x75; vgg19_fc1 is the whole classifier cut
+    at fc1, so it runs at 224x224 only and says why."""
+    assert F._cnn_model("inceptionv3", None, (75, 75)).output_shape == (None, 2048)
+    fc1 = F._cnn_model("vgg19_fc1", None, (224, 224))
+    assert fc1.output_shape == (None, 4096) and fc1.layers[-1].name == "fc1"
+    F.clear_cache()
+    with pytest.raises(ValueError, match="fixed 224x224.*fully connected"):
+        F.extract(np.zeros((1, 32, 32, 3), np.uint8), "vgg19_fc1", None, input_size=SIZE)
+
+
+def test_shufflenet_is_random_init_only(frames):
+    X, info = F.extract(frames, "shufflenetv2", None, input_size=SIZE, progress=False, return_info=True)
+    assert X.shape == (len(frames), 1024) and np.isfinite(X).all() and info.weights == "random init"
+    assert F.weights_used("shufflenetv2") == "random init"
+    with pytest.warns(UserWarning, match="RANDOM-INITIALISED.*no ImageNet weights file"):
+        F.extract(frames[:1], "shufflenetv2", "auto", input_size=SIZE, progress=False)
+    with pytest.raises(F.WeightsNotFoundError, match="shufflenetv2 has no ImageNet weights"):
+        F.extract(frames, "shufflenetv2", "imagenet", input_size=SIZE, progress=False)
     F.clear_cache()
 
 

@@ -150,6 +150,9 @@ def _check_08(folder):
     assert {"raw", "L2", "ZCA, tuned dim"} <= set(t.variant)
     assert t["AP_eval_%"].between(0, 100).all() and t["AP_tune_%"].between(0, 100).all()
     assert set(t["size"]) <= set(TINY["median_sizes"])
+    assert t["MPCA_eval"].between(0, 1).all()                 # mean per-class accuracy, threshold tuned
+    for fig in ("pr_raw_vs_whitened", "similarity_raw_vs_whitened"):   # Zhang 2017 Figs. 5 and 4
+        assert (folder / f"{fig}.png").stat().st_size > 0
     tuning = pd.read_csv(folder / "tuning.csv")
     assert (tuning.knob == "pca dim").any() and tuning.knob.str.startswith("median size").any()
     m = json.loads((folder / "manifest.json").read_text())
