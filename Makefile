@@ -39,7 +39,7 @@ NORDLAND  := data/nordland
 NORDLAND_SRC ?= $(if $(wildcard ../shared/real/nordland/summer),../shared/real/nordland,)
 NORDLAND_URL ?= https://github.com/TimQuelch/seqslam
 
-.PHONY: all help venv synthetic data nordland test quick sweep bench clean-results
+.PHONY: all help venv synthetic data nordland test quick sweep bench clean-results readme-coverage
 .DEFAULT_GOAL := help
 
 help: ## this list
@@ -99,12 +99,19 @@ else
 DATA_DEP := $(DATASET)
 endif
 
-all: $(HTML) $(RESULTS)/tables.md results/datasets.md ## run every notebook into results/, render HTML, assemble results/tables.md
+all: $(HTML) $(RESULTS)/tables.md results/datasets.md results/coverage.md ## run every notebook into results/, render HTML, assemble results/tables.md
 
 # One table across every dataset that has results: results/ (synthetic) and results/<name>/.
 DATASET_RESULTS := results $(patsubst %/07_feature_baselines/,%,$(wildcard results/*/07_feature_baselines/))
 results/datasets.md: $(wildcard $(DATASET_RESULTS:%=%/*/summary.json)) $(RESULTS)/tables.md
 	$(BIN)/python -m greenloop.report --datasets $@ $(DATASET_RESULTS)
+
+# Which table and figure of the papers the results reproduce (greenloop.coverage), read from them.
+results/coverage.md: $(wildcard $(DATASET_RESULTS:%=%/*/manifest.json)) greenloop/coverage.py
+	$(BIN)/python -m greenloop.report --coverage $@ $(DATASET_RESULTS)
+
+readme-coverage: results/coverage.md ## refresh the README's coverage table from the results folders
+	$(BIN)/python -m greenloop.coverage README.md $(DATASET_RESULTS)
 
 $(RESULTS)/%.ipynb: notebooks/%.ipynb $(SOURCES) $(DATA_DEP) | $(STAMP)
 	@mkdir -p $(@D)

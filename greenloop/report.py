@@ -156,6 +156,8 @@ def assemble_tables(results_dir="results", out: str | Path | None = None) -> Pat
              f"`{RUN}`.\n"]
     folders = sorted(p for p in results_dir.iterdir() if p.is_dir() and p.name[:2].isdigit())
     folders += [results_dir / "bench"] if (results_dir / "bench").is_dir() else []
+    if (results_dir / "coverage.md").is_file():
+        parts.append("\n## Coverage of the papers\n\n" + (results_dir / "coverage.md").read_text())
     for folder in folders:
         tables = sorted(folder.glob("*.md"))
         if not tables:
@@ -238,10 +240,22 @@ def write_cross_dataset(results_dirs, out) -> Path:
                             "and scored on the revisit). Every weight label is in the method name.")
 
 
+def write_coverage(results_dirs, out) -> Path:
+    """Write :func:`greenloop.coverage.coverage` of these results folders as ``out`` (.md, .csv)."""
+    from . import coverage
+    return write_table(coverage.coverage(results_dirs), Path(out).with_suffix(""),
+                       title="Coverage: every table and figure of the five papers",
+                       note="Status read from the results folders (greenloop.coverage): an item whose "
+                            "output is in none of them is 'not run'. `datasets`: where its output is.")
+
+
 if __name__ == "__main__":
     # python -m greenloop.report [RESULTS]               -> RESULTS/tables.md
     # python -m greenloop.report --datasets OUT DIR ...  -> OUT (.md, .csv) across datasets
+    # python -m greenloop.report --coverage OUT DIR ...  -> OUT (.md, .csv): the papers' coverage
     if sys.argv[1:2] == ["--datasets"]:
         print(write_cross_dataset(sys.argv[3:], sys.argv[2]))
+    elif sys.argv[1:2] == ["--coverage"]:
+        print(write_coverage(sys.argv[3:], sys.argv[2]))
     else:
         print(assemble_tables(*(sys.argv[1:2] or ["results"])))

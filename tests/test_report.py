@@ -48,3 +48,35 @@ def test_cross_dataset_table_puts_datasets_side_by_side(tmp_path):
     assert "| pixels (none), cosine" in out.read_text()
     with pytest.raises(FileNotFoundError, match="make all"):
         report.cross_dataset([tmp_path / "absent"])
+
+
+def test_coverage_status_comes_from_the_outputs(tmp_path):
+    from greenloop import coverage
+    a, b = tmp_path / "a", tmp_path / "b"
+    for folder, name in ((a, "synthetic"), (b, "real")):
+        report.write_json(folder / "00_dataset" / "manifest.json", {"dataset": f"data/{name}"})
+    (a / "07_feature_baselines").mkdir()
+    (a / "07_feature_baselines" / "table2.csv").write_text("x\n")
+    t = coverage.coverage([a, b]).set_index(["paper", "item"])
+    assert len(t) == len(coverage.ITEMS) and t.index.is_unique
+    row = t.loc[(coverage.QI, "Table 2")]
+    assert row.status == "partly" and row.datasets == "synthetic"       # declared, and found in a only
+    missing = t.loc[(coverage.QI, "Table 6")]                             # declared reproduced, no file
+    assert missing.status == "not run" and "11_lsh_matching/table6.csv" in missing.note
+    assert t.loc[(coverage.ZHANG, "Table I")].status == "not reproduced"  # no output: declared status kept
+    assert set(t.status) <= {"reproduced", "partly", "not reproduced", "not an experiment", "not run"}
+    assert (t.status != "not an experiment").sum() > 20
+
+
+def test_readme_coverage_table_is_the_generated_one():
+    """The README's coverage table is what greenloop.coverage reads from the committed results."""
+    from pathlib import Path
+    from greenloop import coverage
+    root = Path(__file__).resolve().parents[1]
+    text = (root / "README.md").read_text()
+    start, end = "<!-- coverage:start -->\n", "<!-- coverage:end -->"
+    assert start in text and end in text, "README.md lost its coverage block"
+    block = text.split(start, 1)[1].split(end, 1)[0]
+    dirs = [root / "results"] + sorted(p.parent for p in (root / "results").glob("*/07_feature_baselines"))
+    assert block.strip() == coverage.markdown(dirs).strip(), (
+        "README coverage table is stale: make readme-coverage")
