@@ -102,7 +102,7 @@ endif
 all: $(HTML) $(RESULTS)/tables.md results/datasets.md results/coverage.md ## run every notebook into results/, render HTML, assemble results/tables.md
 
 # One table across every dataset that has results: results/ (synthetic) and results/<name>/.
-DATASET_RESULTS := results $(patsubst %/07_feature_baselines/,%,$(wildcard results/*/07_feature_baselines/))
+DATASET_RESULTS := results $(filter-out results/quick,$(patsubst %/07_feature_baselines/,%,$(wildcard results/*/07_feature_baselines/)))
 results/datasets.md: $(wildcard $(DATASET_RESULTS:%=%/*/summary.json)) $(RESULTS)/tables.md
 	$(BIN)/python -m greenloop.report --datasets $@ $(DATASET_RESULTS)
 
@@ -127,8 +127,10 @@ $(RESULTS)/%.html: $(RESULTS)/%.ipynb
 $(RESULTS)/tables.md: $(EXECUTED)
 	$(BIN)/python -m greenloop.report $(RESULTS)
 
-quick: ## the same notebooks with few epochs and seeds into results/quick/ (minutes)
-	$(MAKE) all RESULTS=results/quick PARAMS="-f params/quick.yaml $(PARAMS)"
+# RESULTS given on the command line wins (make quick RESULTS=results/mine); else results/quick/
+QUICK_RESULTS := $(if $(filter command line,$(origin RESULTS)),$(RESULTS),results/quick)
+quick: ## the same notebooks with few epochs and seeds into results/quick/ (or RESULTS=...; minutes)
+	$(MAKE) all RESULTS=$(QUICK_RESULTS) PARAMS="-f params/quick.yaml $(PARAMS)"
 
 # `make sweep`: greenloop.sweep over Dask (python -m greenloop sweep --help). Each --grid is one
 # word of SWEEP_GRID; points whose point.json says ok are skipped, so an interrupted sweep resumes.
