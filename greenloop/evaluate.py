@@ -37,6 +37,7 @@ from greenloop.groundtruth import revisit_frames
 __all__ = [
     "pair_mask", "pair_scores", "pr_curve", "average_precision", "recall_at_100_precision",
     "recall_at_k", "operating_point", "split_mask", "mean_per_class_accuracy", "mpca_threshold",
+    "tune_then_score",
 ]
 
 _NO_LOOPS = ("the ground truth has no loops among the counted pairs (|i - j| > exclude={exclude}"
@@ -316,3 +317,23 @@ def split_mask(n: int, fraction: float = 0.5, gt=None, gap: int = 0):
         raise ValueError(f"gap={gap} leaves no revisit frame in the evaluation part; use a "
                          f"smaller gap or a smaller fraction")
     return tune, evaluate
+
+
+def tune_then_score(candidates, GT, exclude: int, tune, evaluate) -> dict:
+    """Pick a knob's value by AP on the tuning queries and score the pick on the evaluation queries.
+
+    candidates: {value: S}, one (N, N) similarity matrix per candidate value of the knob (a
+        whitening dimension, a median-filter size, ...). GT, exclude: as in :func:`pair_scores`.
+    tune, evaluate: (N,) bool query masks from :func:`split_mask` (swap them for the second split).
+    Returns dict(value, AP_tune, AP_eval, R@100P_eval): the picked value (the first of equal
+    tuning APs), its AP on the tuning queries and its AP and recall at 100 % precision on the
+    evaluation queries, in [0, 1]. The evaluation ground truth never influences the pick.
+    """
+    if not candidates:
+        raise ValueError("candidates is empty: give at least one {value: S}")
+    tuned = {v: average_precision(S, GT, exclude, queries=tune) for v, S in candidates.items()}
+    best = max(tuned, key=tuned.get)
+    S = candidates[best]
+    return {"value": best, "AP_tune": tuned[best],
+            "AP_eval": average_precision(S, GT, exclude, queries=evaluate),
+            "R@100P_eval": recall_at_100_precision(S, GT, exclude, queries=evaluate)}

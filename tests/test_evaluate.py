@@ -254,3 +254,19 @@ def test_pose_similarity_is_perfect_on_greenhouse(greenhouse_poses):
     assert ev.average_precision(S, GT, 150, queries=tune) == pytest.approx(1.0)
     assert ev.average_precision(S, GT, 150, queries=evl) == pytest.approx(1.0)
     assert np.flatnonzero(tune).max() > 2000      # the revisit is at the end of the sequence
+
+
+def test_tune_then_score_picks_on_the_tuning_queries_only():
+    S, GT = hand_example()
+    early, late = np.arange(N) <= 4, np.arange(N) >= 5
+    bad = np.where(GT, 0.0, 1.0)                 # ranks every non-loop above every loop
+    # the candidate that is perfect on the tuning queries wins, whatever it does elsewhere
+    good_early = S.copy()
+    good_early[:, late] = bad[:, late]
+    good_early[late, :] = bad[late, :]
+    r = ev.tune_then_score({"a": good_early, "b": bad}, GT, EXCL, early, late)
+    assert r["value"] == "a" and r["AP_tune"] == pytest.approx(ev.average_precision(good_early, GT, EXCL, early))
+    assert r["AP_eval"] == pytest.approx(ev.average_precision(good_early, GT, EXCL, late))
+    assert r["R@100P_eval"] == ev.recall_at_100_precision(good_early, GT, EXCL, late)
+    with pytest.raises(ValueError, match="empty"):
+        ev.tune_then_score({}, GT, EXCL, early, late)

@@ -151,6 +151,9 @@ def _check_08(folder):
     assert t["AP_eval_%"].between(0, 100).all() and t["AP_tune_%"].between(0, 100).all()
     assert set(t["size"]) <= set(TINY["median_sizes"])
     assert t["MPCA_eval"].between(0, 1).all()                 # mean per-class accuracy, threshold tuned
+    two = pd.read_csv(folder / "second_split.csv")             # knobs re-picked with the parts swapped
+    assert two.split.nunique() == 2 and len(two) == 2 * 2 * len(done)
+    assert set(two[two.knob == "median size, L2"].picked) <= set(TINY["median_sizes"])
     for fig in ("pr_raw_vs_whitened", "similarity_raw_vs_whitened"):   # Zhang 2017 Figs. 5 and 4
         assert (folder / f"{fig}.png").stat().st_size > 0
     tuning = pd.read_csv(folder / "tuning.csv")
