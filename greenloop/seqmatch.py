@@ -45,8 +45,6 @@ the stream except the event list.
 from __future__ import annotations
 
 import math
-from collections import deque
-
 import numpy as np
 
 from . import evaluate
@@ -183,36 +181,23 @@ def contrast_normalise(s, window: int) -> np.ndarray:
     return np.where(sd > _EPS, (s - mu) / np.maximum(sd, _EPS), 0.0).astype(np.float32)
 
 
-def _offsets(seq_len: int, velocities) -> list[tuple[int, ...]]:
-    """Distinct row offsets round(v k), k = 0..seq_len-1, one tuple per velocity."""
-    return sorted({tuple(int(round(v * k)) for k in range(seq_len)) for v in velocities})
+def _offsets(seq_len: int, velocities) -> np.ndarray:
+    """Distinct row offsets round(v k), k = 0..seq_len-1: (V, seq_len) int, one row per velocity."""
+    rows = sorted({tuple(int(round(v * k)) for k in range(seq_len)) for v in velocities})
+    return np.asarray(rows, dtype=np.int64).reshape(len(rows), seq_len)
 
 
-def _sequence_scores(cols, pads, c: int, offsets) -> np.ndarray:
+def _ring_scores(R, rows, c: int, base) -> np.ndarray:
     """Best-trajectory score of each candidate row i < c of the newest query.
 
-    cols[k]: the normalised column of the query k frames back ((c - k,) or shorter; cols[0] is the
-    newest, (c,)); pads[k]: its mean, the value of a trajectory point outside it (None for an
-    empty column: the newest column's mean is used, as for queries before the stream began).
-    offsets: from ``_offsets``. Returns (c,) float32, the mean along the best trajectory.
+    R: (L, W) float32 ring of padded normalised columns: the column of the query k frames back is
+    ring row rows[k], its value for database row r at R[rows[k], margin + r], its mean (a point
+    outside the stored frames) everywhere else. base: (V, L) margin - offsets.
+    Returns (c,) float32: max over velocities of the mean along the trajectory ending at (i, j).
     """
-    L = len(offsets[0])
-    best = None
-    for off in offsets:
-        acc = np.zeros(c, np.float64)
-        for k in range(L):
-            pad = pads[k] if k < len(pads) and pads[k] is not None else pads[0]
-            col = cols[k] if k < len(cols) else None
-            if col is None or col.size == 0:
-                acc += pad
-                continue
-            o = off[k]
-            hi = min(c, col.size + o)
-            acc[:min(o, c)] += pad
-            acc[o:hi] += col[:max(hi - o, 0)]
-            acc[max(hi, o):] += pad
-        best = acc if best is None else np.maximum(best, acc)
-    return (best / L).astype(np.float32)
+    idx = base[:, :, None] + np.arange(c)[None, None, :]          # (V, L, c)
+    vals = R[rows[None, :, None], idx]
+    return (vals.sum(1, dtype=np.float64).max(0) / R.shape[0]).astype(np.float32)
 
 
 def threshold_range(contrast_window: int) -> tuple[float, float]:
@@ -274,13 +259,21 @@ class Detector:
             raise ValueError(f"color must be one of {COLORS}, got {color!r}")
         self.velocities, self.projection, self.color, self.weights = tuple(v), projection, color, weights
         self.store_dtype = np.dtype(store_dtype)
-        self._offsets = _offsets(self.seq_len, self.velocities)
+        from .stream import _single_thread_blas   # a 2-thread gemv stalls on a loaded 2-core machine
+        self._blas = _single_thread_blas()
+        off = _offsets(self.seq_len, self.velocities)
+        self._margin = int(off.max())
+        self._base = self._margin - off
         self.reset()
 
     def reset(self) -> None:
         """Forget every stored frame and event."""
         self._db = None                       # (capacity, D) stored descriptors
-        self._cols = deque(maxlen=self.seq_len)   # newest first: (column, its mean or None)
+        L = self.seq_len
+        self._ring = np.zeros((L, self._margin + 256), np.float32)   # padded columns, see _ring_scores
+        self._pads = np.zeros(L, np.float32)
+        self._empty = np.ones(L, bool)        # ring rows holding no column yet, or an empty one
+        self._newest = 0
         self.frame_index = 0
         self.events: list[dict] = []
         self.last_scores = np.zeros(0, np.float32)
@@ -304,6 +297,23 @@ class Detector:
             self._db = np.concatenate([self._db, np.empty_like(self._db)])
         self._db[j] = y
 
+    def _push_column(self, s: np.ndarray) -> None:
+        """Write the newest normalised column into the ring (dropping the one seq_len back)."""
+        R, m = self._ring, self._margin
+        if m + s.size > R.shape[1]:
+            grown = np.empty((R.shape[0], 2 * R.shape[1]), np.float32)
+            grown[:, :R.shape[1]] = R
+            grown[:, R.shape[1]:] = self._pads[:, None]
+            self._ring = R = grown
+        r = self._newest = (self._newest - 1) % self.seq_len
+        pad = float(s.mean()) if s.size else 0.0
+        R[r, :] = pad
+        R[r, m:m + s.size] = s
+        self._pads[r], self._empty[r] = pad, s.size == 0
+        if s.size and self._empty.any():   # before the stream began: no evidence, the newest mean
+            R[self._empty] = pad
+            self._pads[self._empty] = pad
+
     def update_descriptor(self, x) -> dict | None:
         """Match one raw descriptor x (D,) (L2-normalised and projected here), then store it.
         Returns the closure event {'frame': j, 'match': i, 'score': s} or None."""
@@ -314,11 +324,22 @@ class Detector:
         j, c = self.frame_index, max(self.frame_index - self.exclude, 0)
         if self._db is not None and y.size != self._db.shape[1]:
             raise ValueError(f"descriptor {j} has {y.size} dims, the stream's first had {self._db.shape[1]}")
-        s = self._db[:c].astype(np.float32, copy=False) @ y if c else np.zeros(0, np.float32)
+        if not c:
+            return self._match(y, np.zeros(0, np.float32))
+        with self._blas():
+            s = self._db[:c].astype(np.float32, copy=False) @ y
+        return self._match(y, s)
+
+    def _match(self, y: np.ndarray, s: np.ndarray) -> dict | None:
+        """The stages after the similarity: s (C,) cosine to the C candidates of query j = frame_index."""
+        j, c = self.frame_index, s.size
         s = contrast_normalise(s, self.contrast_window)
-        self._cols.appendleft((s, float(s.mean()) if s.size else None))
-        cols, pads = [a for a, _ in self._cols], [m for _, m in self._cols]
-        self.last_scores = _sequence_scores(cols, pads, c, self._offsets) if c else s
+        self._push_column(s)
+        if c:
+            rows = (self._newest + np.arange(self.seq_len)) % self.seq_len
+            self.last_scores = _ring_scores(self._ring, rows, c, self._base)
+        else:
+            self.last_scores = s
         self._store(y)
         self.frame_index += 1
         if c and self.threshold is not None:
@@ -374,12 +395,19 @@ def score_matrix(X, exclude: int = 150, seq_len: int = 10, velocities=DEFAULT_VE
     if X.ndim != 2:
         raise ValueError(f"X must be (N, D) descriptors, got shape {X.shape}")
     n = len(X)
-    S = np.full((n, n), np.nan, np.float32)
     det = Detector(None, seq_len=seq_len, velocities=velocities, exclude=exclude,
                    contrast_window=contrast_window, projection=projection, store_dtype=store_dtype)
+    if n == 0:
+        return np.zeros((0, 0), np.float32)
+    if not np.all(np.isfinite(X)):
+        raise ValueError("X has NaN or inf values")
+    Y = normalise(X, projection)
+    G = Y.astype(det.store_dtype).astype(np.float32) @ Y.T    # stored rows x queries, one product
+    S = np.full((n, n), np.nan, np.float32)
     for j in range(n):
-        det.update_descriptor(X[j])
-        S[:det.last_scores.size, j] = det.last_scores
+        c = max(j - det.exclude, 0)
+        det._match(Y[j], G[:c, j])
+        S[:c, j] = det.last_scores
     filled = np.isfinite(S)
     S[~filled] = S[filled].min() if filled.any() else 0.0
     return S
