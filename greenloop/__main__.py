@@ -4,7 +4,12 @@ Commands
     detect SEQUENCE_FOLDER --model MODEL [--threshold TAU] [--frames-per-spot L]
         run a trained model (.keras or .tflite) over a recording (a sequence folder or a folder of
         .jpg/.png frames of any size, in numeric order) and print each declared loop closure and a
-        summary (frames, closures, frames/s).
+        summary (frames, closures, frames/s). ``--method dictionary`` (the default) is the main
+        paper's CNN + frequency dictionary (greenloop.stream.Detector).
+    detect SEQUENCE_FOLDER --method greenloop-seq [--threshold T] [--descriptor NAME] [--seq-len L]
+          [--exclude FRAMES] [--contrast-window R]
+        greenloop's own sequence-matching detector (greenloop.seqmatch.Detector): no model, no
+        poses; prints each closure (query frame, matched earlier frame, score).
     sweep NOTEBOOK --grid NAME=V1,V2,... [--grid ...] --out OUT [-f PARAMS.yaml] [-p NAME VALUE]
           [--dataset DIR] [--scheduler local|tcp://HOST:8786|slurm|pbs] [--workers N] [--metric SPEC]
         run the notebook once per point of the grids' cross product on Dask (greenloop.sweep) and
@@ -20,16 +25,61 @@ import time
 os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
 
 
+def _read_window(paths):
+    """Frames decoded in colour (BGR) as a camera delivers them."""
+    import cv2
+
+    frames = []
+    for p in paths:
+        img = cv2.imread(str(p), cv2.IMREAD_COLOR)
+        if img is None:
+            raise ValueError(f"cannot read image {p}: the file is missing, empty or not an "
+                             f"image; replace or delete it")
+        frames.append(img)
+    return frames
+
+
+def _detect_seq(args) -> int:
+    """``detect --method greenloop-seq``: greenloop.seqmatch.Detector over the frames in windows."""
+    from .data import list_frames
+    from .seqmatch import DEFAULT_THRESHOLD, Detector
+
+    paths = list_frames(args.folder)
+    threshold = DEFAULT_THRESHOLD if args.threshold is None else args.threshold
+    det = Detector(threshold, descriptor=args.descriptor, seq_len=args.seq_len,
+                   exclude=args.exclude, contrast_window=args.contrast_window)
+    print(f"# {len(paths)} frames from {args.folder}; greenloop-seq ({args.descriptor}, seq_len "
+          f"{det.seq_len}, exclude {det.exclude}, contrast window {det.contrast_window}); threshold "
+          f"{det.threshold:g}", flush=True)
+    print("frame\tmatch\tscore\tfile\tmatch_file", flush=True)
+    t0 = time.perf_counter()
+    for start in range(0, len(paths), args.window):
+        for e in det.update_many(_read_window(paths[start:start + args.window])):
+            print(f"{e['frame']}\t{e['match']}\t{e['score']:.4f}\t{paths[e['frame']].name}\t"
+                  f"{paths[e['match']].name}", flush=True)
+    dt = time.perf_counter() - t0
+    n = det.frame_index
+    print(f"# summary: {n} frames, {len(det.events)} closures, {n / dt:.1f} frames/s (decoding "
+          f"included, {dt:.2f} s); {det.bytes_per_frame} bytes per stored frame", flush=True)
+    return 0
+
+
 def _detect(args) -> int:
     """``detect``: frames decoded in colour (BGR) as a camera delivers them, fed to
-    greenloop.stream.Detector in windows; prints events as they are declared."""
+    greenloop.stream.Detector (``--method dictionary``) or greenloop.seqmatch.Detector
+    (``--method greenloop-seq``) in windows; prints events as they are declared."""
     from pathlib import Path
 
-    import cv2
+    if args.method == "greenloop-seq":
+        return _detect_seq(args)
 
     from .data import list_frames
     from .stream import Detector
 
+    if args.model is None:
+        raise ValueError("--method dictionary needs --model (a trained .keras or .tflite file)")
+    if args.threshold is not None and int(args.threshold) != args.threshold:
+        raise ValueError(f"--threshold (tau) must be an integer for --method dictionary, got {args.threshold:g}")
     if not Path(args.model).is_file():
         raise FileNotFoundError(f"model file {args.model} not found: pass a trained .keras model "
                                 f"(greenloop.cnn.train saves results/models/<key>/model.keras) or a "
@@ -37,7 +87,7 @@ def _detect(args) -> int:
     paths = list_frames(args.folder)
     if args.frames_per_spot is not None and args.frames_per_spot < 1:
         raise ValueError(f"--frames-per-spot must be >= 1, got {args.frames_per_spot}")
-    tau = args.threshold
+    tau = None if args.threshold is None else int(args.threshold)
     if tau is None:
         tau = (args.frames_per_spot or 60) + args.margin
     elif args.frames_per_spot is not None and tau < args.frames_per_spot:
@@ -50,14 +100,7 @@ def _detect(args) -> int:
     t0 = time.perf_counter()
     for start in range(0, len(paths), args.window):
         chunk = paths[start:start + args.window]
-        frames = []
-        for p in chunk:
-            img = cv2.imread(str(p), cv2.IMREAD_COLOR)
-            if img is None:
-                raise ValueError(f"cannot read image {p}: the file is missing, empty or not an "
-                                 f"image; replace or delete it")
-            frames.append(img)
-        for e in det.update_many(frames):
+        for e in det.update_many(_read_window(chunk)):
             print(f"{e['frame']}\t{e['spot']}\t{e['count']}\t{paths[e['frame']].name}", flush=True)
     dt = time.perf_counter() - t0
     n = det.frame_index
@@ -153,16 +196,29 @@ def build_parser() -> argparse.ArgumentParser:
                                    "declared loop closure (frame, spot, count) and a summary.")
     d.add_argument("folder", metavar="SEQUENCE_FOLDER",
                    help="sequence folder (its rgb/) or folder of .jpg/.png frames, any size")
-    d.add_argument("--model", required=True, help="trained model: .keras or .tflite file")
-    d.add_argument("--threshold", "--tau", type=int, default=None,
-                   help="tau: declare a closure when a spot has been predicted this many times "
-                        "(default: frames-per-spot + margin)")
+    d.add_argument("--method", default="dictionary", choices=("dictionary", "greenloop-seq"),
+                   help="dictionary: the main paper's CNN + frequency dictionary (needs --model; "
+                        "default); greenloop-seq: sequence matching (greenloop.seqmatch)")
+    d.add_argument("--model", default=None, help="dictionary: trained model, .keras or .tflite file")
+    d.add_argument("--threshold", "--tau", type=float, default=None,
+                   help="dictionary: tau, declare a closure when a spot has been predicted this many "
+                        "times (an integer; default frames-per-spot + margin); greenloop-seq: the "
+                        "sequence score to reach (default greenloop.seqmatch.DEFAULT_THRESHOLD)")
     d.add_argument("--frames-per-spot", type=int, default=None, metavar="L",
                    help="frames per spot the model was trained with (default 60)")
     d.add_argument("--margin", type=int, default=10, help="Delta in tau = L + Delta (default 10)")
     d.add_argument("--backend", default="auto", choices=("auto", "numpy", "tflite", "keras"),
                    help="inference backend (default auto)")
     d.add_argument("--window", type=int, default=70, help="frames per batch (default 70)")
+    g = d.add_argument_group("greenloop-seq (greenloop.seqmatch.Detector)")
+    g.add_argument("--descriptor", default="pixels-patchnorm",
+                   choices=("pixels", "pixels-patchnorm", "mobilenetv2"),
+                   help="per-frame descriptor (default pixels-patchnorm)")
+    g.add_argument("--seq-len", type=int, default=10, help="frames per matched sequence (default 10)")
+    g.add_argument("--exclude", type=int, default=150,
+                   help="only frames more than this many frames older are candidates (default 150)")
+    g.add_argument("--contrast-window", type=int, default=10,
+                   help="SeqSLAM local contrast window in frames, 0 = off (default 10)")
     d.set_defaults(func=_detect)
     _sweep_parser(sub)
     return ap

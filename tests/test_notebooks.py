@@ -228,10 +228,31 @@ def _check_10(folder):
     assert s["networks_trained"] == 3 + 2 + len(TINY["mid_layers"])
 
 
+def _check_13(folder):
+    t = pd.read_csv(folder / "leaderboard.csv")
+    assert (folder.parent / "leaderboard.csv").read_text() == (folder / "leaderboard.csv").read_text()
+    cols = ["method", "weights", "AP_%", "R@100P_%", "R@95P_%", "closures_declared", "closures_false",
+            "first_revisit_delay_frames", "fps", "bytes_per_stored_frame", "scored_on", "target_met"]
+    assert set(cols) <= set(t.columns)
+    seq = t[t.method.str.startswith("greenloop-seq")]
+    assert len(seq) == 1 and seq.target_met.str.contains("highest_AP").all()
+    assert t.method.str.contains("dictionary").any() and t.method.str.contains("PCA-whitened").sum() == len(TINY["cnn_backbones"])
+    assert {"imagenet", "random init", "none", "trained here"} >= set(t.weights) >= {"none", "trained here"}
+    scored = t.dropna(subset=["AP_%"])
+    for c in ("AP_%", "R@100P_%", "R@95P_%"):
+        assert scored[c].between(0, 100).all(), c
+    assert (scored["R@95P_%"] >= scored["R@100P_%"]).all() and (scored.fps > 0).all()
+    assert (scored.closures_false <= scored.closures_declared).all()
+    assert scored.scored_on.str.startswith("evaluation queries").all()
+    tuning = pd.read_csv(folder / "seq_tuning.csv")
+    assert len(tuning) == len(TINY["seq_descriptors"]) * len(TINY["seq_lens"]) * len(TINY["contrast_windows"])
+
+
 CHECKS = {"01_spot_grouping": _check_01, "02_training_over_seeds": _check_02,
           "03_confusion_matrix": _check_03, "05_dictionary_threshold": _check_05, "06_speed": _check_06,
           "07_feature_baselines": _check_07, "08_descriptor_postprocessing": _check_08,
-          "09_rgbd_features": _check_09, "10_siamese_rgbd": _check_10, "11_lsh_matching": _check_11}
+          "09_rgbd_features": _check_09, "10_siamese_rgbd": _check_10, "11_lsh_matching": _check_11,
+          "13_leaderboard": _check_13}
 
 
 def _check_00_pairs(folder):

@@ -1,0 +1,484 @@
+"""Sequence matching: greenloop's own loop-closure detector ("greenloop-seq").
+
+A revisit is a *run* of matching frames, not one frame. Each frame is described by one vector,
+compared with every stored frame older than an exclusion window, the comparison is contrast-
+normalised locally, and the score of a pair (i, j) is the mean normalised similarity along a short
+straight trajectory through the (database, query) matrix that ends at (i, j). A closure is declared
+at query j when its best trajectory score reaches a threshold.
+
+Stages (all causal: query j only ever sees frames 0..j, no pose, no ground truth)::
+
+    frame ─► describe (pixels 32x32 gray | SeqSLAM patch-normalised pixels | MobileNet v2 1280-d)
+          ─► L2-normalise (optional projection fitted on tuning frames, then L2 again)
+          ─► cosine similarity s_i = <y_i, y_j> to every stored frame i with j - i > exclude
+          ─► local contrast normalisation of s over database rows (optional, ``contrast_window``)
+          ─► sequence score: mean of the normalised columns j, j-1, .., j-L+1 along the rows
+             i, i - round(v), .., i - round(v (L-1)), best over the velocities v
+          ─► closure (i*, j) when max_i score_i >= threshold
+
+What it draws on (cited, not copied)
+    * M. J. Milford and G. F. Wyeth, "SeqSLAM: Visual route-based navigation for sunny summer days
+      and stormy winter nights", ICRA 2012: downsampled, patch-normalised images (patch size P),
+      local contrast enhancement of each query's difference vector over R_window database
+      templates, D^_i = (D_i - mean_l) / std_l, and a search over straight-line trajectories of
+      length ds with velocities between V_min and V_max. Here similarities replace differences
+      (higher = more similar), the trajectory search only looks back in time (the stream has no
+      future frames), and a trajectory point outside the stored frames counts as the column's mean
+      (no evidence either way) instead of being dropped.
+    * Zhang et al. 2017 (CNN-Aug): L2 normalisation and PCA whitening of CNN descriptors
+      (``greenloop.similarity.pca_whiten``), here fitted on tuning frames only.
+    * Sandler et al. 2018, MobileNet v2 (ImageNet weights, the study's best single-frame
+      descriptor; ``greenloop.features``).
+
+Units and shapes
+    Frame indices and ``exclude`` / ``seq_len`` / ``contrast_window`` are in frames *of the stream
+    fed to the detector* (a notebook that keeps every 4th frame passes ``exclude // 4``).
+    Descriptors are (N, D) float; the score matrix is (N, N) float32, row = earlier (database)
+    frame, column = query. Scores are cosine similarities in [-1, 1] when ``contrast_window`` is 0,
+    z-scores otherwise (bounded by +-sqrt(contrast_window + 1)).
+
+Memory per stored frame (``bytes_per_frame``): the stored descriptor, D x itemsize bytes
+(``store_dtype`` float32 = 4, float16 = 2), plus one float32 per frame in each of the ``seq_len``
+buffered normalised similarity columns: D * itemsize + 4 * seq_len bytes. Nothing else grows with
+the stream except the event list.
+"""
+from __future__ import annotations
+
+import math
+import numpy as np
+
+from . import evaluate
+from .data import preprocess_image
+
+DESCRIPTORS = ("pixels", "pixels-patchnorm", "mobilenetv2")
+COLORS = ("bgr", "rgb")
+STORE_DTYPES = ("float32", "float16")
+DEFAULT_VELOCITIES = (0.8, 1.0, 1.25)     # SeqSLAM's V_min..V_max range around unit speed
+PATCH = 8                                  # SeqSLAM patch-normalisation size (pixels)
+PIXEL_SIZE = (32, 32)                      # the study's raw-pixel descriptor (width, height)
+CNN_SIZE = (224, 224)                      # MobileNet v2's fixed TFLite input
+DEFAULT_THRESHOLD = 1.0                    # CLI default (z-score units, contrast window 10); tune it per site
+_EPS = 1e-6
+
+__all__ = ["DESCRIPTORS", "Detector", "patch_normalise", "describe", "describe_frames", "normalise",
+           "fit_projection", "contrast_normalise", "score_matrix", "recall_at_precision",
+           "closures", "choose_threshold", "threshold_range"]
+
+
+# ------------------------------------------------------------------------------ descriptors
+def patch_normalise(gray, patch: int = PATCH) -> np.ndarray:
+    """SeqSLAM patch normalisation: every ``patch`` x ``patch`` block to zero mean, unit std.
+
+    gray: (N, H, W) float images, H and W multiples of ``patch``. A flat block becomes 0.
+    Returns (N, H * W) float32, the normalised images flattened row-major.
+    """
+    g = np.asarray(gray, dtype=np.float32)
+    if g.ndim != 3 or g.shape[1] % patch or g.shape[2] % patch:
+        raise ValueError(f"patch_normalise needs (N, H, W) images with H, W multiples of {patch}, "
+                         f"got shape {g.shape}")
+    n, h, w = g.shape
+    b = g.reshape(n, h // patch, patch, w // patch, patch)
+    mu = b.mean(axis=(2, 4), keepdims=True)
+    sd = b.std(axis=(2, 4), keepdims=True)
+    z = np.where(sd > _EPS, (b - mu) / np.maximum(sd, _EPS), 0.0)
+    return z.reshape(n, h * w).astype(np.float32)
+
+
+def _check_descriptor(descriptor: str) -> str:
+    if descriptor not in DESCRIPTORS:
+        raise ValueError(f"descriptor must be one of {DESCRIPTORS}, got {descriptor!r}")
+    return descriptor
+
+
+def describe(frames_or_folder, descriptor: str = "pixels", step: int = 1, weights="auto",
+             return_info: bool = False):
+    """Descriptors of a whole sequence, as the detector computes them frame by frame.
+
+    frames_or_folder: a sequence folder (its rgb/ frames) or an (N, H, W[, 3]) uint8 array (RGB).
+    descriptor: "pixels" (32x32 gray in [0, 1], 1024-d), "pixels-patchnorm" (the same, SeqSLAM
+        patch-normalised, 1024-d) or "mobilenetv2" (ImageNet TFLite graph, 224x224, 1280-d).
+    step: every step-th frame. weights: for mobilenetv2 (see ``greenloop.features.extract``).
+    Returns (N, D) float32, or (X, info) with return_info (``greenloop.features.ExtractInfo``; its
+    seconds_per_image includes loading, preprocessing and the descriptor).
+    """
+    from . import features
+    _check_descriptor(descriptor)
+    name = "mobilenetv2" if descriptor == "mobilenetv2" else "pixels"
+    X, info = features.extract(frames_or_folder, name, weights=weights, progress=False,
+                               return_info=True, step=step)
+    if descriptor == "pixels-patchnorm":
+        import time
+        t0 = time.perf_counter()
+        X = patch_normalise(X.reshape(-1, PIXEL_SIZE[1], PIXEL_SIZE[0]))
+        info.seconds_per_image += (time.perf_counter() - t0) / max(len(X), 1)
+    return (X, info) if return_info else X
+
+
+def describe_frames(frames, descriptor: str = "pixels", color: str = "bgr", weights="auto") -> np.ndarray:
+    """Raw camera frames -> descriptors (M, D) float32, the streaming path of :class:`Detector`.
+
+    frames: a list of (H, W, 3) uint8 frames (BGR as cv2 decodes them, or RGB with color="rgb")
+    or (H, W) gray uint8. Preprocessing is ``greenloop.data.preprocess_image``, the path
+    ``load_frames`` takes, so a frame from disk gives the same descriptor as :func:`describe`.
+    """
+    _check_descriptor(descriptor)
+    if descriptor == "mobilenetv2":
+        from . import features
+        rgb = np.stack([preprocess_image(f, CNN_SIZE, gray=False, color=color) for f in frames])
+        return features.extract(rgb, "mobilenetv2", weights=weights, progress=False)
+    g = np.stack([preprocess_image(f, PIXEL_SIZE, gray=True, color=color) for f in frames])
+    g = g.astype(np.float32) / np.float32(255.0)
+    return patch_normalise(g) if descriptor == "pixels-patchnorm" else g.reshape(len(g), -1)
+
+
+def normalise(X, projection=None) -> np.ndarray:
+    """L2-normalise rows (N, D) -> (N, D), or with a ``similarity.Projection`` L2 -> project ->
+    L2 again -> (N, k). float32. A zero row stays zero."""
+    from .similarity import apply_projection, l2_normalise
+    Y = l2_normalise(np.asarray(X, dtype=np.float32))
+    if projection is not None:
+        Y = l2_normalise(apply_projection(Y, projection).astype(np.float32))
+    return np.ascontiguousarray(Y, dtype=np.float32)
+
+
+def fit_projection(X_fit, dim: int = 128, eps: float = 1e-5):
+    """PCA whitening (Zhang 2017) fitted on L2-normalised ``X_fit`` (M, D) (tuning frames only).
+
+    dim is clipped to the rank of the data (silently). Returns a ``similarity.Projection`` for
+    :func:`normalise` / :class:`Detector`.
+    """
+    import warnings
+
+    from .similarity import l2_normalise, pca_whiten
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        _, proj = pca_whiten(l2_normalise(np.asarray(X_fit, dtype=np.float32)), dim=dim, eps=eps)
+    return proj
+
+
+# ------------------------------------------------------------------------ matching stages
+def contrast_normalise(s, window: int) -> np.ndarray:
+    """SeqSLAM local contrast enhancement of one query's similarity vector.
+
+    s: (C,) similarities of a query to its C candidate database frames (rows 0..C-1).
+    window: R_window in frames; row i is normalised by the mean and std of the rows within
+        window // 2 of it (clipped to 0..C-1), (s_i - mean) / std; 0 returns s unchanged.
+    Returns (C,) float32 z-scores (0 where the window is flat).
+    """
+    s = np.asarray(s, dtype=np.float64)
+    if window == 0 or s.size == 0:
+        return s.astype(np.float32)
+    h = window // 2
+    c = s.size
+    c1 = np.concatenate([[0.0], np.cumsum(s)])
+    c2 = np.concatenate([[0.0], np.cumsum(s * s)])
+    lo = np.maximum(np.arange(c) - h, 0)
+    hi = np.minimum(np.arange(c) + h + 1, c)
+    n = hi - lo
+    mu = (c1[hi] - c1[lo]) / n
+    var = np.maximum((c2[hi] - c2[lo]) / n - mu * mu, 0.0)
+    sd = np.sqrt(var)
+    return np.where(sd > _EPS, (s - mu) / np.maximum(sd, _EPS), 0.0).astype(np.float32)
+
+
+def _offsets(seq_len: int, velocities) -> np.ndarray:
+    """Distinct row offsets round(v k), k = 0..seq_len-1: (V, seq_len) int, one row per velocity."""
+    rows = sorted({tuple(int(round(v * k)) for k in range(seq_len)) for v in velocities})
+    return np.asarray(rows, dtype=np.int64).reshape(len(rows), seq_len)
+
+
+def _ring_scores(R, rows, c: int, base) -> np.ndarray:
+    """Best-trajectory score of each candidate row i < c of the newest query.
+
+    R: (L, W) float32 ring of padded normalised columns: the column of the query k frames back is
+    ring row rows[k], its value for database row r at R[rows[k], margin + r], its mean (a point
+    outside the stored frames) everywhere else. base: (V, L) margin - offsets.
+    Returns (c,) float32: max over velocities of the mean along the trajectory ending at (i, j).
+    """
+    idx = base[:, :, None] + np.arange(c)[None, None, :]          # (V, L, c)
+    vals = R[rows[None, :, None], idx]
+    return (vals.sum(1, dtype=np.float64).max(0) / R.shape[0]).astype(np.float32)
+
+
+def threshold_range(contrast_window: int) -> tuple[float, float]:
+    """The closed interval a score (and so a threshold) can take: [-1, 1] for cosine scores
+    (contrast_window 0), +-sqrt(contrast_window + 1) for contrast-normalised z-scores."""
+    if contrast_window == 0:
+        return -1.0, 1.0
+    z = math.sqrt(contrast_window + 1)
+    return -z, z
+
+
+def _check_int(name: str, value, low: int) -> int:
+    if isinstance(value, bool) or int(value) != value or value < low:
+        raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
+    return int(value)
+
+
+def _check_threshold(threshold, contrast_window: int):
+    if threshold is None:
+        return None
+    lo, hi = threshold_range(contrast_window)
+    t = float(threshold)
+    if not (math.isfinite(t) and lo <= t <= hi):
+        kind = "cosine" if contrast_window == 0 else f"z-score (contrast_window {contrast_window})"
+        raise ValueError(f"threshold must lie in [{lo:.3g}, {hi:.3g}] for {kind} scores, got {threshold!r}")
+    return t
+
+
+# ------------------------------------------------------------------------------ streaming
+class Detector:
+    """Streaming greenloop-seq: one frame (or descriptor) in, a closure event or None out.
+
+    threshold: declare a closure at query j when its best sequence score >= threshold (range:
+        :func:`threshold_range`); None only scores (``last_scores``) and declares nothing.
+    descriptor: one of DESCRIPTORS (raw frames) -- ignored by ``update_descriptor``.
+    seq_len: L, frames per trajectory (1 = single-frame matching). velocities: database frames
+        per query frame along a trajectory (SeqSLAM's V_min..V_max). exclude: only stored frames
+        i with j - i > exclude are candidates. contrast_window: SeqSLAM R_window (0 = off).
+    projection: optional ``similarity.Projection`` (see :func:`fit_projection`).
+    store_dtype: "float32" or "float16" for the stored descriptors. color: "bgr" or "rgb".
+    Attributes: ``events`` (list of {'frame', 'match', 'score'}), ``frame_index``, ``last_scores``
+    ((C,) float32 scores of the newest query's candidates), ``bytes_per_frame``.
+    """
+
+    def __init__(self, threshold=None, descriptor: str = "pixels", seq_len: int = 10,
+                 velocities=DEFAULT_VELOCITIES, exclude: int = 150, contrast_window: int = 10,
+                 projection=None, store_dtype: str = "float32", color: str = "bgr", weights="auto"):
+        self.descriptor = _check_descriptor(descriptor)
+        self.seq_len = _check_int("seq_len", seq_len, 1)
+        self.exclude = _check_int("exclude", exclude, 0)
+        self.contrast_window = _check_int("contrast_window", contrast_window, 0)
+        self.threshold = _check_threshold(threshold, self.contrast_window)
+        v = [float(x) for x in np.atleast_1d(velocities)]
+        if not v or not all(math.isfinite(x) and x > 0 for x in v):
+            raise ValueError(f"velocities must be positive numbers, got {velocities!r}")
+        if store_dtype not in STORE_DTYPES:
+            raise ValueError(f"store_dtype must be one of {STORE_DTYPES}, got {store_dtype!r}")
+        if color not in COLORS:
+            raise ValueError(f"color must be one of {COLORS}, got {color!r}")
+        self.velocities, self.projection, self.color, self.weights = tuple(v), projection, color, weights
+        self.store_dtype = np.dtype(store_dtype)
+        from .stream import _single_thread_blas   # a 2-thread gemv stalls on a loaded 2-core machine
+        self._blas = _single_thread_blas()
+        off = _offsets(self.seq_len, self.velocities)
+        self._margin = int(off.max())
+        self._base = self._margin - off
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget every stored frame and event."""
+        self._db = None                       # (capacity, D) stored descriptors
+        L = self.seq_len
+        self._ring = np.zeros((L, self._margin + 256), np.float32)   # padded columns, see _ring_scores
+        self._pads = np.zeros(L, np.float32)
+        self._empty = np.ones(L, bool)        # ring rows holding no column yet, or an empty one
+        self._newest = 0
+        self.frame_index = 0
+        self.events: list[dict] = []
+        self.last_scores = np.zeros(0, np.float32)
+        self._frame_shape = None
+
+    @property
+    def bytes_per_frame(self) -> int:
+        """Bytes held per stored frame: D * itemsize (descriptor) + 4 * seq_len (column buffer);
+        0 before the first frame (D unknown)."""
+        if self._db is None:
+            return 0
+        return int(self._db.shape[1] * self.store_dtype.itemsize + 4 * self.seq_len)
+
+    def _store(self, y: np.ndarray) -> None:
+        j = self.frame_index
+        if self._db is None:
+            self._db = np.empty((256, y.size), self.store_dtype)
+        elif y.size != self._db.shape[1]:
+            raise ValueError(f"descriptor {j} has {y.size} dims, the stream's first had {self._db.shape[1]}")
+        if j == len(self._db):
+            self._db = np.concatenate([self._db, np.empty_like(self._db)])
+        self._db[j] = y
+
+    def _push_column(self, s: np.ndarray) -> None:
+        """Write the newest normalised column into the ring (dropping the one seq_len back)."""
+        R, m = self._ring, self._margin
+        if m + s.size > R.shape[1]:
+            grown = np.empty((R.shape[0], 2 * R.shape[1]), np.float32)
+            grown[:, :R.shape[1]] = R
+            grown[:, R.shape[1]:] = self._pads[:, None]
+            self._ring = R = grown
+        r = self._newest = (self._newest - 1) % self.seq_len
+        pad = float(s.mean()) if s.size else 0.0
+        R[r, :] = pad
+        R[r, m:m + s.size] = s
+        self._pads[r], self._empty[r] = pad, s.size == 0
+        if s.size and self._empty.any():   # before the stream began: no evidence, the newest mean
+            R[self._empty] = pad
+            self._pads[self._empty] = pad
+
+    def update_descriptor(self, x) -> dict | None:
+        """Match one raw descriptor x (D,) (L2-normalised and projected here), then store it.
+        Returns the closure event {'frame': j, 'match': i, 'score': s} or None."""
+        x = np.asarray(x, dtype=np.float32).reshape(1, -1)
+        if x.shape[1] == 0 or not np.all(np.isfinite(x)):
+            raise ValueError(f"descriptor {self.frame_index} is empty or has NaN/inf values")
+        y = normalise(x, self.projection)[0]
+        j, c = self.frame_index, max(self.frame_index - self.exclude, 0)
+        if self._db is not None and y.size != self._db.shape[1]:
+            raise ValueError(f"descriptor {j} has {y.size} dims, the stream's first had {self._db.shape[1]}")
+        if not c:
+            return self._match(y, np.zeros(0, np.float32))
+        with self._blas():
+            s = self._db[:c].astype(np.float32, copy=False) @ y
+        return self._match(y, s)
+
+    def _match(self, y: np.ndarray, s: np.ndarray) -> dict | None:
+        """The stages after the similarity: s (C,) cosine to the C candidates of query j = frame_index."""
+        j, c = self.frame_index, s.size
+        s = contrast_normalise(s, self.contrast_window)
+        self._push_column(s)
+        if c:
+            rows = (self._newest + np.arange(self.seq_len)) % self.seq_len
+            self.last_scores = _ring_scores(self._ring, rows, c, self._base)
+        else:
+            self.last_scores = s
+        self._store(y)
+        self.frame_index += 1
+        if c and self.threshold is not None:
+            i = int(np.argmax(self.last_scores))
+            if self.last_scores[i] >= self.threshold:
+                event = {"frame": j, "match": i, "score": float(self.last_scores[i])}
+                self.events.append(event)
+                return event
+        return None
+
+    def _check_frame(self, frame, index: int) -> None:
+        if not isinstance(frame, np.ndarray) or frame.dtype != np.uint8 or frame.ndim not in (2, 3) \
+                or (frame.ndim == 3 and frame.shape[2] not in (1, 3)) or 0 in frame.shape:
+            got = f"{frame.dtype} {frame.shape}" if isinstance(frame, np.ndarray) else type(frame).__name__
+            raise ValueError(f"frame {index} must be a non-empty (H, W, 3) or (H, W) uint8 array, "
+                             f"got {got}")
+        if self._frame_shape is None:
+            self._frame_shape = frame.shape
+        elif frame.shape != self._frame_shape:
+            raise ValueError(f"frame {index} has shape {frame.shape}, but the stream started with "
+                             f"{self._frame_shape}: one camera, one frame size")
+
+    def update(self, frame) -> dict | None:
+        """One raw frame (H, W, 3) uint8 BGR (RGB with color="rgb") or (H, W) gray -> event or None."""
+        return self._update_frames([frame])[0]
+
+    def update_many(self, frames) -> list[dict]:
+        """A window of raw frames (one batched descriptor pass) -> the events declared in it."""
+        return [e for e in self._update_frames(list(frames)) if e is not None]
+
+    def _update_frames(self, frames) -> list:
+        if not frames:
+            return []
+        for k, f in enumerate(frames):
+            self._check_frame(f, self.frame_index + k)
+        X = describe_frames(frames, self.descriptor, self.color, self.weights)
+        return [self.update_descriptor(x) for x in X]
+
+
+# ------------------------------------------------------------------------------ batch scores
+def score_matrix(X, exclude: int = 150, seq_len: int = 10, velocities=DEFAULT_VELOCITIES,
+                 contrast_window: int = 10, projection=None, store_dtype: str = "float32") -> np.ndarray:
+    """The (N, N) score matrix the streaming detector thresholds, for ``greenloop.evaluate``.
+
+    X: (N, D) raw descriptors in stream order (:func:`describe`). The other arguments are those
+    of :class:`Detector`. The columns are computed by feeding X to a Detector one row at a time,
+    so S[:, j] is exactly what the stream sees at query j.
+    Returns S (N, N) float32: S[i, j] = sequence score of database frame i for query j where
+    j - i > exclude; every other entry holds the smallest filled score (0 if none), so it never
+    ranks above a candidate. N = 0 gives a (0, 0) matrix.
+    """
+    X = np.asarray(X, dtype=np.float32)
+    if X.ndim != 2:
+        raise ValueError(f"X must be (N, D) descriptors, got shape {X.shape}")
+    n = len(X)
+    det = Detector(None, seq_len=seq_len, velocities=velocities, exclude=exclude,
+                   contrast_window=contrast_window, projection=projection, store_dtype=store_dtype)
+    if n == 0:
+        return np.zeros((0, 0), np.float32)
+    if not np.all(np.isfinite(X)):
+        raise ValueError("X has NaN or inf values")
+    Y = normalise(X, projection)
+    G = Y.astype(det.store_dtype).astype(np.float32) @ Y.T    # stored rows x queries, one product
+    S = np.full((n, n), np.nan, np.float32)
+    for j in range(n):
+        c = max(j - det.exclude, 0)
+        det._match(Y[j], G[:c, j])
+        S[:c, j] = det.last_scores
+    filled = np.isfinite(S)
+    S[~filled] = S[filled].min() if filled.any() else 0.0
+    return S
+
+
+def recall_at_precision(S, GT, precision: float = 0.95, exclude: int = 150, queries=None) -> float:
+    """Largest pair recall whose precision is >= ``precision`` (0 < precision <= 1) on the counted
+    pairs of ``greenloop.evaluate`` (same arguments as ``evaluate.pair_scores``). Returns [0, 1]."""
+    if not 0 < precision <= 1:
+        raise ValueError(f"precision must be in (0, 1], got {precision}")
+    p, r, _ = evaluate.pr_curve(S, GT, exclude, queries)
+    ok = p >= precision
+    return float(r[ok].max()) if ok.any() else 0.0
+
+
+def _best_per_query(S, GT, exclude: int, queries):
+    """(query frames j, best candidate i, its score, is it a loop, does j have a loop partner)."""
+    S = np.asarray(S)
+    G = np.asarray(GT, dtype=bool)
+    m = evaluate.pair_mask(S.shape[0], exclude, queries)
+    js = np.flatnonzero(m.any(0))
+    Sm = np.where(m, S, -np.inf)
+    best = Sm[:, js].argmax(0)
+    score = Sm[best, js]
+    return js, best, score, G[best, js], (G & m)[:, js].any(0)
+
+
+def closures(S, GT, threshold: float, exclude: int = 150, queries=None) -> dict:
+    """Per-query closures of a score matrix at a threshold (what a streaming detector declares).
+
+    At every query frame j (j in ``queries`` if given) whose best candidate i* (largest S[i, j],
+    j - i > exclude) scores >= threshold, one closure (i*, j) is declared; it is false when
+    GT[i*, j] is False. S, GT: (N, N) as in ``greenloop.evaluate``.
+    Returns dict(declared, false, correct, revisits (queries with a loop partner), precision
+    (NaN if none declared), recall (correct / revisits), f1, first_delay (frames from the first
+    revisit query to the first correct closure; None if never)).
+    """
+    js, _, score, ok, rev = _best_per_query(S, GT, exclude, queries)
+    dec = score >= threshold
+    correct = int((dec & ok).sum())
+    n_dec, n_rev = int(dec.sum()), int(rev.sum())
+    precision = correct / n_dec if n_dec else float("nan")
+    recall = correct / n_rev if n_rev else float("nan")
+    f1 = 2 * precision * recall / (precision + recall) if correct else 0.0
+    first_rev = js[rev][0] if n_rev else None
+    hits = js[dec & ok]
+    delay = int(hits[0] - first_rev) if len(hits) and first_rev is not None else None
+    return dict(declared=n_dec, false=n_dec - correct, correct=correct, revisits=n_rev,
+                precision=precision, recall=recall, f1=f1, first_delay=delay)
+
+
+def choose_threshold(S, GT, exclude: int = 150, queries=None, rule: str = "f1") -> float:
+    """The threshold of per-query closures (:func:`closures`) picked on the given (tuning) queries.
+
+    rule: "f1" (default): the best-query score that maximises closure F1; "p95": the lowest one
+    whose closure precision is >= 0.95 (the highest score when none reaches it). Only labels
+    of ``queries`` are read, so pass the tuning mask. Returns a float.
+    """
+    if rule not in ("f1", "p95"):
+        raise ValueError(f"rule must be 'f1' or 'p95', got {rule!r}")
+    js, _, score, ok, rev = _best_per_query(S, GT, exclude, queries)
+    if not len(js):
+        raise ValueError("no query frame with candidates in the given queries")
+    order = np.argsort(-score, kind="stable")
+    s, hit = score[order], ok[order]
+    last = np.r_[s[1:] != s[:-1], True]              # a threshold declares whole ties
+    tp = np.cumsum(hit)[last]
+    n = (np.arange(len(s)) + 1)[last]
+    prec, rec = tp / n, tp / max(int(rev.sum()), 1)
+    if rule == "f1":
+        f1 = np.where(tp > 0, 2 * prec * rec / np.maximum(prec + rec, 1e-12), 0.0)
+        return float(s[last][int(np.argmax(f1))])
+    good = np.flatnonzero(prec >= 0.95)
+    return float(s[last][good[-1]] if len(good) else s[0])

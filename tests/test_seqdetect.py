@@ -1,0 +1,189 @@
+"""greenloop.seqmatch (the greenloop-seq detector) and `python -m greenloop detect --method greenloop-seq`.
+Fast: random descriptors and raw pixels only, no network weights."""
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from greenloop import data, evaluate, seqmatch
+from greenloop.seqmatch import Detector
+
+from conftest import write_frames
+
+ROOT = Path(__file__).resolve().parents[1]
+D, N0, REPEAT, EXCLUDE = 32, 300, 100, 50
+
+
+def _walk(n, seed, a=0.9):
+    """A random walk that forgets (AR(1), correlation length ~10 frames): (n, D) descriptors."""
+    rng = np.random.default_rng(seed)
+    x = np.zeros((n, D))
+    x[0] = rng.normal(size=D)
+    for t in range(1, n):
+        x[t] = a * x[t - 1] + np.sqrt(1 - a * a) * rng.normal(size=D)
+    return x
+
+
+@pytest.fixture(scope="module")
+def revisit():
+    """N0 frames, then the first REPEAT frames again with noise; GT: |i - (j - N0)| <= 2."""
+    w = _walk(N0, 0)
+    X = np.concatenate([w, w[:REPEAT] + np.random.default_rng(1).normal(scale=1.0, size=(REPEAT, D))])
+    n = len(X)
+    GT = np.zeros((n, n), bool)
+    for k in range(REPEAT):
+        GT[max(k - 2, 0):k + 3, N0 + k] = True
+    return X, GT | GT.T
+
+
+def _run(X, threshold=0.55, **kw):
+    det = Detector(threshold, seq_len=10, exclude=EXCLUDE, contrast_window=0, **kw)
+    events = [e for x in X if (e := det.update_descriptor(x)) is not None]
+    return det, events
+
+
+def test_finds_the_synthetic_revisit(revisit):
+    X, _ = revisit
+    det, events = _run(X)
+    assert events == det.events and det.frame_index == len(X)
+    assert all(e["frame"] >= N0 for e in events), "a closure before the revisit began"
+    right = [e for e in events if abs(e["match"] - (e["frame"] - N0)) <= 3]
+    assert len(right) == len(events)                              # no false closure
+    assert len(right) >= 0.8 * REPEAT                             # most of the revisit found
+    assert min(e["frame"] for e in events) < N0 + 15              # and soon after it starts
+
+
+def test_silent_without_revisit():
+    det, events = _run(_walk(N0 + REPEAT, 5))
+    assert events == [] and det.frame_index == N0 + REPEAT
+
+
+def test_sequence_beats_single_frames(revisit):
+    X, GT = revisit
+    ap = {L: evaluate.average_precision(seqmatch.score_matrix(X, EXCLUDE, L, contrast_window=0), GT, EXCLUDE)
+          for L in (1, 10)}
+    assert ap[10] > ap[1]
+
+
+@pytest.mark.parametrize("kw", [dict(contrast_window=10), dict(contrast_window=0, store_dtype="float16"),
+                                dict(contrast_window=6, velocities=(1.0,), seq_len=3)])
+def test_stream_equals_score_matrix(revisit, kw):
+    X, _ = revisit
+    X = X[::2]
+    opts = {"seq_len": 5, "exclude": 20, **kw}
+    S = seqmatch.score_matrix(X, **opts)
+    det = Detector(None, **opts)
+    for j, x in enumerate(X):
+        assert det.update_descriptor(x) is None                   # threshold None: scores only
+        c = max(j - 20, 0)
+        assert np.allclose(det.last_scores, S[:c, j], rtol=1e-4, atol=1e-4)
+        assert np.all(S[c:, j] <= S[:, :].max())
+    filled = S[evaluate.pair_mask(len(X), 20)]
+    assert np.all(S[~evaluate.pair_mask(len(X), 20)] <= filled.min())
+    assert det.bytes_per_frame == D * np.dtype(kw.get("store_dtype", "float32")).itemsize + 4 * opts["seq_len"]
+
+
+def test_projection_and_metrics(revisit):
+    X, GT = revisit
+    proj = seqmatch.fit_projection(X[:N0], dim=16)
+    S = seqmatch.score_matrix(X, EXCLUDE, 10, contrast_window=0, projection=proj)
+    det = Detector(None, seq_len=10, exclude=EXCLUDE, contrast_window=0, projection=proj)
+    for x in X:
+        det.update_descriptor(x)
+    assert det.bytes_per_frame == 16 * 4 + 40
+    tune, ev = evaluate.split_mask(len(X), 0.5, gt=GT, gap=5)
+    t = seqmatch.choose_threshold(S, GT, EXCLUDE, queries=tune)
+    c = seqmatch.closures(S, GT, t, EXCLUDE, queries=ev)
+    assert c["declared"] >= c["correct"] > 0 and c["revisits"] > 0 and 0 < c["recall"] <= 1
+    assert c["first_delay"] is not None and c["first_delay"] >= 0
+    r95 = seqmatch.recall_at_precision(S, GT, 0.95, EXCLUDE, queries=ev)
+    assert evaluate.recall_at_100_precision(S, GT, EXCLUDE, queries=ev) <= r95 <= 1
+    hi = seqmatch.choose_threshold(S, GT, EXCLUDE, queries=tune, rule="p95")
+    p = seqmatch.closures(S, GT, hi, EXCLUDE, queries=tune)["precision"]
+    assert p >= 0.95
+
+
+def test_patch_normalise():
+    rng = np.random.default_rng(0)
+    g = rng.random((3, 32, 32)).astype(np.float32)
+    z = seqmatch.patch_normalise(g).reshape(3, 4, 8, 4, 8)
+    assert np.allclose(z.mean(axis=(2, 4)), 0, atol=1e-5) and np.allclose(z.std(axis=(2, 4)), 1, atol=1e-3)
+    assert np.all(seqmatch.patch_normalise(np.ones((1, 16, 16))) == 0)
+    with pytest.raises(ValueError, match="multiples"):
+        seqmatch.patch_normalise(np.zeros((1, 30, 32)))
+
+
+@pytest.mark.parametrize("descriptor", ["pixels", "pixels-patchnorm"])
+def test_frames_give_the_descriptors_of_the_folder(tmp_path, descriptor):
+    folder = write_frames(tmp_path / "seq", 6, size=(50, 40))
+    ref = seqmatch.describe(folder, descriptor)
+    frames = [cv2.imread(str(p), cv2.IMREAD_COLOR) for p in data.list_frames(folder)]
+    assert np.allclose(seqmatch.describe_frames(frames, descriptor), ref, atol=1e-6)
+    det = Detector(None, descriptor=descriptor, exclude=2, seq_len=2)
+    assert det.update_many(frames) == [] and det.frame_index == 6 and det.bytes_per_frame == 1024 * 4 + 8
+
+
+def test_bad_inputs():
+    det = Detector(0.5, exclude=2, contrast_window=0)
+    assert det.update_many([]) == [] and det.frame_index == 0 and det.bytes_per_frame == 0
+    assert seqmatch.score_matrix(np.zeros((0, 8))).shape == (0, 0)
+    det.update(np.zeros((30, 40, 3), np.uint8))
+    with pytest.raises(ValueError, match="started with"):
+        det.update(np.zeros((31, 40, 3), np.uint8))
+    with pytest.raises(ValueError, match="frame 3 has shape"):
+        det.update_many([np.zeros((30, 40, 3), np.uint8)] * 2 + [np.zeros((30, 40), np.uint8)])
+    with pytest.raises(ValueError, match="uint8"):
+        det.update(np.zeros((30, 40, 3), np.float32))
+    with pytest.raises(ValueError, match="dims"):
+        d = Detector(None)
+        d.update_descriptor(np.ones(8))
+        d.update_descriptor(np.ones(9))
+    with pytest.raises(ValueError, match="NaN"):
+        Detector(None).update_descriptor(np.full(4, np.nan))
+    for bad, cw in [(1.5, 0), (-1.01, 0), (float("nan"), 0), (float("inf"), 10), (4.0, 10)]:
+        with pytest.raises(ValueError, match="threshold must lie"):
+            Detector(bad, contrast_window=cw)
+    assert Detector(3.0, contrast_window=10).threshold == 3.0
+    with pytest.raises(ValueError, match="descriptor"):
+        Detector(0.5, descriptor="sift", contrast_window=0)
+    with pytest.raises(ValueError, match="seq_len"):
+        Detector(0.5, seq_len=0, contrast_window=0)
+    with pytest.raises(ValueError, match="velocities"):
+        Detector(0.5, velocities=(0.0,), contrast_window=0)
+    with pytest.raises(ValueError, match="precision"):
+        seqmatch.recall_at_precision(np.zeros((3, 3)), np.eye(3, dtype=bool), 0.0, 0)
+
+
+def _revisit_folder(folder: Path) -> Path:
+    """30 smooth random frames, then frames 0..14 again with a little noise: 45 .png files."""
+    rng = np.random.default_rng(0)
+    base = [cv2.GaussianBlur(rng.integers(0, 256, (48, 64, 3), dtype=np.uint8), (9, 9), 3) for _ in range(30)]
+    folder.mkdir(parents=True)
+    frames = base + [np.clip(f.astype(int) + rng.integers(-4, 5, f.shape), 0, 255).astype(np.uint8) for f in base[:15]]
+    for i, f in enumerate(frames):
+        cv2.imwrite(str(folder / f"{i}.png"), f)
+    return folder
+
+
+def test_cli_detect_by_method(tmp_path):
+    folder = _revisit_folder(tmp_path / "run")
+    env = dict(os.environ, PYTHONPATH=str(ROOT), TF_CPP_MIN_LOG_LEVEL="3")
+    cmd = [sys.executable, "-m", "greenloop", "detect", str(folder), "--method", "greenloop-seq",
+           "--descriptor", "pixels-patchnorm", "--exclude", "10", "--seq-len", "3", "--contrast-window", "0",
+           "--threshold", "0.8", "--window", "7"]
+    res = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=120)
+    assert res.returncode == 0, res.stderr
+    rows = [line.split("\t") for line in res.stdout.splitlines() if line and line[0].isdigit()]
+    assert rows and all(int(r[0]) >= 30 and int(r[1]) == int(r[0]) - 30 for r in rows)
+    assert len(rows) >= 10 and rows[0][3] == f"{rows[0][0]}.png"
+    summary = [line for line in res.stdout.splitlines() if "summary" in line]
+    assert summary and f"45 frames, {len(rows)} closures" in summary[0] and "4108 bytes per stored frame" in summary[0]
+    bad = subprocess.run(cmd[:-4] + ["--threshold", "2"], capture_output=True, text=True, env=env, timeout=60)
+    assert bad.returncode == 2 and "threshold must lie" in bad.stderr
+    nomodel = subprocess.run([sys.executable, "-m", "greenloop", "detect", str(folder), "--method", "dictionary"],
+                             capture_output=True, text=True, env=env, timeout=60)
+    assert nomodel.returncode == 2 and "--model" in nomodel.stderr
