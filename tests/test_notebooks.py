@@ -234,8 +234,9 @@ def _check_13(folder):
     cols = ["method", "weights", "AP_%", "R@100P_%", "R@95P_%", "closures_declared", "closures_false",
             "first_revisit_delay_frames", "fps", "bytes_per_stored_frame", "scored_on", "target_met"]
     assert set(cols) <= set(t.columns)
-    seq = t[t.method.str.startswith("greenloop-seq")]
-    assert len(seq) == 1 and seq.target_met.str.contains("highest_AP").all()
+    seq = t[t.method.str.startswith("greenloop-seq")]             # greenloop-seq and greenloop-seq-fast
+    assert len(seq) == 2 and seq.target_met.str.contains("highest_AP").all()
+    assert seq.method.str.startswith("greenloop-seq-fast (pixels").sum() == 1   # no CNN in the fast variant
     assert t.method.str.contains("dictionary").any() and t.method.str.contains("PCA-whitened").sum() == len(TINY["cnn_backbones"])
     assert {"imagenet", "random init", "none", "trained here"} >= set(t.weights) >= {"none", "trained here"}
     scored = t.dropna(subset=["AP_%"])
