@@ -6,8 +6,9 @@ Commands
         .jpg/.png frames of any size, in numeric order) and print each declared loop closure and a
         summary (frames, closures, frames/s). ``--method dictionary`` (the default) is the main
         paper's CNN + frequency dictionary (greenloop.stream.Detector).
-    detect SEQUENCE_FOLDER --method greenloop-seq [--threshold T] [--descriptor NAME] [--seq-len L]
-          [--exclude FRAMES] [--contrast-window R]
+    detect SEQUENCE_FOLDER --method greenloop-seq (--tuned SUMMARY_JSON | --threshold T)
+          [--variant greenloop-seq|greenloop-seq-fast] [--descriptor NAME] [--seq-len L]
+          [--exclude FRAMES] [--contrast-window R] [--step N]
         greenloop's own sequence-matching detector (greenloop.seqmatch.Detector): no model, no
         poses; prints each closure (query frame, matched earlier frame, score).
     sweep NOTEBOOK --grid NAME=V1,V2,... [--grid ...] --out OUT [-f PARAMS.yaml] [-p NAME VALUE]
@@ -39,18 +40,52 @@ def _read_window(paths):
     return frames
 
 
-def _detect_seq(args) -> int:
-    """``detect --method greenloop-seq``: greenloop.seqmatch.Detector over the frames in windows."""
-    from .data import list_frames
-    from .seqmatch import DEFAULT_THRESHOLD, Detector
+def _tuned_knobs(args) -> dict:
+    """greenloop-seq's knobs: from ``--tuned`` (a notebook 13 summary.json, the variant named by
+    ``--variant``), overridden by any flag given explicitly. Returns dict(descriptor, seq_len,
+    contrast_window, threshold, step, exclude), exclude and seq_len in streamed frames."""
+    import json
+    from pathlib import Path
 
-    paths = list_frames(args.folder)
-    threshold = DEFAULT_THRESHOLD if args.threshold is None else args.threshold
-    det = Detector(threshold, descriptor=args.descriptor, seq_len=args.seq_len,
-                   exclude=args.exclude, contrast_window=args.contrast_window)
-    print(f"# {len(paths)} frames from {args.folder}; greenloop-seq ({args.descriptor}, seq_len "
-          f"{det.seq_len}, exclude {det.exclude}, contrast window {det.contrast_window}); threshold "
-          f"{det.threshold:g}", flush=True)
+    knobs = dict(descriptor="pixels-patchnorm", seq_len=10, contrast_window=10, threshold=None,
+                 step=1, exclude=150)
+    if args.tuned:
+        path = Path(args.tuned)
+        if not path.is_file():
+            raise FileNotFoundError(f"--tuned {path}: no such file; run notebook 13 on a recording of "
+                                    f"your site (make all DATASET=...), then pass its "
+                                    f"<results>/13_leaderboard/summary.json")
+        summary = json.loads(path.read_text())
+        if args.variant not in summary.get("knobs", {}):
+            raise ValueError(f"--tuned {path} has no variant {args.variant!r} (it has "
+                             f"{sorted(summary.get('knobs', {}))})")
+        knobs.update(summary["knobs"][args.variant], threshold=summary["thresholds"][args.variant],
+                     step=int(summary["frame_step"]), exclude=int(summary["exclude_steps"]))
+    for k in ("descriptor", "seq_len", "contrast_window", "threshold", "step", "exclude"):
+        if getattr(args, k) is not None:
+            knobs[k] = getattr(args, k)
+    if knobs["threshold"] is None:
+        raise ValueError("greenloop-seq needs a threshold chosen on your own data: pass --tuned "
+                         "<results>/13_leaderboard/summary.json (notebook 13 picks the knobs and the "
+                         "threshold on a tuning part) or --threshold T")
+    if knobs["step"] < 1:
+        raise ValueError(f"--step must be >= 1, got {knobs['step']}")
+    return knobs
+
+
+def _detect_seq(args) -> int:
+    """``detect --method greenloop-seq``: greenloop.seqmatch.Detector over the frames in windows
+    (every ``step``-th frame of the folder, the rate its knobs were tuned at)."""
+    from .data import list_frames
+    from .seqmatch import Detector
+
+    kn = _tuned_knobs(args)
+    paths = list_frames(args.folder)[::kn["step"]]
+    det = Detector(kn["threshold"], descriptor=kn["descriptor"], seq_len=kn["seq_len"],
+                   exclude=kn["exclude"], contrast_window=kn["contrast_window"])
+    print(f"# {len(paths)} frames from {args.folder} (every {kn['step']}); greenloop-seq "
+          f"({kn['descriptor']}, seq_len {det.seq_len}, exclude {det.exclude}, contrast window "
+          f"{det.contrast_window}); threshold {det.threshold:g}", flush=True)
     print("frame\tmatch\tscore\tfile\tmatch_file", flush=True)
     t0 = time.perf_counter()
     for start in range(0, len(paths), args.window):
@@ -203,7 +238,7 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--threshold", "--tau", type=float, default=None,
                    help="dictionary: tau, declare a closure when a spot has been predicted this many "
                         "times (an integer; default frames-per-spot + margin); greenloop-seq: the "
-                        "sequence score to reach (default greenloop.seqmatch.DEFAULT_THRESHOLD)")
+                        "sequence score to reach (else read from --tuned)")
     d.add_argument("--frames-per-spot", type=int, default=None, metavar="L",
                    help="frames per spot the model was trained with (default 60)")
     d.add_argument("--margin", type=int, default=10, help="Delta in tau = L + Delta (default 10)")
@@ -211,14 +246,20 @@ def build_parser() -> argparse.ArgumentParser:
                    help="inference backend (default auto)")
     d.add_argument("--window", type=int, default=70, help="frames per batch (default 70)")
     g = d.add_argument_group("greenloop-seq (greenloop.seqmatch.Detector)")
-    g.add_argument("--descriptor", default="pixels-patchnorm",
-                   choices=("pixels", "pixels-patchnorm", "mobilenetv2"),
+    g.add_argument("--tuned", default=None, metavar="SUMMARY_JSON",
+                   help="knobs and threshold picked by notebook 13 on a tuning part "
+                        "(<results>/13_leaderboard/summary.json); flags below override them")
+    g.add_argument("--variant", default="greenloop-seq-fast", choices=("greenloop-seq", "greenloop-seq-fast"),
+                   help="which of --tuned's variants (default greenloop-seq-fast: no CNN)")
+    g.add_argument("--descriptor", default=None, choices=("pixels", "pixels-patchnorm", "mobilenetv2"),
                    help="per-frame descriptor (default pixels-patchnorm)")
-    g.add_argument("--seq-len", type=int, default=10, help="frames per matched sequence (default 10)")
-    g.add_argument("--exclude", type=int, default=150,
-                   help="only frames more than this many frames older are candidates (default 150)")
-    g.add_argument("--contrast-window", type=int, default=10,
+    g.add_argument("--seq-len", type=int, default=None, help="frames per matched sequence (default 10)")
+    g.add_argument("--exclude", type=int, default=None,
+                   help="only frames more than this many streamed frames older are candidates (default 150)")
+    g.add_argument("--contrast-window", type=int, default=None,
                    help="SeqSLAM local contrast window in frames, 0 = off (default 10)")
+    g.add_argument("--step", type=int, default=None,
+                   help="stream every step-th frame (default 1; --tuned: its frame_step)")
     d.set_defaults(func=_detect)
     _sweep_parser(sub)
     return ap

@@ -57,7 +57,6 @@ DEFAULT_VELOCITIES = (0.8, 1.0, 1.25)     # SeqSLAM's V_min..V_max range around 
 PATCH = 8                                  # SeqSLAM patch-normalisation size (pixels)
 PIXEL_SIZE = (32, 32)                      # the study's raw-pixel descriptor (width, height)
 CNN_SIZE = (224, 224)                      # MobileNet v2's fixed TFLite input
-DEFAULT_THRESHOLD = 1.0                    # CLI default (z-score units, contrast window 10); tune it per site
 _EPS = 1e-6
 
 __all__ = ["DESCRIPTORS", "Detector", "patch_normalise", "describe", "describe_frames", "normalise",

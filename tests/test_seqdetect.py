@@ -1,5 +1,6 @@
 """greenloop.seqmatch (the greenloop-seq detector) and `python -m greenloop detect --method greenloop-seq`.
 Fast: random descriptors and raw pixels only, no network weights."""
+import json
 import os
 import subprocess
 import sys
@@ -184,6 +185,20 @@ def test_cli_detect_by_method(tmp_path):
     assert summary and f"45 frames, {len(rows)} closures" in summary[0] and "4108 bytes per stored frame" in summary[0]
     bad = subprocess.run(cmd[:-4] + ["--threshold", "2"], capture_output=True, text=True, env=env, timeout=60)
     assert bad.returncode == 2 and "threshold must lie" in bad.stderr
+    # knobs and threshold read from a notebook 13 summary (the tuned variant), streamed at its frame_step
+    summary = tmp_path / "summary.json"
+    summary.write_text(json.dumps({"frame_step": 1, "exclude_steps": 10, "thresholds": {"greenloop-seq-fast": 0.8},
+                                   "knobs": {"greenloop-seq-fast": {"descriptor": "pixels-patchnorm", "seq_len": 3,
+                                                                    "contrast_window": 0}}}))
+    tuned = subprocess.run(cmd[:7] + ["--tuned", str(summary), "--window", "7"], capture_output=True, text=True,
+                           env=env, timeout=120)
+    assert tuned.returncode == 0, tuned.stderr
+    assert [line.split("\t")[:2] for line in tuned.stdout.splitlines() if line[:1].isdigit()] == [r[:2] for r in rows]
+    none = subprocess.run(cmd[:7], capture_output=True, text=True, env=env, timeout=60)
+    assert none.returncode == 2 and "--tuned" in none.stderr and "--threshold" in none.stderr
+    wrong = subprocess.run(cmd[:7] + ["--tuned", str(summary), "--variant", "greenloop-seq"], capture_output=True,
+                           text=True, env=env, timeout=60)
+    assert wrong.returncode == 2 and "no variant 'greenloop-seq'" in wrong.stderr
     nomodel = subprocess.run([sys.executable, "-m", "greenloop", "detect", str(folder), "--method", "dictionary"],
                              capture_output=True, text=True, env=env, timeout=60)
     assert nomodel.returncode == 2 and "--model" in nomodel.stderr
