@@ -21,9 +21,10 @@ def threshold(frames_per_spot: int, error_rate: float, margin: int) -> dict:
         raise ValueError(f"frames_per_spot must be >= 1, got {frames_per_spot}")
     if not 0 <= error_rate < 1:
         raise ValueError(f"error_rate must be in [0, 1), got {error_rate}")
+    if margin < 0:
+        raise ValueError(f"margin must be >= 0 (the paper's tau = L + margin is at least L: a spot "
+                         f"must be seen more often than its own L frames), got {margin}")
     tau = int(frames_per_spot + margin)
-    if tau < 1:
-        raise ValueError(f"tau = L + margin = {tau} must be >= 1: use a larger margin")
     return {"frames_per_spot": int(frames_per_spot), "error_rate": float(error_rate),
             "margin": int(margin), "expected_correct": (1 - error_rate) * frames_per_spot, "tau": tau}
 
