@@ -39,8 +39,9 @@ gets timm's ImageNet mean/std; MobileNet v1/v2 ``x / 127.5 - 1`` (quantised to t
 input with its scale and zero point); EfficientNet-Lite0 ``(x - 127) / 128``, as the TensorFlow Lite
 models were trained. The TFLite graphs take only 224x224: mobilenetv1/v2 refuse another
 ``input_size``, with pretrained and random-init weights alike, so a result never depends on whether
-the files were found; so does vgg19_fc1, whose fully connected layer takes a 224x224 input's 7x7 map. Frames are resized to the input size with OpenCV (INTER_AREA when
-shrinking, bilinear when enlarging), as ``greenloop.data.load_frames`` does.
+the files were found; so does vgg19_fc1, whose fully connected layer takes a 224x224 input's 7x7
+map. Frames are resized to the input size with OpenCV (INTER_AREA when shrinking, bilinear when
+enlarging), as ``greenloop.data.load_frames`` does.
 
 Weights (CNN backbones), the ``weights`` argument:
 
