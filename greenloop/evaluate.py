@@ -35,7 +35,8 @@ from sklearn.metrics import average_precision_score, precision_recall_curve, roc
 from greenloop.groundtruth import revisit_frames
 
 __all__ = [
-    "pair_mask", "pair_scores", "pr_curve", "average_precision", "recall_at_100_precision",
+    "pair_mask", "pair_scores", "pr_curve", "average_precision", "recall_at_precision",
+    "recall_at_100_precision",
     "recall_at_k", "operating_point", "split_mask", "mean_per_class_accuracy", "mpca_threshold",
     "tune_then_score",
 ]
@@ -154,14 +155,24 @@ def average_precision(S, GT, exclude: int = 150, queries=None) -> float:
     return float(average_precision_score(y_true, y_score))
 
 
-def recall_at_100_precision(S, GT, exclude: int = 150, queries=None) -> float:
-    """The largest recall reached with precision exactly 1 (no false loop declared).
+def recall_at_precision(S, GT, precision: float = 0.95, exclude: int = 150, queries=None) -> float:
+    """The largest pair recall reached with precision >= ``precision`` (0 < precision <= 1).
 
-    Arguments as in :func:`pair_scores`. Thresholds are the distinct scores, so tied pairs are
-    declared together: 0.0 if the top-scored pair (or any pair tied with it) is not a loop.
+    Arguments otherwise as in :func:`pair_scores`. Thresholds are the distinct scores, so tied
+    pairs are declared together. Returns a float in [0, 1] (0.0 when no threshold reaches it).
     """
-    precision, recall, _ = pr_curve(S, GT, exclude, queries)
-    return float(recall[precision == 1.0].max())
+    if not 0 < precision <= 1:
+        raise ValueError(f"precision must be in (0, 1], got {precision}")
+    p, r, _ = pr_curve(S, GT, exclude, queries)
+    ok = p >= precision
+    return float(r[ok].max()) if ok.any() else 0.0
+
+
+def recall_at_100_precision(S, GT, exclude: int = 150, queries=None) -> float:
+    """The largest recall reached with precision exactly 1 (no false loop declared):
+    :func:`recall_at_precision` at 1. 0.0 if the top-scored pair (or any pair tied with it) is
+    not a loop."""
+    return recall_at_precision(S, GT, 1.0, exclude, queries)
 
 
 def recall_at_k(S, GT, k: int = 1, exclude: int = 150, queries=None) -> float:

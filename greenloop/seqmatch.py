@@ -49,6 +49,7 @@ import numpy as np
 
 from . import evaluate
 from .data import preprocess_image
+from .evaluate import recall_at_precision  # re-exported: notebook 13 calls seqmatch.recall_at_precision
 
 DESCRIPTORS = ("pixels", "pixels-patchnorm", "mobilenetv2")
 COLORS = ("bgr", "rgb")
@@ -410,16 +411,6 @@ def score_matrix(X, exclude: int = 150, seq_len: int = 10, velocities=DEFAULT_VE
     filled = np.isfinite(S)
     S[~filled] = S[filled].min() if filled.any() else 0.0
     return S
-
-
-def recall_at_precision(S, GT, precision: float = 0.95, exclude: int = 150, queries=None) -> float:
-    """Largest pair recall whose precision is >= ``precision`` (0 < precision <= 1) on the counted
-    pairs of ``greenloop.evaluate`` (same arguments as ``evaluate.pair_scores``). Returns [0, 1]."""
-    if not 0 < precision <= 1:
-        raise ValueError(f"precision must be in (0, 1], got {precision}")
-    p, r, _ = evaluate.pr_curve(S, GT, exclude, queries)
-    ok = p >= precision
-    return float(r[ok].max()) if ok.any() else 0.0
 
 
 def _best_per_query(S, GT, exclude: int, queries):
