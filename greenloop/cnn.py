@@ -22,6 +22,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 CACHE_DIR = Path(os.environ.get("GREENLOOP_CACHE", ROOT / "results" / "models"))
 SPLITS = ("random", "blocked")
+BLOCKS = ("random", "centre")   # where split="blocked" puts each spot's test block
 
 
 def build(n_classes: int, input_shape=(32, 32, 1), jit_compile="auto", steps_per_execution: int = 1):
@@ -50,29 +51,60 @@ def build(n_classes: int, input_shape=(32, 32, 1), jit_compile="auto", steps_per
 
 
 def split_indices(y: np.ndarray, seed: int, test_size: float = 0.2, split: str = "random",
-                  gap: int = 5) -> tuple[np.ndarray, np.ndarray]:
+                  gap: int = 5, block: str = "random",
+                  train_size: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Train/test frame indices.
 
     y: (N,) spot labels in capture order. seed: RNG seed.
     split="random": the paper's shuffled, non-stratified split (sklearn train_test_split);
         2260 frames give 1808 / 452.
     split="blocked": in every run of consecutive frames with one label (a spot), one contiguous
-        block of round(test_size * run length) frames at a seeded random position is held out, and
-        ``gap`` frames on each side of it are dropped from training, so no test frame has a
-        near-duplicate neighbour in training.
-    Returns (train_idx (n_train,), test_idx (n_test,)) int64, sorted for "blocked".
+        block of round(test_size * run length) frames is held out, and ``gap`` frames (>= 0) on
+        each side of it are dropped from training, so no test frame has a near-duplicate
+        neighbour in training. block="random": the block sits at a seeded random position and
+        its gap may reach into the neighbouring spots; block="centre": the block sits in the
+        middle of its spot (the seed then only shuffles training), so block and gap stay inside
+        the spot when the spot is long enough.
+    train_size: keep only this many training frames (a seeded random subset), to compare splits
+        at one training-set size; None keeps them all.
+    Returns (train_idx (n_train,), test_idx (n_test,)) int64, sorted for "blocked" and for a
+    subsampled split.
     """
     y = np.asarray(y)
     n = len(y)
     if not 0 < test_size < 1:
         raise ValueError(f"test_size must be in (0, 1), got {test_size}")
+    if split not in SPLITS:
+        raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
+    if block not in BLOCKS:
+        raise ValueError(f"block must be one of {BLOCKS}, got {block!r}")
+    gap = _count(gap, "gap")
     if split == "random":
         from sklearn.model_selection import train_test_split
         train, test = train_test_split(np.arange(n), test_size=test_size, random_state=seed, shuffle=True)
-        return np.asarray(train, np.int64), np.asarray(test, np.int64)
-    if split != "blocked":
-        raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
-    rng = np.random.default_rng(seed)
+        train, test = np.asarray(train, np.int64), np.asarray(test, np.int64)
+    else:
+        train, test = _blocked(y, np.random.default_rng(seed), test_size, gap, block)
+    if train_size is None:
+        return train, test
+    train_size = _count(train_size, "train_size")
+    if not 1 <= train_size <= len(train):
+        raise ValueError(f"train_size must be in [1, {len(train)}] (the split's training frames), "
+                         f"got {train_size}")
+    keep = np.random.default_rng([seed, 1]).choice(len(train), train_size, replace=False)
+    return np.sort(train[keep]), test
+
+
+def _count(v, name: str) -> int:
+    """v as an int >= 0, or ValueError naming ``name``."""
+    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
+        raise ValueError(f"{name} must be an integer >= 0, got {v!r}")
+    return int(v)
+
+
+def _blocked(y, rng, test_size: float, gap: int, block: str):
+    """split_indices' blocked split: (train_idx, test_idx) sorted int64 (see there)."""
+    n = len(y)
     starts = np.flatnonzero(np.r_[True, y[1:] != y[:-1]])
     ends = np.r_[starts[1:], n]
     is_test = np.zeros(n, bool)
@@ -81,12 +113,11 @@ def split_indices(y: np.ndarray, seed: int, test_size: float = 0.2, split: str =
         k = int(round(test_size * (e - s)))
         if k < 1 or e - s - k < 1:
             continue
-        a = s + int(rng.integers(0, e - s - k + 1))
+        offset = int(rng.integers(0, e - s - k + 1)) if block == "random" else (e - s - k) // 2
+        a = s + offset
         is_test[a:a + k] = True
         dropped[max(0, a - gap):min(n, a + k + gap)] = True
-    train = np.flatnonzero(~dropped)
-    test = np.flatnonzero(is_test)
-    return train, test
+    return np.flatnonzero(~dropped), np.flatnonzero(is_test)
 
 
 def cache_key(X: np.ndarray, y: np.ndarray, **params) -> str:
@@ -145,12 +176,13 @@ def _load_cached(folder: Path):
 
 def train(X: np.ndarray, y: np.ndarray, seed: int, epochs: int = 200, batch_size: int = 32,
           test_size: float = 0.2, split: str = "random", n_classes: int | None = None,
-          fast: bool | str = True, cache: bool | str | Path = True, progress: bool = True, gap: int = 5):
+          fast: bool | str = True, cache: bool | str | Path = True, progress: bool = True, gap: int = 5,
+          block: str = "random", train_size: int | None = None):
     """Train the paper's CNN on frames X with spot labels y; the test split is the validation data.
 
     X: (N, H, W, C) float32 in [0, 1]. y: (N,) int spot labels. seed: seeds the split, the weight
     initialisation and the shuffling (same seed, same numbers on CPU).
-    split: "random" (the paper's 80/20) or "blocked" (see ``split_indices``).
+    split: "random" (the paper's 80/20) or "blocked"; gap, block, train_size: see ``split_indices``.
     n_classes: defaults to y.max() + 1.
     fast: which trainer runs the same protocol (batch 32, Adam 1e-3, categorical cross-entropy,
         ``model.fit``'s shuffled batches, the same seeded Keras initial weights):
@@ -183,6 +215,10 @@ def train(X: np.ndarray, y: np.ndarray, seed: int, epochs: int = 200, batch_size
     params = dict(seed=int(seed), epochs=int(epochs), batch_size=int(batch_size),
                   test_size=float(test_size), split=split, n_classes=n_classes, fast=fast,
                   gap=int(gap) if split == "blocked" else None)
+    if split == "blocked" and block != "random":  # only non-default split knobs join the key,
+        params["block"] = block                  # so models trained before they existed stay cached
+    if train_size is not None:
+        params["train_size"] = int(train_size)
     if fast == "fused":  # keys fused runs apart from those of the first fused trainer (NumPy's order)
         params["batch_order"] = "model.fit"
     key = cache_key(X, y, **params)
@@ -255,13 +291,15 @@ def _accelerator() -> bool:
     return False
 
 
-def _fit(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size, split, fast, gap, **_):
+def _fit(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size, split, fast, gap,
+         block="random", train_size=None, **_):
     if fast == "fused":
         return _fit_fused(X, y, progress, n_classes=n_classes, seed=seed, epochs=epochs,
-                          batch_size=batch_size, test_size=test_size, split=split, gap=gap)
+                          batch_size=batch_size, test_size=test_size, split=split, gap=gap,
+                          block=block, train_size=train_size)
     import keras
 
-    train_idx, test_idx = split_indices(y, seed, test_size, split, gap or 0)
+    train_idx, test_idx = split_indices(y, seed, test_size, split, gap or 0, block, train_size)
     keras.utils.set_random_seed(seed)
     xla = fast == "xla"
     steps = int(np.ceil(len(train_idx) / batch_size)) if xla else 1
@@ -327,7 +365,8 @@ def _softmax_loss(Z3, y):
     return E / S, loss
 
 
-def _fit_fused(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size, split, gap):
+def _fit_fused(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size, split, gap,
+               block="random", train_size=None):
     """The paper's protocol (batch 32, Adam 1e-3, softmax cross-entropy, shuffled batches, the
     test split as validation data after each epoch) with the gradients written out in float32,
     like Keras computes them:
@@ -346,7 +385,7 @@ def _fit_fused(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size
 
     from . import kernels
 
-    train_idx, test_idx = split_indices(y, seed, test_size, split, gap or 0)
+    train_idx, test_idx = split_indices(y, seed, test_size, split, gap or 0, block, train_size)
     keras.utils.set_random_seed(seed)
     model = build(n_classes, X.shape[1:], jit_compile=False)
     conv, dense, out = (model.get_layer(n) for n in ("conv", "dense", "output"))
@@ -449,3 +488,37 @@ def run_seeds(X: np.ndarray, y: np.ndarray, seeds, progress: bool = True, **trai
         out.append({"seed": int(seed), "model": model, "history": history, "split": split,
                     "test_accuracy": float(np.mean(pred == y[split["test"]])), "test_pred": pred})
     return out
+
+
+def leakage_controls(X: np.ndarray, y: np.ndarray, seeds, gaps=(0, 5, 10, 20, 40),
+                     centre_gap: int = 5, converged_at: float = 0.95, progress: bool = True,
+                     **train_kw) -> list[dict]:
+    """How much of the random split's accuracy is memory: the blocked split at every gap, beside a
+    random split with the same number of training frames, and a block centred in its spot.
+
+    X: (N, H, W, C) frames, y: (N,) spot labels, seeds: ints; gaps: frames dropped on each side of
+    a test block (``split_indices``); centre_gap: the gap of the centred-block run.
+    converged_at: a seed whose final training accuracy is below this fraction did not fit its own
+    training frames ("converged" False). train_kw go to ``train`` (epochs, batch_size, ...).
+    Returns one dict per run: control ("blocked", "random, same n_train", "blocked, centred"),
+    gap (frames; the matched random run carries the gap of the blocked run it matches), seed,
+    n_train, n_test, test_acc_% and final_train_acc_% (in %), converged (bool).
+    """
+    def row(control, gap, r):
+        final = 100 * r["history"]["accuracy"][-1]
+        return {"control": control, "gap": int(gap), "seed": r["seed"],
+                "n_train": len(r["split"]["train"]), "n_test": len(r["split"]["test"]),
+                "test_acc_%": round(100 * r["test_accuracy"], 2), "final_train_acc_%": round(final, 2),
+                "converged": bool(final >= 100 * converged_at)}
+
+    rows = []
+    for gap in gaps:
+        for r in run_seeds(X, y, seeds, progress, split="blocked", gap=gap, **train_kw):
+            rows.append(row("blocked", gap, r))
+            m = run_seeds(X, y, [r["seed"]], progress, split="random",
+                          train_size=len(r["split"]["train"]), **train_kw)[0]
+            rows.append(row("random, same n_train", gap, m))
+    for r in run_seeds(X, y, seeds, progress, split="blocked", gap=centre_gap, block="centre",
+                       **train_kw):
+        rows.append(row("blocked, centred", centre_gap, r))
+    return rows

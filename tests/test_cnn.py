@@ -43,6 +43,39 @@ def test_blocked_split_keeps_neighbours_out():
         cnn.split_indices(y, 0, split="stratified")
 
 
+def test_centred_blocks_stay_inside_their_spot():
+    y = spots.group(600, 60)
+    tr, te = cnn.split_indices(y, seed=3, split="blocked", gap=10, block="centre")
+    # each spot of 60 frames: the 12 test frames are 24..35, the gap drops 14..23 and 36..45
+    assert list(te[:12]) == list(range(24, 36))
+    assert list(tr[:14]) == list(range(14)) and tr[14] == 46
+    # no frame of another spot is dropped: every spot keeps 60 - 12 - 20 training frames
+    assert (np.bincount(y[tr]) == 28).all()
+    # the seed does not move a centred block
+    assert (cnn.split_indices(y, seed=4, split="blocked", gap=10, block="centre")[1] == te).all()
+    with pytest.raises(ValueError, match="block must be"):
+        cnn.split_indices(y, 0, split="blocked", block="left")
+
+
+def test_gap_widens_the_distance_to_training():
+    y = spots.group(600, 60)
+    for gap in (0, 5, 20):
+        tr, te = cnn.split_indices(y, seed=1, split="blocked", gap=gap)
+        assert np.abs(te[:, None] - tr[None, :]).min() == gap + 1
+    with pytest.raises(ValueError, match="gap must be"):
+        cnn.split_indices(y, 0, split="blocked", gap=-1)
+
+
+def test_train_size_subsamples_the_training_frames():
+    y = spots.group(2260, 60)
+    tr_full, te_full = cnn.split_indices(y, seed=2)
+    tr, te = cnn.split_indices(y, seed=2, train_size=1430)
+    assert len(tr) == 1430 and set(tr) <= set(tr_full) and (te == te_full).all()
+    assert (tr == cnn.split_indices(y, seed=2, train_size=1430)[0]).all()  # seeded
+    with pytest.raises(ValueError, match="train_size must be"):
+        cnn.split_indices(y, 0, train_size=1809)
+
+
 def test_train_is_deterministic_and_learns(tmp_path):
     X, y = _toy()
     a = cnn.train(X, y, seed=1, epochs=3, cache=False, progress=False)
@@ -109,3 +142,16 @@ def test_concurrent_runs_share_one_cache_entry(tmp_path):
     assert a == b  # identical histories, training seconds included: the second one loaded it
     entries = [p for p in tmp_path.iterdir() if p.is_dir()]
     assert len(entries) == 1 and not list(tmp_path.glob(".tmp-*"))
+
+
+def test_leakage_controls_match_the_training_set_sizes():
+    X, y = _toy(n=240, L=60)
+    rows = cnn.leakage_controls(X, y, [0], gaps=(0, 10), epochs=1, cache=False, progress=False)
+    by = {(r["control"], r["gap"]): r for r in rows}
+    assert set(by) == {("blocked", 0), ("random, same n_train", 0), ("blocked", 10),
+                       ("random, same n_train", 10), ("blocked, centred", 5)}
+    for g in (0, 10):
+        assert by["blocked", g]["n_train"] == by["random, same n_train", g]["n_train"]
+    assert by["blocked", 0]["n_train"] == 240 - 48 and by["blocked", 10]["n_train"] < 240 - 48
+    for r in rows:
+        assert r["converged"] == (r["final_train_acc_%"] >= 95) and 0 <= r["test_acc_%"] <= 100

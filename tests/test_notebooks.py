@@ -19,7 +19,7 @@ def results(tmp_path_factory):
 
 
 NOISE = re.compile(r"it/s\]|s/it\]|\d+%\|[#\u2588 ]|oneDNN|cuInit|cudart|Skipping variable loading|retracing"
-                   r"|site-packages/")
+                   r"|site-packages/|\.py:\d+: \w*Warning|/root/|\.keras/models")
 
 
 def _noise(path) -> list[str]:
@@ -96,6 +96,13 @@ def _check_02(folder):
     t = pd.read_csv(folder / "per_seed.csv")
     assert sorted(t.split.unique()) == ["blocked", "random"]
     assert len(t) == 2 * len(TINY["seeds"])
+    c = pd.read_csv(folder / "leakage_controls.csv")
+    assert set(c.control) == {"blocked", "random, same n_train", "blocked, centred"}
+    blocked = c[c.control == "blocked"].set_index(["gap", "seed"]).n_train
+    matched = c[c.control == "random, same n_train"].set_index(["gap", "seed"]).n_train
+    assert blocked.equals(matched)                     # the control has the blocked split's training-set size
+    by_gap = blocked.groupby("gap").min()
+    assert by_gap.index.tolist() == TINY["sweep_gaps"] and by_gap.is_monotonic_decreasing
 
 
 def _check_03(folder):
@@ -103,6 +110,8 @@ def _check_03(folder):
     assert len(t) == -(-200 // TINY["frames_per_spot"])
     e = pd.read_csv(folder / "errors_per_seed.csv")
     assert (e.test_frames == 40).all()
+    assert sorted(e.split.unique()) == ["blocked", "random"] and len(e) == 2 * len(TINY["seeds"])
+    assert len(pd.read_csv(folder / "table2_blocked.csv")) == len(t)
 
 
 def _check_05(folder):
