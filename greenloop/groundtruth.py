@@ -203,6 +203,29 @@ def for_sequence(folder, frames=None, threshold: float = 0.5, exclude: int = 150
     return pair_matrix(data.read_loop_pairs(folder, n_frames=n), n, f, exclude)
 
 
+def variants(folder, frames=None, thresholds=(0.3, 0.4, 0.5, 0.6, 0.7, 0.8), exclude: int = 150,
+             max_distance: float = 1.0, max_angle: float = 30.0) -> dict:
+    """The ground truths a pose-tracked sequence admits, to show how scores move with the definition.
+
+    folder, frames, exclude: as :func:`for_sequence`. thresholds: Qi 2024 Eq. 5 thresholds
+    (mixed units, module doc). max_distance (metres), max_angle (degrees): the metric variant
+    (:func:`loop_matrix_metric`).
+    Returns {label: (M, M) bool}: "Eq. 5 < t" for every t, then "metric: < d m, < a deg";
+    an empty dict for a folder without poses (its loop pairs admit one ground truth only).
+    """
+    folder = Path(folder)
+    if data.ground_truth_kind(folder) != "poses":
+        return {}
+    n = len(data.list_frames(folder))
+    f = _check_frames(frames, n)
+    _, poses = data.read_trajectory(folder, n_frames=n)
+    far = _far_frames(f, exclude)
+    out = {f"Eq. 5 < {t:g}": loop_matrix(poses[f], t, 0) & far for t in thresholds}
+    out[f"metric: < {max_distance:g} m, < {max_angle:g} deg"] = (
+        loop_matrix_metric(poses[f], max_distance, max_angle, 0) & far)
+    return out
+
+
 def definition(folder, threshold: float = 0.5, exclude: int = 150) -> str:
     """One line saying which ground truth ``for_sequence(folder, ..., threshold, exclude)`` uses,
     for table notes and printouts (names the file and, for pairs, their count and tolerances)."""

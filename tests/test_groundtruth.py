@@ -174,3 +174,12 @@ def test_pair_file_reproduces_the_pose_ground_truth(tiny_sequence, tiny_pairs_se
         a = groundtruth.for_sequence(tiny_pairs_sequence, frames, exclude=exclude)
         b = groundtruth.for_sequence(tiny_sequence, frames, threshold=0.5, exclude=exclude)
         assert b.any() and (a == b).all()
+
+
+def test_variants_follow_the_threshold(tiny_sequence, tiny_pairs_sequence):
+    v = groundtruth.variants(tiny_sequence, np.arange(0, 200, 2), thresholds=(0.3, 0.5, 0.8), exclude=20)
+    eq5 = [v[f"Eq. 5 < {t:g}"] for t in (0.3, 0.5, 0.8)]
+    assert list(v)[-1].startswith("metric")
+    assert (eq5[1] == groundtruth.for_sequence(tiny_sequence, np.arange(0, 200, 2), 0.5, 20)).all()
+    assert not (eq5[0] & ~eq5[1]).any() and not (eq5[1] & ~eq5[2]).any()   # a looser threshold only adds loops
+    assert groundtruth.variants(tiny_pairs_sequence) == {}

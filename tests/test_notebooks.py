@@ -132,6 +132,9 @@ def _feature_backbones():
 
 def _check_07(folder):
     t = pd.read_csv(folder / "table2.csv")
+    g = pd.read_csv(folder / "ap_vs_ground_truth.csv").set_index("ground_truth")
+    assert g.loop_pairs.loc["Eq. 5 < 0.3"] <= g.loop_pairs.loc["Eq. 5 < 0.5"] <= g.loop_pairs.loc["Eq. 5 < 0.8"]
+    assert (g.loc["Eq. 5 < 0.5", t.label].values == t["AP_%"].values).all()   # the main table's definition
     assert t.backbone.tolist() == _feature_backbones()          # one row per backbone, in order
     assert {"weights", "label"} <= set(t.columns)
     assert (t.label == t.backbone.str.split(":").str[0] + " (" + t.weights + ")").all()
