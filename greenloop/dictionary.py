@@ -65,23 +65,32 @@ class LoopDetector:
         return int(self.counts.nbytes)
 
 
-def run(labels, n_classes: int, threshold: int) -> np.ndarray:
-    """Run a fresh detector over a stream of predicted labels (T,) -> closure flags (T,) bool.
+def counts(labels, n_classes: int) -> np.ndarray:
+    """The dictionary's running counts D(c) over a stream of predicted labels.
 
-    Vectorised equivalent of calling ``LoopDetector.update`` frame by frame: frame t is flagged when
-    the running count of labels[t] (itself included) is >= threshold.
+    labels: (T,) int in 0..n_classes-1. Returns (T, n_classes) int32: row t holds every spot's
+    count after frame t (itself included), what ``LoopDetector`` holds after t + 1 updates.
     """
     labels = np.asarray(labels, dtype=np.int64)
     if labels.ndim != 1:
         raise ValueError(f"labels must be 1-D (T,), got {labels.shape}")
-    if threshold < 1:
-        raise ValueError(f"threshold tau must be >= 1, got {threshold}")
     if len(labels) and (labels.min() < 0 or labels.max() >= n_classes):
         raise ValueError(f"labels must lie in 0..{n_classes - 1}, got {labels.min()}..{labels.max()}")
     onehot = np.zeros((len(labels), n_classes), dtype=np.int32)
     onehot[np.arange(len(labels)), labels] = 1
-    running = np.cumsum(onehot, axis=0)[np.arange(len(labels)), labels]
-    return running >= threshold
+    return np.cumsum(onehot, axis=0, dtype=np.int32)
+
+
+def run(labels, n_classes: int, threshold: int) -> np.ndarray:
+    """Run a fresh detector over a stream of predicted labels (T,) -> closure flags (T,) bool.
+
+    Vectorised equivalent of calling ``LoopDetector.update`` frame by frame: frame t is flagged when
+    the running count of labels[t] (itself included, :func:`counts`) is >= threshold.
+    """
+    if threshold < 1:
+        raise ValueError(f"threshold tau must be >= 1, got {threshold}")
+    labels = np.asarray(labels, dtype=np.int64)
+    return counts(labels, n_classes)[np.arange(len(labels)), labels] >= threshold
 
 
 def closure_events(labels, n_classes: int, threshold: int) -> list[dict]:

@@ -81,3 +81,13 @@ def test_score_closures_on_a_query_mask_and_choose_threshold():
         dictionary.score_closures(pred, ref, gt, 4, queries=np.ones(3, bool))
     with pytest.raises(ValueError, match="taus"):
         dictionary.choose_threshold(pred, ref, gt, [], late)
+
+
+def test_counts_are_the_detectors_running_counts():
+    labels = np.array([0, 1, 1, 2, 1, 0])
+    D = dictionary.counts(labels, 3)
+    assert D.shape == (6, 3) and D[-1].tolist() == [2, 3, 1] and D[2].tolist() == [1, 2, 0]
+    det = dictionary.LoopDetector(3, 2)
+    for t, c in enumerate(labels):
+        det.update(int(c))
+        assert det.counts.tolist() == D[t].tolist()
