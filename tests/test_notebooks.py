@@ -105,6 +105,14 @@ def _check_03(folder):
     assert (e.test_frames == 40).all()
 
 
+def _check_04(folder):
+    tf = pd.read_csv(folder / "training_frames.csv")
+    assert tf.frames.tolist() == ["all frames (the paper's protocol)", "training frames only", "held-out test frames only"]
+    assert tf.n_frames.tolist()[0] == 200 and tf.shift1_vs_test_only_points.iloc[-1] == 0
+    t3 = pd.read_csv(folder / "table3.csv")
+    assert abs(tf["shift1_%"].iloc[0] - t3["shift1_all_frames_%"].mean()) < 0.01
+
+
 def _check_05(folder):
     s = json.loads((folder / "summary.json").read_text())
     assert s["derived"]["tau"] == TINY["frames_per_spot"] + 10
@@ -250,7 +258,8 @@ def _check_13(folder):
 
 
 CHECKS = {"01_spot_grouping": _check_01, "02_training_over_seeds": _check_02,
-          "03_confusion_matrix": _check_03, "05_dictionary_threshold": _check_05, "06_speed": _check_06,
+          "03_confusion_matrix": _check_03, "04_shift_robustness": _check_04,
+          "05_dictionary_threshold": _check_05, "06_speed": _check_06,
           "07_feature_baselines": _check_07, "08_descriptor_postprocessing": _check_08,
           "09_rgbd_features": _check_09, "10_siamese_rgbd": _check_10, "11_lsh_matching": _check_11,
           "13_leaderboard": _check_13}
