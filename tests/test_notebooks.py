@@ -114,6 +114,27 @@ def _check_03(folder):
     assert len(pd.read_csv(folder / "table2_blocked.csv")) == len(t)
 
 
+def _check_04(folder):
+    from greenloop import shift
+    t = pd.read_csv(folder / "shift_controls.csv")
+    assert t.input.unique().tolist() == list(shift.CONTROLS)
+    assert len(t) == 4 * 4 * len(shift.CONTROLS)                   # 4 directions x shifts 1, 2, 4, 8
+    assert t["accuracy_mean_%"].between(0, 100).all()
+    assert t.changed_pixels_per_frame.between(0, 32 * 32).all() and t.mean_abs_change_per_pixel.between(0, 1).all()
+    one = t[(t.shift_px == 1) & (t.direction == "right")].set_index("input")
+    assert one.loc["replicate border", "mean_abs_change_per_pixel"] < one.loc["zero border (paper)", "mean_abs_change_per_pixel"]
+    # 160x120 -> 32x32: 5 full-res px per input column, so horizontal full-res zero-border shifts equal the paper's
+    assert one.loc["full-res shift, zero border", "accuracy_mean_%"] == one.loc["zero border (paper)", "accuracy_mean_%"]
+    w = pd.read_csv(folder / "shift_controls_1px.csv")
+    assert w.direction.tolist() == ["right", "left", "down", "up"]
+    tf = pd.read_csv(folder / "training_frames.csv")
+    assert tf.frames.tolist() == ["all frames (the paper's protocol)", "training frames only", "held-out test frames only"]
+    assert tf.n_frames.tolist()[0] == 200 and tf.shift1_vs_test_only_points.iloc[-1] == 0
+    t3 = pd.read_csv(folder / "table3.csv")
+    assert abs(tf["shift1_%"].iloc[0] - t3["shift1_all_frames_%"].mean()) < 0.01
+    assert (folder / "shift_controls.png").is_file()
+
+
 def _check_05(folder):
     s = json.loads((folder / "summary.json").read_text())
     assert s["derived"]["tau"] == TINY["frames_per_spot"] + 10
@@ -262,7 +283,8 @@ def _check_13(folder):
 
 
 CHECKS = {"01_spot_grouping": _check_01, "02_training_over_seeds": _check_02,
-          "03_confusion_matrix": _check_03, "05_dictionary_threshold": _check_05, "06_speed": _check_06,
+          "03_confusion_matrix": _check_03, "04_shift_robustness": _check_04,
+          "05_dictionary_threshold": _check_05, "06_speed": _check_06,
           "07_feature_baselines": _check_07, "08_descriptor_postprocessing": _check_08,
           "09_rgbd_features": _check_09, "10_siamese_rgbd": _check_10, "11_lsh_matching": _check_11,
           "13_leaderboard": _check_13}
