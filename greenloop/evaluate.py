@@ -303,6 +303,31 @@ class NoHonestSplit(ValueError):
         self.n, self.gap, self.revisits, self.first, self.last = n, gap, revisits, first, last
         self.span = None if first is None else last - first
 
+    def statement(self, dropped: str = "the tuned rows", frames=None,
+                  kept: str = "numbers that need no tuning are scored on every query instead") -> str:
+        """The notebooks' one-paragraph note (Markdown) for this case: what is missing and why.
+
+        dropped: what the caller does not report, e.g. "the tuned rows".
+        kept: what it reports instead (a clause, no full stop).
+        frames: optional (n,) original frame numbers of the split's frames (``np.arange(0, N,
+            step)``), to name the revisit frames as original frames as well; the gap and the span
+            are in the split's own frames (steps of ``step``).
+        """
+        if self.revisits is None:
+            why = (f"the {self.n} frames cannot be cut with a gap of {self.gap} frames between the "
+                   f"tuning and the evaluation part")
+        else:
+            unit = "frames" if frames is None else "described frames"
+            where = f"{unit} {self.first}..{self.last}"
+            if frames is not None:
+                f = np.asarray(frames)
+                where += f", original frames {int(f[self.first])}..{int(f[self.last])}"
+            why = (f"the {self.revisits} revisit frame{'s' if self.revisits != 1 else ''} of this "
+                   f"sequence ({where}) all lie within {self.span} {unit}, no more than the gap of "
+                   f"{self.gap} {unit} kept free between the tuning and the evaluation part; no "
+                   f"tune/score split keeps them apart")
+        return f"**No honest tuning/evaluation split:** {why}, so {dropped} are not reported; {kept}."
+
 
 def split_mask(n: int, fraction: float = 0.5, gt=None, gap: int = 0):
     """Two disjoint, contiguous sets of query frames: tune on one, report on the other.
