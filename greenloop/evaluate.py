@@ -25,7 +25,9 @@ of the sequence and scored on another, never picked by its score on the evaluati
 truth. :func:`split_mask` gives two disjoint sets of *query* frames; every pair-based function
 takes ``queries=``: a (N,) bool mask, and pair (i, j), i < j, counts only when the later frame
 j is in the mask (the earlier frame i may be anywhere). Tune with ``queries=tune``, report with
-``queries=eval``.
+``queries=eval``. Where the revisit frames all lie within the gap of each other (one short loop
+at the very end of a sequence), no such split exists: :func:`split_mask` raises
+:class:`NoHonestSplit`, and only untuned numbers (over every query) can be reported.
 """
 from __future__ import annotations
 
@@ -37,8 +39,8 @@ from greenloop.groundtruth import revisit_frames
 __all__ = [
     "pair_mask", "pair_scores", "pr_curve", "average_precision", "recall_at_precision",
     "recall_at_100_precision",
-    "recall_at_k", "operating_point", "split_mask", "mean_per_class_accuracy", "mpca_threshold",
-    "tune_then_score",
+    "recall_at_k", "operating_point", "split_mask", "NoHonestSplit", "mean_per_class_accuracy",
+    "mpca_threshold", "tune_then_score",
 ]
 
 _NO_LOOPS = ("the ground truth has no loops among the counted pairs (|i - j| > exclude={exclude}"
@@ -286,20 +288,75 @@ def operating_point(predicted, GT, exclude: int = 150, queries=None) -> dict:
 
 
 # ------------------------------------------------------------------------------ tuning
+class NoHonestSplit(ValueError):
+    """:func:`split_mask` found no cut that leaves revisit frames (or, without a ground truth,
+    frames) on both sides of the gap. A ValueError, so code that caught the old errors still does.
+
+    Attributes: n (frames), gap (frames kept free after the cut), revisits (number of revisit
+    frames; None without a ground truth), first, last (frame index of the first and last revisit
+    frame; None without one), span = last - first (frames; None without one).
+    """
+
+    def __init__(self, message: str, *, n: int, gap: int, revisits: int | None = None,
+                 first: int | None = None, last: int | None = None):
+        super().__init__(message)
+        self.n, self.gap, self.revisits, self.first, self.last = n, gap, revisits, first, last
+        self.span = None if first is None else last - first
+
+    def statement(self, dropped: str = "the tuned rows", frames=None,
+                  kept: str = "numbers that need no tuning are scored on every query instead") -> str:
+        """The notebooks' one-paragraph note (Markdown) for this case: what is missing and why.
+
+        dropped: what the caller does not report, e.g. "the tuned rows".
+        kept: what it reports instead (a clause, no full stop).
+        frames: optional (n,) original frame numbers of the split's frames (``np.arange(0, N,
+            step)``), to name the revisit frames as original frames as well; the gap and the span
+            are in the split's own frames (steps of ``step``).
+        """
+        if self.revisits is None:
+            why = (f"the {self.n} frames cannot be cut with a gap of {self.gap} frames between the "
+                   f"tuning and the evaluation part")
+        else:
+            unit = "frames" if frames is None else "described frames"
+            where = f"{unit} {self.first}..{self.last}"
+            if frames is not None:
+                f = np.asarray(frames)
+                where += f", original frames {int(f[self.first])}..{int(f[self.last])}"
+            why = (f"the {self.revisits} revisit frame{'s' if self.revisits != 1 else ''} of this "
+                   f"sequence ({where}) all lie within {self.span} {unit}, no more than the gap of "
+                   f"{self.gap} {unit} kept free between the tuning and the evaluation part; no "
+                   f"tune/score split keeps them apart")
+        return f"**No honest tuning/evaluation split:** {why}, so {dropped} are not reported; {kept}."
+
+
 def split_mask(n: int, fraction: float = 0.5, gt=None, gap: int = 0):
     """Two disjoint, contiguous sets of query frames: tune on one, report on the other.
 
     n: number of frames. fraction: share of the split that goes to the tuning part (0 < f < 1).
-    gt: optional (n, n) ground truth. Without it, the cut is at frame round(fraction * n).
-        With it, the cut puts ``fraction`` of the *revisit frames* (frames with a loop partner
-        earlier in the sequence, :func:`greenloop.groundtruth.revisit_frames`) in the tuning
-        part, and at least one in each part; use this when loops are rare or clustered (the
-        GreenHouse set revisits only in frames ~2068-2260, so a plain cut at n/2 would leave
+    gt: optional (n, n) bool ground truth. Without it, the requested cut is at frame
+        round(fraction * n). With it, the requested cut is at the revisit frame rev[m],
+        m = round(fraction * R) clipped to 1..R-1, where rev are the R *revisit frames* (frames
+        with a loop partner earlier in the sequence, :func:`greenloop.groundtruth.revisit_frames`)
+        in order: ``fraction`` of them before the cut. Use it when loops are rare or clustered
+        (the GreenHouse set revisits only in frames ~2068-2260, so a plain cut at n/2 would leave
         the tuning part without any loop). Only labels are used, never scores.
-    gap: frames right after the cut that belong to neither part, so that near-duplicate
-        neighbours (and median-filter windows, use gap >= size) do not straddle it.
+    gap: frames right after the cut that belong to neither part (frames, >= 0), so that
+        near-duplicate neighbours (and median-filter windows, use gap >= size) do not straddle it.
+
+    The cut is the requested one when it leaves a revisit frame at or after cut + gap. Otherwise
+    (revisits clustered at the end of the sequence, e.g. one loop closing in its last frames) it
+    moves down to the latest cut that still does, last revisit frame - gap: the honest cut
+    closest to the requested one, with as many revisit frames in the tuning part as the gap
+    allows and at least the last one in the evaluation part. So with a ground truth both parts
+    always hold a revisit frame and no revisit frame within ``gap`` after the cut is scored.
+    An honest cut exists iff the revisit frames span more than the gap (last - first > gap);
+    without a ground truth, iff n > gap + 1 (the cut is then at most n - 1 - gap).
+
     Returns (tune (n,) bool, evaluate (n,) bool): tune = frames before the cut, evaluate =
     frames from cut + gap on. Pass them as ``queries=`` to the scoring functions.
+    Raises NoHonestSplit (a ValueError) when no honest cut exists, naming the number of revisit
+    frames, their span and the gap; ValueError for bad arguments or a ground truth with no
+    revisit frame at all.
     """
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 2:
         raise ValueError(f"n must be an integer >= 2 frames, got {n!r}")
@@ -307,27 +364,34 @@ def split_mask(n: int, fraction: float = 0.5, gt=None, gap: int = 0):
         raise ValueError(f"fraction must be strictly between 0 and 1, got {fraction}")
     if isinstance(gap, bool) or not isinstance(gap, (int, np.integer)) or gap < 0:
         raise ValueError(f"gap must be an integer >= 0 frames, got {gap!r}")
+    n, gap = int(n), int(gap)
     if gt is None:
-        cut = min(max(int(round(fraction * n)), 1), n - 1)
+        cut = min(min(max(int(round(fraction * n)), 1), n - 1), n - 1 - gap)
+        if cut < 1:
+            raise NoHonestSplit(
+                f"{n} frames cannot be split with a gap of {gap} frames: a split needs a frame "
+                f"before the cut and one at or after cut + gap, so n must exceed gap + 1",
+                n=n, gap=gap)
     else:
         G = _check_gt(gt)
         if G.shape[0] != n:
             raise ValueError(f"gt has shape {G.shape} but n={n}")
         rev = np.flatnonzero(revisit_frames(G))
-        if rev.size < 2:
-            raise ValueError(f"the ground truth has {rev.size} revisit frame(s); a split needs at "
-                             f"least 2 (one per part): the sequence may not revisit any place")
+        if rev.size == 0:
+            raise ValueError("the ground truth has no revisit frame (no frame has a loop partner "
+                             "earlier in the sequence): the sequence may not revisit any place")
+        first, last = int(rev[0]), int(rev[-1])
+        if last - first <= gap:
+            raise NoHonestSplit(
+                f"the {rev.size} revisit frame(s) of this sequence all lie within {last - first} "
+                f"frames (frames {first}..{last}), not more than the gap of {gap} frames kept free "
+                f"between the tuning and the evaluation part: no split keeps revisits on both sides "
+                f"(it needs one before the cut and one at or after cut + gap, so their span must "
+                f"exceed the gap)", n=n, gap=gap, revisits=int(rev.size), first=first, last=last)
         m = min(max(int(round(fraction * rev.size)), 1), rev.size - 1)
-        cut = int(rev[m])                     # rev[:m] tune, rev[m:] evaluate
+        cut = min(int(rev[m]), last - gap)     # rev[:m] tune when the requested cut is honest
     idx = np.arange(n)
-    tune = idx < cut
-    evaluate = idx >= cut + gap
-    if not evaluate.any():
-        raise ValueError(f"gap={gap} leaves no evaluation frames after the cut at frame {cut}")
-    if gt is not None and not np.any(evaluate[rev]):
-        raise ValueError(f"gap={gap} leaves no revisit frame in the evaluation part; use a "
-                         f"smaller gap or a smaller fraction")
-    return tune, evaluate
+    return idx < cut, idx >= cut + gap
 
 
 def tune_then_score(candidates, GT, exclude: int, tune, evaluate) -> dict:

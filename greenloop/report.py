@@ -187,7 +187,8 @@ def _dataset_rows(folder: Path) -> list[dict]:
                 rows.append({"method": f"{r['label']}, cosine", "metric": metric, "value": r[metric]})
     s13 = _json(folder / "13_leaderboard" / "summary.json")
     for r in (s13 or {}).get("leaderboard", []):
-        if r["method"].startswith("greenloop-seq") and r.get("AP_%") is not None:
+        ap = r.get("AP_%")                                # None or NaN: not run (e.g. no honest split)
+        if r["method"].startswith("greenloop-seq") and ap is not None and ap == ap:
             name, _, knobs = r["method"].partition(" (")
             for metric in ("AP_%", "R@100P_%"):           # the descriptor is picked per dataset
                 rows.append({"method": f"{name}, evaluation part of the leaderboard split",

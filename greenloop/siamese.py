@@ -385,6 +385,48 @@ def load_inputs(folder, size=INPUT_SIZE, step: int = 1, depth: bool = True,
 
 
 # ---------------------------------------------------------------------------------- pairs
+def training_split(n: int, fraction: float, gt, gap: int, frames_per_spot: int, frames=None):
+    """The training and held-out frames of a Siamese run, kept ``gap`` frames apart.
+
+    n: frames. fraction: share of the revisit frames before the cut (``evaluate.split_mask``).
+    gt: (n, n) bool ground truth. gap: frames after the training part in neither part.
+    frames_per_spot: L, the place length; all in frames of this array. frames: optional (n,)
+    original frame numbers of these frames (``np.arange(0, N, step)``), to name them in the note.
+    Returns (train (n,) bool, held (n,) bool, note): first ``evaluate.split_mask(n, fraction,
+    gt, gap)`` (revisit frames on both sides) with note None. Where that raises
+    ``evaluate.NoHonestSplit`` (every revisit frame within ``gap`` of the others, e.g. one short
+    loop at the end of a sequence), training needs no revisit frame, so the training part is
+    every frame before (first revisit frame - gap) and the held-out part every frame from the
+    first revisit frame on: every revisit is held out, the places are spots only (no positive
+    pair across time), no training frame lies within ``gap`` of a held-out one, and note (one
+    Markdown sentence) says so. Raises ``evaluate.NoHonestSplit`` where that training part would
+    hold fewer than two places (first revisit frame - gap <= frames_per_spot).
+    """
+    from . import evaluate, groundtruth
+
+    try:
+        train, held = evaluate.split_mask(n, fraction, gt=gt, gap=gap)
+        return train, held, None
+    except evaluate.NoHonestSplit as e:
+        first = int(np.flatnonzero(groundtruth.revisit_frames(gt))[0])
+        cut = first - int(gap)
+        if cut <= int(frames_per_spot):
+            raise evaluate.NoHonestSplit(
+                f"{e}; nor does a training part before the first revisit frame {first} less the gap "
+                f"of {gap} frames hold two places of {frames_per_spot} frames",
+                n=e.n, gap=e.gap, revisits=e.revisits, first=e.first, last=e.last) from e
+        idx = np.arange(n)
+        f = idx if frames is None else np.asarray(frames)
+        unit = "frames" if frames is None else "steps"
+        note = (f"**Training part without revisits:** the {e.revisits} revisit frames (frames "
+                f"{f[e.first]}..{f[e.last]}) all lie within {e.span} {unit}, no more than the gap of "
+                f"{gap} {unit}, so no cut leaves revisits on both sides; the networks are trained on "
+                f"frames {f[0]}..{f[cut - 1]} (before the first revisit frame less the gap), whose "
+                f"places are spots only, and every frame from {f[first]} on, every revisit, is held "
+                f"out and scored.")
+        return idx < cut, idx >= first, note
+
+
 def place_labels(train, gt, frames_per_spot: int) -> np.ndarray:
     """The place of every training frame: (N,) int64 in 0 .. K-1, and -1 for every other frame.
 

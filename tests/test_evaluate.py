@@ -224,6 +224,83 @@ def test_split_mask():
         ev.split_mask(N, 0.5, gt=np.zeros((N, N), dtype=bool))
 
 
+
+def _end_loop(n, first, last):
+    """(n, n) ground truth whose revisit frames are first..last: frame j revisits frame j - first."""
+    GT = np.zeros((n, n), dtype=bool)
+    for j in range(first, last + 1):
+        GT[j - first, j] = GT[j, j - first] = True
+    return GT
+
+
+def _check_honest(tune, evl, GT, gap):
+    """Both parts hold revisit frames, they are disjoint, and the gap after the cut is free."""
+    rev = np.flatnonzero(np.triu(GT, 1).any(0))
+    cut = int(np.flatnonzero(tune)[-1]) + 1
+    assert tune.tolist() == (np.arange(len(tune)) < cut).tolist()
+    assert evl.tolist() == (np.arange(len(evl)) >= cut + gap).tolist()
+    assert tune[rev].any() and evl[rev].any() and not np.any(tune & evl)
+    assert not np.any((rev >= cut) & (rev < cut + gap) & evl[rev])   # nothing of the gap scored
+    return cut
+
+
+def test_split_mask_keeps_its_cut_where_the_requested_one_is_honest():
+    GT = _end_loop(100, 60, 99)                  # 40 revisit frames 60..99
+    tune, evl = ev.split_mask(100, 0.5, gt=GT, gap=5)
+    assert _check_honest(tune, evl, GT, 5) == 80  # rev[20] = 80: 20 revisit frames tune, 95..99 scored
+    assert evl.sum() == 15
+
+
+def test_split_mask_moves_the_cut_down_for_revisits_clustered_at_the_end():
+    # revisit frames 90..99, gap 5: the requested cut rev[5] = 95 leaves nothing after 95 + 5;
+    # the latest honest cut is 99 - 5 = 94: revisit frames 90..93 tune, frame 99 scored
+    GT = _end_loop(100, 90, 99)
+    tune, evl = ev.split_mask(100, 0.5, gt=GT, gap=5)
+    assert _check_honest(tune, evl, GT, 5) == 94
+    assert np.flatnonzero(evl).tolist() == [99]
+    # the span (6) just exceeds the gap (5): revisit frame 90 tunes, 96 is scored
+    GT = _end_loop(100, 90, 96)
+    tune, evl = ev.split_mask(100, 0.5, gt=GT, gap=5)
+    assert _check_honest(tune, evl, GT, 5) == 91
+    assert np.flatnonzero(tune & np.triu(GT, 1).any(0)).tolist() == [90]
+    assert np.flatnonzero(evl & np.triu(GT, 1).any(0)).tolist() == [96]
+    # a larger fraction asks for a later cut: the same honest limit
+    assert _check_honest(*ev.split_mask(100, 0.9, gt=GT, gap=5), GT, 5) == 91
+    # a small fraction whose requested cut is honest keeps it: rev[round(0.1 * 20)] = rev[2] = 82
+    assert _check_honest(*ev.split_mask(100, 0.1, gt=_end_loop(100, 80, 99), gap=5),
+                         _end_loop(100, 80, 99), 5) == 82
+
+
+def test_split_mask_on_a_loop_pair_ground_truth_closing_at_the_end():
+    # 600 frames, every 8th described, frames 560..599 revisit 0..39 (ground_truth.csv pairs):
+    # the revisit frames among the described ones are 70..74 (original 560..592)
+    from greenloop.groundtruth import pair_matrix
+    pairs = [(k, 560 + k, 2) for k in range(40)]
+    GT = pair_matrix(pairs, 600, np.arange(0, 600, 8), exclude=150)
+    assert np.flatnonzero(np.triu(GT, 1).any(0)).tolist() == [70, 71, 72, 73, 74]
+    assert _check_honest(*ev.split_mask(75, 0.5, gt=GT, gap=3), GT, 3) == 71
+    with pytest.raises(ev.NoHonestSplit) as e:      # 08's gap: the largest median size, 15
+        ev.split_mask(75, 0.5, gt=GT, gap=15)
+    assert (e.value.revisits, e.value.first, e.value.last, e.value.span, e.value.gap) == (5, 70, 74, 4, 15)
+
+
+def test_split_mask_raises_no_honest_split_when_the_revisits_fit_in_the_gap():
+    for first in (95, 94):                         # spans 4 and 5, gap 5: no cut c with 94 < c <= 94
+        with pytest.raises(ev.NoHonestSplit, match=rf"{100 - first} revisit frame\(s\).*within "
+                           rf"{99 - first} frames \(frames {first}..99\).*gap of 5 frames"):
+            ev.split_mask(100, 0.5, gt=_end_loop(100, first, 99), gap=5)
+    with pytest.raises(ev.NoHonestSplit, match="1 revisit frame"):   # one revisit frame, no gap
+        ev.split_mask(100, 0.5, gt=_end_loop(100, 99, 99), gap=0)
+    assert issubclass(ev.NoHonestSplit, ValueError)
+    with pytest.raises(ValueError, match="no revisit frame") as e:     # no loop at all: another error
+        ev.split_mask(100, 0.5, gt=np.zeros((100, 100), dtype=bool))
+    assert not isinstance(e.value, ev.NoHonestSplit)
+    # without a ground truth: the cut moves down to n - 1 - gap, and n <= gap + 1 has no split
+    tune, evl = ev.split_mask(10, 0.5, gap=6)
+    assert np.flatnonzero(tune).tolist() == [0, 1, 2] and np.flatnonzero(evl).tolist() == [9]
+    with pytest.raises(ev.NoHonestSplit, match="10 frames"):
+        ev.split_mask(10, 0.5, gap=9)
+
 # ------------------------------------------------------------------- real GreenHouse poses
 @pytest.fixture(scope="module")
 def greenhouse_poses():

@@ -38,7 +38,12 @@ def test_cross_dataset_table_puts_datasets_side_by_side(tmp_path):
         "per_seed": [{"split": "random", "seed": 0, "in_traversal_test_acc_%": 99.0, "revisit_acc_%": 20.0},
                      {"split": "random", "seed": 1, "in_traversal_test_acc_%": 97.0, "revisit_acc_%": 30.0}],
         "dictionary": [{"tau_rule": "chosen", "tau": 65, "precision": 0.5, "recall": 0.25}]})
+    report.write_json(tmp_path / "nordland" / "13_leaderboard" / "summary.json", {"leaderboard": [
+        {"method": "greenloop-seq (pixels, seq_len 10, contrast window 0)", "AP_%": 61.5, "R@100P_%": 20.0},
+        {"method": "greenloop-seq-fast: not run", "AP_%": float("nan"), "R@100P_%": float("nan")}]})
     t = report.cross_dataset([tmp_path / "synthetic", tmp_path / "nordland", tmp_path / "absent"])
+    seq = t[t.method.str.startswith("greenloop-seq")]        # a row that was not run (NaN) is left out
+    assert seq.nordland.tolist() == ["61.5 (pixels)", "20.0 (pixels)"] and len(seq) == 2
     assert list(t.columns) == ["method", "metric", "synthetic", "nordland"]
     ap = t[(t.method == "pixels (none), cosine") & (t.metric == "AP_%")].iloc[0]
     assert (ap.synthetic, ap.nordland) == (40.0, 12.5)

@@ -196,6 +196,24 @@ def test_pairs_never_include_a_heldout_frame_or_its_neighbours():
         sm.make_pairs(np.array([0, -1, -1]), 10)
 
 
+
+def test_training_split_holds_every_revisit_out_when_no_honest_split_exists():
+    gt = _loop_gt()                                               # revisits 90..119: the usual split
+    train, held, note = sm.training_split(120, 0.5, gt, 5, 20)
+    assert note is None and [a.tolist() for a in evaluate.split_mask(120, 0.5, gt=gt, gap=5)] == [train.tolist(), held.tolist()]
+    gt = _loop_gt(shift=116, length=4)                            # revisits 116..119 (span 3), gap 5
+    with pytest.raises(evaluate.NoHonestSplit):
+        evaluate.split_mask(120, 0.5, gt=gt, gap=5)
+    train, held, note = sm.training_split(120, 0.5, gt, 5, 20)    # train 0..110, held 116..119
+    assert np.flatnonzero(train).tolist() == list(range(111)) and np.flatnonzero(held).tolist() == [116, 117, 118, 119]
+    assert "frames 0..110" in note and "from 116 on" in note
+    labels = sm.place_labels(train, gt, 20)
+    assert labels.max() == 5 and (labels[~train] == -1).all()      # spots only: 111 frames, 6 places
+    pairs, _ = sm.make_pairs(labels, 200, seed=0)
+    sm.check_pairs(pairs, held, 5)
+    with pytest.raises(evaluate.NoHonestSplit, match="two places"):  # 111 frames hold no two places of 111
+        sm.training_split(120, 0.5, gt, 5, 111)
+
 def test_train_uses_only_labelled_frames_and_is_cached(tmp_path):
     gt, gap = _loop_gt(), 5
     train, held = evaluate.split_mask(120, 0.5, gt=gt, gap=gap)
