@@ -938,7 +938,7 @@ _DESCRIPTOR_CODE = ("features", "data", "ghostnet", "shufflenet", "mobilenet_tfl
                     "efficientnet_lite", "torch_weights")
 
 
-def describe(folder, specs, weights="auto", input_size=None, step: int = 1,
+def extract_all(folder, specs, weights="auto", input_size=None, step: int = 1,
              vocab_size: int = DEFAULT_VOCAB_SIZE, spot_model=None, cache=True):
     """Descriptors of one sequence folder for every backbone-list entry, computed once per dataset.
 
@@ -984,7 +984,7 @@ def describe(folder, specs, weights="auto", input_size=None, step: int = 1,
 
 
 def _descriptor_key(folder, name, weights, input_size, step, vocab_size) -> str:
-    """Hex key of one describe() entry (see there for what it covers)."""
+    """Hex key of one extract_all() entry (see there for what it covers)."""
     import hashlib
     import importlib
     import json

@@ -379,14 +379,14 @@ def test_extract_spec_keeps_fixed_inputs_and_forces_random_init():
     assert X.shape == (2, 1024)
 
 
-def test_describe_computes_each_descriptor_once(tiny_sequence, tmp_path, capsys):
+def test_extract_all_computes_each_descriptor_once(tiny_sequence, tmp_path, capsys):
     specs = ["pixels", "ghostnet:random"]
-    a, ia = F.describe(tiny_sequence, specs, input_size=32, step=5, cache=tmp_path)
+    a, ia = F.extract_all(tiny_sequence, specs, input_size=32, step=5, cache=tmp_path)
     assert len(list(tmp_path.glob("*/features.npy"))) == 2
-    b, ib = F.describe(tiny_sequence, specs, input_size=32, step=5, cache=tmp_path)
+    b, ib = F.extract_all(tiny_sequence, specs, input_size=32, step=5, cache=tmp_path)
     for s in specs:
         assert np.array_equal(a[s], b[s]) and ia[s] == ib[s] and a[s].shape[0] == 40
     assert np.array_equal(a["pixels"], F.extract(tiny_sequence, "pixels", step=5, progress=False))
-    F.describe(tiny_sequence, specs, input_size=32, step=4, cache=tmp_path)   # other settings: new entries
+    F.extract_all(tiny_sequence, specs, input_size=32, step=4, cache=tmp_path)   # other settings: new entries
     assert len(list(tmp_path.glob("*/features.npy"))) == 4
     assert "ghostnet (random init)" in capsys.readouterr().out
