@@ -65,3 +65,20 @@ def tiny_pairs_sequence(tiny_sequence, tmp_path_factory):
     _, poses = data.read_trajectory(tiny_sequence)
     data.write_loop_pairs(folder / data.GROUND_TRUTH_NAME, pose_loops_as_pairs(poses))
     return folder
+
+
+@pytest.fixture(scope="session")
+def tiny_end_loop_sequence(tiny_sequence, tmp_path_factory):
+    """A user's sequence whose only revisit lies at its end: tiny_sequence's frames 0..179 as jpg
+    (no poses, no depth), then frames 0..19 seen again, darker and shifted by 2 px, as frames
+    180..199; ground_truth.csv pairs each with its first visit (tolerance 1)."""
+    folder = tmp_path_factory.mktemp("seq") / "tiny-end-loop"
+    (folder / "rgb").mkdir(parents=True)
+    for i in range(200):
+        img = cv2.imread(str(tiny_sequence / "rgb" / f"{i if i < 180 else i - 180}.png"))
+        if i >= 180:
+            img = np.roll((img * 0.8).astype(np.uint8), 2, axis=1)
+        cv2.imwrite(str(folder / "rgb" / f"{i}.jpg"), img)
+    from greenloop import data
+    data.write_loop_pairs(folder / data.GROUND_TRUTH_NAME, [(180 + k, k, 1) for k in range(20)])
+    return folder

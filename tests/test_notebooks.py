@@ -328,3 +328,22 @@ def _check_10_pairs(folder):
 
 PAIR_CHECKS = {"00_dataset": _check_00_pairs, "03_confusion_matrix": _check_03_pairs,
                "09_rgbd_features": _check_09_pairs, "10_siamese_rgbd": _check_10_pairs}
+
+
+@pytest.fixture(scope="module")
+def end_loop_results(tmp_path_factory):
+    return tmp_path_factory.mktemp("results-end-loop")
+
+
+# the notebooks that tune on one part of the revisits and score on another
+SPLITTING = [p for p in NOTEBOOKS if p.stem[:2] in ("08", "10", "12", "13")]
+
+
+@pytest.mark.parametrize("notebook", SPLITTING, ids=[p.stem for p in SPLITTING])
+def test_notebook_runs_on_a_sequence_whose_only_revisit_is_at_its_end(notebook, tiny_end_loop_sequence,
+                                                                     end_loop_results, monkeypatch):
+    """A user's jpg sequence (no poses, no depth) with one loop closing in its last 20 frames: each
+    notebook either splits those revisits into a tuning and an evaluation part or says that no
+    honest split exists, and renders the rest either way."""
+    folder = _run(notebook, tiny_end_loop_sequence, end_loop_results, monkeypatch)
+    assert json.loads((folder / "manifest.json").read_text())["dataset_ground_truth"] == "pairs"
