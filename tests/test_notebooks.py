@@ -90,6 +90,13 @@ def _check_01(folder):
     assert t.frames_per_spot.tolist() == TINY["frames_per_spot_list"]
     assert t.spots.tolist() == [-(-200 // L) for L in TINY["frames_per_spot_list"]]
     assert t["acc_mean_%"].between(0, 100).all()
+    c = pd.read_csv(folder / "table1_control_runs.csv")
+    assert sorted(c.frames_per_spot.unique()) == sorted(TINY["frames_per_spot_list"])
+    for L, d in c.groupby("frames_per_spot"):          # the matched control has the blocked split's size
+        b, m = (d[d.control == k].set_index("seed").n_train for k in ("blocked", "random, same n_train"))
+        assert b.equals(m) and (b < 200 * 0.8).all()
+    s = pd.read_csv(folder / "table1_controls.csv")
+    assert len(s) == 3 * len(TINY["frames_per_spot_list"]) and s["acc_median_%"].between(0, 100).all()
 
 
 def _check_02(folder):
@@ -347,3 +354,30 @@ def test_notebook_runs_on_a_sequence_whose_only_revisit_is_at_its_end(notebook, 
     honest split exists, and renders the rest either way."""
     folder = _run(notebook, tiny_end_loop_sequence, end_loop_results, monkeypatch)
     assert json.loads((folder / "manifest.json").read_text())["dataset_ground_truth"] == "pairs"
+    END_LOOP_CHECKS[notebook.stem[:2]](folder)
+
+
+def _end_loop_08(folder):
+    t = pd.read_csv(folder / "postprocessing.csv")
+    assert set(t.backbone) == set(TINY["backbones"]) - {"spot_cnn"}       # 08 skips spot_cnn
+    assert "AP_eval_%" in t.columns            # 20 revisit frames, gap 5: an honest split exists
+    assert t.filter(like="AP_").stack().dropna().between(0, 100).all()
+
+
+def _end_loop_12(folder):
+    s = json.loads((folder / "summary.json").read_text())
+    assert s["first_traversal_end"] == 180 and s["revisit_frames"] == 20   # the fixture's one loop
+
+
+def _end_loop_13(folder):
+    t = pd.read_csv(folder / "leaderboard.csv")
+    assert len(t) and t.filter(like="AP").stack().dropna().between(0, 100).all()
+
+
+def _end_loop_10(folder):
+    sup = pd.read_csv(folder / "supervisions.csv")
+    assert sup[sup.train_pairs > 0].supervision.tolist() == ["softmax", "contrastive", "multitask"]
+    assert sup["AP_%"].between(0, 100).all()
+
+
+END_LOOP_CHECKS = {"08": _end_loop_08, "10": _end_loop_10, "12": _end_loop_12, "13": _end_loop_13}
