@@ -333,6 +333,7 @@ class Detector:
         file.
     threshold: tau >= 1; a closure of spot c is declared at the frame where its count reaches tau
         (once per spot, like ``greenloop.dictionary.closure_events``; the dictionary never decays).
+        None: count every frame but declare no closure (``events`` stays empty; for timing).
     n_classes: size of the dictionary; defaults to the model's number of outputs.
     backend: "auto", "numpy", "tflite" or "keras" (see the module docstring).
     color: channel order of 3-channel frames: "bgr" (OpenCV, the default) or "rgb". Gray frames
@@ -344,13 +345,13 @@ class Detector:
     int32), ``frame_index`` (frames seen), ``backend`` (the one in use), ``size`` (width, height).
     """
 
-    def __init__(self, model, threshold: int, n_classes: int | None = None, backend: str = "auto",
+    def __init__(self, model, threshold: int | None, n_classes: int | None = None, backend: str = "auto",
                  color: str = "bgr", num_threads: int | None = None):
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
         if color not in COLORS:
             raise ValueError(f"color must be one of {COLORS}, got {color!r}")
-        if int(threshold) != threshold or threshold < 1:
+        if threshold is not None and (int(threshold) != threshold or threshold < 1):
             raise ValueError(f"threshold tau must be an integer >= 1, got {threshold}")
         keras_model, content = _load_model(model)
         self.color = color
@@ -385,8 +386,8 @@ class Detector:
         n_classes = out_classes if n_classes is None else int(n_classes)
         if n_classes < out_classes:
             raise ValueError(f"n_classes={n_classes} is smaller than the model's {out_classes} outputs")
-        self.dictionary = LoopDetector(n_classes, int(threshold))
-        self.threshold = int(threshold)
+        self.threshold = None if threshold is None else int(threshold)
+        self.dictionary = LoopDetector(n_classes, self.threshold)
         self.n_classes = n_classes
         self.reset()
 
@@ -453,7 +454,7 @@ class Detector:
         t = self.frame_index
         self.frame_index += 1
         self.labels.append(label)
-        if d.counts[label] == d.threshold:
+        if d.threshold is not None and d.counts[label] == d.threshold:
             event = {"frame": t, "spot": label, "count": int(d.counts[label])}
             self.events.append(event)
             return event
@@ -485,7 +486,7 @@ class Detector:
         np.add.at(d.counts, labels, 1)
         t0 = self.frame_index
         events = [{"frame": t0 + int(i), "spot": int(labels[i]), "count": int(running[i])}
-                  for i in np.flatnonzero(running == d.threshold)]
+                  for i in (np.flatnonzero(running == d.threshold) if d.threshold is not None else ())]
         self.frame_index += len(labels)
         self.labels.extend(labels.tolist())
         self.events.extend(events)
