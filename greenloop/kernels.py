@@ -93,20 +93,13 @@ def _compiled():
     # contraction only (no nnan/ninf), so sums may be reordered as any BLAS does while NaNs and
     # infinities behave as in NumPy.
     opts = dict(fastmath={"reassoc", "contract"}, error_model="numpy", cache=True, nogil=True)
-    conv3_relu, conv3_grad = _compile_conv(njit, opts)
-    return {"conv3_relu": conv3_relu, "conv3_grad": conv3_grad, "adam1d": _compile_adam(njit, opts),
-            "area_u8": _compile_area(njit)}
+    return {"conv3_relu": _compile_conv_relu(njit, opts), "conv3_grad": _compile_conv_grad(njit, opts),
+            "adam1d": _compile_adam(njit, opts), "area_u8": _compile_area(njit)}
 
 
-def _compile_conv(njit, opts: dict):
-    """The 3x3 convolution kernels (njit with ``opts``).
-
-    conv3_relu(X (n, h, w) f32, K (kh, kw, f) f32, bias (f,) f32, out (n, ho*wo*f) f32): valid
-    convolution plus ReLU, flattened (row, column, filter) into ``out``.
-    conv3_grad(X (n, h, w), dZ (n, ho*wo*f), A (n, ho*wo*f) the forward output, kh, kw,
-    total (kh*kw + 1, f)): kernel gradients (rows dy*kw + dx) and the bias gradient (last row)
-    summed over the frames, written into ``total``.
-    """
+def _compile_conv_relu(njit, opts: dict):
+    """conv3_relu(X (n, h, w) f32, K (kh, kw, f) f32, bias (f,) f32, out (n, ho*wo*f) f32): valid
+    convolution plus ReLU, flattened (row, column, filter) into ``out`` (njit with ``opts``)."""
     @njit(**opts)
     def conv3_relu(X, K, bias, out):
         n, h, w = X.shape
@@ -131,6 +124,13 @@ def _compile_conv(njit, opts: dict):
                         dst[f] = acc[f] if acc[f] > 0.0 else np.float32(0.0)
         return out
 
+    return conv3_relu
+
+
+def _compile_conv_grad(njit, opts: dict):
+    """conv3_grad(X (n, h, w) f32, dZ (n, ho*wo*f) f32, A (n, ho*wo*f) f32 the forward output,
+    kh, kw, total (kh*kw + 1, f) f32): kernel gradients (rows dy*kw + dx) and the bias gradient
+    (last row) summed over the frames, written into ``total`` (njit with ``opts``)."""
     @njit(**opts)
     def conv3_grad(X, dZ, A, kh, kw, total):
         n, h, w = X.shape
@@ -160,7 +160,7 @@ def _compile_conv(njit, opts: dict):
         total[:, :] = acc
         return total
 
-    return conv3_relu, conv3_grad
+    return conv3_grad
 
 
 def _compile_adam(njit, opts: dict):
