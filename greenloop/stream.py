@@ -25,21 +25,19 @@ and by ``python -m greenloop.bench`` on every frame of the dataset)
     "tflite": TensorFlow's own TFLite interpreter (XNNPACK delegate), converted in memory from the
               Keras model or loaded from a ``.tflite`` file; one interpreter for single frames (2
               threads: the 7.8 MB dense layer is read from memory for every frame, and two cores
-              read it faster than one: measured 0.16 vs 0.22 ms per forward pass on the 2-core build
-              machine), one multi-thread interpreter for windows.
+              share that memory traffic), one multi-thread interpreter for windows.
     "keras":  ``model.predict`` (the reference; slow, for comparison only).
     "auto":   "tflite" when TensorFlow has tf.lite, else "numpy" (paper's architecture only).
 
-Why "auto" picks TFLite: measured with reference and candidates interleaved in one process
-(``python -m greenloop.bench``; figures in results/bench/bench.md), TFLite had the lowest window and
-single-frame times of the backends that give Keras's labels on every frame; XLA ``tf.function`` was
-slower than both, and NumPy is the dependency-free fallback. A numba forward pass (the training
-kernels of ``greenloop.kernels``, with the dense layer skipping the ReLU's zero rows) was measured at
-the same 0.2 ms per frame as TFLite and not added. Costs no backend removes: the 28800 x 68 dense
-layer means reading a 7.8 MB weight matrix per forward pass (2.2 MFLOP/frame), and the exact
-preprocessing of a 640x480 BGR frame must read its 921,600 bytes (cvtColor). The 20x15 area shrink
-after it runs in ``greenloop.kernels.area_shrink`` (the same bytes as OpenCV, whose loop for this
-factor is scalar, 4x faster). The bench's floor row (one cvtColor pass over the window's frames on
+Why "auto" picks TFLite: in ``python -m greenloop.bench`` (reference and candidates interleaved in
+one process; the figures are in results/bench/bench.md) TFLite has the lowest window and
+single-frame times of the backends that give Keras's labels on every frame; NumPy is the
+dependency-free fallback. A numba forward pass (the training kernels of ``greenloop.kernels``, with
+the dense layer skipping the ReLU's zero rows) was no faster than TFLite and is not offered. Costs no
+backend removes: the 28800 x 68 dense layer means reading a 7.8 MB weight matrix per forward pass
+(2.2 MFLOP/frame), and the exact preprocessing of a 640x480 BGR frame must read its 921,600 bytes
+(cvtColor). The 20x15 area shrink after it runs in ``greenloop.kernels.area_shrink`` (the same bytes
+as OpenCV, whose loop for this factor is scalar). The bench's floor row (one cvtColor pass over the window's frames on
 all cores) bounds the window speed-up of any pipeline that converts colour with OpenCV. NumPy's
 BLAS runs on one thread inside these calls (``_single_thread_blas``): on a loaded 2-core machine a
 two-thread matmul stalls whenever one thread is pre-empted.
@@ -203,10 +201,10 @@ class _NumpyNet:
 
 
 def _single_thread_blas():
-    """A context-manager factory that runs NumPy's BLAS on one thread (threadpoolctl, ~7 us), or a
-    no-op when threadpoolctl is missing. On a shared 2-core machine a 2-thread OpenBLAS matmul
-    waits at its barrier whenever one thread is preempted: measured median 5.3 ms / p99 20 ms per
-    frame with 2 threads vs 0.35 / 0.86 ms with 1 (see module docstring)."""
+    """A context-manager factory that runs NumPy's BLAS on one thread (threadpoolctl), or a
+    no-op when threadpoolctl is missing. On a shared machine a multi-thread OpenBLAS matmul
+    waits at its barrier whenever one of its threads is preempted, which multiplies the per-frame
+    latency and its tail (see module docstring; figures in results/bench)."""
     try:
         from threadpoolctl import ThreadpoolController
         blas = ThreadpoolController().select(user_api="blas")
