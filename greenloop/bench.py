@@ -120,7 +120,7 @@ def bench_windows(model, raw, dets, rounds: int) -> dict:
     small = [(X[..., 0] * 255).round().astype(np.uint8) for X in pre]  # already 32x32 gray frames
     times = {"reference": [], "reference_no_preprocessing": [], "preprocessing_only": [], "gray_pass_floor": [],
              **{k: [] for k in dets}, **{f"{k}_preprocessed_input": [] for k in dets}}
-    ref_dict = LoopDetector(n_classes, 10 ** 9)
+    ref_dict = LoopDetector(n_classes, None)  # counts, never fires
     model.predict(pre[0], batch_size=WINDOW, verbose=0)
     for d in dets.values():
         d.update_many(wins[0])
@@ -152,7 +152,7 @@ def bench_single(model, raw, dets, n_ref: int, n_ours: int) -> dict:
     from .stream import preprocess
 
     n_classes = int(model.output_shape[-1])
-    ref_dict = LoopDetector(n_classes, 10 ** 9)
+    ref_dict = LoopDetector(n_classes, None)  # counts, never fires
     times = {"reference": [], **{k: [] for k in dets}}
     blocks = 5
     for k, d in dets.items():
@@ -243,22 +243,11 @@ def same_distribution(plain, fast) -> dict:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m greenloop.bench", description=__doc__.split("\n")[0])
-    ap.add_argument("--out", default="results/bench", help="output folder (default results/bench)")
-    ap.add_argument("--dataset", default="data/synthetic-greenhouse",
-                    help="sequence folder (default data/synthetic-greenhouse; random frames if missing)")
-    ap.add_argument("--quick", action="store_true", help="fewer repetitions, 1 seed, 2 epochs (< 1 min)")
-    ap.add_argument("--accuracy-seeds", type=int, default=10,
-                    help="seeds of the 200-epoch accuracy comparison, plain vs fast (default 10: the "
-                         "notebooks' 0-4 and five more, since one seed in ten can end several points "
-                         "below the rest; 0 skips it; cached models are reused)")
-    args = ap.parse_args(argv)
+    """CLI: time the reference and greenloop.stream, train both ways, write bench.json / .md / .csv."""
+    args = _parse_args(argv)
     t_start = time.perf_counter()
 
-    import keras
-
-    from . import cnn, report
-    from .stream import Detector, export_tflite
+    from .stream import Detector
 
     quick = args.quick
     raw, u8, y, info = _load(Path(args.dataset))
@@ -266,18 +255,10 @@ def main(argv=None) -> int:
     n_classes = int(y.max() + 1)
     print(f"[bench] {len(u8)} frames, {n_classes} spots, random={info['random_frames']}", flush=True)
 
-    # a quickly trained paper CNN (the timing is architecture-bound; agreement needs any weights)
-    keras.utils.set_random_seed(0)
-    model = cnn.build(n_classes, jit_compile=False)
-    Y = keras.utils.to_categorical(y, n_classes).astype(np.float32)
-    model.fit(X, Y, epochs=1, batch_size=32, verbose=0)
+    model = _quick_model(X, y, n_classes)
     import tempfile
     tmpdir = tempfile.TemporaryDirectory()
-    dets = {"numpy": Detector(model, 10 ** 9, backend="numpy"),
-            "tflite": Detector(model, 10 ** 9, backend="tflite"),
-            # dynamic-range int8 weights: a quarter of the dense layer's bytes to read per frame;
-            # labels may differ from Keras, so it is judged by its test-accuracy change (row below)
-            "tflite-int8": Detector(export_tflite(model, Path(tmpdir.name) / "int8.tflite", quantize=True), 10 ** 9)}
+    dets = _detectors(model, Path(tmpdir.name))
 
     print("[bench] (a) windows", flush=True)
     windows = bench_windows(model, raw, dets, rounds=8 if quick else 30)
@@ -285,12 +266,7 @@ def main(argv=None) -> int:
     single = bench_single(model, raw, dets, n_ref=30 if quick else 150, n_ours=500 if quick else 3000)
 
     print("[bench] (d) label agreement", flush=True)
-    ref_labels = cnn.predict(model, X)
-    agreement = {}
-    for k, d in dets.items():
-        lab = np.concatenate([d.predict(u8[i:i + 512]) for i in range(0, len(u8), 512)])
-        agreement[k] = {"frames": int(len(lab)), "same_labels": int((lab == ref_labels).sum()),
-                        "fraction": float(np.mean(lab == ref_labels))}
+    agreement = _agreement(model, dets, X, u8)
 
     print("[bench] (c) training", flush=True)
     seeds = [0] if quick else [0, 1, 2]
@@ -301,31 +277,114 @@ def main(argv=None) -> int:
     if not quick and args.accuracy_seeds > 0:
         print(f"[bench] (c') 200-epoch accuracy over {args.accuracy_seeds} seeds, plain vs fast", flush=True)
         accuracy = bench_accuracy(X, y, list(range(args.accuracy_seeds)), 200)
+        accuracy["comparison"] = same_distribution(accuracy["plain"]["test_accuracy"],
+                                                   accuracy["fast"]["test_accuracy"])
 
-    # quantised export: accuracy change on a model trained with the paper's full protocol (seed 0,
-    # 200 epochs: the notebooks' cached model when it exists, else trained here; --quick: the
-    # short fast-path run), on its own test split
+    quant = _quantized_accuracy(quick, fast_run, epochs, X, y, u8, Path(tmpdir.name))
+    best = min(("numpy", "tflite"), key=lambda k: windows[k]["median_ms"])
+    result = _result(quick, info, n_classes, Detector(model, None).backend, windows, single, training,
+                     accuracy, agreement, quant)
+    rows = (_window_rows(windows, dets) + _single_rows(single, dets)
+            + _training_rows(training, accuracy, seeds, epochs) + _agreement_rows(agreement, quant))
+    result["wall_seconds"] = time.perf_counter() - t_start
+    _write(Path(args.out), result, rows)
+    print(f"[bench] wrote {Path(args.out) / 'bench.json'} in {result['wall_seconds']:.0f} s; "
+          f"fastest window backend: {best}")
+    return 0
+
+
+def _parse_args(argv):
+    """The command line (see the module docstring) as an argparse Namespace."""
+    ap = argparse.ArgumentParser(prog="python -m greenloop.bench", description=__doc__.split("\n")[0])
+    ap.add_argument("--out", default="results/bench", help="output folder (default results/bench)")
+    ap.add_argument("--dataset", default="data/synthetic-greenhouse",
+                    help="sequence folder (default data/synthetic-greenhouse; random frames if missing)")
+    ap.add_argument("--quick", action="store_true", help="fewer repetitions, 1 seed, 2 epochs (< 1 min)")
+    ap.add_argument("--accuracy-seeds", type=int, default=10,
+                    help="seeds of the 200-epoch accuracy comparison, plain vs fast (default 10: the "
+                         "notebooks' 0-4 and five more, since one seed in ten can end several points "
+                         "below the rest; 0 skips it; cached models are reused)")
+    return ap.parse_args(argv)
+
+
+def _quick_model(X, y, n_classes: int):
+    """The paper's CNN after one seeded epoch of ``model.fit`` on X (N, 32, 32, 1) float32, y (N,):
+    the timing is architecture-bound, and the agreement check needs only some weights."""
+    import keras
+
+    from . import cnn
+
+    keras.utils.set_random_seed(0)
+    model = cnn.build(n_classes, jit_compile=False)
+    Y = keras.utils.to_categorical(y, n_classes).astype(np.float32)
+    model.fit(X, Y, epochs=1, batch_size=32, verbose=0)
+    return model
+
+
+def _detectors(model, tmpdir: Path) -> dict:
+    """The timed pipelines: {'numpy', 'tflite', 'tflite-int8'} -> counting-only ``Detector``
+    (threshold None: the dictionary counts, no closure is declared). The int8 export (written
+    into ``tmpdir``) has a quarter of the dense layer's bytes to read per frame; its labels may
+    differ from Keras, so it is judged by its test-accuracy change instead."""
+    from .stream import Detector, export_tflite
+
+    return {"numpy": Detector(model, None, backend="numpy"),
+            "tflite": Detector(model, None, backend="tflite"),
+            "tflite-int8": Detector(export_tflite(model, tmpdir / "int8.tflite", quantize=True), None)}
+
+
+def _agreement(model, dets: dict, X, u8) -> dict:
+    """(d) per backend: how many of the frames u8 (N, 32, 32) uint8 get Keras's label (Keras on
+    X (N, 32, 32, 1) float32). Returns {backend: {'frames', 'same_labels', 'fraction'}}."""
+    from . import cnn
+
+    ref_labels = cnn.predict(model, X)
+    agreement = {}
+    for k, d in dets.items():
+        lab = np.concatenate([d.predict(u8[i:i + 512]) for i in range(0, len(u8), 512)])
+        agreement[k] = {"frames": int(len(lab)), "same_labels": int((lab == ref_labels).sum()),
+                        "fraction": float(np.mean(lab == ref_labels))}
+    return agreement
+
+
+def _quantized_accuracy(quick: bool, fast_run: dict, epochs: int, X, y, u8, tmpdir: Path) -> dict:
+    """Test-accuracy change of the dynamic-range quantised TFLite export, on the model's own test
+    split: a model trained with the paper's full protocol (seed 0, 200 epochs: the notebooks'
+    cached model when it exists, else trained here), or with --quick the short fast-path run.
+
+    X (N, 32, 32, 1) float32, u8 (N, 32, 32) uint8, y (N,). Returns {'test_frames',
+    'keras_accuracy', 'tflite_float_accuracy', 'tflite_dynamic_range_accuracy' (fractions),
+    'change_points' (percentage points), 'model' (which one)}.
+    """
+    from . import cnn
+    from .stream import Detector, export_tflite
+
     if quick:
         q_model, q_split, q_desc = fast_run["model"], fast_run["split"], f"fast-path model, seed {fast_run['seed']}, {epochs} epochs"
     else:
         q_model, _, q_split = cnn.train(X, y, 0, epochs=200)
         q_desc = "paper protocol, seed 0, 200 epochs (greenloop.cnn cache)"
     test = q_split["test"]
-    q = Detector(export_tflite(q_model, Path(tmpdir.name) / "q.tflite", quantize=True), 10 ** 9)
-    f = Detector(export_tflite(q_model, Path(tmpdir.name) / "f.tflite"), 10 ** 9)
+    q = Detector(export_tflite(q_model, tmpdir / "q.tflite", quantize=True), None)
+    f = Detector(export_tflite(q_model, tmpdir / "f.tflite"), None)
     acc_q = float(np.mean(q.predict(u8[test]) == y[test]))
     acc_f = float(np.mean(f.predict(u8[test]) == y[test]))
     acc_k = float(np.mean(cnn.predict(q_model, X[test]) == y[test]))
-    quant = {"test_frames": int(len(test)), "keras_accuracy": acc_k, "tflite_float_accuracy": acc_f,
-             "tflite_dynamic_range_accuracy": acc_q, "change_points": 100 * (acc_q - acc_k),
-             "model": q_desc}
+    return {"test_frames": int(len(test)), "keras_accuracy": acc_k, "tflite_float_accuracy": acc_f,
+            "tflite_dynamic_range_accuracy": acc_q, "change_points": 100 * (acc_q - acc_k),
+            "model": q_desc}
 
-    best = min(("numpy", "tflite"), key=lambda k: windows[k]["median_ms"])
-    result = {
+
+def _result(quick, info, n_classes, default_backend, windows, single, training, accuracy,
+            agreement, quant) -> dict:
+    """bench.json's content: the figures plus date, machine, CPU and versions."""
+    from . import report
+
+    return {
         "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
         "machine": platform.node(), "platform": platform.platform(), "cpu": report.cpu_model(),
         "versions": report.versions(), "quick": quick, "data": info, "window": WINDOW,
-        "n_classes": n_classes, "default_backend": Detector(model, 10 ** 9).backend,
+        "n_classes": n_classes, "default_backend": default_backend,
         "windows": windows, "single": single, "training": training, "accuracy_200_epochs": accuracy,
         "agreement": agreement,
         "quantized_tflite": quant,
@@ -333,87 +392,112 @@ def main(argv=None) -> int:
                 "both alike; ratios are the robust figures",
     }
 
-    import pandas as pd
 
+def _row(measure, ref, ours, ratio, target, met) -> dict:
+    """One row of bench.md / bench.csv (all cells strings)."""
+    return {"measurement": measure, "reference": ref, "ours": ours, "ratio": ratio,
+            "target": target, "met?": met}
+
+
+def _window_rows(windows: dict, dets: dict) -> list[dict]:
+    """Rows of (a): windows with and without preprocessing, preprocessing alone, the floor."""
     ref_w = windows["reference"]
     rows = []
-
-    def row(measure, ref, ours, ratio, target, met):
-        rows.append({"measurement": measure, "reference": ref, "ours": ours, "ratio": ratio,
-                     "target": target, "met?": met})
-
     for k in dets:
         r = ref_w["median_ms"] / windows[k]["median_ms"]
-        row(f"70-frame window, frames/s, preprocessing included ({k})", f"{ref_w['frames_per_s']:.0f}",
-            f"{windows[k]['frames_per_s']:.0f}", f"{r:.1f}x", ">= 10x", "yes" if r >= 10 else "no")
+        rows.append(_row(f"70-frame window, frames/s, preprocessing included ({k})", f"{ref_w['frames_per_s']:.0f}",
+                         f"{windows[k]['frames_per_s']:.0f}", f"{r:.1f}x", ">= 10x", "yes" if r >= 10 else "no"))
     rn = windows["reference_no_preprocessing"]
     for k in ("numpy", "tflite"):
         r = rn["median_ms"] / windows[k]["median_ms"]
-        row(f"70-frame window, frames/s: reference without preprocessing (paper's quantity) vs ours with ({k})",
-            f"{rn['frames_per_s']:.0f}", f"{windows[k]['frames_per_s']:.0f}", f"{r:.1f}x", "(info)", "")
+        rows.append(_row(f"70-frame window, frames/s: reference without preprocessing (paper's quantity) vs ours with ({k})",
+                         f"{rn['frames_per_s']:.0f}", f"{windows[k]['frames_per_s']:.0f}", f"{r:.1f}x", "(info)", ""))
     for k in ("numpy", "tflite"):
         o = windows[f"{k}_preprocessed_input"]
         r = rn["median_ms"] / o["median_ms"]
-        row(f"70-frame window of 32x32 gray frames (no resize), frames/s, vs reference without preprocessing ({k})",
-            f"{rn['frames_per_s']:.0f}", f"{o['frames_per_s']:.0f}", f"{r:.1f}x", ">= 10x", "yes" if r >= 10 else "no")
-    row("preprocessing alone (cvtColor + INTER_AREA, 640x480 -> 32x32), ms/frame", "",
-        f"{windows['preprocessing_only']['median_ms'] / WINDOW:.3f}", "", "(info)", "")
+        rows.append(_row(f"70-frame window of 32x32 gray frames (no resize), frames/s, vs reference without preprocessing ({k})",
+                         f"{rn['frames_per_s']:.0f}", f"{o['frames_per_s']:.0f}", f"{r:.1f}x", ">= 10x", "yes" if r >= 10 else "no"))
+    rows.append(_row("preprocessing alone (cvtColor + INTER_AREA, 640x480 -> 32x32), ms/frame", "",
+                     f"{windows['preprocessing_only']['median_ms'] / WINDOW:.3f}", "", "(info)", ""))
     fl = windows["gray_pass_floor"]
-    row("floor: one cvtColor pass over the window's raw bytes (threaded), frames/s; ratio = the most a "
-        "pipeline converting colour with OpenCV can reach", f"{ref_w['frames_per_s']:.0f}", f"{fl['frames_per_s']:.0f}",
-        f"{ref_w['median_ms'] / fl['median_ms']:.1f}x", "(info)", "")
+    rows.append(_row("floor: one cvtColor pass over the window's raw bytes (threaded), frames/s; ratio = the most a "
+                     "pipeline converting colour with OpenCV can reach", f"{ref_w['frames_per_s']:.0f}", f"{fl['frames_per_s']:.0f}",
+                     f"{ref_w['median_ms'] / fl['median_ms']:.1f}x", "(info)", ""))
+    return rows
+
+
+def _single_rows(single: dict, dets: dict) -> list[dict]:
+    """Rows of (b): single-frame median and p99 latency per backend."""
+    rows = []
     for k in dets:
         s, sr = single[k], single["reference"]
-        row(f"single frame median latency, ms ({k})", f"{sr['median_ms']:.2f}", f"{s['median_ms']:.3f}",
-            f"{sr['median_ms'] / s['median_ms']:.0f}x", "<= 0.3 ms", "yes" if s["median_ms"] <= 0.3 else "no")
-        row(f"single frame p99 latency, ms ({k})", f"{sr['p99_ms']:.2f}", f"{s['p99_ms']:.3f}",
-            f"{sr['p99_ms'] / s['p99_ms']:.0f}x", "<= 1 ms", "yes" if s["p99_ms"] <= 1 else "no")
+        rows.append(_row(f"single frame median latency, ms ({k})", f"{sr['median_ms']:.2f}", f"{s['median_ms']:.3f}",
+                         f"{sr['median_ms'] / s['median_ms']:.0f}x", "<= 0.3 ms", "yes" if s["median_ms"] <= 0.3 else "no"))
+        rows.append(_row(f"single frame p99 latency, ms ({k})", f"{sr['p99_ms']:.2f}", f"{s['p99_ms']:.3f}",
+                         f"{sr['p99_ms'] / s['p99_ms']:.0f}x", "<= 1 ms", "yes" if s["p99_ms"] <= 1 else "no"))
+    return rows
+
+
+def _training_rows(training: dict, accuracy: dict | None, seeds, epochs: int) -> list[dict]:
+    """Rows of (c) and (c'): seconds per epoch of each trainer, test accuracy after ``epochs``, and
+    (when run) the 200-epoch accuracy distributions and training times."""
     tp, tf_ = training["plain"], training["fast"]
-    row(f"training s/epoch ({training['n_train_frames']} frames, {len(seeds)} seed(s), {epochs} epochs; "
-        f"ours: the {training['trainer']} trainer)",
-        f"{tp['median_seconds_per_epoch']:.2f}", f"{tf_['median_seconds_per_epoch']:.2f}",
-        f"{tp['median_seconds_per_epoch'] / tf_['median_seconds_per_epoch']:.1f}x", ">= 2x",
-        "yes" if tp['median_seconds_per_epoch'] >= 2 * tf_['median_seconds_per_epoch'] else "no")
+    rows = [_row(f"training s/epoch ({training['n_train_frames']} frames, {len(seeds)} seed(s), {epochs} epochs; "
+                 f"ours: the {training['trainer']} trainer)",
+                 f"{tp['median_seconds_per_epoch']:.2f}", f"{tf_['median_seconds_per_epoch']:.2f}",
+                 f"{tp['median_seconds_per_epoch'] / tf_['median_seconds_per_epoch']:.1f}x", ">= 2x",
+                 "yes" if tp['median_seconds_per_epoch'] >= 2 * tf_['median_seconds_per_epoch'] else "no")]
     tx = training["xla"]
-    row("training s/epoch, XLA model.fit (the fast path where Keras has a GPU) vs plain",
-        f"{tp['median_seconds_per_epoch']:.2f}", f"{tx['median_seconds_per_epoch']:.2f}",
-        f"{tp['median_seconds_per_epoch'] / tx['median_seconds_per_epoch']:.1f}x", "(info)", "")
-    row(f"test accuracy after {epochs} epochs (mean over seeds)", f"{tp['mean_test_accuracy']:.3f}",
-        f"{tf_['mean_test_accuracy']:.3f}", "", "same distribution", "")
+    rows.append(_row("training s/epoch, XLA model.fit (the fast path where Keras has a GPU) vs plain",
+                     f"{tp['median_seconds_per_epoch']:.2f}", f"{tx['median_seconds_per_epoch']:.2f}",
+                     f"{tp['median_seconds_per_epoch'] / tx['median_seconds_per_epoch']:.1f}x", "(info)", ""))
+    rows.append(_row(f"test accuracy after {epochs} epochs (mean over seeds)", f"{tp['mean_test_accuracy']:.3f}",
+                     f"{tf_['mean_test_accuracy']:.3f}", "", "same distribution", ""))
     if accuracy is not None:
         ap_, af = accuracy["plain"], accuracy["fast"]
         fmt = lambda v: f"{100 * np.mean(v):.1f} ± {100 * np.std(v):.1f} % [{', '.join(f'{100 * a:.1f}' for a in v)}]"  # noqa: E731
-        same = same_distribution(ap_["test_accuracy"], af["test_accuracy"])
-        accuracy["comparison"] = same
-        row(f"test accuracy after 200 epochs, mean ± sd [per seed], seeds {ap_['seeds']}; ratio column: "
-            f"mean difference and two-sided Mann-Whitney p", fmt(ap_["test_accuracy"]), fmt(af["test_accuracy"]),
-            f"{same['mean_difference_points']:+.1f} pt, p = {same['mann_whitney_p']:.2f}", "same distribution",
-            "too few seeds to judge" if min(len(ap_["seeds"]), len(af["seeds"])) < 4
-            else "no difference detected" if same["mann_whitney_p"] >= 0.05 else "no: differs")
+        same = accuracy["comparison"]
+        rows.append(_row(f"test accuracy after 200 epochs, mean ± sd [per seed], seeds {ap_['seeds']}; ratio column: "
+                         f"mean difference and two-sided Mann-Whitney p", fmt(ap_["test_accuracy"]), fmt(af["test_accuracy"]),
+                         f"{same['mean_difference_points']:+.1f} pt, p = {same['mann_whitney_p']:.2f}", "same distribution",
+                         "too few seeds to judge" if min(len(ap_["seeds"]), len(af["seeds"])) < 4
+                         else "no difference detected" if same["mann_whitney_p"] >= 0.05 else "no: differs"))
         tp2, tf2 = np.median(ap_["training_seconds"]), np.median(af["training_seconds"])
-        # not judged: each time was recorded when its model was trained (another hour, other load;
-        # epoch times on the shared build machine drift 2x over a day); the interleaved s/epoch row is
-        row("one 200-epoch training, s (median over seeds; recorded when each was trained, NOT interleaved)",
-            f"{tp2:.0f}", f"{tf2:.0f}", f"{tp2 / tf2:.1f}x", "(info)", "")
+        # not judged: each time was recorded when its model was trained (another hour, other load);
+        # the interleaved s/epoch row is
+        rows.append(_row("one 200-epoch training, s (median over seeds; recorded when each was trained, NOT interleaved)",
+                         f"{tp2:.0f}", f"{tf2:.0f}", f"{tp2 / tf2:.1f}x", "(info)", ""))
+    return rows
+
+
+def _agreement_rows(agreement: dict, quant: dict) -> list[dict]:
+    """Rows of (d): labels equal to Keras per backend, and the quantised export's accuracy change."""
+    rows = []
     for k in ("numpy", "tflite"):
         a = agreement[k]
-        row(f"labels equal to Keras ({k})", "", f"{a['same_labels']}/{a['frames']}", "", "all",
-            "yes" if a["same_labels"] == a["frames"] else "no")
-    row("quantised (dynamic-range) TFLite test accuracy change, points", f"{acc_k:.3f}", f"{acc_q:.3f}",
-        f"{quant['change_points']:+.2f}", "|change| < 0.5", "yes" if abs(quant["change_points"]) < 0.5 else "no")
-    df = pd.DataFrame(rows)
-    out = Path(args.out)
-    result["wall_seconds"] = time.perf_counter() - t_start
+        rows.append(_row(f"labels equal to Keras ({k})", "", f"{a['same_labels']}/{a['frames']}", "", "all",
+                         "yes" if a["same_labels"] == a["frames"] else "no"))
+    acc_k, acc_q = quant["keras_accuracy"], quant["tflite_dynamic_range_accuracy"]
+    rows.append(_row("quantised (dynamic-range) TFLite test accuracy change, points", f"{acc_k:.3f}", f"{acc_q:.3f}",
+                     f"{quant['change_points']:+.2f}", "|change| < 0.5", "yes" if abs(quant["change_points"]) < 0.5 else "no"))
+    return rows
+
+
+def _write(out: Path, result: dict, rows: list[dict]) -> None:
+    """Write <out>/bench.json and the table <out>/bench.md / bench.csv, and print the table."""
+    import pandas as pd
+
+    from . import report
+
+    info = result["data"]
     report.write_json(out / "bench.json", result)
     note = (f"Run {result['date']} on {result['cpu']}, {'random frames' if info['random_frames'] else info['dataset']}"
-            f"{', --quick' if quick else ''}. Reference: cv2 preprocessing + Keras model.predict + Python "
+            f"{', --quick' if result['quick'] else ''}. Reference: cv2 preprocessing + Keras model.predict + Python "
             f"dictionary loop; ours: greenloop.stream.Detector (default backend {result['default_backend']}). "
             f"Reference and ours interleaved in one process; tflite-int8 is the dynamic-range quantised "
             f"export, judged by its test-accuracy change, not by label equality.")
-    md = report.write_table(df, out / "bench", title="Speed: reference vs greenloop.stream", note=note)
+    md = report.write_table(pd.DataFrame(rows), out / "bench", title="Speed: reference vs greenloop.stream", note=note)
     print(md.read_text())
-    print(f"[bench] wrote {out / 'bench.json'} in {result['wall_seconds']:.0f} s; fastest window backend: {best}")
-    return 0
 
 
 if __name__ == "__main__":

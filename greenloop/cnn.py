@@ -383,27 +383,20 @@ def _fit_fused(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size
     from threadpoolctl import threadpool_limits
     from .progress import bar as tqdm  # in the terminal, not in the notebook
 
-    from . import kernels
-
     train_idx, test_idx = split_indices(y, seed, test_size, split, gap or 0, block, train_size)
     keras.utils.set_random_seed(seed)
     model = build(n_classes, X.shape[1:], jit_compile=False)
     conv, dense, out = (model.get_layer(n) for n in ("conv", "dense", "output"))
-    wc, bc = conv.get_weights()
-    kh, kw, _, nf = wc.shape
-    f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
-    params = [f32(wc.reshape(kh, kw, nf)), f32(bc), *map(f32, dense.get_weights()), *map(f32, out.get_weights())]
-    moments = [(np.zeros_like(p), np.zeros_like(p)) for p in params]
-    Kc, bc, Wd, bd, Wo, bo = params
+    params, ksize = _fused_params(conv, dense, out)
+    state = {"params": params, "moments": [(np.zeros_like(p), np.zeros_like(p)) for p in params],
+             "ksize": ksize, "step": 0, "dW": np.empty_like(params[2]),
+             "dA": np.empty((batch_size, params[2].shape[0]), np.float32)}
     Xg = np.ascontiguousarray(X[..., 0], dtype=np.float32)
-    dW = np.empty_like(Wd)
-    dA = np.empty((batch_size, Wd.shape[0]), np.float32)
     y = np.asarray(y, np.int64)
     orders = fit_orders(len(train_idx), batch_size)
     history = {k: [] for k in ("accuracy", "loss", "val_accuracy", "val_loss")}
     epoch_seconds = []
     t0 = time.perf_counter()
-    step = 0
     bar = tqdm(total=epochs, desc=f"train seed {seed} ({split})", unit="epoch", leave=False, disable=not progress)
     # one BLAS thread per call: kernels.run_slices spreads the work over the cores itself
     with threadpool_limits(limits=1, user_api="blas"):
@@ -412,32 +405,10 @@ def _fit_fused(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size
             order = train_idx[next(orders)]
             correct = loss_sum = 0.0
             for s in range(0, len(order), batch_size):
-                idx = order[s:s + batch_size]
-                b = len(idx)
-                Xb = Xg[idx]
-                A, Z2, Z3 = _logits(Xb, Kc, bc, Wd, bd, Wo, bo)
-                prob, loss = _softmax_loss(Z3, y[idx])
-                correct += float((Z3.argmax(1) == y[idx]).sum())
-                loss_sum += float(loss.sum())
-                dZ3 = prob
-                dZ3[np.arange(b), y[idx]] -= 1.0
-                dZ3 /= np.float32(b)
-                H = np.maximum(Z2, 0)
-                dZ2 = (dZ3 @ Wo.T) * (Z2 > 0)
-                grads = {3: dZ2.sum(0), 4: H.T @ dZ3, 5: dZ3.sum(0)}
-                step += 1
-                t = np.float32(step)
-                alpha = np.float32(1e-3) * np.sqrt(np.float32(1) - np.float32(0.999) ** t) / (np.float32(1) - np.float32(0.9) ** t)
-                kernels.dense_backward_adam(A, dZ2, Wd, *moments[2], alpha, dW, dA[:b])  # Wd updated
-                grads[0], grads[1] = kernels.conv_grad(Xb, dA[:b], A, (kh, kw))
-                for i, g in grads.items():
-                    kernels.adam(params[i], np.ascontiguousarray(g, np.float32), *moments[i], alpha)
-            val_loss = val_correct = 0.0
-            for s in range(0, len(test_idx), 256):
-                idx = test_idx[s:s + 256]
-                Z3 = _logits(Xg[idx], Kc, bc, Wd, bd, Wo, bo)[2]
-                val_loss += float(_softmax_loss(Z3, y[idx])[1].sum())
-                val_correct += float((Z3.argmax(1) == y[idx]).sum())
+                c, l_ = _fused_step(state, Xg, y, order[s:s + batch_size])
+                correct += c
+                loss_sum += l_
+            val_loss, val_correct = _fused_validate(params, Xg, y, test_idx)
             history["accuracy"].append(correct / len(order))
             history["loss"].append(loss_sum / len(order))
             history["val_accuracy"].append(val_correct / max(1, len(test_idx)))
@@ -446,12 +417,73 @@ def _fit_fused(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size
             bar.update(1)
             bar.set_postfix(val_acc=f"{history['val_accuracy'][-1]:.3f}", refresh=False)
     bar.close()
+    Kc, bc, Wd, bd, Wo, bo = params
     conv.set_weights([Kc[:, :, None, :], bc])
     dense.set_weights([Wd, bd])
     out.set_weights([Wo, bo])
     history["seconds"] = time.perf_counter() - t0
     history["epoch_seconds"] = epoch_seconds
     return model, history, {"train": train_idx, "test": test_idx}
+
+
+def _fused_params(conv, dense, out):
+    """The Keras layers' weights as C-contiguous float32 arrays, in ``_logits``'s order.
+
+    Returns ([Kc (kh, kw, f) conv kernel of the single input channel, bc (f,), Wd (positions*f, 68),
+    bd (68,), Wo (68, C), bo (C,)], (kh, kw) kernel size in pixels).
+    """
+    wc, bc = conv.get_weights()
+    kh, kw, _, nf = wc.shape
+    f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
+    return [f32(wc.reshape(kh, kw, nf)), f32(bc), *map(f32, dense.get_weights()),
+            *map(f32, out.get_weights())], (kh, kw)
+
+
+def _fused_step(state: dict, Xg: np.ndarray, y: np.ndarray, idx: np.ndarray):
+    """One Adam step on the batch ``idx`` (b,) of gray frames Xg (N, H, W) with labels y (N,).
+
+    state: 'params' (the six arrays of ``_fused_params``, updated in place), 'moments' (Adam's
+    first and second moments, like params), 'ksize' (kh, kw), 'step' (Adam's step count,
+    incremented), 'dW' (positions*f, 68) and 'dA' (batch_size, positions*f) float32 scratch.
+    Returns (correct predictions, summed loss) of the batch before the step.
+    """
+    from . import kernels
+
+    params, moments = state["params"], state["moments"]
+    Kc, bc, Wd, bd, Wo, bo = params
+    b = len(idx)
+    Xb = Xg[idx]
+    A, Z2, Z3 = _logits(Xb, Kc, bc, Wd, bd, Wo, bo)
+    prob, loss = _softmax_loss(Z3, y[idx])
+    correct = float((Z3.argmax(1) == y[idx]).sum())
+    loss_sum = float(loss.sum())
+    dZ3 = prob
+    dZ3[np.arange(b), y[idx]] -= 1.0
+    dZ3 /= np.float32(b)
+    H = np.maximum(Z2, 0)
+    dZ2 = (dZ3 @ Wo.T) * (Z2 > 0)
+    grads = {3: dZ2.sum(0), 4: H.T @ dZ3, 5: dZ3.sum(0)}
+    state["step"] += 1
+    t = np.float32(state["step"])
+    alpha = np.float32(1e-3) * np.sqrt(np.float32(1) - np.float32(0.999) ** t) / (np.float32(1) - np.float32(0.9) ** t)
+    dA = state["dA"]
+    kernels.dense_backward_adam(A, dZ2, Wd, *moments[2], alpha, state["dW"], dA[:b])  # Wd updated
+    grads[0], grads[1] = kernels.conv_grad(Xb, dA[:b], A, state["ksize"])
+    for i, g in grads.items():
+        kernels.adam(params[i], np.ascontiguousarray(g, np.float32), *moments[i], alpha)
+    return correct, loss_sum
+
+
+def _fused_validate(params, Xg: np.ndarray, y: np.ndarray, test_idx: np.ndarray):
+    """(summed loss, correct predictions) on the frames ``test_idx`` of Xg (N, H, W), in batches
+    of 256; params: the six arrays of ``_fused_params``."""
+    val_loss = val_correct = 0.0
+    for s in range(0, len(test_idx), 256):
+        idx = test_idx[s:s + 256]
+        Z3 = _logits(Xg[idx], *params)[2]
+        val_loss += float(_softmax_loss(Z3, y[idx])[1].sum())
+        val_correct += float((Z3.argmax(1) == y[idx]).sum())
+    return val_loss, val_correct
 
 
 def predict(model, X: np.ndarray, batch_size: int = 512) -> np.ndarray:

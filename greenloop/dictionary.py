@@ -32,28 +32,30 @@ def threshold(frames_per_spot: int, error_rate: float, margin: int) -> dict:
 class LoopDetector:
     """Frequency-count loop detector (the paper's key-value dictionary), O(1) per frame.
 
-    n_classes: number of spots N (labels 0 .. N-1). threshold: tau >= 1 detections.
+    n_classes: number of spots N (labels 0 .. N-1). threshold: tau >= 1 detections, or None to
+    count without ever declaring a closure (``update`` always returns False; for timing the
+    counting alone).
     ``update(label)`` returns True when that label's count has reached tau (at that frame and every
     later frame of the class: a closure is a state, not an edge). ``counts`` is the (N,) int32
     array D, ``nbytes`` its memory (4 bytes per counter, the paper's 152 bytes for 38 classes).
     """
 
-    def __init__(self, n_classes: int, threshold: int):
+    def __init__(self, n_classes: int, threshold: int | None):
         if n_classes < 1:
             raise ValueError(f"n_classes must be >= 1, got {n_classes}")
-        if threshold < 1:
+        if threshold is not None and threshold < 1:
             raise ValueError(f"threshold tau must be >= 1 detections, got {threshold}")
         self.n_classes = int(n_classes)
-        self.threshold = int(threshold)
+        self.threshold = None if threshold is None else int(threshold)
         self.counts = np.zeros(self.n_classes, dtype=np.int32)
 
     def update(self, label: int) -> bool:
-        """Count one prediction; True if D(label) >= tau afterwards."""
+        """Count one prediction; True if D(label) >= tau afterwards (never when tau is None)."""
         label = int(label)
         if not 0 <= label < self.n_classes:
             raise ValueError(f"unknown label {label}: the detector has classes 0..{self.n_classes - 1}")
         self.counts[label] += 1
-        return bool(self.counts[label] >= self.threshold)
+        return self.threshold is not None and bool(self.counts[label] >= self.threshold)
 
     def reset(self) -> None:
         """Set every counter back to zero."""

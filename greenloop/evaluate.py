@@ -358,40 +358,57 @@ def split_mask(n: int, fraction: float = 0.5, gt=None, gap: int = 0):
     frames, their span and the gap; ValueError for bad arguments or a ground truth with no
     revisit frame at all.
     """
+    n, gap = _check_split_args(n, fraction, gap)
+    cut = _plain_cut(n, fraction, gap) if gt is None else _revisit_cut(n, fraction, gt, gap)
+    idx = np.arange(n)
+    return idx < cut, idx >= cut + gap
+
+
+def _check_split_args(n, fraction, gap) -> tuple[int, int]:
+    """``split_mask``'s n (frames, >= 2) and gap (frames, >= 0) as ints; ValueError when n, gap
+    or fraction (strictly between 0 and 1) is out of range."""
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 2:
         raise ValueError(f"n must be an integer >= 2 frames, got {n!r}")
     if not 0 < fraction < 1:
         raise ValueError(f"fraction must be strictly between 0 and 1, got {fraction}")
     if isinstance(gap, bool) or not isinstance(gap, (int, np.integer)) or gap < 0:
         raise ValueError(f"gap must be an integer >= 0 frames, got {gap!r}")
-    n, gap = int(n), int(gap)
-    if gt is None:
-        cut = min(min(max(int(round(fraction * n)), 1), n - 1), n - 1 - gap)
-        if cut < 1:
-            raise NoHonestSplit(
-                f"{n} frames cannot be split with a gap of {gap} frames: a split needs a frame "
-                f"before the cut and one at or after cut + gap, so n must exceed gap + 1",
-                n=n, gap=gap)
-    else:
-        G = _check_gt(gt)
-        if G.shape[0] != n:
-            raise ValueError(f"gt has shape {G.shape} but n={n}")
-        rev = np.flatnonzero(revisit_frames(G))
-        if rev.size == 0:
-            raise ValueError("the ground truth has no revisit frame (no frame has a loop partner "
-                             "earlier in the sequence): the sequence may not revisit any place")
-        first, last = int(rev[0]), int(rev[-1])
-        if last - first <= gap:
-            raise NoHonestSplit(
-                f"the {rev.size} revisit frame(s) of this sequence all lie within {last - first} "
-                f"frames (frames {first}..{last}), not more than the gap of {gap} frames kept free "
-                f"between the tuning and the evaluation part: no split keeps revisits on both sides "
-                f"(it needs one before the cut and one at or after cut + gap, so their span must "
-                f"exceed the gap)", n=n, gap=gap, revisits=int(rev.size), first=first, last=last)
-        m = min(max(int(round(fraction * rev.size)), 1), rev.size - 1)
-        cut = min(int(rev[m]), last - gap)     # rev[:m] tune when the requested cut is honest
-    idx = np.arange(n)
-    return idx < cut, idx >= cut + gap
+    return int(n), int(gap)
+
+
+def _plain_cut(n: int, fraction: float, gap: int) -> int:
+    """The cut (a frame index) without a ground truth: round(fraction * n), clipped to 1..n-1 and
+    to at most n - 1 - gap; NoHonestSplit when that leaves no frame before it."""
+    cut = min(min(max(int(round(fraction * n)), 1), n - 1), n - 1 - gap)
+    if cut < 1:
+        raise NoHonestSplit(
+            f"{n} frames cannot be split with a gap of {gap} frames: a split needs a frame "
+            f"before the cut and one at or after cut + gap, so n must exceed gap + 1",
+            n=n, gap=gap)
+    return cut
+
+
+def _revisit_cut(n: int, fraction: float, gt, gap: int) -> int:
+    """The cut (a frame index) on the revisit frames of gt (n, n) bool: at revisit frame rev[m],
+    m = round(fraction * R) clipped to 1..R-1, moved down to at most last revisit - gap.
+    ValueError without revisit frames, NoHonestSplit when they span no more than the gap."""
+    G = _check_gt(gt)
+    if G.shape[0] != n:
+        raise ValueError(f"gt has shape {G.shape} but n={n}")
+    rev = np.flatnonzero(revisit_frames(G))
+    if rev.size == 0:
+        raise ValueError("the ground truth has no revisit frame (no frame has a loop partner "
+                         "earlier in the sequence): the sequence may not revisit any place")
+    first, last = int(rev[0]), int(rev[-1])
+    if last - first <= gap:
+        raise NoHonestSplit(
+            f"the {rev.size} revisit frame(s) of this sequence all lie within {last - first} "
+            f"frames (frames {first}..{last}), not more than the gap of {gap} frames kept free "
+            f"between the tuning and the evaluation part: no split keeps revisits on both sides "
+            f"(it needs one before the cut and one at or after cut + gap, so their span must "
+            f"exceed the gap)", n=n, gap=gap, revisits=int(rev.size), first=first, last=last)
+    m = min(max(int(round(fraction * rev.size)), 1), rev.size - 1)
+    return min(int(rev[m]), last - gap)     # rev[:m] tune when the requested cut is honest
 
 
 def tune_then_score(candidates, GT, exclude: int, tune, evaluate) -> dict:

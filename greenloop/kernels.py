@@ -2,21 +2,20 @@
 
 * ``run_chunked``: split a range over a few threads (BLAS calls, OpenCV and the numba kernels
   here release the GIL). One mechanism for every parallel loop of greenloop's speed paths, so no
-  second thread pool (OpenBLAS's, numba's) spins on a core that another one needs: on the 2-core
-  build machine a two-thread OpenBLAS call followed by a numba ``prange`` ran 2-3x slower than
-  either alone.
+  second thread pool (OpenBLAS's, numba's) spins on a core that another one needs (a
+  multi-threaded OpenBLAS call next to a numba ``prange`` slows both down).
 * ``conv_relu`` / ``conv_grad``: the paper CNN's 3x3 convolution (valid, stride 1, one input
   channel) forward with its ReLU, and its kernel and bias gradients.
 * ``adam``: Keras's Adam update of one float32 array, in place, in one pass over memory, with
   its moments flushed to zero below float32's smallest normal number, as TensorFlow's FTZ does.
 * ``area_shrink``: OpenCV's INTER_AREA shrink of a gray uint8 image by integer factors (the
-  main paper's 640x480 -> 32x32 is 20 x 15), bit-identical to ``cv2.resize`` and 4x faster than
+  main paper's 640x480 -> 32x32 is 20 x 15), bit-identical to ``cv2.resize`` and faster than
   it (OpenCV runs a scalar loop for factors other than 2); ``greenloop.data.preprocess_image``
   uses it after checking it against OpenCV once per image shape.
 
 Each kernel is checked against the library it replaces in tests/test_kernels.py. numba is imported
 lazily; ``available()`` says whether it is installed, and callers fall back to plain
-NumPy / OpenCV / Keras when it is not. Kernels compile on first use (a few seconds) and are cached
+NumPy / OpenCV / Keras when it is not. Kernels compile on first use and are cached
 on disk next to this file (numba's ``cache=True``).
 """
 from __future__ import annotations
@@ -79,19 +78,28 @@ def run_chunked(work, n: int, min_parallel: int = 8) -> None:
 # ---------------------------------------------------------------------------------------------
 @functools.lru_cache(maxsize=1)
 def _compiled():
+    """The numba kernels, compiled (or loaded from numba's disk cache) once per process.
+
+    Returns {'conv3_relu', 'conv3_grad', 'adam1d', 'area_u8'}: serial kernels that release the
+    GIL; ``run_slices`` spreads them over the cores, so numba's own thread pool is never started
+    (its spinning workers would compete with the BLAS calls on the other cores).
+    """
     from numba import njit
 
-    # Serial kernels that release the GIL; ``run_slices`` spreads them over the cores, so numba's
-    # own thread pool is never started (once started, its workers slowed the BLAS calls on the
-    # other core 2.6x on the 2-core build machine). What makes LLVM vectorise them (checked in the
-    # assembly): error_model="numpy" (numba's default "python" model tests every division for
-    # zero, which keeps Adam scalar: about 3x slower), inner loops over 1-D views indexed by plain
-    # range() variables (an offset index makes numba test it for negative wraparound), and
-    # accumulators in local arrays. fastmath: reassociation and FMA contraction only (no
-    # nnan/ninf), so sums may be reordered as any BLAS does while NaNs and infinities behave as in
-    # NumPy.
+    # What makes LLVM vectorise them (checked in the assembly): error_model="numpy" (numba's
+    # default "python" model tests every division for zero, which keeps Adam scalar), inner loops
+    # over 1-D views indexed by plain range() variables (an offset index makes numba test it for
+    # negative wraparound), and accumulators in local arrays. fastmath: reassociation and FMA
+    # contraction only (no nnan/ninf), so sums may be reordered as any BLAS does while NaNs and
+    # infinities behave as in NumPy.
     opts = dict(fastmath={"reassoc", "contract"}, error_model="numpy", cache=True, nogil=True)
+    return {"conv3_relu": _compile_conv_relu(njit, opts), "conv3_grad": _compile_conv_grad(njit, opts),
+            "adam1d": _compile_adam(njit, opts), "area_u8": _compile_area(njit)}
 
+
+def _compile_conv_relu(njit, opts: dict):
+    """conv3_relu(X (n, h, w) f32, K (kh, kw, f) f32, bias (f,) f32, out (n, ho*wo*f) f32): valid
+    convolution plus ReLU, flattened (row, column, filter) into ``out`` (njit with ``opts``)."""
     @njit(**opts)
     def conv3_relu(X, K, bias, out):
         n, h, w = X.shape
@@ -116,6 +124,13 @@ def _compiled():
                         dst[f] = acc[f] if acc[f] > 0.0 else np.float32(0.0)
         return out
 
+    return conv3_relu
+
+
+def _compile_conv_grad(njit, opts: dict):
+    """conv3_grad(X (n, h, w) f32, dZ (n, ho*wo*f) f32, A (n, ho*wo*f) f32 the forward output,
+    kh, kw, total (kh*kw + 1, f) f32): kernel gradients (rows dy*kw + dx) and the bias gradient
+    (last row) summed over the frames, written into ``total`` (njit with ``opts``)."""
     @njit(**opts)
     def conv3_grad(X, dZ, A, kh, kw, total):
         n, h, w = X.shape
@@ -145,11 +160,18 @@ def _compiled():
         total[:, :] = acc
         return total
 
-    # Flush-to-zero for the moments, as TensorFlow's threads run (FTZ): the first moment of a
-    # weight whose gradient is zero (a dead ReLU unit) decays by beta_1 every step and enters
-    # float32's subnormal range after ~800 steps; x86 handles subnormals ~100x slower, and by
-    # epoch 20 of the paper's protocol 43 % of the dense layer's m were subnormal (training
-    # slowed from 0.35 to 0.9 s/epoch). Values below the smallest normal float32 become 0.
+    return conv3_grad
+
+
+def _compile_adam(njit, opts: dict):
+    """adam1d(w, g, m, v (k,) f32, alpha, one_minus_b1, one_minus_b2, eps f32): Keras's Adam step
+    on one flat array, in place (njit with ``opts``).
+
+    The moments are flushed to zero below float32's smallest normal number, as TensorFlow's
+    threads run (FTZ): the first moment of a weight whose gradient is zero (a dead ReLU unit)
+    decays by beta_1 every step and would enter the subnormal range after ~800 steps, where x86
+    arithmetic is far slower.
+    """
     tiny = np.float32(np.finfo(np.float32).tiny)
 
     @njit(**opts)
@@ -163,6 +185,12 @@ def _compiled():
             v[i] = vi
             w[i] -= (mi * alpha) / (np.sqrt(vi) + eps)
 
+    return adam1d
+
+
+def _compile_area(njit):
+    """area_u8(g (h, w) uint8, fy, fx, out (h // fy, w // fx) uint8): OpenCV's INTER_AREA shrink
+    by integer factors, bit-identical (no fastmath: the rounding must match)."""
     @njit(cache=True, nogil=True)
     def area_u8(g, fy, fx, out):
         h, w = g.shape
@@ -185,7 +213,7 @@ def _compiled():
                 out[by, bx] = np.uint8(np.rint(np.float32(s) * scale))
         return out
 
-    return {"conv3_relu": conv3_relu, "conv3_grad": conv3_grad, "adam1d": adam1d, "area_u8": area_u8}
+    return area_u8
 
 
 def conv_relu(X: np.ndarray, K: np.ndarray, bias: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:

@@ -227,7 +227,7 @@ def zca_whiten(X, eps: float = 1e-5, dim: int | None = None, cov: str = "sample"
     The whitening matrix W = U diag(.) U^T is symmetric (``projection.matrix()``).
 
     X: (N, D) features. For D > N the eigenvectors come from the (N, N) Gram matrix of the
-        centred data (equivalent to its SVD), so 2261 x 4096 takes about a second.
+        centred data (equivalent to its SVD), an (N, N) problem instead of a (D, D) one.
     eps: added to every eigenvalue (> 0; default 1e-5).
     dim: None (default) = exact ZCA with all D axes: directions the fitting frames do not span
         (eigenvalue 0, e.g. when D > N - 1) are scaled by 1/sqrt(eps) as the formula says. That
@@ -292,8 +292,8 @@ def cosine_matrix(A, B=None) -> np.ndarray:
     A: (N_db, D) database features; B: (N_query, D) query features, or None to compare A with
     itself. Returns S (N_db, N_query) float32 with S[i, j] = cos(A_i, B_j) in [-1, 1];
     higher = more similar. A zero row has similarity 0 with everything.
-    Computed as one float32 matrix product of L2-normalised rows (2261 x 4096: ~0.2-1 s on two
-    cores); float32 rounding is ~1e-6, far below any meaningful similarity difference.
+    Computed as one float32 matrix product of L2-normalised rows; float32 rounding is ~1e-6, far
+    below any meaningful similarity difference.
     """
     A = _features(A, "A")
     An = l2_normalise(A.astype(np.float32, copy=False))

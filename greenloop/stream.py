@@ -25,21 +25,19 @@ and by ``python -m greenloop.bench`` on every frame of the dataset)
     "tflite": TensorFlow's own TFLite interpreter (XNNPACK delegate), converted in memory from the
               Keras model or loaded from a ``.tflite`` file; one interpreter for single frames (2
               threads: the 7.8 MB dense layer is read from memory for every frame, and two cores
-              read it faster than one: measured 0.16 vs 0.22 ms per forward pass on the 2-core build
-              machine), one multi-thread interpreter for windows.
+              share that memory traffic), one multi-thread interpreter for windows.
     "keras":  ``model.predict`` (the reference; slow, for comparison only).
     "auto":   "tflite" when TensorFlow has tf.lite, else "numpy" (paper's architecture only).
 
-Why "auto" picks TFLite: measured with reference and candidates interleaved in one process
-(``python -m greenloop.bench``; figures in results/bench/bench.md), TFLite had the lowest window and
-single-frame times of the backends that give Keras's labels on every frame; XLA ``tf.function`` was
-slower than both, and NumPy is the dependency-free fallback. A numba forward pass (the training
-kernels of ``greenloop.kernels``, with the dense layer skipping the ReLU's zero rows) was measured at
-the same 0.2 ms per frame as TFLite and not added. Costs no backend removes: the 28800 x 68 dense
-layer means reading a 7.8 MB weight matrix per forward pass (2.2 MFLOP/frame), and the exact
-preprocessing of a 640x480 BGR frame must read its 921,600 bytes (cvtColor). The 20x15 area shrink
-after it runs in ``greenloop.kernels.area_shrink`` (the same bytes as OpenCV, whose loop for this
-factor is scalar, 4x faster). The bench's floor row (one cvtColor pass over the window's frames on
+Why "auto" picks TFLite: in ``python -m greenloop.bench`` (reference and candidates interleaved in
+one process; the figures are in results/bench/bench.md) TFLite has the lowest window and
+single-frame times of the backends that give Keras's labels on every frame; NumPy is the
+dependency-free fallback. A numba forward pass (the training kernels of ``greenloop.kernels``, with
+the dense layer skipping the ReLU's zero rows) was no faster than TFLite and is not offered. Costs no
+backend removes: the 28800 x 68 dense layer means reading a 7.8 MB weight matrix per forward pass
+(2.2 MFLOP/frame), and the exact preprocessing of a 640x480 BGR frame must read its 921,600 bytes
+(cvtColor). The 20x15 area shrink after it runs in ``greenloop.kernels.area_shrink`` (the same bytes
+as OpenCV, whose loop for this factor is scalar). The bench's floor row (one cvtColor pass over the window's frames on
 all cores) bounds the window speed-up of any pipeline that converts colour with OpenCV. NumPy's
 BLAS runs on one thread inside these calls (``_single_thread_blas``): on a loaded 2-core machine a
 two-thread matmul stalls whenever one thread is pre-empted.
@@ -203,10 +201,10 @@ class _NumpyNet:
 
 
 def _single_thread_blas():
-    """A context-manager factory that runs NumPy's BLAS on one thread (threadpoolctl, ~7 us), or a
-    no-op when threadpoolctl is missing. On a shared 2-core machine a 2-thread OpenBLAS matmul
-    waits at its barrier whenever one thread is preempted: measured median 5.3 ms / p99 20 ms per
-    frame with 2 threads vs 0.35 / 0.86 ms with 1 (see module docstring)."""
+    """A context-manager factory that runs NumPy's BLAS on one thread (threadpoolctl), or a
+    no-op when threadpoolctl is missing. On a shared machine a multi-thread OpenBLAS matmul
+    waits at its barrier whenever one of its threads is preempted, which multiplies the per-frame
+    latency and its tail (see module docstring; figures in results/bench)."""
     try:
         from threadpoolctl import ThreadpoolController
         blas = ThreadpoolController().select(user_api="blas")
@@ -333,6 +331,7 @@ class Detector:
         file.
     threshold: tau >= 1; a closure of spot c is declared at the frame where its count reaches tau
         (once per spot, like ``greenloop.dictionary.closure_events``; the dictionary never decays).
+        None: count every frame but declare no closure (``events`` stays empty; for timing).
     n_classes: size of the dictionary; defaults to the model's number of outputs.
     backend: "auto", "numpy", "tflite" or "keras" (see the module docstring).
     color: channel order of 3-channel frames: "bgr" (OpenCV, the default) or "rgb". Gray frames
@@ -344,13 +343,13 @@ class Detector:
     int32), ``frame_index`` (frames seen), ``backend`` (the one in use), ``size`` (width, height).
     """
 
-    def __init__(self, model, threshold: int, n_classes: int | None = None, backend: str = "auto",
+    def __init__(self, model, threshold: int | None, n_classes: int | None = None, backend: str = "auto",
                  color: str = "bgr", num_threads: int | None = None):
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
         if color not in COLORS:
             raise ValueError(f"color must be one of {COLORS}, got {color!r}")
-        if int(threshold) != threshold or threshold < 1:
+        if threshold is not None and (int(threshold) != threshold or threshold < 1):
             raise ValueError(f"threshold tau must be an integer >= 1, got {threshold}")
         keras_model, content = _load_model(model)
         self.color = color
@@ -385,8 +384,8 @@ class Detector:
         n_classes = out_classes if n_classes is None else int(n_classes)
         if n_classes < out_classes:
             raise ValueError(f"n_classes={n_classes} is smaller than the model's {out_classes} outputs")
-        self.dictionary = LoopDetector(n_classes, int(threshold))
-        self.threshold = int(threshold)
+        self.threshold = None if threshold is None else int(threshold)
+        self.dictionary = LoopDetector(n_classes, self.threshold)
         self.n_classes = n_classes
         self.reset()
 
@@ -453,7 +452,7 @@ class Detector:
         t = self.frame_index
         self.frame_index += 1
         self.labels.append(label)
-        if d.counts[label] == d.threshold:
+        if d.threshold is not None and d.counts[label] == d.threshold:
             event = {"frame": t, "spot": label, "count": int(d.counts[label])}
             self.events.append(event)
             return event
@@ -485,7 +484,7 @@ class Detector:
         np.add.at(d.counts, labels, 1)
         t0 = self.frame_index
         events = [{"frame": t0 + int(i), "spot": int(labels[i]), "count": int(running[i])}
-                  for i in np.flatnonzero(running == d.threshold)]
+                  for i in (np.flatnonzero(running == d.threshold) if d.threshold is not None else ())]
         self.frame_index += len(labels)
         self.labels.extend(labels.tolist())
         self.events.extend(events)

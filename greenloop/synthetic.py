@@ -28,9 +28,9 @@ same painter pass (a primitive-id buffer plus each primitive's plane equation).
 
 Sensor model: smooth brightness / white-balance drift along the route, seeded per-frame exposure
 flicker, mild Gaussian blur, optional per-pixel Gaussian noise (``noise``, default 0: i.i.d.
-noise does not compress, and 2260 frames at 640x480 grow from ~0.38 GB to ~0.9 GB at noise=1);
-depth from quantised disparity (1/8 px, 50 mm baseline) with a smooth seeded error field, no
-reading beyond 10 m, nearer than 0.2 m or in the occlusion shadow right of depth edges.
+noise does not compress, so it makes the sequence much larger on disk); depth from quantised
+disparity (1/8 px, 50 mm baseline) with a smooth seeded error field, no reading beyond 10 m,
+nearer than 0.2 m or in the occlusion shadow right of depth edges.
 
 Public: ``make_greenhouse`` (and the CLI ``python -m greenloop.synthetic``), ``route``,
 ``route_world``, ``route_waypoints``, ``route_length``, ``camera_intrinsics``,
@@ -661,13 +661,34 @@ def build_scene(seed: int = 0) -> Scene:
     """Build the greenhouse hall for ``seed`` (plant sizes/colours, textures, lighting drift).
 
     The layout (beds, aisles, equipment) is fixed; the seed varies the details. Returns a
-    ``Scene``; building takes well under a second.
+    ``Scene``.
     """
     seed = _check_seed(seed)
     rng = np.random.default_rng([seed, 0x5CE4E])
     sb = _new_builder()
-    W, D = HALL_WIDTH, HALL_DEPTH
-    # cultivation beds, split into 1 m modules so the painter's order stays right
+    _add_beds(sb)
+    truss_z = np.arange(3.0, HALL_DEPTH - 0.5, 3.0)
+    _add_posts(sb, truss_z)
+    _add_roof_structure(sb, truss_z)
+    _add_pipes_and_lights(sb)
+    _add_gantry(sb)
+    _add_equipment(sb)
+    # the random draws below keep their order: quad colours, plants, textures, lighting phases
+    quads, n, color, obj, lo, hi = _finish_quads(sb, rng)
+    plants = _make_plants(rng)
+    atlas, rows = _texture_atlas(rng)
+    return Scene(quads=quads, quad_color=color.astype(np.float32), quad_normal=n, quad_obj=obj,
+                 obj_lo=lo, obj_hi=hi, obj_far=np.asarray(sb["far"]),
+                 plant_center=plants[0], plant_radius=plants[1], plant_color=plants[2],
+                 plant_flat=plants[3], plant_leaves=plants[4], leaf_center=plants[5],
+                 leaf_a1=plants[6], leaf_a2=plants[7], leaf_color=plants[8],
+                 atlas=atlas, atlas_rows=np.asarray(rows, np.float32),
+                 light_phase=rng.uniform(0, 2 * np.pi, 6))
+
+
+def _add_beds(sb: dict) -> None:
+    """Cultivation beds (tray, growing surface, stand), split into 1 m modules along z so the
+    painter's order stays right. Draws no random numbers."""
     tops = [(215, 220, 218), (60, 72, 88), (218, 222, 220), (215, 220, 218), (60, 72, 88),
             (210, 215, 215)]
     for k, xc in enumerate(BED_X):
@@ -683,15 +704,23 @@ def build_scene(seed: int = 0) -> Scene:
             _add_object(sb, [top], tops[k], far=True)
             _box(sb, (xc - BED_WIDTH / 2 + 0.1, 0.0, z0), (xc + BED_WIDTH / 2 - 0.1, BED_TOP - 0.13, z1),
                  (62, 64, 66), far=True)
-    # posts: along the walls and through every other bed, on the truss lines
-    truss_z = np.arange(3.0, D - 0.5, 3.0)
+
+
+def _add_posts(sb: dict, truss_z: np.ndarray) -> None:
+    """Posts along the walls and through every other bed, on the truss lines ``truss_z`` (T,)
+    (z metres)."""
     for zt in truss_z:
-        for xp in (0.12, W - 0.12) + tuple(BED_X[1::2]):
+        for xp in (0.12, HALL_WIDTH - 0.12) + tuple(BED_X[1::2]):
             inside_bed = BED_Z0 < zt < BED_Z0 + BED_LENGTH
             if xp in BED_X and not inside_bed:
                 continue
             _box(sb, (xp - 0.05, 0.0, zt - 0.05), (xp + 0.05, HALL_HEIGHT, zt + 0.05), (190, 192, 188))
-    # roof trusses: bottom and top chords in 2.3 m pieces, verticals and diagonals
+
+
+def _add_roof_structure(sb: dict, truss_z: np.ndarray) -> None:
+    """Roof trusses on ``truss_z`` (T,) and at both end walls (z metres): bottom and top chords
+    in 2.3 m pieces, verticals and diagonals; then the purlins along the hall."""
+    W, D = HALL_WIDTH, HALL_DEPTH
     grey = (175, 177, 172)
     for zt in np.concatenate([truss_z, [0.3, D - 0.3]]):
         xs = np.linspace(0.0, W, 7)
@@ -703,11 +732,15 @@ def build_scene(seed: int = 0) -> Scene:
             _beam(sb, (x0, 3.43, zt), (x0, 3.97, zt), 0.04, grey)
             a, b = ((x0, 3.43, zt), (x1, 3.97, zt)) if i % 2 == 0 else ((x0, 3.97, zt), (x1, 3.43, zt))
             _beam(sb, a, b, 0.035, grey)
-    # purlins along the hall
     for xp in np.arange(1.2, W, 2.4):
         for z0 in np.arange(0.0, D - 0.01, 2.5):
             _box(sb, (xp - 0.03, 3.9, z0), (xp + 0.03, 3.97, min(z0 + 2.5, D)), grey)
-    # irrigation pipes over the beds, a big air duct above aisle A2, LED bars over the beds
+
+
+def _add_pipes_and_lights(sb: dict) -> None:
+    """Irrigation pipes over the beds, LED bars (emissive) with their housings over the beds, and
+    a big air duct above aisle A2."""
+    D = HALL_DEPTH
     z_lo, z_hi = 0.6, D - 0.6
     for xc in BED_X:
         for z0 in np.arange(z_lo, z_hi, 2.0):
@@ -718,7 +751,12 @@ def build_scene(seed: int = 0) -> Scene:
             _box(sb, (xc - 0.09, 2.0, z0), (xc + 0.09, 2.05, z0 + 1.2), (120, 120, 125))
     for z0 in np.arange(0.0, D - 0.01, 2.0):
         _beam(sb, (AISLE_A2, 3.0, z0), (AISLE_A2, 3.0, min(z0 + 2.0, D)), 0.45, (225, 228, 230), sides=8)
-    # automated equipment: an irrigation gantry across the beds on rails along the walls
+
+
+def _add_gantry(sb: dict) -> None:
+    """The automated irrigation gantry across the beds, on rails along the walls, with its
+    carriage and nozzles."""
+    W = HALL_WIDTH
     zg = BED_Z0 + 0.55 * BED_LENGTH
     orange = (30, 135, 235)
     xs = np.linspace(0.35, W - 0.35, 7)
@@ -730,7 +768,12 @@ def build_scene(seed: int = 0) -> Scene:
     _box(sb, (AISLE_A3 - 0.9, 1.85, zg - 0.2), (AISLE_A3 - 0.4, 2.1, zg + 0.2), (80, 80, 85))
     for xn in np.arange(0.8, W - 0.5, 0.5):
         _beam(sb, (xn, 1.7, zg), (xn, 1.55, zg), 0.03, (40, 40, 40))
-    # front area: water tank, electrical cabinet, crates; back area: dosing unit, cart, robot
+
+
+def _add_equipment(sb: dict) -> None:
+    """Front area: water tank, electrical cabinet, crates; back area: dosing unit with canisters,
+    a cart with plant trays; a robot in the aisle between the last two beds."""
+    D = HALL_DEPTH
     _prism(sb, 11.9, 1.15, 0.6, 0.0, 1.7, (170, 115, 45))
     _box(sb, (1.0, 0.0, 0.02), (2.0, 1.9, 0.5), (175, 182, 186))
     _box(sb, (1.05, 0.15, 0.5), (1.48, 1.8, 0.52), (150, 158, 162))
@@ -749,6 +792,15 @@ def build_scene(seed: int = 0) -> Scene:
     _box(sb, (10.5, 0.05, BED_Z0 + 2.0), (11.1, 1.25, BED_Z0 + 2.8), (30, 200, 235))
     _box(sb, (10.55, 1.25, BED_Z0 + 2.1), (11.05, 1.3, BED_Z0 + 2.7), (40, 40, 40))
 
+
+def _finish_quads(sb: dict, rng):
+    """Stack the builder's polygons, orient their normals outwards and shade them.
+
+    Returns (quads (Q, 4, 3) float64 metres, normals (Q, 3) outward unit vectors, colour (Q, 3)
+    float64 BGR 0..255 after Lambert shading (emissive quads unshaded) and a seeded +-4 %
+    brightness per quad, obj (Q,) object index, lo / hi (O, 3) object bounding boxes in metres).
+    Draws Q uniforms from ``rng``.
+    """
     quads = np.stack(sb["quads"]).astype(np.float64)
     obj = np.asarray(sb["obj"])
     lo, hi = np.stack(sb["lo"]), np.stack(sb["hi"])
@@ -764,8 +816,16 @@ def build_scene(seed: int = 0) -> Scene:
     shade = 0.5 + 0.55 * np.clip(n @ LIGHT, 0, None)
     color = np.where(emit[:, None], color, color * shade[:, None])
     color = np.clip(color * rng.uniform(0.96, 1.04, (len(color), 1)), 0, 255)
+    return quads, n, color, obj, lo, hi
 
-    plants = _make_plants(rng)
+
+def _texture_atlas(rng):
+    """Floor, roof and the four wall textures stacked into one atlas, each followed by two rows
+    repeating its last row (so bilinear lookups never bleed into the next texture).
+
+    Returns (atlas (Ha, Wa, 3) uint8 BGR, rows (6,) int first atlas row of floor, roof, left,
+    right, front, back). Draws the textures' random numbers from ``rng`` in that order.
+    """
     floor, roof = _texture_floor(rng), _texture_roof(rng)
     walls = _texture_walls(rng)
     faces = [floor, roof] + walls
@@ -775,13 +835,7 @@ def build_scene(seed: int = 0) -> Scene:
     for r, t in zip(rows, faces):
         atlas[r:r + t.shape[0], :t.shape[1]] = t
         atlas[r + t.shape[0]:r + t.shape[0] + 2, :t.shape[1]] = t[-1:]
-    return Scene(quads=quads, quad_color=color.astype(np.float32), quad_normal=n, quad_obj=obj,
-                 obj_lo=lo, obj_hi=hi, obj_far=np.asarray(sb["far"]),
-                 plant_center=plants[0], plant_radius=plants[1], plant_color=plants[2],
-                 plant_flat=plants[3], plant_leaves=plants[4], leaf_center=plants[5],
-                 leaf_a1=plants[6], leaf_a2=plants[7], leaf_color=plants[8],
-                 atlas=atlas, atlas_rows=np.asarray(rows, np.float32),
-                 light_phase=rng.uniform(0, 2 * np.pi, 6))
+    return atlas, rows
 
 
 # ---------------------------------------------------------------------------------------------
@@ -862,12 +916,29 @@ def _render_hall(scene: Scene, g: _Grid, R: np.ndarray, o: np.ndarray):
 def _draw_list(scene: Scene, g: _Grid, R: np.ndarray, o: np.ndarray):
     """Visible primitives, clipped, projected and sorted far-to-near.
 
+    R (3, 3), o (3,): camera-to-hall rotation and camera centre (metres).
     Returns (items, planes) with items a list of draw commands and planes (K + 1, 3) float64
     inverse-depth coefficients (A, B, C): 1/z = A*(u-cx)/fx + B*(v-cy)/fy + C for primitive id
     1..K (row 0 unused: the hall).
     """
+    pkeys, pplanes, polys, pcol = _draw_polygons(scene, g, R, o)
+    C, rpx, detail, blob = _plant_visibility(scene, g, R, o)
+    leaves = _leaf_ellipses(scene, g, R, o, detail)
+    blobs = _blob_ellipses(scene, g, C, rpx, blob)
+    return _sorted_items(pkeys, pplanes, polys, pcol, leaves, blobs)
+
+
+def _draw_polygons(scene: Scene, g: _Grid, R: np.ndarray, o: np.ndarray):
+    """The scene's polygons that face the camera and reach into the view, near-clipped and
+    projected.
+
+    R (3, 3), o (3,): camera-to-hall rotation and camera centre (metres).
+    Returns (keys (K,) float64 painter's distance in metres (their object's nearest or farthest
+    point, see ``Scene.obj_far``), planes (K, 3) float64 inverse-depth coefficients (see
+    ``_draw_list``), polys (list of K (k, 2) int32 image corners in 1/ONE pixels, or None where
+    clipping left nothing), colours (list of K BGR triples, fogged)).
+    """
     fx, fy, cx, cy, w, h = g.fx, g.fy, g.cx, g.cy, g.w, g.h
-    # ---- polygons
     V = (scene.quads - o) @ R                      # (Q, 4, 3) camera frame
     x, y, z = V[..., 0], V[..., 1], V[..., 2]
     m = 4.0
@@ -902,8 +973,19 @@ def _draw_list(scene: Scene, g: _Grid, R: np.ndarray, o: np.ndarray):
         else:
             polys.append(P[j])
     pcol = _fog(scene.quad_color[qi], pkeys).tolist()
+    return pkeys, pplanes, polys, pcol
 
-    # ---- plants: leaves for near ones, one blob each for far ones
+
+def _plant_visibility(scene: Scene, g: _Grid, R: np.ndarray, o: np.ndarray):
+    """Which plants are drawn, and how: leaf by leaf when near, as one blob when far.
+
+    R (3, 3), o (3,): camera-to-hall rotation and camera centre (metres).
+    Returns (C (P, 3) plant centres in the camera frame (metres), rpx (P,) plant radius in
+    pixels, detail (P,) bool drawn leaf by leaf (radius >= 6 px), blob (P,) bool drawn as one
+    ellipse (visible but smaller); holes vanish below 0.6 px).
+    """
+    fx, fy, cx, cy, w, h = g.fx, g.fy, g.cx, g.cy, g.w, g.h
+    m = 4.0
     C = (scene.plant_center - o) @ R
     pz = C[:, 2]
     rpx = fx * scene.plant_radius / np.maximum(pz, 1e-3)
@@ -914,7 +996,18 @@ def _draw_list(scene: Scene, g: _Grid, R: np.ndarray, o: np.ndarray):
             & ((rpx > 0.6) | (scene.plant_flat == 0)))     # holes vanish below a pixel
     detail = pvis & (rpx >= 6.0)
     blob = pvis & ~detail
-    # leaves of the detailed plants
+    return C, rpx, detail, blob
+
+
+def _leaf_ellipses(scene: Scene, g: _Grid, R: np.ndarray, o: np.ndarray, detail: np.ndarray):
+    """Image ellipses of the leaves of the plants marked in ``detail`` (P,) bool, leaves nearer
+    than 0.12 m dropped.
+
+    Returns (centre (L, 2) pixels, axes (L, 2) semi-axes in pixels, angle (L,) degrees,
+    colour (L, 3) BGR before fog, key (L,) distance to the camera in metres, depth (L,) metres
+    along the optical axis).
+    """
+    fx, fy, cx, cy = g.fx, g.fy, g.cx, g.cy
     counts = np.diff(scene.plant_leaves)
     pid = np.nonzero(detail)[0]
     if len(pid):
@@ -930,10 +1023,16 @@ def _draw_list(scene: Scene, g: _Grid, R: np.ndarray, o: np.ndarray):
     A2 = scene.leaf_a2[lidx] @ R
     e_c = np.stack([fx * Lc[:, 0] / lz + cx, fy * Lc[:, 1] / lz + cy], 1)
     e_ax, e_ang = _project_ellipses(Lc, A1, A2, fx, fy)
-    e_col = scene.leaf_color[lidx]
-    e_key = np.linalg.norm(Lc, axis=1)
-    e_depth = lz
-    # blobs
+    return e_c, e_ax, e_ang, scene.leaf_color[lidx], np.linalg.norm(Lc, axis=1), lz
+
+
+def _blob_ellipses(scene: Scene, g: _Grid, C: np.ndarray, rpx: np.ndarray, blob: np.ndarray):
+    """One image ellipse per far plant marked in ``blob`` (P,) bool, squashed by the viewing
+    elevation; C (P, 3) camera-frame centres (metres), rpx (P,) radii in pixels.
+
+    Returns the same six arrays as ``_leaf_ellipses`` (angle 0, the plant's mean colour).
+    """
+    fx, fy, cx, cy = g.fx, g.fy, g.cx, g.cy
     bid = np.nonzero(blob)[0]
     Cb = C[bid]
     bz = Cb[:, 2]
@@ -943,18 +1042,24 @@ def _draw_list(scene: Scene, g: _Grid, R: np.ndarray, o: np.ndarray):
     b_ax = np.stack([b_r, b_r * squash], 1)
     b_c = np.stack([fx * Cb[:, 0] / bz + cx, fy * Cb[:, 1] / bz + cy], 1)
     b_key = np.linalg.norm(Cb, axis=1)
+    return b_c, b_ax, np.zeros(len(bid)), scene.plant_color[bid], b_key, bz
 
-    ec = np.concatenate([e_c, b_c])
-    eax = np.concatenate([e_ax, b_ax])
-    eang = np.concatenate([e_ang, np.zeros(len(bid))])
-    ekey = np.concatenate([e_key, b_key])
-    ecol = _fog(np.concatenate([e_col, scene.plant_color[bid]]), ekey).tolist()
-    edepth = np.concatenate([e_depth, bz])
+
+def _sorted_items(pkeys, pplanes, polys, pcol, leaves, blobs):
+    """Merge polygons (from ``_draw_polygons``) and ellipses (``leaves`` then ``blobs``, each the
+    six arrays of ``_leaf_ellipses``) into one far-to-near draw list.
+
+    Returns (items, planes) as ``_draw_list``: items are (0, polygon, colour, id) or
+    (1, (centre, axes, angle) in 1/ONE pixels and degrees, colour, id), ids 1..K in input order
+    (polygons first); planes (K + 1, 3) with 1/z = C (A = B = 0) for the ellipses.
+    """
+    ec, eax, eang, ecol, ekey, edepth = (np.concatenate([a, b]) for a, b in zip(leaves, blobs))
+    ecol = _fog(ecol, ekey).tolist()
     eci = np.rint(ec * ONE).astype(np.int64).tolist()
     eai = np.maximum(np.rint(eax * ONE), 1).astype(np.int64).tolist()
     eang = eang.tolist()
 
-    npoly = len(qi)
+    npoly = len(polys)
     keys = np.concatenate([pkeys, ekey])
     order = np.argsort(-keys, kind="stable")
     planes = np.zeros((1 + len(keys), 3))
@@ -1112,28 +1217,16 @@ def make_greenhouse(folder, n_frames: int = DEFAULT_FRAMES, size=DEFAULT_SIZE, s
     overwrite: replace an existing non-empty ``folder`` (otherwise FileExistsError).
     noise: std of the per-pixel Gaussian sensor noise in grey levels (0..255). Every frame also
         gets a seeded exposure / white-balance flicker, and depth a smooth seeded error field.
-        Per-pixel noise is incompressible: 2260 frames at 640x480 take ~0.4 GB without it,
-        ~0.9 GB at noise=1.
+        Per-pixel noise is incompressible, so it makes the PNG files much larger.
     Writes into a temporary folder beside ``folder`` and renames it at the end, so an
     interrupted run leaves nothing half-written. Returns the folder as a Path.
     """
     n = _check_frames(n_frames)
     size = _check_size(size)
     seed = _check_seed(seed)
-    if not (isinstance(noise, (int, float)) and 0 <= noise <= 50):
-        raise ValueError(f"noise must be a std in grey levels between 0 and 50, got {noise!r}")
-    noise = float(noise)
-    if workers is None:
-        workers = os.cpu_count() or 1
-    if isinstance(workers, bool) or int(workers) != workers or int(workers) < 1:
-        raise ValueError(f"workers must be a positive integer, got {workers!r}")
-    workers = int(workers)
+    noise, workers = _check_noise_workers(noise, workers)
     folder = Path(folder)
-    if folder.exists() and not folder.is_dir():
-        raise FileExistsError(f"{folder} exists and is not a folder: choose another output path")
-    if folder.is_dir() and any(folder.iterdir()) and not overwrite:
-        raise FileExistsError(f"{folder} already exists and is not empty: delete it, choose another "
-                              f"folder, or pass overwrite=True (CLI: --overwrite)")
+    _check_output(folder, overwrite)
     folder.parent.mkdir(parents=True, exist_ok=True)
     tmp = folder.parent / f".{folder.name}.tmp-{os.getpid()}"
     if tmp.exists():
@@ -1141,42 +1234,80 @@ def make_greenhouse(folder, n_frames: int = DEFAULT_FRAMES, size=DEFAULT_SIZE, s
     try:
         (tmp / "rgb").mkdir(parents=True)
         (tmp / "depth").mkdir()
-        chunk = 8
-        chunks = [list(range(i, min(i + chunk, n))) for i in range(0, n, chunk)]
-        from .progress import bar as tqdm  # in the terminal, not in the notebook
-        bar = tqdm(total=n, desc=f"render {folder.name}", unit="frame", disable=not progress)
-        try:
-            if workers == 1:
-                _worker_init(seed, n, size, str(tmp), noise)
-                for c in chunks:
-                    bar.update(_render_chunk(c))
-            else:
-                import multiprocessing as mp
-                with mp.get_context("fork" if "fork" in mp.get_all_start_methods() else "spawn").Pool(
-                        workers, _worker_init, (seed, n, size, str(tmp), noise)) as pool:
-                    for done in pool.imap_unordered(_render_chunk, chunks):
-                        bar.update(done)
-        finally:
-            bar.close()
-            _WORKER.clear()
-        poses = route(n, seed)
-        write_trajectory(tmp / "CameraTrajectory.txt", np.arange(n), poses)
-        write_camera_yaml(tmp / "camera.yaml", size)
-        meta = {"generator": "greenloop.synthetic", "format": 1, "n_frames": n,
-                "width": size[0], "height": size[1], "seed": seed, "noise": noise,
-                "route_length_m": round(route_length(), 3), "depth_scale": DEPTH_SCALE}
-        (tmp / "synthetic.json").write_text(json.dumps(meta, indent=1, sort_keys=True) + "\n")
-        if folder.exists():
-            old = folder.parent / f".{folder.name}.old-{os.getpid()}"
-            folder.rename(old)
-            tmp.rename(folder)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            tmp.rename(folder)
+        _render_frames(tmp, f"render {folder.name}", n, size, seed, noise, workers, progress)
+        _write_metadata(tmp, n, size, seed, noise)
+        _move_into_place(tmp, folder)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     return folder
+
+
+def _check_noise_workers(noise, workers) -> tuple[float, int]:
+    """Validated (noise std in grey levels, 0..50; worker processes, >= 1, None = all cores)."""
+    if not (isinstance(noise, (int, float)) and 0 <= noise <= 50):
+        raise ValueError(f"noise must be a std in grey levels between 0 and 50, got {noise!r}")
+    if workers is None:
+        workers = os.cpu_count() or 1
+    if isinstance(workers, bool) or int(workers) != workers or int(workers) < 1:
+        raise ValueError(f"workers must be a positive integer, got {workers!r}")
+    return float(noise), int(workers)
+
+
+def _check_output(folder: Path, overwrite: bool) -> None:
+    """FileExistsError unless ``folder`` is absent, an empty folder, or may be overwritten."""
+    if folder.exists() and not folder.is_dir():
+        raise FileExistsError(f"{folder} exists and is not a folder: choose another output path")
+    if folder.is_dir() and any(folder.iterdir()) and not overwrite:
+        raise FileExistsError(f"{folder} already exists and is not empty: delete it, choose another "
+                              f"folder, or pass overwrite=True (CLI: --overwrite)")
+
+
+def _render_frames(tmp: Path, desc: str, n: int, size, seed: int, noise: float, workers: int,
+                   progress: bool) -> None:
+    """Render frames 0..n-1 into tmp/rgb and tmp/depth, in chunks of 8 frames over ``workers``
+    processes (1: in this process), with a progress bar labelled ``desc``."""
+    chunk = 8
+    chunks = [list(range(i, min(i + chunk, n))) for i in range(0, n, chunk)]
+    from .progress import bar as tqdm  # in the terminal, not in the notebook
+    bar = tqdm(total=n, desc=desc, unit="frame", disable=not progress)
+    try:
+        if workers == 1:
+            _worker_init(seed, n, size, str(tmp), noise)
+            for c in chunks:
+                bar.update(_render_chunk(c))
+        else:
+            import multiprocessing as mp
+            with mp.get_context("fork" if "fork" in mp.get_all_start_methods() else "spawn").Pool(
+                    workers, _worker_init, (seed, n, size, str(tmp), noise)) as pool:
+                for done in pool.imap_unordered(_render_chunk, chunks):
+                    bar.update(done)
+    finally:
+        bar.close()
+        _WORKER.clear()
+
+
+def _write_metadata(tmp: Path, n: int, size, seed: int, noise: float) -> None:
+    """CameraTrajectory.txt (n poses, TUM, first camera's frame), camera.yaml and synthetic.json."""
+    poses = route(n, seed)
+    write_trajectory(tmp / "CameraTrajectory.txt", np.arange(n), poses)
+    write_camera_yaml(tmp / "camera.yaml", size)
+    meta = {"generator": "greenloop.synthetic", "format": 1, "n_frames": n,
+            "width": size[0], "height": size[1], "seed": seed, "noise": noise,
+            "route_length_m": round(route_length(), 3), "depth_scale": DEPTH_SCALE}
+    (tmp / "synthetic.json").write_text(json.dumps(meta, indent=1, sort_keys=True) + "\n")
+
+
+def _move_into_place(tmp: Path, folder: Path) -> None:
+    """Rename the finished ``tmp`` to ``folder``, moving an existing ``folder`` aside first and
+    deleting it afterwards."""
+    if folder.exists():
+        old = folder.parent / f".{folder.name}.old-{os.getpid()}"
+        folder.rename(old)
+        tmp.rename(folder)
+        shutil.rmtree(old, ignore_errors=True)
+    else:
+        tmp.rename(folder)
 
 
 def _parse_size(text: str) -> tuple[int, int]:

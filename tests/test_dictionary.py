@@ -30,6 +30,15 @@ def test_detector_on_hand_made_stream():
     assert det.counts.sum() == 0
 
 
+def test_threshold_none_counts_but_declares_nothing():
+    det = dictionary.LoopDetector(3, threshold=None)
+    stream = [0, 0, 1, 0, 2, 0, 1, 1]
+    assert det.threshold is None
+    assert [det.update(c) for c in stream] == [False] * len(stream)
+    assert det.counts.tolist() == [4, 3, 1]
+    with pytest.raises(ValueError, match="unknown label 3"):
+        det.update(3)
+
 def test_detector_rejects_bad_input():
     with pytest.raises(ValueError, match="threshold"):
         dictionary.LoopDetector(3, 0)

@@ -115,6 +115,19 @@ def test_closure_events_on_crafted_stream(brightness_model):
     assert det.dictionary.counts.tolist() == np.bincount(truth, minlength=4).tolist()
 
 
+def test_threshold_none_counts_but_declares_nothing(brightness_model):
+    levels = [10, 200, 10, 10, 100, 200, 200, 10, 100, 100, 240, 100, 240, 240]
+    frames = [_frame(v) for v in levels]
+    one = Detector(brightness_model, None, backend="numpy")
+    assert one.threshold is None and one.dictionary.threshold is None
+    truth = one.predict(frames)
+    assert all(one.update(f) is None for f in frames)
+    win = Detector(brightness_model, None, backend="numpy")
+    assert win.update_many(frames[:5]) == [] and win.update_many(frames[5:]) == []
+    for det in (one, win):
+        assert det.events == [] and det.labels == list(truth) and det.frame_index == len(levels)
+        assert det.dictionary.counts.tolist() == np.bincount(truth, minlength=4).tolist()
+
 @pytest.mark.parametrize("splits", [[14], [1, 5, 8], [3, 3, 3, 5], [7, 0, 7]])
 def test_windows_equal_one_at_a_time(brightness_model, splits):
     levels = [10, 200, 10, 10, 100, 200, 200, 10, 100, 100, 240, 100, 240, 240]
