@@ -49,12 +49,12 @@ from __future__ import annotations
 import contextlib
 import io
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from .data import preprocess_image
+from .common import write_atomic
 from .dictionary import LoopDetector
 from .kernels import run_chunked
 
@@ -310,17 +310,7 @@ def export_tflite(model, path, quantize: bool = False) -> Path:
     path = Path(path)
     if path.suffix.lower() != ".tflite":
         raise ValueError(f"path must end in .tflite, got {path}")
-    data = _convert(keras_model, quantize)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".tmp-{path.name}-")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    return write_atomic(path, _convert(keras_model, quantize))
 
 
 # ---------------------------------------------------------------------------------------------
