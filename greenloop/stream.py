@@ -429,7 +429,9 @@ class Detector:
         frame: (H, W, 3) uint8 BGR (RGB if ``color="rgb"``) or (H, W) / (H, W, 1) uint8 gray.
         Returns the closure event {'frame': index of this frame in the stream, 'spot': label,
         'count': its count (= tau)} when this frame's spot reaches tau now, else None. The label is
-        appended to ``labels`` either way.
+        appended to ``labels`` either way. An EVENT (count == tau, once per spot), unlike
+        ``dictionary.LoopDetector.update(label)``, which returns the closure STATE (count >= tau)
+        at every later frame of the spot too; both count by ``LoopDetector.add``.
         """
         x = preprocess_u8(frame, self.size, self.color).astype(np.float32) / np.float32(255.0)
         label = int(self._net.labels(x[None])[0])
@@ -439,12 +441,12 @@ class Detector:
         d = self.dictionary
         if not 0 <= label < d.n_classes:
             raise ValueError(f"model predicted label {label} outside the dictionary's 0..{d.n_classes - 1}")
-        d.counts[label] += 1
+        count = d.add(label)                         # the dictionary's one counting rule
         t = self.frame_index
         self.frame_index += 1
         self.labels.append(label)
-        if d.counts[label] == d.threshold:
-            event = {"frame": t, "spot": label, "count": int(d.counts[label])}
+        if count == d.threshold:                     # an EVENT: the count becomes tau (once per spot)
+            event = {"frame": t, "spot": label, "count": count}
             self.events.append(event)
             return event
         return None
@@ -465,14 +467,7 @@ class Detector:
         d = self.dictionary
         if labels.min() < 0 or labels.max() >= d.n_classes:
             raise ValueError(f"model predicted labels outside the dictionary's 0..{d.n_classes - 1}")
-        # running count of each frame's label = count before the window + occurrences so far
-        order = np.argsort(labels, kind="stable")
-        sorted_l = labels[order]
-        first = np.r_[0, np.flatnonzero(sorted_l[1:] != sorted_l[:-1]) + 1]
-        rank = np.arange(len(labels)) - np.repeat(first, np.diff(np.r_[first, len(labels)]))
-        running = np.empty(len(labels), np.int64)
-        running[order] = d.counts[sorted_l] + rank + 1
-        np.add.at(d.counts, labels, 1)
+        running = d.add_many(labels)                 # count before the window + occurrences so far
         t0 = self.frame_index
         events = [{"frame": t0 + int(i), "spot": int(labels[i]), "count": int(running[i])}
                   for i in np.flatnonzero(running == d.threshold)]
