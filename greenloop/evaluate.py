@@ -421,9 +421,10 @@ def tune_then_score(candidates, GT, exclude: int, tune, evaluate) -> dict:
     candidates: {value: S}, one (N, N) similarity matrix per candidate value of the knob (a
         whitening dimension, a median-filter size, ...). GT, exclude: as in :func:`pair_scores`.
     tune, evaluate: (N,) bool query masks from :func:`split_mask` (swap them for the second split).
-    Returns dict(value, AP_tune, AP_eval, R@100P_eval): the picked value (the first of equal
-    tuning APs), its AP on the tuning queries and its AP and recall at 100 % precision on the
-    evaluation queries, in [0, 1]. The evaluation ground truth never influences the pick.
+    Returns dict(value, AP_tune, AP_eval, R@100P_eval, AP_tune_all): the picked value (the first
+    of equal tuning APs), its AP on the tuning queries and its AP and recall at 100 % precision on
+    the evaluation queries, in [0, 1], and {value: AP on the tuning queries} of every candidate
+    (the tuning curve). The evaluation ground truth never influences the pick.
     """
     if not candidates:
         raise ValueError("candidates is empty: give at least one {value: S}")
@@ -432,4 +433,5 @@ def tune_then_score(candidates, GT, exclude: int, tune, evaluate) -> dict:
     S = candidates[best]
     return {"value": best, "AP_tune": tuned[best],
             "AP_eval": average_precision(S, GT, exclude, queries=evaluate),
-            "R@100P_eval": recall_at_100_precision(S, GT, exclude, queries=evaluate)}
+            "R@100P_eval": recall_at_100_precision(S, GT, exclude, queries=evaluate),
+            "AP_tune_all": tuned}

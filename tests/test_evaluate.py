@@ -345,6 +345,7 @@ def test_tune_then_score_picks_on_the_tuning_queries_only():
     assert r["value"] == "a" and r["AP_tune"] == pytest.approx(ev.average_precision(good_early, GT, EXCL, early))
     assert r["AP_eval"] == pytest.approx(ev.average_precision(good_early, GT, EXCL, late))
     assert r["R@100P_eval"] == ev.recall_at_100_precision(good_early, GT, EXCL, late)
+    assert r["AP_tune_all"] == {"a": r["AP_tune"], "b": ev.average_precision(bad, GT, EXCL, early)}
     with pytest.raises(ValueError, match="empty"):
         ev.tune_then_score({}, GT, EXCL, early, late)
 
