@@ -56,7 +56,7 @@ import numpy as np
 from .data import preprocess_image
 from .common import write_atomic
 from .dictionary import LoopDetector
-from .kernels import run_chunked
+from .kernels import one_blas_thread, run_chunked
 
 BACKENDS = ("auto", "numpy", "tflite", "keras")
 COLORS = ("bgr", "rgb")
@@ -203,16 +203,8 @@ class _NumpyNet:
 
 
 def _single_thread_blas():
-    """A context-manager factory that runs NumPy's BLAS on one thread (threadpoolctl, ~7 us), or a
-    no-op when threadpoolctl is missing. On a shared 2-core machine a 2-thread OpenBLAS matmul
-    waits at its barrier whenever one thread is preempted: measured median 5.3 ms / p99 20 ms per
-    frame with 2 threads vs 0.35 / 0.86 ms with 1 (see module docstring)."""
-    try:
-        from threadpoolctl import ThreadpoolController
-        blas = ThreadpoolController().select(user_api="blas")
-    except Exception:  # threadpoolctl absent or broken: keep BLAS as it is
-        return contextlib.nullcontext
-    return lambda: blas.limit(limits=1)
+    """A context-manager factory: ``kernels.one_blas_thread`` (BLAS on one thread, see there)."""
+    return one_blas_thread
 
 
 class _TFLiteNet:
