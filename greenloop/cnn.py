@@ -11,13 +11,14 @@ import fcntl
 import hashlib
 import json
 import os
-import shutil
 import tempfile
 import time
 import warnings
 from pathlib import Path
 
 import numpy as np
+
+from .common import publish_folder
 
 ROOT = Path(__file__).resolve().parents[1]
 CACHE_DIR = Path(os.environ.get("GREENLOOP_CACHE", ROOT / "results" / "models"))
@@ -253,9 +254,7 @@ def cached(key: str, cache, fit, save, load, marker: str = "model.keras"):
         result = fit()
         tmp = Path(tempfile.mkdtemp(dir=root, prefix=f".tmp-{key}-"))
         save(tmp, result)
-        if folder.exists():
-            shutil.rmtree(folder)
-        os.replace(tmp, folder)
+        publish_folder(tmp, folder)
         return result
 
 

@@ -2,10 +2,20 @@
 
 D(f_t) <- D(f_t) + 1 for the class f_t predicted for frame t; closure when exists c: D(c) >= tau.
 Counters never decay (as in the paper), so misclassifications accumulate over a long run.
+
+One counting rule: the running count of frame t is the number of frames 0..t (t included) with
+its label, plus the counter's value before the stream (:func:`running_count`). ``counts`` (every
+spot's count after every frame), ``run`` (the state D(f_t) >= tau), ``LoopDetector`` (one frame at
+a time) and ``greenloop.stream.Detector`` (raw frames; its events are the frames where the count
+EQUALS tau, once per spot) all follow it; tests/test_dictionary.py checks them against each
+other on random label streams.
 """
 from __future__ import annotations
 
 import numpy as np
+
+from .common import positive_int
+from .groundtruth import far_in_time, revisit_frames
 
 
 def threshold(frames_per_spot: int, error_rate: float, margin: int) -> dict:
@@ -36,8 +46,11 @@ class LoopDetector:
     count without ever declaring a closure (``update`` always returns False; for timing the
     counting alone).
     ``update(label)`` returns True when that label's count has reached tau (at that frame and every
-    later frame of the class: a closure is a state, not an edge). ``counts`` is the (N,) int32
-    array D, ``nbytes`` its memory (4 bytes per counter, the paper's 152 bytes for 38 classes).
+    later frame of the class: a closure is a STATE, D >= tau, not an edge). Not to be confused
+    with ``greenloop.stream.Detector.update(frame)``, which returns an EVENT dict only at the one
+    frame where a spot's count becomes equal to tau (else None). ``add``/``add_many`` count and
+    return the new running counts. ``counts`` is the (N,) int32 array D, ``nbytes`` its memory
+    (4 bytes per counter, the paper's 152 bytes for 38 classes).
     """
 
     def __init__(self, n_classes: int, threshold: int | None):
@@ -50,12 +63,25 @@ class LoopDetector:
         self.counts = np.zeros(self.n_classes, dtype=np.int32)
 
     def update(self, label: int) -> bool:
-        """Count one prediction; True if D(label) >= tau afterwards (never when tau is None)."""
+        """Count one prediction; True if D(label) >= tau afterwards (the closure state; never
+        when tau is None)."""
+        count = self.add(label)
+        return self.threshold is not None and count >= self.threshold
+
+    def add(self, label: int) -> int:
+        """Count one prediction; returns D(label) afterwards (the frame's running count)."""
         label = int(label)
         if not 0 <= label < self.n_classes:
             raise ValueError(f"unknown label {label}: the detector has classes 0..{self.n_classes - 1}")
         self.counts[label] += 1
-        return self.threshold is not None and bool(self.counts[label] >= self.threshold)
+        return int(self.counts[label])
+
+    def add_many(self, labels) -> np.ndarray:
+        """Count a window of predictions in order; returns each frame's running count (T,) int64,
+        what ``add`` returns frame by frame (:func:`running_count` from the current counters)."""
+        running = running_count(labels, self.n_classes, start=self.counts)
+        np.add.at(self.counts, np.asarray(labels, dtype=np.int64), 1)
+        return running
 
     def reset(self) -> None:
         """Set every counter back to zero."""
@@ -67,17 +93,44 @@ class LoopDetector:
         return int(self.counts.nbytes)
 
 
-def counts(labels, n_classes: int) -> np.ndarray:
-    """The dictionary's running counts D(c) over a stream of predicted labels.
-
-    labels: (T,) int in 0..n_classes-1. Returns (T, n_classes) int32: row t holds every spot's
-    count after frame t (itself included), what ``LoopDetector`` holds after t + 1 updates.
-    """
+def _check_labels(labels, n_classes: int) -> np.ndarray:
     labels = np.asarray(labels, dtype=np.int64)
     if labels.ndim != 1:
         raise ValueError(f"labels must be 1-D (T,), got {labels.shape}")
     if len(labels) and (labels.min() < 0 or labels.max() >= n_classes):
         raise ValueError(f"labels must lie in 0..{n_classes - 1}, got {labels.min()}..{labels.max()}")
+    return labels
+
+
+def running_count(labels, n_classes: int, start=None) -> np.ndarray:
+    """The counting rule: each frame's own running count D(labels[t]) after frame t.
+
+    labels: (T,) int in 0..n_classes-1. start: optional (n_classes,) counts before the stream
+    (a ``LoopDetector``'s ``counts``); zeros by default. Returns (T,) int64: start[c] + the number
+    of frames 0..t labelled c = labels[t] (t included). Without a (T, n_classes) matrix: one
+    stable sort, the rank of each frame among the frames of its label.
+    """
+    labels = _check_labels(labels, n_classes)
+    T = len(labels)
+    if T == 0:
+        return np.zeros(0, np.int64)
+    order = np.argsort(labels, kind="stable")
+    sorted_l = labels[order]
+    first = np.r_[0, np.flatnonzero(sorted_l[1:] != sorted_l[:-1]) + 1]
+    rank = np.arange(T) - np.repeat(first, np.diff(np.r_[first, T]))
+    running = np.empty(T, np.int64)
+    running[order] = rank + 1 + (0 if start is None else np.asarray(start, np.int64)[sorted_l])
+    return running
+
+
+def counts(labels, n_classes: int) -> np.ndarray:
+    """The dictionary's running counts D(c) of every spot over a stream of predicted labels.
+
+    labels: (T,) int in 0..n_classes-1. Returns (T, n_classes) int32: row t holds every spot's
+    count after frame t (itself included), what ``LoopDetector`` holds after t + 1 updates;
+    ``counts(l, n)[t, l[t]] == running_count(l, n)[t]``.
+    """
+    labels = _check_labels(labels, n_classes)
     onehot = np.zeros((len(labels), n_classes), dtype=np.int32)
     onehot[np.arange(len(labels)), labels] = 1
     return np.cumsum(onehot, axis=0, dtype=np.int32)
@@ -87,12 +140,48 @@ def run(labels, n_classes: int, threshold: int) -> np.ndarray:
     """Run a fresh detector over a stream of predicted labels (T,) -> closure flags (T,) bool.
 
     Vectorised equivalent of calling ``LoopDetector.update`` frame by frame: frame t is flagged when
-    the running count of labels[t] (itself included, :func:`counts`) is >= threshold.
+    the running count of labels[t] (itself included, :func:`running_count`) is >= threshold.
     """
     if threshold < 1:
         raise ValueError(f"threshold tau must be >= 1, got {threshold}")
-    labels = np.asarray(labels, dtype=np.int64)
-    return counts(labels, n_classes)[np.arange(len(labels)), labels] >= threshold
+    return running_count(labels, n_classes) >= threshold
+
+
+def declared_pairs(pred, reference_labels, threshold: int, exclude: int = 150) -> np.ndarray:
+    """The loop pairs the dictionary declares: (T, T) bool, True at [t, i] when frame t is flagged
+    (:func:`run` at ``threshold``) and frame i belongs to the spot predicted for t
+    (reference_labels[i] == pred[t]) with |i - t| > exclude (``groundtruth.far_in_time``).
+
+    pred, reference_labels: (T,) labels of frames 0..T-1 in capture order (as
+    :func:`score_closures`; reference_labels may hold -1 for frames of no spot).
+    Score it with ``evaluate.operating_point`` (pairs) or :func:`query_closures` (per query).
+    """
+    pred = np.asarray(pred, dtype=np.int64)
+    ref = np.asarray(reference_labels, dtype=np.int64)
+    if pred.shape != ref.shape or pred.ndim != 1:
+        raise ValueError(f"pred {pred.shape} and reference_labels {ref.shape} must be (T,) labels of the same frames")
+    flags = run(pred, int(max(pred.max(), ref.max()) + 1), threshold)
+    return flags[:, None] & (ref[None, :] == pred[:, None]) & far_in_time(len(pred), exclude)
+
+
+def query_closures(declared, gt, queries=None) -> dict:
+    """Per-query closures of a detector's declared pairs (the dictionary's on described frames).
+
+    declared: (M, M) bool, row = query t, column = frames it declares a loop with (e.g.
+    ``declared_pairs(...)[np.ix_(frames, frames)]``). gt: (M, M) bool ground truth of the same
+    frames. queries: optional (M,) bool mask of the queries counted (every frame if None).
+    A query is declared when its row holds a pair; correct when one of them is a loop in gt.
+    Returns ``evaluate.closure_counts`` of it: dict(declared, false, correct, revisits,
+    precision, recall, f1, first_delay), revisits = revisit frames (groundtruth.revisit_frames)
+    among the queries, first_delay in frames from the first of them to the first correct query.
+    """
+    from .evaluate import closure_counts  # sklearn is not needed to count frames
+
+    D = np.asarray(declared, dtype=bool)
+    G = np.asarray(gt, dtype=bool)
+    q = np.ones(len(D), dtype=bool) if queries is None else np.asarray(queries, dtype=bool)
+    dec = D.any(1) & q
+    return closure_counts(dec, (D & G).any(1) & dec, revisit_frames(G) & q)
 
 
 def closure_events(labels, n_classes: int, threshold: int) -> list[dict]:
@@ -136,11 +225,8 @@ def score_closures(pred, reference_labels, gt, threshold: int, exclude: int = 15
                          f"must describe the same frames")
     n_classes = int(max(pred.max(), ref.max()) + 1)
     flags = run(pred, n_classes, threshold)
-    idx = np.arange(len(pred))
-    # true[t]: a loop partner of t (far in time) lies in the predicted spot
-    member = ref[None, :] == pred[:, None]                      # (T, T): frame i in spot pred[t]
-    far = np.abs(idx[:, None] - idx[None, :]) > exclude
-    true_at = (gt & member & far).any(1)
+    # true[t] (read only where t is flagged): a loop partner of t, far in time, lies in its predicted spot
+    true_at = (gt & declared_pairs(pred, ref, threshold, exclude)).any(1)
     revisit = np.tril(gt, -1).any(1)
     q = np.ones(len(pred), dtype=bool) if queries is None else np.asarray(queries, dtype=bool)
     if q.shape != pred.shape:

@@ -14,6 +14,8 @@ import urllib.request
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+from .common import write_atomic
+
 REPO = "SCAU-AIUS/SLAM-for-agricultural-equipment"
 BASE_URL = os.environ.get("GREENLOOP_DATA_URL",
                           f"https://raw.githubusercontent.com/{REPO}/main/dataset")
@@ -34,17 +36,20 @@ then run the notebooks with DATASET={folder}."""
 
 
 def _fetch(url: str, dest: Path, timeout: float) -> int:
-    """Download url to dest atomically (dest.part, then rename). Returns bytes written."""
-    part = dest.with_name(dest.name + ".part")
-    with urllib.request.urlopen(url, timeout=timeout) as r, open(part, "wb") as fh:
-        n = 0
-        while chunk := r.read(1 << 16):
-            fh.write(chunk)
-            n += len(chunk)
-    if n == 0:
-        part.unlink(missing_ok=True)
-        raise OSError(f"{url} returned an empty file")
-    os.replace(part, dest)
+    """Download url to dest atomically (common.write_atomic: a temporary file, then a rename).
+    Returns bytes written."""
+    n = 0
+
+    def stream(tmp: Path) -> None:
+        nonlocal n
+        with urllib.request.urlopen(url, timeout=timeout) as r, open(tmp, "wb") as fh:
+            while chunk := r.read(1 << 16):
+                fh.write(chunk)
+                n += len(chunk)
+        if n == 0:
+            raise OSError(f"{url} returned an empty file")
+
+    write_atomic(dest, stream)
     return n
 
 

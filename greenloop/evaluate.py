@@ -34,13 +34,14 @@ from __future__ import annotations
 import numpy as np
 from sklearn.metrics import average_precision_score, precision_recall_curve, roc_curve
 
-from greenloop.groundtruth import revisit_frames
+from greenloop.common import positive_int
+from greenloop.groundtruth import far_in_time, revisit_frames
 
 __all__ = [
     "pair_mask", "pair_scores", "pr_curve", "average_precision", "recall_at_precision",
     "recall_at_100_precision",
     "recall_at_k", "operating_point", "split_mask", "NoHonestSplit", "mean_per_class_accuracy",
-    "mpca_threshold", "tune_then_score",
+    "mpca_threshold", "tune_then_score", "closure_counts",
 ]
 
 _NO_LOOPS = ("the ground truth has no loops among the counted pairs (|i - j| > exclude={exclude}"
@@ -51,9 +52,7 @@ _NO_LOOPS = ("the ground truth has no loops among the counted pairs (|i - j| > e
 
 # ----------------------------------------------------------------------------------- checks
 def _check_exclude(exclude) -> int:
-    if isinstance(exclude, bool) or not isinstance(exclude, (int, np.integer)) or exclude < 0:
-        raise ValueError(f"exclude must be an integer >= 0 (frames), got {exclude!r}")
-    return int(exclude)
+    return positive_int("exclude", exclude, 0, unit="frames")
 
 
 def _check_gt(GT, name: str = "GT") -> np.ndarray:
@@ -100,8 +99,7 @@ def pair_mask(n: int, exclude: int = 150, queries=None) -> np.ndarray:
     """
     exclude = _check_exclude(exclude)
     q = _check_queries(queries, n)
-    idx = np.arange(n)
-    m = (idx[None, :] - idx[:, None]) > exclude
+    m = np.triu(far_in_time(n, exclude), 1)            # i < j and j - i > exclude
     if q is not None:
         m &= q[None, :]
     return m
@@ -189,8 +187,7 @@ def recall_at_k(S, GT, k: int = 1, exclude: int = 150, queries=None) -> float:
     S: (N, N) similarity, higher = more similar (column j = query). GT: (N, N) bool symmetric.
     k: integer >= 1. Raises ValueError if no frame is a query (no loops).
     """
-    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
-        raise ValueError(f"k must be an integer >= 1, got {k!r}")
+    positive_int("k", k)
     S, G = _check_pair(S, GT)
     n = S.shape[0]
     cand = pair_mask(n, exclude, queries)               # [i, j]: i is a candidate of query j
@@ -287,6 +284,32 @@ def operating_point(predicted, GT, exclude: int = 150, queries=None) -> dict:
                 ignored=ignored)
 
 
+def closure_counts(declared, correct, revisit, at=None) -> dict:
+    """Count per-query closures: the one tally of ``seqmatch.closures`` (a score matrix at a
+    threshold) and ``dictionary.query_closures`` (a detector's declared pairs).
+
+    declared, correct, revisit: (Q,) bool per query: a closure is declared at it, the declared
+    closure is a ground-truth loop (a subset of declared), it has a loop partner. at: (Q,) the
+    frame index of each query (default 0..Q-1), for the delay.
+    Returns dict(declared, false, correct, revisits, precision (NaN if none declared), recall
+    (correct / revisits, NaN without revisits), f1 (0 without a correct closure), first_delay
+    (frames from the first revisit query to the first correct closure; None if never)).
+    """
+    dec, ok, rev = (np.asarray(a, dtype=bool) for a in (declared, correct, revisit))
+    at = np.arange(len(dec)) if at is None else np.asarray(at)
+    ok = dec & ok
+    correct_ = int(ok.sum())
+    n_dec, n_rev = int(dec.sum()), int(rev.sum())
+    precision = correct_ / n_dec if n_dec else float("nan")
+    recall = correct_ / n_rev if n_rev else float("nan")
+    f1 = 2 * precision * recall / (precision + recall) if correct_ else 0.0
+    first_rev = at[rev][0] if n_rev else None
+    hits = at[ok]
+    delay = int(hits[0] - first_rev) if len(hits) and first_rev is not None else None
+    return dict(declared=n_dec, false=n_dec - correct_, correct=correct_, revisits=n_rev,
+                precision=precision, recall=recall, f1=f1, first_delay=delay)
+
+
 # ------------------------------------------------------------------------------ tuning
 class NoHonestSplit(ValueError):
     """:func:`split_mask` found no cut that leaves revisit frames (or, without a ground truth,
@@ -367,12 +390,10 @@ def split_mask(n: int, fraction: float = 0.5, gt=None, gap: int = 0):
 def _check_split_args(n, fraction, gap) -> tuple[int, int]:
     """``split_mask``'s n (frames, >= 2) and gap (frames, >= 0) as ints; ValueError when n, gap
     or fraction (strictly between 0 and 1) is out of range."""
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 2:
-        raise ValueError(f"n must be an integer >= 2 frames, got {n!r}")
+    positive_int("n", n, 2, unit="frames")
     if not 0 < fraction < 1:
         raise ValueError(f"fraction must be strictly between 0 and 1, got {fraction}")
-    if isinstance(gap, bool) or not isinstance(gap, (int, np.integer)) or gap < 0:
-        raise ValueError(f"gap must be an integer >= 0 frames, got {gap!r}")
+    positive_int("gap", gap, 0, unit="frames")
     return int(n), int(gap)
 
 
@@ -417,9 +438,10 @@ def tune_then_score(candidates, GT, exclude: int, tune, evaluate) -> dict:
     candidates: {value: S}, one (N, N) similarity matrix per candidate value of the knob (a
         whitening dimension, a median-filter size, ...). GT, exclude: as in :func:`pair_scores`.
     tune, evaluate: (N,) bool query masks from :func:`split_mask` (swap them for the second split).
-    Returns dict(value, AP_tune, AP_eval, R@100P_eval): the picked value (the first of equal
-    tuning APs), its AP on the tuning queries and its AP and recall at 100 % precision on the
-    evaluation queries, in [0, 1]. The evaluation ground truth never influences the pick.
+    Returns dict(value, AP_tune, AP_eval, R@100P_eval, AP_tune_all): the picked value (the first
+    of equal tuning APs), its AP on the tuning queries and its AP and recall at 100 % precision on
+    the evaluation queries, in [0, 1], and {value: AP on the tuning queries} of every candidate
+    (the tuning curve). The evaluation ground truth never influences the pick.
     """
     if not candidates:
         raise ValueError("candidates is empty: give at least one {value: S}")
@@ -428,4 +450,5 @@ def tune_then_score(candidates, GT, exclude: int, tune, evaluate) -> dict:
     S = candidates[best]
     return {"value": best, "AP_tune": tuned[best],
             "AP_eval": average_precision(S, GT, exclude, queries=evaluate),
-            "R@100P_eval": recall_at_100_precision(S, GT, exclude, queries=evaluate)}
+            "R@100P_eval": recall_at_100_precision(S, GT, exclude, queries=evaluate),
+            "AP_tune_all": tuned}

@@ -32,10 +32,12 @@ The matrix is symmetric with a False diagonal; evaluations count each unordered 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
 from . import data
+from .common import positive_int
 
 
 class NoGroundTruthError(FileNotFoundError):
@@ -52,11 +54,6 @@ def _check(poses, threshold_name: str, threshold: float, exclude: int) -> np.nda
     if exclude < 0:
         raise ValueError(f"exclude must be >= 0 frames, got {exclude}")
     return poses
-
-
-def _far_in_time(n: int, exclude: int) -> np.ndarray:
-    idx = np.arange(n)
-    return np.abs(idx[:, None] - idx[None, :]) > exclude
 
 
 def pose_error(poses) -> np.ndarray:
@@ -87,7 +84,7 @@ def loop_matrix(poses, threshold: float = 0.5, exclude: int = 150) -> np.ndarray
     Returns (N, N) bool, symmetric, False on the diagonal.
     """
     poses = _check(poses, "threshold", threshold, exclude)
-    return (pose_error(poses) < threshold) & _far_in_time(len(poses), exclude)
+    return (pose_error(poses) < threshold) & far_in_time(len(poses), exclude)
 
 
 def loop_matrix_metric(poses, max_distance: float = 1.0, max_angle: float = 30.0,
@@ -108,7 +105,7 @@ def loop_matrix_metric(poses, max_distance: float = 1.0, max_angle: float = 30.0
     d2 = np.maximum(sq[:, None] + sq[None, :] - 2.0 * t @ t.T, 0.0)
     cos = np.clip(z @ z.T, -1.0, 1.0)
     close = (d2 < max_distance ** 2) & (cos > np.cos(np.radians(max_angle)))
-    return close & _far_in_time(len(poses), exclude)
+    return close & far_in_time(len(poses), exclude)
 
 
 def _check_frames(frames, n_frames: int) -> np.ndarray:
@@ -126,13 +123,17 @@ def _check_frames(frames, n_frames: int) -> np.ndarray:
     return f
 
 
-def _far_frames(frames: np.ndarray, exclude) -> np.ndarray:
-    """(M, M) bool: |frames[a] - frames[b]| > exclude, exclude in original frames.
+def far_in_time(frames, exclude) -> np.ndarray:
+    """The "far in time" rule of every ground truth and score: (M, M) bool, True at [a, b] iff
+    |frames[a] - frames[b]| > exclude. The one implementation greenloop uses (ground truths,
+    ``evaluate.pair_mask``, ``dictionary.declared_pairs``).
 
-    frames must be sorted; built from each row's band of near columns, without an (M, M)
-    integer difference matrix (M = 7152 frames would need 400 MB for it)."""
-    if isinstance(exclude, bool) or not isinstance(exclude, (int, np.integer)) or exclude < 0:
-        raise ValueError(f"exclude must be an integer >= 0 (original frames), got {exclude!r}")
+    frames: an int n (frames 0..n-1, one per row) or (M,) sorted original frame numbers (e.g.
+        ``np.arange(0, N, step)``). exclude: an integer >= 0, in the units of ``frames``.
+    Built from each row's band of near columns, without an (M, M) integer difference matrix
+    (M = 7152 frames would need 400 MB for it)."""
+    exclude = positive_int("exclude", exclude, 0, unit="original frames", whole_floats=True)
+    frames = np.arange(int(frames)) if np.ndim(frames) == 0 else np.asarray(frames)
     lo = np.searchsorted(frames, frames - exclude, side="left")
     hi = np.searchsorted(frames, frames + exclude, side="right")
     cols = np.arange(len(frames))
@@ -152,7 +153,7 @@ def pair_matrix(pairs, n_frames: int, frames=None, exclude: int = 150) -> np.nda
     Returns (M, M) bool, symmetric, False on the diagonal (the kind ``loop_matrix`` returns).
     """
     f = _check_frames(frames, n_frames)
-    far = _far_frames(f, exclude)
+    far = far_in_time(f, exclude)
     p = np.asarray(pairs, dtype=np.int64)
     if p.size == 0:
         p = p.reshape(0, 3)
@@ -199,8 +200,36 @@ def for_sequence(folder, frames=None, threshold: float = 0.5, exclude: int = 150
     f = _check_frames(frames, n)
     if kind == "poses":
         _, poses = data.read_trajectory(folder, n_frames=n)
-        return loop_matrix(poses[f], threshold, 0) & _far_frames(f, exclude)
+        return loop_matrix(poses[f], threshold, 0) & far_in_time(f, exclude)
     return pair_matrix(data.read_loop_pairs(folder, n_frames=n), n, f, exclude)
+
+
+class Described(NamedTuple):
+    """What :func:`described_frames` returns (the prelude of the descriptor notebooks)."""
+    frames: np.ndarray   # (M,) original frame numbers of the described frames, 0, step, 2 step, ...
+    ex: int              # exclude in steps of frame_step: exclude // frame_step
+    gt: np.ndarray       # (M, M) bool ground truth of those frames (for_sequence)
+    summary: str         # one line naming the frames, the exclusion band and the ground truth
+
+
+def described_frames(folder, frame_step: int, threshold: float = 0.5, exclude: int = 150) -> Described:
+    """Every frame_step-th frame of a sequence, its exclusion band in steps and its ground truth.
+
+    folder: a sequence folder. frame_step: describe frames 0, frame_step, 2 frame_step, ...
+    (an integer >= 1). threshold, exclude: as :func:`for_sequence` (exclude in ORIGINAL frames).
+    Returns Described(frames, ex, gt, summary): ``ex = exclude // frame_step`` is the band the
+    scoring functions take for the described frames, ``gt = for_sequence(folder, frames,
+    threshold, exclude)`` and ``summary`` the line the notebooks print (frames, band in steps and
+    original frames, the ground-truth definition, its loop pairs and revisit frames).
+    """
+    step = positive_int("frame_step", frame_step, whole_floats=True)
+    frames = np.arange(0, len(data.list_frames(folder)), step)
+    ex = int(exclude) // step
+    gt = for_sequence(folder, frames, threshold, exclude)
+    summary = (f"{len(frames)} frames (frame_step {frame_step}), exclusion band {ex} steps = {ex * step} original "
+               f"frames; ground truth ({definition(folder, threshold, exclude)}): {len(loop_pairs(gt))} loop pairs, "
+               f"{int(revisit_frames(gt).sum())} revisit frames")
+    return Described(frames, ex, gt, summary)
 
 
 def variants(folder, frames=None, thresholds=(0.3, 0.4, 0.5, 0.6, 0.7, 0.8), exclude: int = 150,
@@ -219,7 +248,7 @@ def variants(folder, frames=None, thresholds=(0.3, 0.4, 0.5, 0.6, 0.7, 0.8), exc
     n = len(data.list_frames(folder))
     f = _check_frames(frames, n)
     _, poses = data.read_trajectory(folder, n_frames=n)
-    far = _far_frames(f, exclude)
+    far = far_in_time(f, exclude)
     out = {f"Eq. 5 < {t:g}": loop_matrix(poses[f], t, 0) & far for t in thresholds}
     out[f"metric: < {max_distance:g} m, < {max_angle:g} deg"] = (
         loop_matrix_metric(poses[f], max_distance, max_angle, 0) & far)

@@ -39,7 +39,6 @@ uint32, indices int64, times in seconds (wall clock, ``time.perf_counter``). Bad
 """
 from __future__ import annotations
 
-import contextlib
 import heapq
 import itertools
 import time
@@ -94,13 +93,9 @@ def _check_X(X, H: np.ndarray, name: str = "X") -> np.ndarray:
 
 
 def _single_thread_blas():
-    """Run NumPy's BLAS on one thread (threadpoolctl) for stable per-query timings, as one
-    robot core would; a no-op where threadpoolctl is missing."""
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - threadpoolctl is pinned in environment.txt
-        return contextlib.nullcontext()
-    return threadpool_limits(limits=1, user_api="blas")
+    """NumPy's BLAS on one thread for stable per-query timings (``kernels.one_blas_thread``)."""
+    from .kernels import one_blas_thread
+    return one_blas_thread()
 
 
 # ----------------------------------------------------------------------------- hashing

@@ -44,6 +44,7 @@ import cv2
 import numpy as np
 
 from . import data
+from .common import publish_folder
 
 SOURCE_URL = "https://github.com/TimQuelch/seqslam"
 SOURCE_SUBDIR = "datasets/nordland_trimmed"
@@ -178,13 +179,7 @@ def build(out, src, tolerance: int = TOLERANCE, overwrite: bool = False, progres
     shutil.rmtree(tmp, ignore_errors=True)
     try:
         _write(tmp, summer, winter, tolerance, meta, progress)
-        if out.exists():
-            old = out.parent / f".{out.name}.old-{os.getpid()}"
-            out.rename(old)
-            tmp.rename(out)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            tmp.rename(out)
+        publish_folder(tmp, out)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise

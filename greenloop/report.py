@@ -12,27 +12,14 @@ import json
 import os
 import platform
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from .common import write_atomic  # the one atomic file write, also report.write_atomic
+
 PAPER, RUN = "paper", "this run"
-
-
-def _atomic_write(path: Path, write) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".tmp-{path.name}-")
-    os.close(fd)
-    try:
-        write(Path(tmp))
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
 
 
 def _default(o):
@@ -49,7 +36,7 @@ def _default(o):
 
 def write_json(path, obj) -> Path:
     """Write ``obj`` (numpy scalars/arrays allowed) as indented JSON, atomically."""
-    return _atomic_write(path, lambda p: p.write_text(json.dumps(obj, indent=1, default=_default)))
+    return write_atomic(path, lambda p: p.write_text(json.dumps(obj, indent=1, default=_default)))
 
 
 def write_table(df, path, title: str | None = None, note: str | None = None) -> Path:
@@ -59,11 +46,11 @@ def write_table(df, path, title: str | None = None, note: str | None = None) -> 
     Returns the .md path.
     """
     path = Path(path)
-    _atomic_write(path.with_suffix(".csv"), lambda p: df.to_csv(p, index=False))
+    write_atomic(path.with_suffix(".csv"), lambda p: df.to_csv(p, index=False))
     md = (f"### {title}\n\n" if title else "") + df.to_markdown(index=False) + "\n"
     if note:
         md += f"\n{note}\n"
-    return _atomic_write(path.with_suffix(".md"), lambda p: p.write_text(md))
+    return write_atomic(path.with_suffix(".md"), lambda p: p.write_text(md))
 
 
 def paper_vs_run(rows):
@@ -84,7 +71,7 @@ def paper_vs_run(rows):
 def save_figure(fig, path, dpi: int = 110) -> Path:
     """Save a matplotlib figure as PNG atomically (and leave it open for inline display)."""
     path = Path(path).with_suffix(".png")
-    return _atomic_write(path, lambda p: fig.savefig(p, dpi=dpi, bbox_inches="tight", format="png"))
+    return write_atomic(path, lambda p: fig.savefig(p, dpi=dpi, bbox_inches="tight", format="png"))
 
 
 def cpu_model() -> str:
@@ -170,7 +157,7 @@ def assemble_tables(results_dir="results", out: str | Path | None = None) -> Pat
                          f"`{m.get('dataset', '?')}` ({m.get('dataset_fingerprint', '?')})._\n")
         for t in tables:
             parts.append("\n" + t.read_text())
-    return _atomic_write(out, lambda p: p.write_text("".join(parts)))
+    return write_atomic(out, lambda p: p.write_text("".join(parts)))
 
 
 def _json(path: Path):

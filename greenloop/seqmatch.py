@@ -436,17 +436,7 @@ def closures(S, GT, threshold: float, exclude: int = 150, queries=None) -> dict:
     revisit query to the first correct closure; None if never)).
     """
     js, _, score, ok, rev = _best_per_query(S, GT, exclude, queries)
-    dec = score >= threshold
-    correct = int((dec & ok).sum())
-    n_dec, n_rev = int(dec.sum()), int(rev.sum())
-    precision = correct / n_dec if n_dec else float("nan")
-    recall = correct / n_rev if n_rev else float("nan")
-    f1 = 2 * precision * recall / (precision + recall) if correct else 0.0
-    first_rev = js[rev][0] if n_rev else None
-    hits = js[dec & ok]
-    delay = int(hits[0] - first_rev) if len(hits) and first_rev is not None else None
-    return dict(declared=n_dec, false=n_dec - correct, correct=correct, revisits=n_rev,
-                precision=precision, recall=recall, f1=f1, first_delay=delay)
+    return evaluate.closure_counts(score >= threshold, ok, rev, at=js)
 
 
 def choose_threshold(S, GT, exclude: int = 150, queries=None, rule: str = "f1") -> float:

@@ -259,6 +259,33 @@ def zca_whiten(X, eps: float = 1e-5, dim: int | None = None, cov: str = "sample"
     return apply_projection(X, proj), proj
 
 
+def whitening_candidates(X, dims, kind: str = "pca", eps: float = 1e-5, fit=None) -> dict:
+    """The descriptors whitened at every candidate dimension, for tuning the dimension.
+
+    X: (N, D) descriptors (L2-normalised ones in the notebooks). dims: candidate dimensions, in
+    the order to try them. kind: "pca" (:func:`pca_whiten`) or "zca" (:func:`zca_whiten`).
+    fit: optional (N,) bool mask of the frames the whitening is fitted on (the tuning part; every
+    frame when None); every frame is then mapped (:func:`apply_projection`).
+    Returns {kept dim: (N, k) float32 whitened descriptors}: the kept dim is the number of
+    components actually kept (a candidate above the rank of the fitting frames is clipped, with
+    its UserWarning silenced); the first candidate of each kept dim wins, later ones are skipped.
+    """
+    if kind not in ("pca", "zca"):
+        raise ValueError(f"kind must be 'pca' or 'zca', got {kind!r}")
+    X = _features(X)
+    fit_X = X if fit is None else X[np.asarray(fit, dtype=bool)]
+    out = {}
+    for d in dims:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # dim clipped to the rank of the fitting data
+            _, proj = (pca_whiten(fit_X, dim=d, eps=eps) if kind == "pca"
+                       else zca_whiten(fit_X, eps=eps, dim=d))
+        k = int(proj.components.shape[1])
+        if k not in out:
+            out[k] = apply_projection(X, proj)
+    return out
+
+
 def apply_projection(X_new, projection: Projection) -> np.ndarray:
     """Apply a fitted :class:`Projection` (from :func:`pca_whiten`/:func:`zca_whiten`) to frames.
 

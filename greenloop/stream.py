@@ -47,14 +47,14 @@ from __future__ import annotations
 import contextlib
 import io
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from .data import preprocess_image
+from .common import write_atomic
 from .dictionary import LoopDetector
-from .kernels import run_chunked
+from .kernels import one_blas_thread, run_chunked
 
 BACKENDS = ("auto", "numpy", "tflite", "keras")
 COLORS = ("bgr", "rgb")
@@ -201,16 +201,8 @@ class _NumpyNet:
 
 
 def _single_thread_blas():
-    """A context-manager factory that runs NumPy's BLAS on one thread (threadpoolctl), or a
-    no-op when threadpoolctl is missing. On a shared machine a multi-thread OpenBLAS matmul
-    waits at its barrier whenever one of its threads is preempted, which multiplies the per-frame
-    latency and its tail (see module docstring; figures in results/bench)."""
-    try:
-        from threadpoolctl import ThreadpoolController
-        blas = ThreadpoolController().select(user_api="blas")
-    except Exception:  # threadpoolctl absent or broken: keep BLAS as it is
-        return contextlib.nullcontext
-    return lambda: blas.limit(limits=1)
+    """A context-manager factory: ``kernels.one_blas_thread`` (BLAS on one thread, see there)."""
+    return one_blas_thread
 
 
 class _TFLiteNet:
@@ -308,17 +300,7 @@ def export_tflite(model, path, quantize: bool = False) -> Path:
     path = Path(path)
     if path.suffix.lower() != ".tflite":
         raise ValueError(f"path must end in .tflite, got {path}")
-    data = _convert(keras_model, quantize)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".tmp-{path.name}-")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    return write_atomic(path, _convert(keras_model, quantize))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -438,7 +420,9 @@ class Detector:
         frame: (H, W, 3) uint8 BGR (RGB if ``color="rgb"``) or (H, W) / (H, W, 1) uint8 gray.
         Returns the closure event {'frame': index of this frame in the stream, 'spot': label,
         'count': its count (= tau)} when this frame's spot reaches tau now, else None. The label is
-        appended to ``labels`` either way.
+        appended to ``labels`` either way. An EVENT (count == tau, once per spot), unlike
+        ``dictionary.LoopDetector.update(label)``, which returns the closure STATE (count >= tau)
+        at every later frame of the spot too; both count by ``LoopDetector.add``.
         """
         x = preprocess_u8(frame, self.size, self.color).astype(np.float32) / np.float32(255.0)
         label = int(self._net.labels(x[None])[0])
@@ -448,12 +432,12 @@ class Detector:
         d = self.dictionary
         if not 0 <= label < d.n_classes:
             raise ValueError(f"model predicted label {label} outside the dictionary's 0..{d.n_classes - 1}")
-        d.counts[label] += 1
+        count = d.add(label)                         # the dictionary's one counting rule
         t = self.frame_index
         self.frame_index += 1
         self.labels.append(label)
-        if d.threshold is not None and d.counts[label] == d.threshold:
-            event = {"frame": t, "spot": label, "count": int(d.counts[label])}
+        if count == d.threshold:                     # an EVENT: the count becomes tau (once per spot)
+            event = {"frame": t, "spot": label, "count": count}
             self.events.append(event)
             return event
         return None
@@ -474,14 +458,7 @@ class Detector:
         d = self.dictionary
         if labels.min() < 0 or labels.max() >= d.n_classes:
             raise ValueError(f"model predicted labels outside the dictionary's 0..{d.n_classes - 1}")
-        # running count of each frame's label = count before the window + occurrences so far
-        order = np.argsort(labels, kind="stable")
-        sorted_l = labels[order]
-        first = np.r_[0, np.flatnonzero(sorted_l[1:] != sorted_l[:-1]) + 1]
-        rank = np.arange(len(labels)) - np.repeat(first, np.diff(np.r_[first, len(labels)]))
-        running = np.empty(len(labels), np.int64)
-        running[order] = d.counts[sorted_l] + rank + 1
-        np.add.at(d.counts, labels, 1)
+        running = d.add_many(labels)                 # count before the window + occurrences so far
         t0 = self.frame_index
         events = [{"frame": t0 + int(i), "spot": int(labels[i]), "count": int(running[i])}
                   for i in (np.flatnonzero(running == d.threshold) if d.threshold is not None else ())]

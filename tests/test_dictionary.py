@@ -100,3 +100,76 @@ def test_counts_are_the_detectors_running_counts():
     for t, c in enumerate(labels):
         det.update(int(c))
         assert det.counts.tolist() == D[t].tolist()
+
+
+def _brute_counts(labels, n, start=None):
+    """The counting rule written out: a Python dict incremented frame by frame."""
+    D = {c: (0 if start is None else int(start[c])) for c in range(n)}
+    out = []
+    for c in labels:
+        D[int(c)] += 1
+        out.append(D[int(c)])
+    return np.array(out, np.int64)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_one_counting_rule_on_random_label_streams(seed):
+    from greenloop import stream
+
+    rng = np.random.default_rng(seed)
+    n, T, tau = int(rng.integers(1, 8)), int(rng.integers(0, 300)), int(rng.integers(1, 40))
+    labels = rng.integers(0, n, T)
+    want = _brute_counts(labels, n)
+    assert dictionary.running_count(labels, n).tolist() == want.tolist()
+    if T:
+        assert dictionary.counts(labels, n)[np.arange(T), labels].tolist() == want.tolist()
+    assert dictionary.run(labels, n, tau).tolist() == (want >= tau).tolist()
+    det = dictionary.LoopDetector(n, tau)
+    assert [det.update(c) for c in labels] == (want >= tau).tolist()       # the STATE, count >= tau
+    one, win = dictionary.LoopDetector(n, tau), dictionary.LoopDetector(n, tau)
+    assert [one.add(c) for c in labels] == want.tolist()
+    cut = T // 3                                                            # two windows, counters carried over
+    got = np.r_[win.add_many(labels[:cut]), win.add_many(labels[cut:])]
+    assert got.tolist() == want.tolist() and win.counts.tolist() == one.counts.tolist()
+    start = rng.integers(0, 5, n)
+    assert dictionary.running_count(labels, n, start).tolist() == _brute_counts(labels, n, start).tolist()
+    # the streaming detector's EVENTS (count == tau, once per spot), frame by frame and windowed
+    events = dictionary.closure_events(labels, n, tau)
+    assert [e["frame"] for e in events] == [t for t in range(T) if want[t] == tau]
+    for windowed in (False, True):
+        d = stream.Detector.__new__(stream.Detector)      # no network: labels fed directly
+        d.dictionary, d.threshold, d.n_classes = dictionary.LoopDetector(n, tau), tau, n
+        d.reset()
+        if windowed:
+            d.predict = lambda frames: np.asarray(frames, np.int64)
+            got_ev = d.update_many(labels[:cut]) + d.update_many(labels[cut:])
+        else:
+            got_ev = [e for c in labels if (e := d._count(int(c))) is not None]
+        assert got_ev == events and d.events == events
+
+
+def test_declared_pairs_and_query_closures():
+    rng = np.random.default_rng(3)
+    T, ex = 60, 5
+    ref = np.repeat(np.arange(6), 10)
+    pred = np.where(rng.random(T) < 0.8, np.tile(ref[:30], 2), rng.integers(0, 6, T))
+    tau = 4
+    D = dictionary.declared_pairs(pred, ref, tau, ex)
+    flags = dictionary.run(pred, 6, tau)
+    for t in range(T):
+        for i in range(T):
+            assert D[t, i] == (flags[t] and ref[i] == pred[t] and abs(i - t) > ex)
+    gt = np.zeros((T, T), bool)
+    gt[np.arange(30), np.arange(30) + 30] = True
+    gt |= gt.T
+    q = np.arange(T) >= 20
+    c = dictionary.query_closures(D, gt, queries=q)
+    dec = D.any(1) & q
+    ok = (D & gt).any(1) & dec
+    rev = np.triu(gt, 1).any(0) & q
+    assert c["declared"] == dec.sum() and c["false"] == (dec & ~ok).sum() and c["correct"] == ok.sum()
+    assert c["revisits"] == rev.sum()
+    hits = np.flatnonzero(ok)
+    assert c["first_delay"] == (hits[0] - np.flatnonzero(rev)[0] if len(hits) else None)
+    with pytest.raises(ValueError, match="same frames"):
+        dictionary.declared_pairs(pred, ref[:-1], tau, ex)

@@ -345,5 +345,17 @@ def test_tune_then_score_picks_on_the_tuning_queries_only():
     assert r["value"] == "a" and r["AP_tune"] == pytest.approx(ev.average_precision(good_early, GT, EXCL, early))
     assert r["AP_eval"] == pytest.approx(ev.average_precision(good_early, GT, EXCL, late))
     assert r["R@100P_eval"] == ev.recall_at_100_precision(good_early, GT, EXCL, late)
+    assert r["AP_tune_all"] == {"a": r["AP_tune"], "b": ev.average_precision(bad, GT, EXCL, early)}
     with pytest.raises(ValueError, match="empty"):
         ev.tune_then_score({}, GT, EXCL, early, late)
+
+
+def test_closure_counts_tally():
+    dec = np.array([0, 1, 1, 0, 1, 1], bool)
+    ok = np.array([0, 0, 1, 1, 1, 0], bool)          # the 4th is not declared: it does not count
+    rev = np.array([0, 1, 1, 1, 1, 0], bool)
+    c = ev.closure_counts(dec, ok, rev, at=np.array([10, 12, 14, 16, 18, 20]))
+    assert (c["declared"], c["false"], c["correct"], c["revisits"]) == (4, 2, 2, 4)
+    assert c["precision"] == 0.5 and c["recall"] == 0.5 and c["f1"] == 0.5 and c["first_delay"] == 2
+    none = ev.closure_counts(np.zeros(3, bool), np.zeros(3, bool), np.zeros(3, bool))
+    assert np.isnan(none["precision"]) and none["f1"] == 0.0 and none["first_delay"] is None

@@ -183,3 +183,25 @@ def test_variants_follow_the_threshold(tiny_sequence, tiny_pairs_sequence):
     assert (eq5[1] == groundtruth.for_sequence(tiny_sequence, np.arange(0, 200, 2), 0.5, 20)).all()
     assert not (eq5[0] & ~eq5[1]).any() and not (eq5[1] & ~eq5[2]).any()   # a looser threshold only adds loops
     assert groundtruth.variants(tiny_pairs_sequence) == {}
+
+
+def test_far_in_time_is_the_one_rule():
+    for frames, ex in ((7, 0), (7, 2), (np.array([0, 3, 4, 9, 20]), 4), (np.arange(0, 40, 4), 7)):
+        f = np.arange(frames) if np.ndim(frames) == 0 else frames
+        want = np.abs(f[:, None] - f[None, :]) > ex
+        assert np.array_equal(groundtruth.far_in_time(frames, ex), want)
+    with pytest.raises(ValueError, match="exclude must be an integer >= 0"):
+        groundtruth.far_in_time(5, -1)
+    with pytest.raises(ValueError, match="exclude must be an integer >= 0"):
+        groundtruth.far_in_time(5, 1.5)
+
+
+def test_described_frames_is_the_notebooks_prelude(tiny_sequence):
+    n = len(data.list_frames(tiny_sequence))
+    d = groundtruth.described_frames(tiny_sequence, 3, 0.5, 10)
+    assert np.array_equal(d.frames, np.arange(0, n, 3)) and d.ex == 10 // 3
+    assert np.array_equal(d.gt, groundtruth.for_sequence(tiny_sequence, np.arange(0, n, 3), 0.5, 10))
+    assert d.summary.startswith(f"{len(d.frames)} frames (frame_step 3), exclusion band 3 steps = 9 original frames")
+    assert f"{len(groundtruth.loop_pairs(d.gt))} loop pairs" in d.summary
+    with pytest.raises(ValueError, match="frame_step must be an integer >= 1"):
+        groundtruth.described_frames(tiny_sequence, 0)

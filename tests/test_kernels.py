@@ -186,3 +186,17 @@ def test_fused_trainer_matches_model_fit(n, L, epochs):
         np.testing.assert_allclose(a, b, rtol=2e-3, atol=5e-5)
     for k in ("loss", "val_loss", "accuracy", "val_accuracy"):
         np.testing.assert_allclose(hf[k], hp[k], rtol=1e-3, atol=1e-4, err_msg=k)
+
+
+def test_one_blas_thread_limits_numpys_blas_inside_only():
+    from threadpoolctl import threadpool_info
+
+    from greenloop import kernels
+
+    def blas_threads():
+        return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+
+    before = blas_threads()
+    with kernels.one_blas_thread():
+        assert blas_threads() and set(blas_threads()) == {1}
+    assert blas_threads() == before

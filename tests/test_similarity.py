@@ -215,3 +215,26 @@ def test_median_filter_behaviour():
     assert F.sum() == pytest.approx(sum(F[5 + t, 15 + t] for t in range(10)))
     Sym = S + S.T
     assert np.allclose(median_filter(Sym, 5), median_filter(Sym, 5).T)
+
+
+def test_whitening_candidates_fit_on_the_mask_and_keep_each_rank_once():
+    import warnings
+    from greenloop.similarity import whitening_candidates
+
+    X = l2_normalise(correlated(40, 12, seed=3))
+    fit = np.arange(40) < 8                            # 8 frames: rank 7 after centring
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")                 # the clipping warning stays inside
+        c = whitening_candidates(X, [2, 4, 16, 32], "pca", 1e-5, fit=fit)
+    assert list(c) == [2, 4, 7]                        # 16 and 32 clipped to 7: counted once
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        _, proj = pca_whiten(X[fit], dim=16, eps=1e-5)
+    np.testing.assert_array_equal(c[7], apply_projection(X, proj))
+    assert proj.output_dim == 7 and c[7].shape == (40, 7)
+    z = whitening_candidates(X, [3], "zca", 1e-5)    # every frame fitted
+    _, pz = zca_whiten(X, eps=1e-5, dim=3)
+    np.testing.assert_array_equal(z[3], apply_projection(X, pz))
+    assert pz.output_dim == 12                         # ZCA maps back to the input dimension
+    with pytest.raises(ValueError, match="kind must be"):
+        whitening_candidates(X, [3], "ica")

@@ -128,7 +128,8 @@ def test_two_worker_sweep_matches_the_points_run_one_after_another(tiny_sequence
     on_disk = pd.read_csv(out / "sweep.csv")
     assert on_disk["acc_mean_%"].tolist() == table["acc_mean_%"].tolist()
     assert (out / "sweep.md").read_text().count("\n| [") == 2 and (out / "sweep.png").stat().st_size > 0
-    assert len(list((tmp_path / "cache-sweep").glob("*/model.keras"))) == 2        # one shared cache
+    # one shared cache: per point one Table 1 model and 01's three leakage controls per control seed
+    assert len(list((tmp_path / "cache-sweep").glob("*/model.keras"))) == 2 * (1 + 3 * len(TINY["control_seeds"]))
     for p in sweep.plan(grid, out, base, tiny_sequence):
         rec = json.loads((p["folder"] / "point.json").read_text())
         assert rec["status"] == "ok" and rec["parameters"]["results_dir"] == str(p["folder"])
