@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .common import publish_folder
+from .common import positive_int, publish_folder
 
 ROOT = Path(__file__).resolve().parents[1]
 CACHE_DIR = Path(os.environ.get("GREENLOOP_CACHE", ROOT / "results" / "models"))
@@ -98,9 +98,7 @@ def split_indices(y: np.ndarray, seed: int, test_size: float = 0.2, split: str =
 
 def _count(v, name: str) -> int:
     """v as an int >= 0, or ValueError naming ``name``."""
-    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
-        raise ValueError(f"{name} must be an integer >= 0, got {v!r}")
-    return int(v)
+    return positive_int(name, v, 0)
 
 
 def _blocked(y, rng, test_size: float, gap: int, block: str):
@@ -206,8 +204,8 @@ def train(X: np.ndarray, y: np.ndarray, seed: int, epochs: int = 200, batch_size
     y = np.asarray(y, dtype=np.int64)
     if X.ndim != 4 or len(X) != len(y):
         raise ValueError(f"X must be (N, H, W, C) and y (N,), got {X.shape} and {y.shape}")
-    if epochs < 1 or batch_size < 1:
-        raise ValueError(f"epochs and batch_size must be >= 1, got {epochs}, {batch_size}")
+    positive_int("epochs", epochs, whole_floats=True)
+    positive_int("batch_size", batch_size, whole_floats=True)
     n_classes = int(n_classes or y.max() + 1)
     fast = trainer(fast)
     if fast == "fused" and X.shape[3] != 1:
