@@ -330,15 +330,28 @@ def fit_orders(n: int, batch_size: int):
     TensorFlow backend is tested here). tests/test_kernels.py checks the orders against
     ``model.fit`` itself."""
     import keras
-    from keras.src.trainers.data_adapters.array_data_adapter import ArrayDataAdapter
 
-    adapter = ArrayDataAdapter(np.arange(n), batch_size=batch_size, shuffle=True)
+    adapter = _array_data_adapter()(np.arange(n), batch_size=batch_size, shuffle=True)
     if keras.backend.backend() == "tensorflow":
         dataset = adapter.get_tf_dataset()  # created once per fit, iterated once per epoch
         while True:
             yield np.concatenate([np.asarray(b) for b in dataset])
     while True:
         yield np.concatenate(list(adapter.get_numpy_iterator()))
+
+
+def _array_data_adapter():
+    """Keras's private ``ArrayDataAdapter`` class, the one place greenloop imports ``keras.src``.
+
+    ``model.fit(x, y, shuffle=True)`` on NumPy arrays draws its batch order through this adapter,
+    and Keras 3 has no public API that exposes that order (``keras.utils`` offers no data adapter;
+    a hand-written ``tf.random.shuffle`` would not follow Keras's seeding). ``fit_orders`` needs the
+    very same order so that the fused trainer takes model.fit's steps. The module path is private
+    and may move in a Keras upgrade: tests/test_cnn.py imports it through this function and
+    fails with a message naming it."""
+    from keras.src.trainers.data_adapters.array_data_adapter import ArrayDataAdapter
+
+    return ArrayDataAdapter
 
 
 def _logits(Xg, Kc, bc, Wd, bd, Wo, bo):
