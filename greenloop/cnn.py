@@ -272,7 +272,10 @@ def trainer(fast: bool | str = True) -> str:
 
 
 def _accelerator() -> bool:
-    """True when the Keras backend computes on a GPU/TPU (then XLA beats the CPU kernels)."""
+    """True when the Keras backend computes on a GPU/TPU (then XLA beats the CPU kernels).
+
+    Handles the TensorFlow backend (the one installed and tested) and JAX; any other backend
+    counts as no accelerator."""
     import keras
 
     backend = keras.backend.backend()
@@ -282,9 +285,6 @@ def _accelerator() -> bool:
     if backend == "tensorflow":
         import tensorflow as tf
         return bool(tf.config.list_physical_devices("GPU"))
-    if backend == "torch":
-        import torch
-        return bool(torch.cuda.is_available())
     return False
 
 
