@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .common import publish_folder
+from .common import positive_int, publish_folder
 
 ROOT = Path(__file__).resolve().parents[1]
 CACHE_DIR = Path(os.environ.get("GREENLOOP_CACHE", ROOT / "results" / "models"))
@@ -98,9 +98,7 @@ def split_indices(y: np.ndarray, seed: int, test_size: float = 0.2, split: str =
 
 def _count(v, name: str) -> int:
     """v as an int >= 0, or ValueError naming ``name``."""
-    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
-        raise ValueError(f"{name} must be an integer >= 0, got {v!r}")
-    return int(v)
+    return positive_int(name, v, 0)
 
 
 def _blocked(y, rng, test_size: float, gap: int, block: str):
@@ -206,8 +204,8 @@ def train(X: np.ndarray, y: np.ndarray, seed: int, epochs: int = 200, batch_size
     y = np.asarray(y, dtype=np.int64)
     if X.ndim != 4 or len(X) != len(y):
         raise ValueError(f"X must be (N, H, W, C) and y (N,), got {X.shape} and {y.shape}")
-    if epochs < 1 or batch_size < 1:
-        raise ValueError(f"epochs and batch_size must be >= 1, got {epochs}, {batch_size}")
+    positive_int("epochs", epochs, whole_floats=True)
+    positive_int("batch_size", batch_size, whole_floats=True)
     n_classes = int(n_classes or y.max() + 1)
     fast = trainer(fast)
     if fast == "fused" and X.shape[3] != 1:
@@ -274,7 +272,10 @@ def trainer(fast: bool | str = True) -> str:
 
 
 def _accelerator() -> bool:
-    """True when the Keras backend computes on a GPU/TPU (then XLA beats the CPU kernels)."""
+    """True when the Keras backend computes on a GPU/TPU (then XLA beats the CPU kernels).
+
+    Handles the TensorFlow backend (the one installed and tested) and JAX; any other backend
+    counts as no accelerator."""
     import keras
 
     backend = keras.backend.backend()
@@ -284,9 +285,6 @@ def _accelerator() -> bool:
     if backend == "tensorflow":
         import tensorflow as tf
         return bool(tf.config.list_physical_devices("GPU"))
-    if backend == "torch":
-        import torch
-        return bool(torch.cuda.is_available())
     return False
 
 
@@ -332,15 +330,28 @@ def fit_orders(n: int, batch_size: int):
     TensorFlow backend is tested here). tests/test_kernels.py checks the orders against
     ``model.fit`` itself."""
     import keras
-    from keras.src.trainers.data_adapters.array_data_adapter import ArrayDataAdapter
 
-    adapter = ArrayDataAdapter(np.arange(n), batch_size=batch_size, shuffle=True)
+    adapter = _array_data_adapter()(np.arange(n), batch_size=batch_size, shuffle=True)
     if keras.backend.backend() == "tensorflow":
         dataset = adapter.get_tf_dataset()  # created once per fit, iterated once per epoch
         while True:
             yield np.concatenate([np.asarray(b) for b in dataset])
     while True:
         yield np.concatenate(list(adapter.get_numpy_iterator()))
+
+
+def _array_data_adapter():
+    """Keras's private ``ArrayDataAdapter`` class, the one place greenloop imports ``keras.src``.
+
+    ``model.fit(x, y, shuffle=True)`` on NumPy arrays draws its batch order through this adapter,
+    and Keras 3 has no public API that exposes that order (``keras.utils`` offers no data adapter;
+    a hand-written ``tf.random.shuffle`` would not follow Keras's seeding). ``fit_orders`` needs the
+    very same order so that the fused trainer takes model.fit's steps. The module path is private
+    and may move in a Keras upgrade: tests/test_cnn.py imports it through this function and
+    fails with a message naming it."""
+    from keras.src.trainers.data_adapters.array_data_adapter import ArrayDataAdapter
+
+    return ArrayDataAdapter
 
 
 def _logits(Xg, Kc, bc, Wd, bd, Wo, bo):

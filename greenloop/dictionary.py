@@ -27,13 +27,12 @@ def threshold(frames_per_spot: int, error_rate: float, margin: int) -> dict:
              'expected_correct': (1 - eps) * L  (54 for L = 60, eps = 0.10),
              'tau': L + Delta  (70 for Delta = 10)}.
     """
-    if frames_per_spot < 1:
-        raise ValueError(f"frames_per_spot must be >= 1, got {frames_per_spot}")
+    positive_int("frames_per_spot", frames_per_spot, whole_floats=True)
     if not 0 <= error_rate < 1:
         raise ValueError(f"error_rate must be in [0, 1), got {error_rate}")
-    if margin < 0:
-        raise ValueError(f"margin must be >= 0 (the paper's tau = L + margin is at least L: a spot "
-                         f"must be seen more often than its own L frames), got {margin}")
+    positive_int("margin", margin, 0, whole_floats=True,
+                 unit="the paper's tau = L + margin is at least L: a spot must be seen more often "
+                      "than its own L frames")
     tau = int(frames_per_spot + margin)
     return {"frames_per_spot": int(frames_per_spot), "error_rate": float(error_rate),
             "margin": int(margin), "expected_correct": (1 - error_rate) * frames_per_spot, "tau": tau}
@@ -54,10 +53,9 @@ class LoopDetector:
     """
 
     def __init__(self, n_classes: int, threshold: int | None):
-        if n_classes < 1:
-            raise ValueError(f"n_classes must be >= 1, got {n_classes}")
-        if threshold is not None and threshold < 1:
-            raise ValueError(f"threshold tau must be >= 1 detections, got {threshold}")
+        positive_int("n_classes", n_classes, whole_floats=True)
+        if threshold is not None:
+            positive_int("threshold tau", threshold, unit="detections", whole_floats=True)
         self.n_classes = int(n_classes)
         self.threshold = None if threshold is None else int(threshold)
         self.counts = np.zeros(self.n_classes, dtype=np.int32)
@@ -142,8 +140,7 @@ def run(labels, n_classes: int, threshold: int) -> np.ndarray:
     Vectorised equivalent of calling ``LoopDetector.update`` frame by frame: frame t is flagged when
     the running count of labels[t] (itself included, :func:`running_count`) is >= threshold.
     """
-    if threshold < 1:
-        raise ValueError(f"threshold tau must be >= 1, got {threshold}")
+    positive_int("threshold tau", threshold, unit="detections", whole_floats=True)
     return running_count(labels, n_classes) >= threshold
 
 

@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
+from scipy.spatial.distance import cdist
 
 from . import data
 from .common import positive_int
@@ -68,8 +69,7 @@ def pose_error(poses) -> np.ndarray:
     t = poses[:, :3, 3]
     trace = R @ R.T                      # tr(R_i^T R_j) = sum of elementwise products
     rot2 = np.maximum(6.0 - 2.0 * trace, 0.0)
-    sq = np.einsum("ij,ij->i", t, t)
-    trans2 = np.maximum(sq[:, None] + sq[None, :] - 2.0 * t @ t.T, 0.0)
+    trans2 = cdist(t, t, "sqeuclidean")
     e = np.sqrt(rot2 + trans2)
     np.fill_diagonal(e, 0.0)
     return e
@@ -101,8 +101,7 @@ def loop_matrix_metric(poses, max_distance: float = 1.0, max_angle: float = 30.0
         raise ValueError(f"max_angle must be > 0 degrees, got {max_angle}")
     t = poses[:, :3, 3]
     z = poses[:, :3, 2]
-    sq = np.einsum("ij,ij->i", t, t)
-    d2 = np.maximum(sq[:, None] + sq[None, :] - 2.0 * t @ t.T, 0.0)
+    d2 = cdist(t, t, "sqeuclidean")
     cos = np.clip(z @ z.T, -1.0, 1.0)
     close = (d2 < max_distance ** 2) & (cos > np.cos(np.radians(max_angle)))
     return close & far_in_time(len(poses), exclude)

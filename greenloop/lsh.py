@@ -47,6 +47,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from .common import positive_int
 from .similarity import l2_normalise
 
 __all__ = [
@@ -63,14 +64,6 @@ NO_MATCH = -1                       # best index of a query that found no candid
 
 
 # ----------------------------------------------------------------------------------- checks
-def _int(value, name: str, lo: int, hi: int | None = None) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lo or (
-            hi is not None and value > hi):
-        rng = f">= {lo}" if hi is None else f"in [{lo}, {hi}]"
-        raise ValueError(f"{name} must be an integer {rng}, got {value!r}")
-    return int(value)
-
-
 def _check_H(H) -> np.ndarray:
     H = np.asarray(H, dtype=np.float64)
     if H.ndim != 2 or not 1 <= H.shape[1] <= MAX_BITS or H.shape[0] < 1:
@@ -103,8 +96,8 @@ def hyperplanes(dim: int, n_bits: int = 16, seed: int = 0) -> np.ndarray:
     """Random hyperplane normals: (dim, n_bits) float64, i.i.d. N(0, 1) entries (seeded
     ``numpy.random.default_rng(seed)``), so every direction is equally likely (Qi 2024 Sec. 2.2).
     n_bits: 1 ..  MAX_BITS (32). Table 5 uses 16."""
-    dim = _int(dim, "dim", 1)
-    n_bits = _int(n_bits, "n_bits", 1, MAX_BITS)
+    dim = positive_int("dim", dim, 1)
+    n_bits = positive_int("n_bits", n_bits, 1, MAX_BITS)
     return np.random.default_rng(seed).standard_normal((dim, n_bits))
 
 
@@ -140,8 +133,8 @@ def hamming_masks(n_bits: int, radius: int) -> np.ndarray:
     """XOR masks of every code within Hamming distance ``radius``: (P,) uint32, read-only,
     ordered by distance 0, 1, ..., radius (within one distance: lexicographic bit combinations),
     P = sum_{r <= radius} C(n_bits, r). radius: 0 .. n_bits."""
-    n_bits = _int(n_bits, "n_bits", 1, MAX_BITS)
-    radius = _int(radius, "radius", 0, n_bits)
+    n_bits = positive_int("n_bits", n_bits, 1, MAX_BITS)
+    radius = positive_int("radius", radius, 0, n_bits)
     return _masks(n_bits, radius)
 
 
@@ -149,7 +142,7 @@ def probe_order_swp(code: int, n_bits: int = 16, radius: int = 4) -> np.ndarray:
     """Step-wise probing sequence of one query: (P,) uint32 bucket codes, the query's own code
     first, then every code at Hamming distance 1, 2, ..., radius (Table 5: radius m = 4)."""
     masks = hamming_masks(n_bits, radius)
-    return np.uint32(_int(code, "code", 0, (1 << n_bits) - 1)) ^ masks
+    return np.uint32(positive_int("code", code, 0, (1 << n_bits) - 1)) ^ masks
 
 
 # ------------------------------------------------------------------------------ QDP
@@ -279,7 +272,7 @@ def perturbation_sets(costs, n_sets: int, compiled: bool | None = None):
         raise ValueError(f"costs must be (k,) finite values >= 0 with 1 <= k <= {MAX_BITS}, got "
                          f"shape {c.shape}")
     k = c.size
-    n = min(_int(n_sets, "n_sets", 0), (1 << k) - 1)
+    n = min(positive_int("n_sets", n_sets, 0), (1 << k) - 1)
     order = np.argsort(c, kind="stable")
     fast = _heap_compiled() if compiled in (None, True) else None
     if compiled and fast is None:
@@ -292,7 +285,7 @@ def probe_order_qdp(code: int, costs, n_probes: int):
     buckets of its ``n_probes`` cheapest perturbation sets (:func:`perturbation_sets`).
     Returns (probes (1 + n,) uint32 bucket codes, scores (1 + n,) float64 non-decreasing)."""
     flips, scores = perturbation_sets(costs, n_probes)
-    code = _int(code, "code", 0, (1 << np.size(costs)) - 1)
+    code = positive_int("code", code, 0, (1 << np.size(costs)) - 1)
     probes = np.concatenate([[np.uint32(code)], np.uint32(code) ^ flips]).astype(np.uint32)
     return probes, np.concatenate([[0.0], scores])
 
@@ -304,9 +297,9 @@ def qdp_n_probes(n_buckets: int, small: int = 1000, large: int = 1500, threshold
     (Sec. 2.2) states the reverse (1000 above 500 buckets, else 1500): pass
     ``small=1500, large=1000`` for that reading.
     """
-    n_buckets = _int(n_buckets, "n_buckets", 0)
-    small, large = _int(small, "small", 0), _int(large, "large", 0)
-    return small if n_buckets < _int(threshold, "threshold", 0) else large
+    n_buckets = positive_int("n_buckets", n_buckets, 0)
+    small, large = positive_int("small", small, 0), positive_int("large", large, 0)
+    return small if n_buckets < positive_int("threshold", threshold, 0) else large
 
 
 # ------------------------------------------------------------------------ bucket index
@@ -359,7 +352,7 @@ def build_index(X, H, n_stored: int | None = None, offset=None) -> BucketIndex:
     if X.shape[0] == 0:
         raise ValueError("X is empty: need at least one descriptor")
     Xn = np.ascontiguousarray(l2_normalise(X.astype(np.float32, copy=False)))
-    n = X.shape[0] if n_stored is None else _int(n_stored, "n_stored", 0, X.shape[0])
+    n = X.shape[0] if n_stored is None else positive_int("n_stored", n_stored, 0, X.shape[0])
     if offset is not None:
         offset = _check_X(np.asarray(offset, np.float32).reshape(1, -1), H, "offset")[0]
     c = codes(Xn, H, offset)
@@ -390,7 +383,7 @@ def insert(index: BucketIndex, i: int) -> None:
 def _options(method, radius, qdp_probes, qdp_score, theta) -> dict:
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
-    radius = _int(radius, "radius", 0)
+    radius = positive_int("radius", radius, 0)
     if len(tuple(qdp_probes)) != 3:
         raise ValueError(f"qdp_probes must be (small, large, threshold) for qdp_n_probes, got "
                          f"{qdp_probes!r}")
@@ -550,11 +543,11 @@ def incremental_match(X, method: str = "swp", exclude: int = 0, n_bits: int = 16
     Returns a :class:`MatchResult` with one entry per frame (query t = frame t).
     """
     o = _options(method, radius, qdp_probes, qdp_score, theta)
-    exclude = _int(exclude, "exclude", 0)
+    exclude = positive_int("exclude", exclude, 0)
     X = np.asarray(X)
     if X.ndim != 2:
         raise ValueError(f"X must be (N, D) descriptors, got shape {X.shape}")
-    k = _int(centre_frames, "centre_frames", 0, exclude + 1)
+    k = positive_int("centre_frames", centre_frames, 0, exclude + 1)
     offset = l2_normalise(X[:k].astype(np.float32)).mean(0) if k else None
     index = build_index(X, hyperplanes(X.shape[1], n_bits, seed), n_stored=0, offset=offset)
     out = _run(index, index.Xn, o, keep_candidates, exclude)

@@ -48,6 +48,7 @@ import math
 import numpy as np
 
 from . import evaluate
+from .common import positive_int
 from .data import preprocess_image
 from .evaluate import recall_at_precision  # re-exported: notebook 13 calls seqmatch.recall_at_precision
 
@@ -209,12 +210,6 @@ def threshold_range(contrast_window: int) -> tuple[float, float]:
     return -z, z
 
 
-def _check_int(name: str, value, low: int) -> int:
-    if isinstance(value, bool) or int(value) != value or value < low:
-        raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
-    return int(value)
-
-
 def _check_threshold(threshold, contrast_window: int):
     if threshold is None:
         return None
@@ -246,9 +241,9 @@ class Detector:
                  velocities=DEFAULT_VELOCITIES, exclude: int = 150, contrast_window: int = 10,
                  projection=None, store_dtype: str = "float32", color: str = "bgr", weights="auto"):
         self.descriptor = _check_descriptor(descriptor)
-        self.seq_len = _check_int("seq_len", seq_len, 1)
-        self.exclude = _check_int("exclude", exclude, 0)
-        self.contrast_window = _check_int("contrast_window", contrast_window, 0)
+        self.seq_len = positive_int("seq_len", seq_len, 1, whole_floats=True)
+        self.exclude = positive_int("exclude", exclude, 0, whole_floats=True)
+        self.contrast_window = positive_int("contrast_window", contrast_window, 0, whole_floats=True)
         self.threshold = _check_threshold(threshold, self.contrast_window)
         v = [float(x) for x in np.atleast_1d(velocities)]
         if not v or not all(math.isfinite(x) and x > 0 for x in v):

@@ -86,6 +86,7 @@ from pathlib import Path
 import numpy as np
 
 from . import cnn
+from .common import positive_int
 
 LAYERS = ("conv1", "pool1", "conv2", "pool2", "conv3", "conv4", "conv5", "pool5")
 SUPERVISIONS = ("softmax", "contrastive", "multitask")
@@ -584,8 +585,8 @@ def train(X, labels, seed: int = 0, supervision: str = "multitask", fusion: str 
     labels = np.asarray(labels, dtype=np.int64)
     if X.ndim != 4 or labels.shape != (len(X),):
         raise ValueError(f"X must be (N, H, W, C) and labels (N,), got {X.shape} and {labels.shape}")
-    if int(epochs) < 1 or int(batch_size) < 1:
-        raise ValueError(f"epochs and batch_size must be >= 1, got {epochs}, {batch_size}")
+    positive_int("epochs", epochs, whole_floats=True)
+    positive_int("batch_size", batch_size, whole_floats=True)
     _check(supervision, fusion, fusion_layer, merge, X.shape[-1])
     params = dict(model="xu2022_siamese", version=CACHE_VERSION, seed=int(seed),
                   supervision=supervision, fusion=fusion, fusion_layer=fusion_layer,

@@ -30,6 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
+from .common import positive_int
+
 __all__ = [
     "Projection", "l2_normalise", "pca_whiten", "zca_whiten", "apply_projection",
     "cosine_matrix", "distance_similarity", "median_filter",
@@ -205,8 +207,7 @@ def pca_whiten(X, dim: int = 500, eps: float = 1e-5, cov: str = "sample"):
     float64); projection a :class:`Projection` to apply the same map to other frames with
     :func:`apply_projection`.
     """
-    if isinstance(dim, bool) or not isinstance(dim, (int, np.integer)) or dim < 1:
-        raise ValueError(f"dim must be an integer >= 1, got {dim!r}")
+    positive_int("dim", dim)
     X, mean, lam, V, eps = _fit(X, eps, cov, "X", keep=dim)
     if dim > lam.size:
         warnings.warn(f"pca_whiten: dim={dim} exceeds the rank {lam.size} of the centred data "

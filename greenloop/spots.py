@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .common import positive_int
+
 
 def group(n_frames: int, frames_per_spot: int) -> np.ndarray:
     """Spot label of every frame: frames [k*L, (k+1)*L) form spot k; the remainder forms the last,
@@ -11,11 +13,9 @@ def group(n_frames: int, frames_per_spot: int) -> np.ndarray:
     n_frames: N >= 1. frames_per_spot: L >= 1 frames.
     Returns labels (N,) int64 in 0 .. ceil(N / L) - 1.
     """
-    if int(frames_per_spot) != frames_per_spot or frames_per_spot < 1:
-        raise ValueError(f"frames_per_spot must be an integer >= 1, got {frames_per_spot}")
-    if int(n_frames) != n_frames or n_frames < 1:
-        raise ValueError(f"n_frames must be an integer >= 1, got {n_frames}")
-    return np.arange(int(n_frames), dtype=np.int64) // int(frames_per_spot)
+    frames_per_spot = positive_int("frames_per_spot", frames_per_spot, whole_floats=True)
+    n_frames = positive_int("n_frames", n_frames, whole_floats=True)
+    return np.arange(n_frames, dtype=np.int64) // frames_per_spot
 
 
 def n_spots(n_frames: int, frames_per_spot: int) -> int:

@@ -52,7 +52,7 @@ from pathlib import Path
 import numpy as np
 
 from .data import preprocess_image
-from .common import write_atomic
+from .common import positive_int, write_atomic
 from .dictionary import LoopDetector
 from .kernels import one_blas_thread, run_chunked
 
@@ -331,8 +331,8 @@ class Detector:
             raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
         if color not in COLORS:
             raise ValueError(f"color must be one of {COLORS}, got {color!r}")
-        if threshold is not None and (int(threshold) != threshold or threshold < 1):
-            raise ValueError(f"threshold tau must be an integer >= 1, got {threshold}")
+        if threshold is not None:
+            positive_int("threshold tau", threshold, whole_floats=True)
         keras_model, content = _load_model(model)
         self.color = color
         if keras_model is not None:

@@ -126,6 +126,22 @@ def test_train_rejects_bad_input():
         cnn.train(X, y, seed=0, epochs=0, cache=False)
 
 
+def test_keras_private_array_data_adapter_still_exists():
+    """fit_orders (the fused trainer's batch order) needs Keras's private ArrayDataAdapter; if a Keras
+    upgrade moves it, say so here rather than fail deep inside cnn.train."""
+    try:
+        adapter = cnn._array_data_adapter()
+    except ImportError as e:
+        pytest.fail(f"keras.src.trainers.data_adapters.array_data_adapter.ArrayDataAdapter is gone "
+                    f"in this Keras ({e}); greenloop.cnn._array_data_adapter must follow it, or the "
+                    f"fused trainer cannot reproduce model.fit's batch order")
+    batches = list(adapter(np.arange(10), batch_size=4, shuffle=True).get_numpy_iterator())
+    assert [len(b) for b in batches] == [4, 4, 2], "ArrayDataAdapter no longer yields index batches"
+    assert sorted(np.concatenate(batches).tolist()) == list(range(10))
+    order = next(cnn.fit_orders(10, 4))
+    assert sorted(order.tolist()) == list(range(10))
+
+
 def _train_in_subprocess(cache):
     X, y = _toy()
     _, h, _ = cnn.train(X, y, seed=5, epochs=2, cache=cache, progress=False)

@@ -11,7 +11,7 @@ def test_threshold_derivation_matches_paper_arithmetic():
         dictionary.threshold(0, 0.1, 10)
     with pytest.raises(ValueError, match="tau"):
         dictionary.threshold(5, 0.1, -5)
-    with pytest.raises(ValueError, match="margin must be >= 0"):
+    with pytest.raises(ValueError, match="margin must be an integer >= 0"):
         dictionary.threshold(60, 0.1, -5)           # tau = 55 < L would be silently below the paper's rule
     assert dictionary.threshold(60, 0.1, 0)["tau"] == 60
 

@@ -77,6 +77,21 @@ def test_labels_equal_keras_on_odd_sizes(random_model):
     assert np.array_equal(det.predict(rgb), _keras_labels(random_model, colour))
 
 
+def test_keras_backend_is_model_predict(random_model, brightness_model):
+    """backend="keras" (the reference, also `greenloop detect --backend keras`) runs model.predict."""
+    rng = np.random.default_rng(3)
+    frames = [rng.integers(0, 256, (61, 97, 3), dtype=np.uint8) for _ in range(8)]
+    det = Detector(random_model, 5, backend="keras")
+    assert det.backend == "keras"
+    assert np.array_equal(det.predict(frames), _keras_labels(random_model, frames))
+    det = Detector(brightness_model, 3, backend="keras")
+    ref = Detector(brightness_model, 3, backend="numpy")
+    stream = [_frame(v) for v in (20, 20, 90, 20, 200, 90, 90, 20)]
+    for f in stream:
+        assert det.update(f) == ref.update(f)
+    assert det.labels == ref.labels and det.events == ref.events and len(det.events) > 0
+
+
 @pytest.mark.parametrize("ext", ["png", "jpg"])
 def test_preprocessing_equals_load_frames(tmp_path, ext):
     rng = np.random.default_rng(3)
