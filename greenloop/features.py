@@ -85,6 +85,7 @@ import functools
 import os
 import random
 import time
+import contextlib
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -938,6 +939,19 @@ _DESCRIPTOR_CODE = ("features", "data", "ghostnet", "shufflenet", "mobilenet_tfl
                     "efficientnet_lite", "torch_weights")
 
 
+@contextlib.contextmanager
+def random_init_reported(name: str, weights="auto"):
+    """Context for an extraction a notebook shows: where ``weights="auto"`` finds no ImageNet
+    weights for backbone ``name``, print that in one line (no file paths), and keep the
+    UserWarning that says the same with a path into the package out of the notebook."""
+    if weights == "auto" and _resolve(name, weights, warn=False)[0] == "random init":
+        print(f"{name}: no ImageNet weights on this machine, so its row is a RANDOM-INITIALISED "
+              f"network (docs/weights.md says where the files go)")
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=".*RANDOM-INITIALISED", category=UserWarning)
+        yield
+
+
 def extract_all(folder, specs, weights="auto", input_size=None, step: int = 1,
              vocab_size: int = DEFAULT_VOCAB_SIZE, spot_model=None, cache=True):
     """Descriptors of one sequence folder for every backbone-list entry, computed once per dataset.
@@ -961,22 +975,17 @@ def extract_all(folder, specs, weights="auto", input_size=None, step: int = 1,
     feats, infos = {}, {}
     for spec in specs:
         name, w = split_spec(spec, spot_model if spec == "spot_cnn" else weights)
-        label = _resolve(name, w, warn=False)[0]
-        if label == "random init" and w == "auto":
-            print(f"{name}: no ImageNet weights on this machine, so its row is a RANDOM-INITIALISED "
-                  f"network (docs/weights.md says where the files go)")
         kw = dict(return_info=True, progress=False, step=step, vocab_size=vocab_size)
 
         def run(spec=spec, w=w, kw=kw):
-            with warnings.catch_warnings():   # reported above, in one line without paths
-                warnings.filterwarnings("ignore", message=".*RANDOM-INITIALISED", category=UserWarning)
-                return extract_spec(folder, name, w, input_size, **kw)
-        if spec == "spot_cnn" or not cache:
-            X, info = run()
-        else:
-            key = _descriptor_key(folder, name, w, input_size, step, vocab_size)
-            X, info = cnn.cached(key, root, run, _save_descriptors, _load_descriptors,
-                                 marker="features.npy")
+            return extract_spec(folder, name, w, input_size, **kw)
+        with random_init_reported(name, w):
+            if spec == "spot_cnn" or not cache:
+                X, info = run()
+            else:
+                key = _descriptor_key(folder, name, w, input_size, step, vocab_size)
+                X, info = cnn.cached(key, root, run, _save_descriptors, _load_descriptors,
+                                     marker="features.npy")
         feats[spec], infos[spec] = X, info
         print(f"{info.label:42s} D={info.dim:5d}  {info.seconds_per_image * 1e3:8.2f} ms/image")
     clear_cache()

@@ -171,3 +171,26 @@ def test_leakage_controls_match_the_training_set_sizes():
     assert by["blocked", 0]["n_train"] == 240 - 48 and by["blocked", 10]["n_train"] < 240 - 48
     for r in rows:
         assert r["converged"] == (r["final_train_acc_%"] >= 95) and 0 <= r["test_acc_%"] <= 100
+
+
+def test_leakage_control_matches_size_within_the_random_split(monkeypatch):
+    """Nordland's case: at gap 0 the blocked split of 7152 frames in spots of 60 keeps 5722
+    training frames, one more than the random 80/20 split has; the matched random run then keeps
+    all 5721 of its own instead of failing."""
+    from greenloop import cnn, spots
+    y = spots.group(7152, 60)
+    asked = []
+
+    def fake_run_seeds(X, y_, seeds, progress=True, **kw):
+        out = []
+        for s in seeds:
+            tr, te = cnn.split_indices(y_, s, split=kw.get("split", "random"), gap=kw.get("gap", 5),
+                                       block=kw.get("block", "random"), train_size=kw.get("train_size"))
+            asked.append((kw.get("split"), kw.get("train_size"), len(tr)))
+            out.append({"seed": s, "split": {"train": tr, "test": te}, "test_accuracy": 0.5,
+                        "history": {"accuracy": [1.0]}})
+        return out
+    monkeypatch.setattr(cnn, "run_seeds", fake_run_seeds)
+    rows = cnn.leakage_controls(np.zeros((7152, 1, 1, 1), np.float32), y, [0], gaps=[0])
+    blocked, matched = (r for r in rows if r["control"] in ("blocked", "random, same n_train"))
+    assert blocked["n_train"] == 5722 and matched["n_train"] == 5721

@@ -390,3 +390,21 @@ def test_extract_all_computes_each_descriptor_once(tiny_sequence, tmp_path, caps
     F.extract_all(tiny_sequence, specs, input_size=32, step=4, cache=tmp_path)   # other settings: new entries
     assert len(list(tmp_path.glob("*/features.npy"))) == 4
     assert "ghostnet (random init)" in capsys.readouterr().out
+
+
+def test_random_init_fallback_is_reported_in_one_line_without_paths(frames, capsys):
+    """A notebook's extraction with weights="auto" and no weight file: one printed line naming
+    the backbone, and no UserWarning (whose text would carry a path into the package)."""
+    import warnings
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with F.random_init_reported("ghostnet", "auto"):
+            X = F.extract(frames, "ghostnet", "auto", input_size=64)
+    out = capsys.readouterr().out
+    assert out.count("RANDOM-INITIALISED") == 1 and out.startswith("ghostnet:") and "/" not in out.split("(")[0]
+    assert not [w for w in caught if "RANDOM-INITIALISED" in str(w.message)]
+    assert X.shape == (len(frames), 960)
+    with warnings.catch_warnings(record=True) as caught:   # without the context the warning is raised
+        warnings.simplefilter("always")
+        F.extract(frames, "ghostnet", "auto", input_size=64)
+    assert [w for w in caught if "RANDOM-INITIALISED" in str(w.message)]
