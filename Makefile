@@ -15,7 +15,7 @@ TIMEOUT  ?= 7200
 KERNEL   := greenloop
 # Folder(s) of real ImageNet weight files that greenloop.features' weights="auto" looks in first
 # (os.pathsep-separated): here the MobileNet TFLite graphs beside the repo, when they exist. Point it
-# at the files downloaded from github.com/google-coral/test_data (see greenloop.mobilenet_tflite).
+# at the files downloaded from github.com/google-coral/test_data (see greenloop.backbones.mobilenet_tflite).
 GREENLOOP_WEIGHTS ?= $(abspath $(wildcard ../shared/weights/mobilenet-tflite))
 export GREENLOOP_WEIGHTS
 SWEEP_NOTEBOOK ?= notebooks/01_spot_grouping.ipynb
@@ -31,7 +31,7 @@ export PYTHONUNBUFFERED := 1
 NOTEBOOKS := $(sort $(wildcard notebooks/[0-9][0-9]_*.ipynb))
 EXECUTED  := $(patsubst notebooks/%.ipynb,$(RESULTS)/%.ipynb,$(NOTEBOOKS))
 HTML      := $(EXECUTED:.ipynb=.html)
-SOURCES   := $(wildcard greenloop/*.py)
+SOURCES   := $(wildcard greenloop/*.py greenloop/*/*.py)
 STAMP     := $(VENV)/.installed
 SYNTHETIC := data/synthetic-greenhouse
 NORDLAND  := data/nordland
@@ -65,7 +65,7 @@ $(STAMP): environment.txt
 	$(BIN)/python -m pip install -q -r environment.txt
 	$(BIN)/python -m ipykernel install --sys-prefix --name $(KERNEL) --display-name "Python (greenloop)" >/dev/null
 	@# the kernel does not copy low-level output (TensorFlow's C++ logs, progress bars on the real
-	@# stderr) into executed notebooks: it goes to the terminal that runs make (greenloop.progress)
+	@# stderr) into executed notebooks: it goes to the terminal that runs make (greenloop.util.progress)
 	@mkdir -p $(VENV)/etc/ipython
 	@echo "c.IPKernelApp.capture_fd_output = False" > $(VENV)/etc/ipython/ipython_kernel_config.py
 	@touch $@
@@ -75,10 +75,10 @@ synthetic: $(SYNTHETIC)/synthetic.json ## generate the embedded synthetic greenh
 # The generator renders into a temporary folder and renames it at the end, so synthetic.json
 # in place means a complete sequence.
 $(SYNTHETIC)/synthetic.json: | $(STAMP)
-	$(BIN)/python -m greenloop.synthetic $(SYNTHETIC) --overwrite
+	$(BIN)/python -m greenloop.datasets.synthetic $(SYNTHETIC) --overwrite
 
 data: | $(STAMP) ## download the real GreenHouse set into data/greenhouse (resumable)
-	$(BIN)/python -m greenloop.download data/greenhouse
+	$(BIN)/python -m greenloop.datasets.greenhouse data/greenhouse
 
 nordland: $(NORDLAND)/nordland.json ## build data/nordland: Nordland summer then winter, loop pairs as ground truth
 
@@ -86,7 +86,7 @@ nordland: $(NORDLAND)/nordland.json ## build data/nordland: Nordland summer then
 # folder. From NORDLAND_SRC when set, else from a shallow clone of NORDLAND_URL (fails at once
 # offline, naming the fix).
 $(NORDLAND)/nordland.json: | $(STAMP)
-	$(BIN)/python -m greenloop.nordland $(NORDLAND) --overwrite \
+	$(BIN)/python -m greenloop.datasets.nordland $(NORDLAND) --overwrite \
 	    $(if $(NORDLAND_SRC),--src $(NORDLAND_SRC),--url $(NORDLAND_URL))
 
 # The dataset a run needs: the synthetic default and data/nordland are built when missing; any
@@ -104,14 +104,14 @@ all: $(HTML) $(RESULTS)/tables.md results/datasets.md results/coverage.md ## run
 # One table across every dataset that has results: results/ (synthetic) and results/<name>/.
 DATASET_RESULTS := results $(filter-out results/quick,$(patsubst %/07_feature_baselines/,%,$(wildcard results/*/07_feature_baselines/)))
 results/datasets.md: $(wildcard $(DATASET_RESULTS:%=%/*/summary.json)) $(RESULTS)/tables.md
-	$(BIN)/python -m greenloop.report --datasets $@ $(DATASET_RESULTS)
+	$(BIN)/python -m greenloop.study.report --datasets $@ $(DATASET_RESULTS)
 
-# Which table and figure of the papers the results reproduce (greenloop.coverage), read from them.
-results/coverage.md: $(wildcard $(DATASET_RESULTS:%=%/*/manifest.json)) greenloop/coverage.py
-	$(BIN)/python -m greenloop.report --coverage $@ $(DATASET_RESULTS)
+# Which table and figure of the papers the results reproduce (greenloop.study.coverage), read from them.
+results/coverage.md: $(wildcard $(DATASET_RESULTS:%=%/*/manifest.json)) greenloop/study/coverage.py
+	$(BIN)/python -m greenloop.study.report --coverage $@ $(DATASET_RESULTS)
 
 readme-coverage: results/coverage.md ## refresh the README's coverage table from the results folders
-	$(BIN)/python -m greenloop.coverage README.md $(DATASET_RESULTS)
+	$(BIN)/python -m greenloop.study.coverage README.md $(DATASET_RESULTS)
 
 $(RESULTS)/%.ipynb: notebooks/%.ipynb $(SOURCES) $(DATA_DEP) | $(STAMP)
 	@mkdir -p $(@D)
@@ -125,14 +125,14 @@ $(RESULTS)/%.html: $(RESULTS)/%.ipynb
 	@mv $(@D)/.tmp-$*.html $@
 
 $(RESULTS)/tables.md: $(EXECUTED)
-	$(BIN)/python -m greenloop.report $(RESULTS)
+	$(BIN)/python -m greenloop.study.report $(RESULTS)
 
 # RESULTS given on the command line wins (make quick RESULTS=results/mine); else results/quick/
 QUICK_RESULTS := $(if $(filter command line,$(origin RESULTS)),$(RESULTS),results/quick)
 quick: ## the same notebooks with few epochs and seeds into results/quick/ (or RESULTS=...; minutes)
 	$(MAKE) all RESULTS=$(QUICK_RESULTS) PARAMS="-f params/quick.yaml $(PARAMS)"
 
-# `make sweep`: greenloop.sweep over Dask (python -m greenloop sweep --help). Each --grid is one
+# `make sweep`: greenloop.study.sweep over Dask (python -m greenloop sweep --help). Each --grid is one
 # word of SWEEP_GRID; points whose point.json says ok are skipped, so an interrupted sweep resumes.
 sweep: $(DATA_DEP) | $(STAMP) ## Dask sweep of SWEEP_GRID over SWEEP_NOTEBOOK (default L = 40..80 in 01) -> results/sweep/
 	$(BIN)/python -m greenloop sweep $(SWEEP_NOTEBOOK) $(foreach g,$(SWEEP_GRID),--grid '$(g)') \
@@ -140,8 +140,8 @@ sweep: $(DATA_DEP) | $(STAMP) ## Dask sweep of SWEEP_GRID over SWEEP_NOTEBOOK (d
 	    $(if $(SWEEP_METRIC),--metric '$(SWEEP_METRIC)') --timeout $(TIMEOUT) $(PARAMS)
 
 bench: | $(STAMP) ## speed benchmark: streaming detector and training vs plain Keras -> results/bench/
-	$(BIN)/python -m greenloop.bench --out $(RESULTS)/bench --dataset $(DATASET)
-	$(BIN)/python -m greenloop.report $(RESULTS)
+	$(BIN)/python -m greenloop.speed.bench --out $(RESULTS)/bench --dataset $(DATASET)
+	$(BIN)/python -m greenloop.study.report $(RESULTS)
 
 # Optional, for the cross-checks against the torch originals only (GhostNet vs timm, the Lite0 port
 # and checkpoint reader vs efficientnet_lite_pytorch and torch.load): a CPU torch wheel where the

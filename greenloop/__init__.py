@@ -1,0 +1,9 @@
+"""greenloop: CNN-based visual loop-closure detection for agricultural robots, as a study.
+
+The pipeline's stages stand at the top of the package (``groundtruth``, ``spots``, ``cnn``,
+``shift``, ``dictionary``, ``features``, ``similarity``, ``lsh``, ``siamese``, ``seqmatch``,
+``evaluate``); the study's other parts are folders: ``datasets`` (the sequence-folder contract and
+its builders), ``backbones`` (CNN ports and their weights), ``speed`` (the streaming detector and
+its benchmark), ``study`` (results, coverage, sweeps) and ``util`` (building blocks).
+docs/ARCHITECTURE.md draws the layout and what flows through it.
+"""

@@ -5,7 +5,7 @@ Commands
         run a trained model (.keras or .tflite) over a recording (a sequence folder or a folder of
         .jpg/.png frames of any size, in numeric order) and print each declared loop closure and a
         summary (frames, closures, frames/s). ``--method dictionary`` (the default) is the main
-        paper's CNN + frequency dictionary (greenloop.stream.Detector).
+        paper's CNN + frequency dictionary (greenloop.speed.stream.Detector).
     detect SEQUENCE_FOLDER --method greenloop-seq (--tuned SUMMARY_JSON | --threshold T)
           [--variant greenloop-seq|greenloop-seq-fast] [--descriptor NAME] [--seq-len L]
           [--exclude FRAMES] [--contrast-window R] [--step N]
@@ -13,23 +13,31 @@ Commands
         poses; prints each closure (query frame, matched earlier frame, score).
     sweep NOTEBOOK --grid NAME=V1,V2,... [--grid ...] --out OUT [-f PARAMS.yaml] [-p NAME VALUE]
           [--dataset DIR] [--scheduler local|tcp://HOST:8786|slurm|pbs] [--workers N] [--metric SPEC]
-        run the notebook once per point of the grids' cross product on Dask (greenloop.sweep) and
+        run the notebook once per point of the grids' cross product on Dask (greenloop.study.sweep) and
         write OUT/sweep.csv, sweep.md and sweep.png; complete points are not run again.
 """
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 import time
+from pathlib import Path
 
 os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
+
+import cv2  # noqa: E402
+import yaml  # noqa: E402
+
+from greenloop import seqmatch  # noqa: E402
+from greenloop.datasets.sequence import list_frames  # noqa: E402
+from greenloop.speed import stream  # noqa: E402
+from greenloop.study import sweep  # noqa: E402
 
 
 def _read_window(paths):
     """Frames decoded in colour (BGR) as a camera delivers them."""
-    import cv2
-
     frames = []
     for p in paths:
         img = cv2.imread(str(p), cv2.IMREAD_COLOR)
@@ -44,9 +52,6 @@ def _tuned_knobs(args) -> dict:
     """greenloop-seq's knobs: from ``--tuned`` (a notebook 13 summary.json, the variant named by
     ``--variant``), overridden by any flag given explicitly. Returns dict(descriptor, seq_len,
     contrast_window, threshold, step, exclude), exclude and seq_len in streamed frames."""
-    import json
-    from pathlib import Path
-
     knobs = dict(descriptor="pixels-patchnorm", seq_len=10, contrast_window=10, threshold=None,
                  step=1, exclude=150)
     if args.tuned:
@@ -76,13 +81,10 @@ def _tuned_knobs(args) -> dict:
 def _detect_seq(args) -> int:
     """``detect --method greenloop-seq``: greenloop.seqmatch.Detector over the frames in windows
     (every ``step``-th frame of the folder, the rate its knobs were tuned at)."""
-    from .data import list_frames
-    from .seqmatch import Detector
-
     kn = _tuned_knobs(args)
     paths = list_frames(args.folder)[::kn["step"]]
-    det = Detector(kn["threshold"], descriptor=kn["descriptor"], seq_len=kn["seq_len"],
-                   exclude=kn["exclude"], contrast_window=kn["contrast_window"])
+    det = seqmatch.Detector(kn["threshold"], descriptor=kn["descriptor"], seq_len=kn["seq_len"],
+                            exclude=kn["exclude"], contrast_window=kn["contrast_window"])
     print(f"# {len(paths)} frames from {args.folder} (every {kn['step']}); greenloop-seq "
           f"({kn['descriptor']}, seq_len {det.seq_len}, exclude {det.exclude}, contrast window "
           f"{det.contrast_window}); threshold {det.threshold:g}", flush=True)
@@ -101,15 +103,10 @@ def _detect_seq(args) -> int:
 
 def _detect(args) -> int:
     """``detect``: frames decoded in colour (BGR) as a camera delivers them, fed to
-    greenloop.stream.Detector (``--method dictionary``) or greenloop.seqmatch.Detector
+    greenloop.speed.stream.Detector (``--method dictionary``) or greenloop.seqmatch.Detector
     (``--method greenloop-seq``) in windows; prints events as they are declared."""
-    from pathlib import Path
-
     if args.method == "greenloop-seq":
         return _detect_seq(args)
-
-    from .data import list_frames
-    from .stream import Detector
 
     if args.model is None:
         raise ValueError("--method dictionary needs --model (a trained .keras or .tflite file)")
@@ -118,7 +115,7 @@ def _detect(args) -> int:
     if not Path(args.model).is_file():
         raise FileNotFoundError(f"model file {args.model} not found: pass a trained .keras model "
                                 f"(greenloop.cnn.train saves results/models/<key>/model.keras) or a "
-                                f".tflite file (greenloop.stream.export_tflite)")
+                                f".tflite file (greenloop.speed.stream.export_tflite)")
     paths = list_frames(args.folder)
     if args.frames_per_spot is not None and args.frames_per_spot < 1:
         raise ValueError(f"--frames-per-spot must be >= 1, got {args.frames_per_spot}")
@@ -128,7 +125,7 @@ def _detect(args) -> int:
     elif args.frames_per_spot is not None and tau < args.frames_per_spot:
         raise ValueError(f"--threshold {tau} is below --frames-per-spot {args.frames_per_spot}: the "
                          f"paper's tau = L + margin must be >= L")
-    det = Detector(args.model, tau, backend=args.backend)
+    det = stream.Detector(args.model, tau, backend=args.backend)
     print(f"# {len(paths)} frames from {args.folder}; model {args.model} ({det.backend}, "
           f"{det.n_classes} spots); tau = {tau}", flush=True)
     print("frame\tspot\tcount\tfile", flush=True)
@@ -146,10 +143,6 @@ def _detect(args) -> int:
 
 def _sweep(args) -> int:
     """``sweep``: one papermill run per grid point on Dask; 0 when every point is ok, else 1."""
-    import yaml
-
-    from .sweep import parse_grid, run_sweep
-
     base = {}
     for path in args.parameters_file:
         if not os.path.isfile(path):
@@ -161,10 +154,11 @@ def _sweep(args) -> int:
     options = dict(queue=args.queue, cores=args.cores, memory=args.memory, walltime=args.walltime,
                    account=args.account, job_extra_directives=args.job_extra)
     try:
-        table = run_sweep(args.notebook, parse_grid(args.grid), args.out, base=base, dataset=args.dataset,
-                          scheduler=args.scheduler, workers=args.workers, cache=args.cache,
-                          metrics=args.metric, x=args.x, force=args.force, timeout=args.timeout,
-                          kernel=args.kernel, retries=args.retries, cluster_options=options)
+        table = sweep.run_sweep(args.notebook, sweep.parse_grid(args.grid), args.out, base=base,
+                                dataset=args.dataset, scheduler=args.scheduler, workers=args.workers,
+                                cache=args.cache, metrics=args.metric, x=args.x, force=args.force,
+                                timeout=args.timeout, kernel=args.kernel, retries=args.retries,
+                                cluster_options=options)
     except KeyboardInterrupt:
         print(f"sweep: interrupted; the finished points in {args.out} are kept: run the same command "
               f"again to resume", file=sys.stderr)
@@ -174,8 +168,6 @@ def _sweep(args) -> int:
 
 def _sweep_parser(sub) -> None:
     """The ``sweep`` subcommand's arguments."""
-    from .sweep import DEFAULT_DATASET
-
     s = sub.add_parser("sweep", help="run a notebook over a parameter grid on Dask (local or cluster)",
                        description="Run NOTEBOOK once per point of the cross product of the grids, "
                                    "each point a papermill run on a Dask worker, into OUT/<point>/; "
@@ -190,7 +182,7 @@ def _sweep_parser(sub) -> None:
                    help="parameters for every point (e.g. params/quick.yaml); repeatable")
     s.add_argument("-p", "--parameter", action="append", nargs=2, default=[], metavar=("NAME", "VALUE"),
                    help="one parameter for every point (VALUE read as YAML); repeatable")
-    s.add_argument("--dataset", default=str(DEFAULT_DATASET),
+    s.add_argument("--dataset", default=str(sweep.DEFAULT_DATASET),
                    help="sequence folder injected as `dataset` (default data/synthetic-greenhouse)")
     s.add_argument("--scheduler", default="local",
                    help="local (a LocalCluster, default), a scheduler address (tcp://host:8786), or "

@@ -6,22 +6,18 @@ Written against the Keras 3 API only, so it runs on the TensorFlow and the JAX b
 """
 from __future__ import annotations
 
-import contextlib
-import fcntl
-import hashlib
 import json
-import os
-import tempfile
 import time
 import warnings
 from pathlib import Path
 
 import numpy as np
 
-from .common import positive_int, publish_folder
+from greenloop.util import kernels
+from greenloop.util.cache import cache_key, cached
+from greenloop.util.checks import positive_int
+from greenloop.util.progress import bar as tqdm   # in the terminal, never in a notebook
 
-ROOT = Path(__file__).resolve().parents[1]
-CACHE_DIR = Path(os.environ.get("GREENLOOP_CACHE", ROOT / "results" / "models"))
 SPLITS = ("random", "blocked")
 BLOCKS = ("random", "centre")   # where split="blocked" puts each spot's test block
 
@@ -119,23 +115,9 @@ def _blocked(y, rng, test_size: float, gap: int, block: str):
     return np.flatnonzero(~dropped), np.flatnonzero(is_test)
 
 
-def cache_key(X: np.ndarray, y: np.ndarray, **params) -> str:
-    """Hex key of a training run: a hash of the data (X, y bytes), every parameter, and the
-    Keras version and backend. Any change gives another key."""
-    import keras
-
-    h = hashlib.sha1()
-    h.update(np.ascontiguousarray(X).view(np.uint8))
-    h.update(np.ascontiguousarray(y, dtype=np.int64).view(np.uint8))
-    meta = dict(params, shape=list(X.shape), keras=keras.__version__, backend=keras.backend.backend())
-    h.update(json.dumps(meta, sort_keys=True, default=str).encode())
-    return h.hexdigest()[:16]
-
-
 def _epoch_bar(epochs: int, desc: str):
     """A Keras callback showing one tqdm bar per training run (epochs), not per-batch output."""
     import keras
-    from .progress import bar as tqdm  # in the terminal, not in the notebook
 
     class EpochBar(keras.callbacks.Callback):
         def on_train_begin(self, logs=None):
@@ -151,17 +133,6 @@ def _epoch_bar(epochs: int, desc: str):
     return EpochBar()
 
 
-@contextlib.contextmanager
-def _locked(path: Path):
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "w") as fh:
-        fcntl.flock(fh, fcntl.LOCK_EX)
-        try:
-            yield
-        finally:
-            fcntl.flock(fh, fcntl.LOCK_UN)
-
-
 def _load_cached(folder: Path):
     import keras
 
@@ -175,7 +146,7 @@ def _load_cached(folder: Path):
 
 def train(X: np.ndarray, y: np.ndarray, seed: int, epochs: int = 200, batch_size: int = 32,
           test_size: float = 0.2, split: str = "random", n_classes: int | None = None,
-          fast: bool | str = True, cache: bool | str | Path = True, progress: bool = True, gap: int = 5,
+          trainer: str = "auto", cache: bool | str | Path = True, progress: bool = True, gap: int = 5,
           block: str = "random", train_size: int | None = None):
     """Train the paper's CNN on frames X with spot labels y; the test split is the validation data.
 
@@ -183,14 +154,14 @@ def train(X: np.ndarray, y: np.ndarray, seed: int, epochs: int = 200, batch_size
     initialisation and the shuffling (same seed, same numbers on CPU).
     split: "random" (the paper's 80/20) or "blocked"; gap, block, train_size: see ``split_indices``.
     n_classes: defaults to y.max() + 1.
-    fast: which trainer runs the same protocol (batch 32, Adam 1e-3, categorical cross-entropy,
+    trainer: which trainer runs the same protocol (batch 32, Adam 1e-3, categorical cross-entropy,
         ``model.fit``'s shuffled batches, the same seeded Keras initial weights):
-        False or "plain": ``model.fit`` as the paper's code would call it (the reference);
+        "plain": ``model.fit`` as the paper's code would call it (the reference);
         "xla": ``model.fit`` with the train step compiled by XLA and one call per epoch
         (steps_per_execution), the fast path on an accelerator or without numba;
         "fused": gradients written out (``_fit_fused``: numba kernels and single-threaded BLAS
-        split over the cores by ``greenloop.kernels``), the fastest on a CPU;
-        True: "fused" when numba is installed and Keras sees no GPU, else "xla".
+        split over the cores by ``greenloop.util.kernels``), the fastest on a CPU;
+        "auto": "fused" when numba is installed and Keras sees no GPU, else "xla".
         Every trainer visits the frames in ``model.fit``'s order (``fit_orders``). The trainer is
         part of the cache key.
     cache: True (results/models/ or $GREENLOOP_CACHE), a folder, or False. Runs are keyed by
@@ -207,20 +178,22 @@ def train(X: np.ndarray, y: np.ndarray, seed: int, epochs: int = 200, batch_size
     positive_int("epochs", epochs, whole_floats=True)
     positive_int("batch_size", batch_size, whole_floats=True)
     n_classes = int(n_classes or y.max() + 1)
-    fast = trainer(fast)
-    if fast == "fused" and X.shape[3] != 1:
+    trainer = resolve_trainer(trainer)
+    if trainer == "fused" and X.shape[3] != 1:
         raise ValueError(f"the fused trainer needs gray frames (N, H, W, 1), got {X.shape}; "
-                         f"use fast='xla' or fast='plain'")
+                         f"use trainer='xla' or trainer='plain'")
     params = dict(seed=int(seed), epochs=int(epochs), batch_size=int(batch_size),
-                  test_size=float(test_size), split=split, n_classes=n_classes, fast=fast,
+                  test_size=float(test_size), split=split, n_classes=n_classes, trainer=trainer,
                   gap=int(gap) if split == "blocked" else None)
     if split == "blocked" and block != "random":  # only non-default split knobs join the key,
         params["block"] = block                  # so models trained before they existed stay cached
     if train_size is not None:
         params["train_size"] = int(train_size)
-    if fast == "fused":  # keys fused runs apart from those of the first fused trainer (NumPy's order)
+    if trainer == "fused":  # keys fused runs apart from those of the first fused trainer (NumPy's order)
         params["batch_order"] = "model.fit"
-    key = cache_key(X, y, **params)
+    # the key calls the trainer "fast" (train's argument before it was named trainer), so models
+    # trained before the rename stay cached
+    key = cache_key(X, y, **{"fast" if k == "trainer" else k: v for k, v in params.items()})
 
     def save(folder, result):
         model, history, split_ = result
@@ -232,43 +205,16 @@ def train(X: np.ndarray, y: np.ndarray, seed: int, epochs: int = 200, batch_size
     return cached(key, cache, lambda: _fit(X, y, progress, **params), save, _load_cached)
 
 
-def cached(key: str, cache, fit, save, load, marker: str = "model.keras"):
-    """Compute ``fit()`` once per ``key`` and keep it on disk (the model cache of every trainer).
-
-    key: e.g. ``cache_key(...)``. cache: True (results/models/ or $GREENLOOP_CACHE), a folder, or
-    False (just return fit()). save(folder, result) writes fit()'s result into an empty folder;
-    load(folder) reads it back; a key counts as cached when ``<root>/<key>/<marker>`` exists.
-    The folder is written under a temporary name and renamed, all under a file lock on
-    ``<root>/<key>.lock``, so parallel ``make -j`` jobs compute each key once and never read a
-    half-written folder. Returns fit()'s result, or load(folder) when the key was cached.
-    """
-    if not cache:
-        return fit()
-    root = CACHE_DIR if cache is True else Path(cache)
-    folder = root / key
-    with _locked(root / f"{key}.lock"):
-        if (folder / marker).is_file():
-            return load(folder)
-        result = fit()
-        tmp = Path(tempfile.mkdtemp(dir=root, prefix=f".tmp-{key}-"))
-        save(tmp, result)
-        publish_folder(tmp, folder)
-        return result
+TRAINERS = ("auto", "plain", "xla", "fused")
 
 
-TRAINERS = ("plain", "xla", "fused")
-
-
-def trainer(fast: bool | str = True) -> str:
-    """The trainer ``train(fast=...)`` runs: "plain", "xla" or "fused" (see ``train``)."""
-    if fast is False or fast == "plain":
-        return "plain"
-    if fast is True:
-        from . import kernels
+def resolve_trainer(trainer: str = "auto") -> str:
+    """The trainer ``train(trainer=...)`` runs: "plain", "xla" or "fused" (see ``train``)."""
+    if trainer not in TRAINERS:
+        raise ValueError(f"trainer must be one of {TRAINERS}, got {trainer!r}")
+    if trainer == "auto":
         return "fused" if kernels.available() and not _accelerator() else "xla"
-    if fast not in TRAINERS:
-        raise ValueError(f"fast must be True, False or one of {TRAINERS}, got {fast!r}")
-    return fast
+    return trainer
 
 
 def _accelerator() -> bool:
@@ -288,9 +234,9 @@ def _accelerator() -> bool:
     return False
 
 
-def _fit(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size, split, fast, gap,
+def _fit(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size, split, trainer, gap,
          block="random", train_size=None, **_):
-    if fast == "fused":
+    if trainer == "fused":
         return _fit_fused(X, y, progress, n_classes=n_classes, seed=seed, epochs=epochs,
                           batch_size=batch_size, test_size=test_size, split=split, gap=gap,
                           block=block, train_size=train_size)
@@ -298,7 +244,7 @@ def _fit(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size, spli
 
     train_idx, test_idx = split_indices(y, seed, test_size, split, gap or 0, block, train_size)
     keras.utils.set_random_seed(seed)
-    xla = fast == "xla"
+    xla = trainer == "xla"
     steps = int(np.ceil(len(train_idx) / batch_size)) if xla else 1
     model = build(n_classes, X.shape[1:], jit_compile=xla, steps_per_execution=steps)
     Y = keras.utils.to_categorical(y, n_classes).astype(np.float32)
@@ -356,8 +302,6 @@ def _array_data_adapter():
 
 def _logits(Xg, Kc, bc, Wd, bd, Wo, bo):
     """Forward pass on gray frames Xg (n, H, W): (A (n, positions*f), Z2 (n, 68), Z3 (n, C))."""
-    from . import kernels
-
     A = kernels.conv_relu(Xg, Kc, bc)
     Z2 = kernels.matmul(A, Wd)
     Z2 += bd
@@ -391,7 +335,6 @@ def _fit_fused(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size
     against ``model.fit``'s. Same history keys as ``model.fit``."""
     import keras
     from threadpoolctl import threadpool_limits
-    from .progress import bar as tqdm  # in the terminal, not in the notebook
 
     train_idx, test_idx = split_indices(y, seed, test_size, split, gap or 0, block, train_size)
     keras.utils.set_random_seed(seed)
@@ -457,8 +400,6 @@ def _fused_step(state: dict, Xg: np.ndarray, y: np.ndarray, idx: np.ndarray):
     incremented), 'dW' (positions*f, 68) and 'dA' (batch_size, positions*f) float32 scratch.
     Returns (correct predictions, summed loss) of the batch before the step.
     """
-    from . import kernels
-
     params, moments = state["params"], state["moments"]
     Kc, bc, Wd, bd, Wo, bo = params
     b = len(idx)
@@ -521,8 +462,6 @@ def run_seeds(X: np.ndarray, y: np.ndarray, seeds, progress: bool = True, **trai
     Returns one dict per seed: {'seed', 'model', 'history', 'split', 'test_accuracy',
     'test_pred' (n_test,) predicted labels of split['test']}.
     """
-    from .progress import bar as tqdm  # in the terminal, not in the notebook
-
     out = []
     for seed in tqdm(list(seeds), desc="seeds", unit="seed", disable=not progress):
         model, history, split = train(X, y, seed, progress=progress, **train_kw)

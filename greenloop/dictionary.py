@@ -6,7 +6,7 @@ Counters never decay (as in the paper), so misclassifications accumulate over a 
 One counting rule: the running count of frame t is the number of frames 0..t (t included) with
 its label, plus the counter's value before the stream (:func:`running_count`). ``counts`` (every
 spot's count after every frame), ``run`` (the state D(f_t) >= tau), ``LoopDetector`` (one frame at
-a time) and ``greenloop.stream.Detector`` (raw frames; its events are the frames where the count
+a time) and ``greenloop.speed.stream.Detector`` (raw frames; its events are the frames where the count
 EQUALS tau, once per spot) all follow it; tests/test_dictionary.py checks them against each
 other on random label streams.
 """
@@ -14,8 +14,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .common import positive_int
-from .groundtruth import far_in_time, revisit_frames
+from greenloop.evaluate import closure_counts
+from greenloop.groundtruth import far_in_time, revisit_frames
+from greenloop.util.checks import positive_int
 
 
 def threshold(frames_per_spot: int, error_rate: float, margin: int) -> dict:
@@ -46,7 +47,7 @@ class LoopDetector:
     counting alone).
     ``update(label)`` returns True when that label's count has reached tau (at that frame and every
     later frame of the class: a closure is a STATE, D >= tau, not an edge). Not to be confused
-    with ``greenloop.stream.Detector.update(frame)``, which returns an EVENT dict only at the one
+    with ``greenloop.speed.stream.Detector.update(frame)``, which returns an EVENT dict only at the one
     frame where a spot's count becomes equal to tau (else None). ``add``/``add_many`` count and
     return the new running counts. ``counts`` is the (N,) int32 array D, ``nbytes`` its memory
     (4 bytes per counter, the paper's 152 bytes for 38 classes).
@@ -172,8 +173,6 @@ def query_closures(declared, gt, queries=None) -> dict:
     precision, recall, f1, first_delay), revisits = revisit frames (groundtruth.revisit_frames)
     among the queries, first_delay in frames from the first of them to the first correct query.
     """
-    from .evaluate import closure_counts  # sklearn is not needed to count frames
-
     D = np.asarray(declared, dtype=bool)
     G = np.asarray(gt, dtype=bool)
     q = np.ones(len(D), dtype=bool) if queries is None else np.asarray(queries, dtype=bool)

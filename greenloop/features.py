@@ -15,16 +15,16 @@ Backbones (``BACKBONES[name].dim`` is D)::
     efficientnetb0    1280  top_activation (1x1 conv 320->1280, BN, swish), GAP      224x224
     mobilenetv3small  576   hard-swish after conv_1 (1x1 conv 96->576, BN), GAP      224x224
     ghostnet          960   blocks.9 (1x1 ConvBnAct 160->960, ReLU), GAP; timm
-                            ghostnet_100 rebuilt in greenloop.ghostnet               224x224
+                            ghostnet_100 rebuilt in backbones.ghostnet               224x224
     shufflenetv2      1024  conv5 (1x1 conv 464->1024, BN, ReLU) of ShuffleNet v2    224x224
-                            1.0x (greenloop.shufflenet), GAP; random init only
+                            1.0x (backbones.shufflenet), GAP; random init only
     mobilenetv1       1024  Conv2d_13_pointwise (last 7x7 map) of Google's uint8     224x224
                             TFLite MobileNet v1 1.0 embedding graph, dequantised,    (fixed)
-                            GAP in float32 (greenloop.mobilenet_tflite)
+                            GAP in float32 (backbones.mobilenet_tflite)
     mobilenetv2       1280  Conv_1 (1x1 conv 320->1280, ReLU6) of the uint8 TFLite   224x224
                             MobileNet v2 1.0 classifier, dequantised, GAP            (fixed)
     efficientnetlite0 1280  head (1x1 conv 320->1280, BN, ReLU6), GAP; the PyTorch   224x224
-                            Lite0 checkpoint in greenloop.efficientnet_lite
+                            Lite0 checkpoint in backbones.efficientnet_lite
     sift_bovw         k     tf-idf weighted histogram of k SIFT visual words (k=500)  native size
     pixels            1024  the 32x32 grayscale frame in [0, 1], flattened (the      32x32
                             main paper's preprocessing)
@@ -41,7 +41,7 @@ models were trained. The TFLite graphs take only 224x224: mobilenetv1/v2 refuse 
 ``input_size``, with pretrained and random-init weights alike, so a result never depends on whether
 the files were found; so does vgg19_fc1, whose fully connected layer takes a 224x224 input's 7x7
 map. Frames are resized to the input size with OpenCV (INTER_AREA when shrinking, bilinear when
-enlarging), as ``greenloop.data.load_frames`` does.
+enlarging), as ``greenloop.datasets.sequence.load_frames`` does.
 
 Weights (CNN backbones), the ``weights`` argument:
 
@@ -56,9 +56,9 @@ Weights (CNN backbones), the ``weights`` argument:
 * ``"imagenet"``: the local file, else (Keras applications only) Keras's own download; offline that
   fails with ``WeightsNotFoundError`` (a FileNotFoundError) naming the file and where to put it.
   The ported and TFLite networks are never downloaded: GhostNet's file is
-  ``ghostnet_100.in1k.safetensors`` (timm's, see greenloop.ghostnet), MobileNet v1/v2's are the
-  ``.tflite`` graphs of github.com/google-coral/test_data (see greenloop.mobilenet_tflite),
-  EfficientNet-Lite0's is ``efficientnet-lite0-57934424.pth`` (see greenloop.efficientnet_lite).
+  ``ghostnet_100.in1k.safetensors`` (timm's, see greenloop.backbones.ghostnet), MobileNet v1/v2's are the
+  ``.tflite`` graphs of github.com/google-coral/test_data (see greenloop.backbones.mobilenet_tflite),
+  EfficientNet-Lite0's is ``efficientnet-lite0-57934424.pth`` (see greenloop.backbones.efficientnet_lite).
 * a path: a local weights file for that architecture (Keras ``.h5`` / ``.weights.h5`` of the same
   Keras model; GhostNet also timm ``.safetensors``, MobileNet v1/v2 a ``.tflite`` graph,
   EfficientNet-Lite0 the ``.pth`` checkpoint). Missing -> FileNotFoundError; another
@@ -81,11 +81,14 @@ vocabulary fit.
 """
 from __future__ import annotations
 
+import contextlib
 import functools
+import hashlib
+import importlib
+import json
 import os
 import random
 import time
-import contextlib
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -93,11 +96,14 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from . import data as _data
-from . import efficientnet_lite as _lite
-from . import ghostnet as _ghostnet
-from . import mobilenet_tflite as _tflite
-from . import shufflenet as _shufflenet
+from greenloop.backbones import efficientnet_lite as _lite
+from greenloop.backbones import ghostnet as _ghostnet
+from greenloop.backbones import mobilenet_tflite as _tflite
+from greenloop.backbones import shufflenet as _shufflenet
+from greenloop.backbones import torch_weights as _torch_weights
+from greenloop.datasets import sequence
+from greenloop.util import cache as _cache
+from greenloop.util.progress import bar as tqdm  # in the terminal, never in a notebook
 
 DEFAULT_VOCAB_SIZE = 500       # SIFT bag-of-words vocabulary (visual words)
 DEPTH_MAX_M = 10.0             # depth -> uint8 mapping: 0 m -> 0, >= DEPTH_MAX_M -> 255 (linear)
@@ -458,7 +464,6 @@ def _preprocess_fn(b: Backbone):
         return _lite.preprocess_input
     if b.kind == "shufflenet":
         return _shufflenet.preprocess_input
-    import importlib
     module = importlib.import_module(f"keras.applications.{b.module}")
     return module.preprocess_input
 
@@ -500,7 +505,7 @@ def _check_frames(frames) -> np.ndarray:
                 f"0..255 images, divide by 255, or for depth in metres use depth_to_uint8()")
         return a
     raise ValueError(f"frames must be uint8 (0..255) or float in [0, 1], got dtype {a.dtype} "
-                     f"(for uint16 depth use greenloop.data.load_depth and depth_to_uint8)")
+                     f"(for uint16 depth use greenloop.datasets.sequence.load_depth and depth_to_uint8)")
 
 
 def _resize(img: np.ndarray, size) -> np.ndarray:
@@ -529,7 +534,7 @@ def _rgb_batch(a: np.ndarray, size) -> np.ndarray:
 def _gray_batch(a: np.ndarray, size, as_float: bool) -> np.ndarray:
     """Checked frames -> grayscale (b, h, w): float32 in [0, 1] (as_float) or uint8.
 
-    Conversion and resizing follow greenloop.data.load_frames (gray first, then INTER_AREA/LINEAR)."""
+    Conversion and resizing follow greenloop.datasets.sequence.load_frames (gray first, then INTER_AREA/LINEAR)."""
     out = []
     for im in a:
         if im.dtype != np.uint8:
@@ -545,10 +550,10 @@ def _gray_batch(a: np.ndarray, size, as_float: bool) -> np.ndarray:
 
 
 def _load(frames_or_folder, size, gray: bool, limit, step=1):
-    """Folder -> array via greenloop.data.load_frames (uint8); array -> checked array."""
+    """Folder -> array via greenloop.datasets.sequence.load_frames (uint8); array -> checked array."""
     if isinstance(frames_or_folder, (str, os.PathLike)):
-        return _data.load_frames(frames_or_folder, size=size, gray=gray, limit=limit,
-                                 dtype=np.uint8, step=step)
+        return sequence.load_frames(frames_or_folder, size=size, gray=gray, limit=limit,
+                                    dtype=np.uint8, step=step)
     a = _check_frames(frames_or_folder)
     return a[::step][:limit]
 
@@ -556,7 +561,7 @@ def _load(frames_or_folder, size, gray: bool, limit, step=1):
 def depth_to_uint8(depth_m, max_depth: float = DEPTH_MAX_M) -> np.ndarray:
     """Map depth in metres to 0..255 by a fixed linear range, for feeding depth to an RGB CNN.
 
-    depth_m: (N, H, W) float metres (0 = no reading, as greenloop.data.load_depth returns).
+    depth_m: (N, H, W) float metres (0 = no reading, as greenloop.datasets.sequence.load_depth returns).
     0 m -> 0, max_depth (default 10 m, beyond the D435i's useful range) or more -> 255; NaN -> 0.
     A fixed range (not per-frame min/max) keeps the same depth at the same grey level in every
     frame. Returns uint8 (N, H, W).
@@ -576,7 +581,6 @@ def _batches(n, batch_size):
 
 
 def _progress(total, desc, progress):
-    from .progress import bar as tqdm  # in the terminal, not in the notebook
     return tqdm(total=total, desc=desc, unit="img", disable=not progress)
 
 
@@ -617,8 +621,8 @@ def _extract_cnn(b, frames_or_folder, source, size, batch_size, progress, limit,
 def _extract_pixels(frames_or_folder, size, progress, limit, step):
     t0 = time.perf_counter()
     if isinstance(frames_or_folder, (str, os.PathLike)):
-        X = _data.load_frames(frames_or_folder, size=size, gray=True, limit=limit, progress=progress,
-                              step=step)
+        X = sequence.load_frames(frames_or_folder, size=size, gray=True, limit=limit, progress=progress,
+                                 step=step)
         X = X[..., 0]
     else:
         a = _load(frames_or_folder, size, True, limit, step)
@@ -671,8 +675,8 @@ def _extract_spot(frames_or_folder, source, batch_size, progress, limit, step):
         raise ValueError(f"spot_cnn model input must be (H, W, 1) or (H, W, 3), got {shape}")
     size, channels = (shape[1], shape[0]), shape[-1]
     if isinstance(frames_or_folder, (str, os.PathLike)):
-        a = _data.load_frames(frames_or_folder, size=size, gray=channels == 1, limit=limit,
-                              dtype=np.uint8, progress=progress, step=step)
+        a = sequence.load_frames(frames_or_folder, size=size, gray=channels == 1, limit=limit,
+                                 dtype=np.uint8, progress=progress, step=step)
     else:
         a = _load(frames_or_folder, size, True, limit, step)
 
@@ -697,14 +701,13 @@ def _sift_descriptors(gray_frames, progress=False):
 
 
 def _iter_progress(items, desc, progress):
-    from .progress import bar as tqdm  # in the terminal, not in the notebook
     return tqdm(items, desc=desc, unit="img", disable=not progress)
 
 
 def _sift_gray(frames_or_folder, size, limit, step=1):
     if isinstance(frames_or_folder, (str, os.PathLike)):
-        return _data.load_frames(frames_or_folder, size=size, gray=True, limit=limit,
-                                 dtype=np.uint8, step=step)[..., 0]
+        return sequence.load_frames(frames_or_folder, size=size, gray=True, limit=limit,
+                                    dtype=np.uint8, step=step)[..., 0]
     return _gray_batch(_load(frames_or_folder, size, True, limit, step), size, as_float=False)
 
 
@@ -793,7 +796,7 @@ def extract(frames_or_folder, backbone: str, weights="auto", batch_size: int = 3
     """Describe every frame of a sequence with one vector.
 
     frames_or_folder: a sequence folder (its rgb/ frames are loaded with
-        greenloop.data.load_frames at the backbone's input size), or an array of frames: (N, H, W, 3)
+        greenloop.datasets.sequence.load_frames at the backbone's input size), or an array of frames: (N, H, W, 3)
         RGB, (N, H, W, 1) or (N, H, W) single-channel (depth/gray: replicated to 3 channels for the
         CNNs), uint8 0..255 or float in [0, 1]; resized to the input size as needed.
     backbone: a name in BACKBONES (see the module doc for D and the layer of each).
@@ -879,7 +882,7 @@ def extract_rgbd(folder, backbone: str, weights="auto", batch_size: int = 32, pr
     """RGB-D descriptors as in Qi et al. 2024: RGB features and depth features, concatenated.
 
     folder: a sequence folder with rgb/ and depth/ (uint16, metres = value / 5000). Depth is read
-        with greenloop.data.load_depth, mapped to 0..255 by ``depth_to_uint8`` (fixed range
+        with greenloop.datasets.sequence.load_depth, mapped to 0..255 by ``depth_to_uint8`` (fixed range
         0..max_depth metres, default 10 m), replicated to 3 channels and described by the same
         backbone and weights as the RGB frames.
     Returns (N, 2D) float32 ``[rgb features | depth features]`` (or with return_info, an ExtractInfo
@@ -892,7 +895,7 @@ def extract_rgbd(folder, backbone: str, weights="auto", batch_size: int = 32, pr
     Xr, ir = extract(folder, b.name, weights, batch_size, progress, input_size, return_info=True,
                      limit=limit, step=step, **kwargs)
     size = _size(input_size, b.input_size) if b.kind != "spot_cnn" else None
-    depth = _data.load_depth(folder, size=size, limit=limit, step=step)
+    depth = sequence.load_depth(folder, size=size, limit=limit, step=step)
     if len(depth) != len(Xr):
         raise ValueError(f"{folder}: {len(Xr)} rgb frames but {len(depth)} depth frames; an RGB-D "
                          f"sequence needs one depth/N.png per rgb/N.png")
@@ -935,8 +938,8 @@ def time_per_image(backbone: str, weights="auto", input_size=None, n_images: int
 # --------------------------------------------------------------------------------------------
 
 # the modules whose code decides a descriptor: a change to any of them gives new cache keys
-_DESCRIPTOR_CODE = ("features", "data", "ghostnet", "shufflenet", "mobilenet_tflite",
-                    "efficientnet_lite", "torch_weights")
+_DESCRIPTOR_CODE = (__file__, sequence.__file__, _ghostnet.__file__, _shufflenet.__file__,
+                    _tflite.__file__, _lite.__file__, _torch_weights.__file__)
 
 
 @contextlib.contextmanager
@@ -953,7 +956,7 @@ def random_init_reported(name: str, weights="auto"):
 
 
 def extract_all(folder, specs, weights="auto", input_size=None, step: int = 1,
-             vocab_size: int = DEFAULT_VOCAB_SIZE, spot_model=None, cache=True):
+                vocab_size: int = DEFAULT_VOCAB_SIZE, spot_model=None, cache=True):
     """Descriptors of one sequence folder for every backbone-list entry, computed once per dataset.
 
     folder: a sequence folder. specs: backbone-list entries (:func:`split_spec`, e.g.
@@ -969,9 +972,7 @@ def extract_all(folder, specs, weights="auto", input_size=None, step: int = 1,
     line (the random-init fallback of weights="auto"; docs/weights.md says where files go).
     Returns (feats {spec: (N, D) float32}, infos {spec: ExtractInfo}).
     """
-    from . import cnn
-
-    root = Path(cache) if cache not in (True, False) else cnn.CACHE_DIR / "descriptors"
+    root = Path(cache) if cache not in (True, False) else _cache.CACHE_DIR / "descriptors"
     feats, infos = {}, {}
     for spec in specs:
         name, w = split_spec(spec, spot_model if spec == "spot_cnn" else weights)
@@ -984,8 +985,8 @@ def extract_all(folder, specs, weights="auto", input_size=None, step: int = 1,
                 X, info = run()
             else:
                 key = _descriptor_key(folder, name, w, input_size, step, vocab_size)
-                X, info = cnn.cached(key, root, run, _save_descriptors, _load_descriptors,
-                                     marker="features.npy")
+                X, info = _cache.cached(key, root, run, _save_descriptors, _load_descriptors,
+                                        marker="features.npy")
         feats[spec], infos[spec] = X, info
         print(f"{info.label:42s} D={info.dim:5d}  {info.seconds_per_image * 1e3:8.2f} ms/image")
     clear_cache()
@@ -994,19 +995,15 @@ def extract_all(folder, specs, weights="auto", input_size=None, step: int = 1,
 
 def _descriptor_key(folder, name, weights, input_size, step, vocab_size) -> str:
     """Hex key of one extract_all() entry (see there for what it covers)."""
-    import hashlib
-    import importlib
-    import json
-
     import keras
 
     b = BACKBONES[name]
     h = hashlib.sha1()
-    for p in _data.list_frames(folder):
+    for p in sequence.list_frames(folder):
         st = p.stat()
         h.update(f"{p.name}:{st.st_size}:{st.st_mtime_ns};".encode())
-    for mod in _DESCRIPTOR_CODE:
-        h.update(Path(importlib.import_module(f"greenloop.{mod}").__file__).read_bytes())
+    for path in _DESCRIPTOR_CODE:
+        h.update(Path(path).read_bytes())
     _, source = _resolve(name, weights, warn=False)
     size = input_size if b.kind in CNN_KINDS and not b.fixed_input else None
     meta = dict(backbone=name, source=_source_key(source) if source is not None else None,
@@ -1017,8 +1014,6 @@ def _descriptor_key(folder, name, weights, input_size, step, vocab_size) -> str:
 
 
 def _save_descriptors(folder: Path, result) -> None:
-    import json
-
     X, info = result
     np.save(folder / "features.npy", X)
     extra = {k: v for k, v in info.extra.items() if isinstance(v, np.ndarray)}
@@ -1030,8 +1025,6 @@ def _save_descriptors(folder: Path, result) -> None:
 
 
 def _load_descriptors(folder: Path):
-    import json
-
     meta = json.loads((folder / "info.json").read_text())
     extra = dict(meta.pop("extra"))
     if (folder / "extra.npz").is_file():

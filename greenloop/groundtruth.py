@@ -37,8 +37,8 @@ from typing import NamedTuple
 import numpy as np
 from scipy.spatial.distance import cdist
 
-from . import data
-from .common import positive_int
+from greenloop.datasets import sequence
+from greenloop.util.checks import positive_int
 
 
 class NoGroundTruthError(FileNotFoundError):
@@ -49,7 +49,7 @@ def _check(poses, threshold_name: str, threshold: float, exclude: int) -> np.nda
     poses = np.asarray(poses, dtype=np.float64)
     if poses.ndim != 3 or poses.shape[1:] != (4, 4):
         raise ValueError(f"poses must have shape (N, 4, 4), got {poses.shape}; read them with "
-                         f"greenloop.data.read_trajectory")
+                         f"greenloop.datasets.sequence.read_trajectory")
     if not threshold > 0:
         raise ValueError(f"{threshold_name} must be > 0, got {threshold}")
     if exclude < 0:
@@ -143,7 +143,7 @@ def pair_matrix(pairs, n_frames: int, frames=None, exclude: int = 150) -> np.nda
     """Ground-truth loops from loop pairs (module doc), over a chosen subset of frames.
 
     pairs: (P, 2) or (P, 3) integers (i, j[, tolerance]), 0-based frame numbers, tolerance in
-        frames (>= 0), as ``greenloop.data.read_loop_pairs`` returns them.
+        frames (>= 0), as ``greenloop.datasets.sequence.read_loop_pairs`` returns them.
     n_frames: frames in the sequence (every i, j must lie in 0..n_frames-1).
     frames: (M,) strictly increasing original frame numbers of the described frames (default:
         all). A pair counts when its i is among them; its j' are those of them within the
@@ -177,7 +177,7 @@ def pair_matrix(pairs, n_frames: int, frames=None, exclude: int = 150) -> np.nda
 def for_sequence(folder, frames=None, threshold: float = 0.5, exclude: int = 150) -> np.ndarray:
     """The ground-truth loop matrix of a sequence folder: the one call notebooks and users make.
 
-    folder: a sequence folder (greenloop.data). Its poses (CameraTrajectory.txt, one per frame)
+    folder: a sequence folder (greenloop.datasets.sequence). Its poses (CameraTrajectory.txt, one per frame)
         are used where they exist (``loop_matrix``, Qi 2024 Eq. 5 < ``threshold``), its loop
         pairs (ground_truth.csv, ``pair_matrix``) otherwise.
     frames: (M,) strictly increasing original frame numbers of the described frames, e.g.
@@ -189,18 +189,18 @@ def for_sequence(folder, frames=None, threshold: float = 0.5, exclude: int = 150
     ValueError for a malformed file or a trajectory that does not match the frames.
     """
     folder = Path(folder)
-    kind = data.ground_truth_kind(folder)
-    n = len(data.list_frames(folder))
+    kind = sequence.ground_truth_kind(folder)
+    n = len(sequence.list_frames(folder))
     if kind is None:
         raise NoGroundTruthError(
-            f"{folder} has no ground truth: add {data.TRAJECTORY_NAMES[0]} (TUM poses, one per frame) "
-            f"or {data.GROUND_TRUTH_NAME} (a header line, then `i,j[,tolerance]` loop pairs of 0-based "
+            f"{folder} has no ground truth: add {sequence.TRAJECTORY_NAMES[0]} (TUM poses, one per frame) "
+            f"or {sequence.GROUND_TRUTH_NAME} (a header line, then `i,j[,tolerance]` loop pairs of 0-based "
             f"frame numbers) to the folder")
     f = _check_frames(frames, n)
     if kind == "poses":
-        _, poses = data.read_trajectory(folder, n_frames=n)
+        _, poses = sequence.read_trajectory(folder, n_frames=n)
         return loop_matrix(poses[f], threshold, 0) & far_in_time(f, exclude)
-    return pair_matrix(data.read_loop_pairs(folder, n_frames=n), n, f, exclude)
+    return pair_matrix(sequence.read_loop_pairs(folder, n_frames=n), n, f, exclude)
 
 
 class Described(NamedTuple):
@@ -222,7 +222,7 @@ def described_frames(folder, frame_step: int, threshold: float = 0.5, exclude: i
     original frames, the ground-truth definition, its loop pairs and revisit frames).
     """
     step = positive_int("frame_step", frame_step, whole_floats=True)
-    frames = np.arange(0, len(data.list_frames(folder)), step)
+    frames = np.arange(0, len(sequence.list_frames(folder)), step)
     ex = int(exclude) // step
     gt = for_sequence(folder, frames, threshold, exclude)
     summary = (f"{len(frames)} frames (frame_step {frame_step}), exclusion band {ex} steps = {ex * step} original "
@@ -242,11 +242,11 @@ def variants(folder, frames=None, thresholds=(0.3, 0.4, 0.5, 0.6, 0.7, 0.8), exc
     an empty dict for a folder without poses (its loop pairs admit one ground truth only).
     """
     folder = Path(folder)
-    if data.ground_truth_kind(folder) != "poses":
+    if sequence.ground_truth_kind(folder) != "poses":
         return {}
-    n = len(data.list_frames(folder))
+    n = len(sequence.list_frames(folder))
     f = _check_frames(frames, n)
-    _, poses = data.read_trajectory(folder, n_frames=n)
+    _, poses = sequence.read_trajectory(folder, n_frames=n)
     far = far_in_time(f, exclude)
     out = {f"Eq. 5 < {t:g}": loop_matrix(poses[f], t, 0) & far for t in thresholds}
     out[f"metric: < {max_distance:g} m, < {max_angle:g} deg"] = (
@@ -258,15 +258,15 @@ def definition(folder, threshold: float = 0.5, exclude: int = 150) -> str:
     """One line saying which ground truth ``for_sequence(folder, ..., threshold, exclude)`` uses,
     for table notes and printouts (names the file and, for pairs, their count and tolerances)."""
     folder = Path(folder)
-    kind = data.ground_truth_kind(folder)
+    kind = sequence.ground_truth_kind(folder)
     if kind == "poses":
-        return (f"Qi 2024 Eq. 5 on the poses ({data.TRAJECTORY_NAMES[0]}): ||T_i^-1 T_j - I||_F < "
+        return (f"Qi 2024 Eq. 5 on the poses ({sequence.TRAJECTORY_NAMES[0]}): ||T_i^-1 T_j - I||_F < "
                 f"{threshold}, |i - j| > {exclude} frames")
     if kind == "pairs":
-        p = data.read_loop_pairs(folder)
+        p = sequence.read_loop_pairs(folder)
         tol = f"{p[:, 2].min()}" if len(p) and p[:, 2].min() == p[:, 2].max() else (
             f"{p[:, 2].min()}-{p[:, 2].max()}" if len(p) else "-")
-        return (f"loop pairs from {data.GROUND_TRUTH_NAME} ({len(p)} rows, tolerance {tol} frames), "
+        return (f"loop pairs from {sequence.GROUND_TRUTH_NAME} ({len(p)} rows, tolerance {tol} frames), "
                 f"|i - j| > {exclude} frames")
     return "none: the folder has no poses and no loop-pair file"
 

@@ -47,8 +47,10 @@ from functools import lru_cache
 
 import numpy as np
 
-from .common import positive_int
-from .similarity import l2_normalise
+from greenloop.similarity import l2_normalise
+from greenloop.util import kernels
+from greenloop.util.checks import positive_int
+from greenloop.util.kernels import one_blas_thread
 
 __all__ = [
     "MAX_BITS", "METHODS", "hyperplanes", "codes", "hamming_masks", "probe_order_swp", "qdp_costs",
@@ -83,12 +85,6 @@ def _check_X(X, H: np.ndarray, name: str = "X") -> np.ndarray:
     if not np.all(np.isfinite(X)):
         raise ValueError(f"{name} contains NaN or inf; fix the descriptors first")
     return X
-
-
-def _single_thread_blas():
-    """NumPy's BLAS on one thread for stable per-query timings (``kernels.one_blas_thread``)."""
-    from .kernels import one_blas_thread
-    return one_blas_thread()
 
 
 # ----------------------------------------------------------------------------- hashing
@@ -200,7 +196,6 @@ def _heap_compiled():
     """The same heap compiled with numba (arrays instead of tuples; the pop order is that of
     the tuples (score, largest position, set), a strict total order, so it is identical), or
     None without numba. Compiled and run once here, so no timed query pays the compilation."""
-    from . import kernels
     if not kernels.available():
         return None
     from numba import njit
@@ -500,7 +495,7 @@ def _run(index: BucketIndex, queries: np.ndarray, o: dict, keep: bool, exclude: 
     secs, probe_secs = np.zeros(Q), np.zeros(Q)
     n_stored, n_cand, n_probe, n_buck = (np.zeros(Q, np.int64) for _ in range(4))
     kept, spent, done = ([] if keep else None), 0.0, Q
-    with _single_thread_blas():
+    with one_blas_thread():   # stable per-query timings
         for t in range(Q):
             if exclude is not None and t - exclude - 1 >= 0:
                 insert(index, t - exclude - 1)

@@ -45,12 +45,16 @@ the stream except the event list.
 from __future__ import annotations
 
 import math
+import time
+import warnings
+
 import numpy as np
 
-from . import evaluate
-from .common import positive_int
-from .data import preprocess_image
-from .evaluate import recall_at_precision  # re-exported: notebook 13 calls seqmatch.recall_at_precision
+from greenloop import evaluate, features
+from greenloop.datasets.sequence import preprocess_image
+from greenloop.similarity import apply_projection, l2_normalise, pca_whiten
+from greenloop.util.checks import positive_int
+from greenloop.util.kernels import one_blas_thread
 
 DESCRIPTORS = ("pixels", "pixels-patchnorm", "mobilenetv2")
 COLORS = ("bgr", "rgb")
@@ -62,7 +66,7 @@ CNN_SIZE = (224, 224)                      # MobileNet v2's fixed TFLite input
 _EPS = 1e-6
 
 __all__ = ["DESCRIPTORS", "Detector", "patch_normalise", "describe", "describe_frames", "normalise",
-           "fit_projection", "contrast_normalise", "score_matrix", "recall_at_precision",
+           "fit_projection", "contrast_normalise", "score_matrix",
            "closures", "choose_threshold", "threshold_range"]
 
 
@@ -102,13 +106,11 @@ def describe(frames_or_folder, descriptor: str = "pixels", step: int = 1, weight
     Returns (N, D) float32, or (X, info) with return_info (``greenloop.features.ExtractInfo``; its
     seconds_per_image includes loading, preprocessing and the descriptor).
     """
-    from . import features
     _check_descriptor(descriptor)
     name = "mobilenetv2" if descriptor == "mobilenetv2" else "pixels"
     X, info = features.extract(frames_or_folder, name, weights=weights, progress=False,
                                return_info=True, step=step)
     if descriptor == "pixels-patchnorm":
-        import time
         t0 = time.perf_counter()
         X = patch_normalise(X.reshape(-1, PIXEL_SIZE[1], PIXEL_SIZE[0]))
         info.seconds_per_image += (time.perf_counter() - t0) / max(len(X), 1)
@@ -119,12 +121,11 @@ def describe_frames(frames, descriptor: str = "pixels", color: str = "bgr", weig
     """Raw camera frames -> descriptors (M, D) float32, the streaming path of :class:`Detector`.
 
     frames: a list of (H, W, 3) uint8 frames (BGR as cv2 decodes them, or RGB with color="rgb")
-    or (H, W) gray uint8. Preprocessing is ``greenloop.data.preprocess_image``, the path
+    or (H, W) gray uint8. Preprocessing is ``greenloop.datasets.sequence.preprocess_image``, the path
     ``load_frames`` takes, so a frame from disk gives the same descriptor as :func:`describe`.
     """
     _check_descriptor(descriptor)
     if descriptor == "mobilenetv2":
-        from . import features
         rgb = np.stack([preprocess_image(f, CNN_SIZE, gray=False, color=color) for f in frames])
         return features.extract(rgb, "mobilenetv2", weights=weights, progress=False)
     g = np.stack([preprocess_image(f, PIXEL_SIZE, gray=True, color=color) for f in frames])
@@ -135,7 +136,6 @@ def describe_frames(frames, descriptor: str = "pixels", color: str = "bgr", weig
 def normalise(X, projection=None) -> np.ndarray:
     """L2-normalise rows (N, D) -> (N, D), or with a ``similarity.Projection`` L2 -> project ->
     L2 again -> (N, k). float32. A zero row stays zero."""
-    from .similarity import apply_projection, l2_normalise
     Y = l2_normalise(np.asarray(X, dtype=np.float32))
     if projection is not None:
         Y = l2_normalise(apply_projection(Y, projection).astype(np.float32))
@@ -148,9 +148,6 @@ def fit_projection(X_fit, dim: int = 128, eps: float = 1e-5):
     dim is clipped to the rank of the data (silently). Returns a ``similarity.Projection`` for
     :func:`normalise` / :class:`Detector`.
     """
-    import warnings
-
-    from .similarity import l2_normalise, pca_whiten
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
         _, proj = pca_whiten(l2_normalise(np.asarray(X_fit, dtype=np.float32)), dim=dim, eps=eps)
@@ -254,8 +251,6 @@ class Detector:
             raise ValueError(f"color must be one of {COLORS}, got {color!r}")
         self.velocities, self.projection, self.color, self.weights = tuple(v), projection, color, weights
         self.store_dtype = np.dtype(store_dtype)
-        from .stream import _single_thread_blas   # a 2-thread gemv stalls on a loaded 2-core machine
-        self._blas = _single_thread_blas()
         off = _offsets(self.seq_len, self.velocities)
         self._margin = int(off.max())
         self._base = self._margin - off
@@ -321,7 +316,7 @@ class Detector:
             raise ValueError(f"descriptor {j} has {y.size} dims, the stream's first had {self._db.shape[1]}")
         if not c:
             return self._match(y, np.zeros(0, np.float32))
-        with self._blas():
+        with one_blas_thread():   # a 2-thread gemv stalls on a loaded 2-core machine
             s = self._db[:c].astype(np.float32, copy=False) @ y
         return self._match(y, s)
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from . import data
+from greenloop.datasets import sequence
 
 BORDERS = ("zero", "replicate")
 
@@ -64,13 +64,13 @@ def shift_before_downsampling(full: np.ndarray, dx: float = 1, dy: float = 0, si
     """Shift full-resolution frames, then downsample them exactly as the CNN's input is made.
 
     full: (N, H, W, 1) uint8 gray frames at native resolution, as
-        ``data.load_frames(folder, size=None, dtype=np.uint8)`` returns them.
+        ``sequence.load_frames(folder, size=None, dtype=np.uint8)`` returns them.
     dx, dy: shift in pixels of the downsampled frame; the full frame moves by
         ``full_resolution_offset`` (e.g. 20 px for dx=1 at 640 -> 32 wide).
     size: (width, height) of the CNN input. border: as in ``shift``, applied at full resolution.
-    Returns (N, size[1], size[0], 1) float32 in [0, 1]: ``data.preprocess_image`` (the one
-    preprocessing path) on each shifted frame, scaled by 1/255 like ``data.load_frames``; with
-    dx = dy = 0 it equals ``data.load_frames(folder, size)``.
+    Returns (N, size[1], size[0], 1) float32 in [0, 1]: ``sequence.preprocess_image`` (the one
+    preprocessing path) on each shifted frame, scaled by 1/255 like ``sequence.load_frames``; with
+    dx = dy = 0 it equals ``sequence.load_frames(folder, size)``.
     """
     full = np.asarray(full)
     if full.ndim != 4 or full.shape[-1] != 1 or full.dtype != np.uint8:
@@ -79,7 +79,7 @@ def shift_before_downsampling(full: np.ndarray, dx: float = 1, dy: float = 0, si
     out = np.empty((len(full), int(size[1]), int(size[0]), 1), np.float32)
     for k in range(len(full)):                 # one frame at a time: no second full-size copy
         moved = shift(full[k:k + 1], DX, DY, border)[0]
-        out[k, ..., 0] = data.preprocess_image(moved, size, gray=True)
+        out[k, ..., 0] = sequence.preprocess_image(moved, size, gray=True)
     return out / np.float32(255.0)
 
 
@@ -90,9 +90,9 @@ CONTROLS = ("zero border (paper)", "replicate border", "full-res shift, zero bor
 def control_inputs(X: np.ndarray, full: np.ndarray, dx: int = 1, dy: int = 0) -> dict[str, np.ndarray]:
     """The CNN inputs of one shift under each control, keyed by the names in ``CONTROLS``.
 
-    X: (N, h, w, 1) float32 in [0, 1], the CNN's inputs (``data.load_frames(folder)``).
+    X: (N, h, w, 1) float32 in [0, 1], the CNN's inputs (``sequence.load_frames(folder)``).
     full: (N, H, W, 1) uint8, the same frames at native resolution
-        (``data.load_frames(folder, size=None, dtype=np.uint8)``).
+        (``sequence.load_frames(folder, size=None, dtype=np.uint8)``).
     dx, dy: the shift in pixels of X. Returns {name: (N, h, w, 1) float32 in [0, 1]}: the
     paper's shift of X (zero border), the same with a replicated border, and the full-resolution
     frames shifted by the equivalent amount with either border, then downsampled.

@@ -85,8 +85,11 @@ from pathlib import Path
 
 import numpy as np
 
-from . import cnn
-from .common import positive_int
+from greenloop import evaluate, features, groundtruth, spots
+from greenloop.datasets import sequence
+from greenloop.util.cache import cache_key, cached
+from greenloop.util.checks import positive_int
+from greenloop.util.progress import bar as tqdm  # in the terminal, never in a notebook
 
 LAYERS = ("conv1", "pool1", "conv2", "pool2", "conv3", "conv4", "conv5", "pool5")
 SUPERVISIONS = ("softmax", "contrastive", "multitask")
@@ -335,8 +338,6 @@ def describe(model, frames, batch_size: int = 256, stream: str | None = None,
     """
     import keras
 
-    from .features import ExtractInfo
-
     if stream is not None:
         name = f"scnn_late_{stream}"
         if stream not in ("rgb", "depth") or name not in [l.name for l in model.layers]:
@@ -358,9 +359,9 @@ def describe(model, frames, batch_size: int = 256, stream: str | None = None,
     if not return_info:
         return X
     h, w = ins[0].shape[1:3]
-    return X, ExtractInfo(backbone=model.name, weights=weights, dim=X.shape[1], n_images=n,
-                          input_size=(int(w), int(h)), layer=f"fc7 (Dense {DESCRIPTOR_DIM}, linear)",
-                          seconds_per_image=float(dt))
+    return X, features.ExtractInfo(backbone=model.name, weights=weights, dim=X.shape[1], n_images=n,
+                                   input_size=(int(w), int(h)), layer=f"fc7 (Dense {DESCRIPTOR_DIM}, linear)",
+                                   seconds_per_image=float(dt))
 
 
 def load_inputs(folder, size=INPUT_SIZE, step: int = 1, depth: bool = True,
@@ -368,17 +369,15 @@ def load_inputs(folder, size=INPUT_SIZE, step: int = 1, depth: bool = True,
     """Network inputs of a sequence: (N, H, W, 3) RGB, or (N, H, W, 4) RGB then depth, float32
     in [0, 1].
 
-    RGB: ``greenloop.data.load_frames`` at ``size`` (width, height). Depth (depth=True; the folder
-    must have depth/): ``data.load_depth`` at the same size, mapped to 0..1 over 0..max_depth
+    RGB: ``greenloop.datasets.sequence.load_frames`` at ``size`` (width, height). Depth (depth=True; the folder
+    must have depth/): ``sequence.load_depth`` at the same size, mapped to 0..1 over 0..max_depth
     metres by ``features.depth_to_uint8`` (default ``features.DEPTH_MAX_M``).
     step: every step-th frame.
     """
-    from . import data, features
-
-    X = data.load_frames(folder, size=size, gray=False, step=step, progress=False)
+    X = sequence.load_frames(folder, size=size, gray=False, step=step, progress=False)
     if not depth:
         return X
-    D = data.load_depth(folder, size=size, step=step)
+    D = sequence.load_depth(folder, size=size, step=step)
     if len(D) != len(X):
         raise ValueError(f"{folder}: {len(X)} rgb frames but {len(D)} depth frames")
     D = features.depth_to_uint8(D, max_depth or features.DEPTH_MAX_M).astype(np.float32) / 255.0
@@ -403,8 +402,6 @@ def training_split(n: int, fraction: float, gt, gap: int, frames_per_spot: int, 
     Markdown sentence) says so. Raises ``evaluate.NoHonestSplit`` where that training part would
     hold fewer than two places (first revisit frame - gap <= frames_per_spot).
     """
-    from . import evaluate, groundtruth
-
     try:
         train, held = evaluate.split_mask(n, fraction, gt=gt, gap=gap)
         return train, held, None
@@ -439,8 +436,6 @@ def place_labels(train, gt, frames_per_spot: int) -> np.ndarray:
     (``spots.by_place`` on the training frames alone), so a revisit inside the training part gives
     positive pairs across time. Frames outside ``train`` get -1 and never enter a pair.
     """
-    from . import spots
-
     train = np.asarray(train, dtype=bool)
     gt = np.asarray(gt, dtype=bool)
     if train.ndim != 1 or gt.shape != (len(train), len(train)):
@@ -517,7 +512,6 @@ def _fit(X, labels, progress, *, seed, supervision, fusion, fusion_layer, epochs
          batch_size, positive_fraction, margin, lam, width, merge, optimizer, learning_rate,
          weight_decay, **_):
     import keras
-    from tqdm import tqdm
 
     keras.utils.set_random_seed(seed)
     n_classes = int(labels.max()) + 1
@@ -574,7 +568,7 @@ def train(X, labels, seed: int = 0, supervision: str = "multitask", fusion: str 
     lam, width, merge, optimizer, learning_rate, weight_decay: see ``build``.
     epochs: passes; each draws n_pairs new pairs (``make_pairs``, rounded up to whole batches of
     ``batch_size`` pairs). cache: as ``greenloop.cnn.train`` (results/models/ or
-    $GREENLOOP_CACHE, keyed by ``cnn.cache_key`` of the data, labels and every parameter).
+    $GREENLOOP_CACHE, keyed by ``util.cache.cache_key`` of the data, labels and every parameter).
     progress: a tqdm bar on stderr.
     Returns (descriptor, history, pairs): the descriptor model (frames -> (N, DESCRIPTOR_DIM));
     history with per-epoch 'loss' and 'epoch_seconds', 'seconds' (training wall time),
@@ -595,7 +589,7 @@ def train(X, labels, seed: int = 0, supervision: str = "multitask", fusion: str 
                   width=float(width), merge=merge if fusion == "mid" else None,
                   optimizer=optimizer, learning_rate=learning_rate, weight_decay=float(weight_decay),
 )
-    key = cnn.cache_key(X, labels, **params)
+    key = cache_key(X, labels, **params)
 
     def save(folder, result):
         model, history, pairs = result
@@ -604,4 +598,4 @@ def train(X, labels, seed: int = 0, supervision: str = "multitask", fusion: str 
         np.savez(folder / "pairs.npz", **pairs)
         (folder / "params.json").write_text(json.dumps(dict(params, key=key), indent=1))
 
-    return cnn.cached(key, cache, lambda: _fit(X, labels, progress, **params), save, _load)
+    return cached(key, cache, lambda: _fit(X, labels, progress, **params), save, _load)

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from .common import positive_int
+from greenloop.util.checks import positive_int
 
 __all__ = [
     "Projection", "l2_normalise", "pca_whiten", "zca_whiten", "apply_projection",

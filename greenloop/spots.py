@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .common import positive_int
+from greenloop.util.checks import positive_int
 
 
 def group(n_frames: int, frames_per_spot: int) -> np.ndarray:

@@ -31,7 +31,7 @@ def write_frames(folder: Path, n: int, size=(40, 30), ext=".png", seed=0) -> Pat
 @pytest.fixture(scope="session")
 def tiny_sequence(tmp_path_factory):
     """A 200-frame, 160x120 synthetic greenhouse sequence (rgb, depth, trajectory, camera)."""
-    from greenloop import synthetic
+    from greenloop.datasets import synthetic
     folder = tmp_path_factory.mktemp("seq") / "tiny-greenhouse"
     return synthetic.make_greenhouse(folder, n_frames=200, size=(160, 120), seed=0, progress=False)
 
@@ -59,11 +59,11 @@ def tiny_pairs_sequence(tiny_sequence, tmp_path_factory):
     loop pairs in ground_truth.csv (the pose loops, |i - j| > 10, with tolerances)."""
     import shutil
 
-    from greenloop import data
+    from greenloop.datasets import sequence
     folder = tmp_path_factory.mktemp("seq") / "tiny-pairs"
     shutil.copytree(tiny_sequence / "rgb", folder / "rgb")
-    _, poses = data.read_trajectory(tiny_sequence)
-    data.write_loop_pairs(folder / data.GROUND_TRUTH_NAME, pose_loops_as_pairs(poses))
+    _, poses = sequence.read_trajectory(tiny_sequence)
+    sequence.write_loop_pairs(folder / sequence.GROUND_TRUTH_NAME, pose_loops_as_pairs(poses))
     return folder
 
 
@@ -79,6 +79,6 @@ def tiny_end_loop_sequence(tiny_sequence, tmp_path_factory):
         if i >= 180:
             img = np.roll((img * 0.8).astype(np.uint8), 2, axis=1)
         cv2.imwrite(str(folder / "rgb" / f"{i}.jpg"), img)
-    from greenloop import data
-    data.write_loop_pairs(folder / data.GROUND_TRUTH_NAME, [(180 + k, k, 1) for k in range(20)])
+    from greenloop.datasets import sequence
+    sequence.write_loop_pairs(folder / sequence.GROUND_TRUTH_NAME, [(180 + k, k, 1) for k in range(20)])
     return folder

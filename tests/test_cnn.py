@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from greenloop import cnn, spots
+from greenloop.util.cache import cache_key
 
 
 def _toy(n=120, L=30, seed=0):
@@ -91,19 +92,22 @@ def test_train_is_deterministic_and_learns(tmp_path):
 
 def test_cache_reuses_and_key_changes(tmp_path):
     X, y = _toy()
-    base = dict(seed=0, epochs=2, batch_size=32, test_size=0.2, split="random", n_classes=4, fast=True, gap=None)
-    k0 = cnn.cache_key(X, y, **base)
+    base = dict(seed=0, epochs=2, batch_size=32, test_size=0.2, split="random", n_classes=4, fast="fused",
+                gap=None, batch_order="model.fit")
+    k0 = cache_key(X, y, **base)
     for name, value in [("seed", 1), ("epochs", 3), ("batch_size", 16), ("test_size", 0.3),
-                        ("split", "blocked"), ("n_classes", 5), ("fast", False)]:
-        assert cnn.cache_key(X, y, **dict(base, **{name: value})) != k0, name
+                        ("split", "blocked"), ("n_classes", 5), ("fast", "plain")]:
+        assert cache_key(X, y, **dict(base, **{name: value})) != k0, name
     X2 = X.copy(); X2[0, 0, 0, 0] += 0.01
-    assert cnn.cache_key(X2, y, **base) != k0
-    assert cnn.cache_key(X, y[::-1].copy(), **base) != k0
+    assert cache_key(X2, y, **base) != k0
+    assert cache_key(X, y[::-1].copy(), **base) != k0
 
     m1, h1, s1 = cnn.train(X, y, seed=0, epochs=2, cache=tmp_path, progress=False)
     folders = [p for p in tmp_path.iterdir() if p.is_dir()]
     assert len(folders) == 1 and (folders[0] / "model.keras").is_file()
     assert json.loads((folders[0] / "params.json").read_text())["epochs"] == 2
+    # the key still names the trainer "fast", as before train(trainer=...): older caches stay valid
+    assert folders[0].name == k0
     m2, h2, s2 = cnn.train(X, y, seed=0, epochs=2, cache=tmp_path, progress=False)
     assert h2 == h1 and (s2["test"] == s1["test"]).all()
     assert np.allclose(m2.predict(X[:4], verbose=0), m1.predict(X[:4], verbose=0))

@@ -114,7 +114,7 @@ def _brute_counts(labels, n, start=None):
 
 @pytest.mark.parametrize("seed", range(6))
 def test_one_counting_rule_on_random_label_streams(seed):
-    from greenloop import stream
+    from greenloop.speed import stream
 
     rng = np.random.default_rng(seed)
     n, T, tau = int(rng.integers(1, 8)), int(rng.integers(0, 300)), int(rng.integers(1, 40))

@@ -307,7 +307,7 @@ def greenhouse_poses():
     path = GREENHOUSE / "CameraTrajectory.txt"
     if not path.is_file():
         pytest.skip(f"real GreenHouse trajectory not found at {path}")
-    from greenloop.data import read_trajectory
+    from greenloop.datasets.sequence import read_trajectory
     _, poses = read_trajectory(path)
     return poses
 
@@ -359,3 +359,32 @@ def test_closure_counts_tally():
     assert c["precision"] == 0.5 and c["recall"] == 0.5 and c["f1"] == 0.5 and c["first_delay"] == 2
     none = ev.closure_counts(np.zeros(3, bool), np.zeros(3, bool), np.zeros(3, bool))
     assert np.isnan(none["precision"]) and none["f1"] == 0.0 and none["first_delay"] is None
+
+
+# ------------------------------------------------------------ the spot classifier
+def test_per_spot_on_hand_made_labels():
+    t = np.array([0, 0, 0, 1, 1, 2])
+    p = np.array([0, 0, 1, 1, 1, 1])
+    df = ev.per_spot(t, p, 4)
+    assert df["class"].tolist() == [1, 2, 3, 4]
+    assert df.loc[0, ["precision", "recall", "support"]].tolist() == [1.0, 0.67, 3]
+    assert df.loc[1, "precision"] == 0.5 and df.loc[1, "recall"] == 1.0
+    assert df.loc[2, "recall"] == 0 and df.loc[3, "support"] == 0
+    with pytest.raises(ValueError):
+        ev.per_spot(t, p[:3], 4)
+
+
+def test_spot_errors_counts_adjacent_errors():
+    s = ev.spot_errors([0, 1, 2, 3, 4], [0, 2, 2, 0, 4])
+    assert s["misclassified"] == 2 and s["adjacent"] == 1 and s["adjacent_share"] == 0.5
+    assert s["accuracy"] == pytest.approx(0.6)
+    assert ev.spot_errors([1, 2], [1, 2])["adjacent_share"] is None
+
+
+def test_same_place_errors():
+    labels = np.array([0, 0, 1, 1, 2, 2])
+    gt = np.zeros((6, 6), bool)
+    gt[0, 5] = gt[5, 0] = True          # frame 5 (spot 2) revisits frame 0 (spot 0)
+    frames = np.array([5, 4, 2])
+    pred = np.array([0, 1, 1])          # 5 -> spot 0: same place; 4 -> spot 1: plain error; 2 right
+    assert ev.same_place_errors(frames, pred, labels, gt) == 1

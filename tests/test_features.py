@@ -13,7 +13,9 @@ import pytest
 keras = pytest.importorskip("keras")
 from safetensors.numpy import save_file  # noqa: E402
 
-from greenloop import data, features as F, ghostnet as G  # noqa: E402
+from greenloop import features as F  # noqa: E402
+from greenloop.backbones import ghostnet as G  # noqa: E402
+from greenloop.datasets import sequence  # noqa: E402
 
 SIZE = 32  # smallest input every Keras application accepts
 DIMS = {"vgg19": 512, "resnet50": 2048, "resnet101": 2048, "resnet152": 2048,
@@ -65,7 +67,7 @@ def write_sequence(folder, rgb, depth_m=None):
         (folder / "depth").mkdir()
         for i, d in enumerate(depth_m):
             cv2.imwrite(str(folder / "depth" / f"{i}.png"),
-                        np.rint(d * data.DEPTH_SCALE).astype(np.uint16))
+                        np.rint(d * sequence.DEPTH_SCALE).astype(np.uint16))
     return folder
 
 
@@ -161,7 +163,7 @@ def test_input_forms_agree(frames):
 def test_folder_input(tmp_path, frames):
     folder = write_sequence(tmp_path / "seq", frames)
     kw = dict(backbone="mobilenetv3small", weights=None, input_size=SIZE, progress=False)
-    loaded = data.load_frames(folder, size=(SIZE, SIZE), gray=False, dtype=np.uint8)
+    loaded = sequence.load_frames(folder, size=(SIZE, SIZE), gray=False, dtype=np.uint8)
     np.testing.assert_array_equal(F.extract(folder, **kw), F.extract(loaded, **kw))
     assert F.extract(folder, limit=3, **kw).shape == (3, 576)
 
@@ -265,7 +267,7 @@ def test_pixels_is_the_main_papers_preprocessing(tmp_path, frames):
     np.testing.assert_allclose(X, expected.reshape(len(frames), -1) / 255.0, atol=1e-6)
     folder = write_sequence(tmp_path / "seq", frames)
     Xf = F.extract(folder, "pixels", progress=False)
-    np.testing.assert_array_equal(Xf, data.load_frames(folder).reshape(len(frames), -1))
+    np.testing.assert_array_equal(Xf, sequence.load_frames(folder).reshape(len(frames), -1))
     assert np.abs(Xf - X).max() <= 1 / 255 + 1e-6  # gray from file vs from RGB array: rounding only
 
 
@@ -345,7 +347,7 @@ def test_extract_rgbd(tmp_path, frames):
     assert X.shape == (len(frames), 2 * 576) and info.dim == 2 * 576
     rgb = F.extract(folder, "mobilenetv3small", None, input_size=SIZE, progress=False)
     np.testing.assert_array_equal(X[:, :576], rgb)
-    d8 = F.depth_to_uint8(data.load_depth(folder, size=(SIZE, SIZE)))
+    d8 = F.depth_to_uint8(sequence.load_depth(folder, size=(SIZE, SIZE)))
     np.testing.assert_array_equal(X[:, 576:], F.extract(d8, "mobilenetv3small", None,
                                                         input_size=SIZE, progress=False))
     with pytest.raises(FileNotFoundError, match="depth"):

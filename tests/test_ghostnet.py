@@ -13,7 +13,7 @@ import pytest
 keras = pytest.importorskip("keras")
 from safetensors.numpy import save_file  # noqa: E402
 
-from greenloop import ghostnet as G  # noqa: E402
+from greenloop.backbones import ghostnet as G  # noqa: E402
 
 
 def _randomise_bn(model, seed=0):

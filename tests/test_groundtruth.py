@@ -3,7 +3,8 @@ import time
 import numpy as np
 import pytest
 
-from greenloop import data, groundtruth
+from greenloop import groundtruth
+from greenloop.datasets import sequence
 
 
 def _line_poses(n, step=0.1):
@@ -50,7 +51,7 @@ def test_bad_input():
 
 
 def test_real_trajectory_start_end_revisit(real_trajectory):
-    _, P = data.read_trajectory(real_trajectory)
+    _, P = sequence.read_trajectory(real_trajectory)
     t0 = time.perf_counter()
     gt = groundtruth.loop_matrix(P, threshold=0.5, exclude=150)
     elapsed = time.perf_counter() - t0
@@ -67,7 +68,7 @@ def _pair_folder(tmp_path, n, lines, name="seq"):
     """A pose-less sequence folder of n tiny frames with ground_truth.csv holding `lines`."""
     from conftest import write_frames
     folder = write_frames(tmp_path / name, n, size=(8, 6))
-    (folder / data.GROUND_TRUTH_NAME).write_text("\n".join(lines) + "\n")
+    (folder / sequence.GROUND_TRUTH_NAME).write_text("\n".join(lines) + "\n")
     return folder
 
 
@@ -81,9 +82,9 @@ def test_pairs_tolerance_symmetry_and_exclusion(tmp_path):
     assert groundtruth.for_sequence(folder, exclude=1)[10, 12]
     # the tolerance widens j only: 1 and 3 are not loops with 30
     assert not gt[1, 30] and not gt[3, 30]
-    # the file's pairs are what data.read_loop_pairs returns, tolerance 0 where absent
-    assert data.read_loop_pairs(folder).tolist() == [[2, 30, 1], [5, 20, 0], [10, 12, 0]]
-    assert data.describe(folder)["ground_truth"] == "pairs"
+    # the file's pairs are what sequence.read_loop_pairs returns, tolerance 0 where absent
+    assert sequence.read_loop_pairs(folder).tolist() == [[2, 30, 1], [5, 20, 0], [10, 12, 0]]
+    assert sequence.describe(folder)["ground_truth"] == "pairs"
     assert "3 rows, tolerance 0-1 frames" in groundtruth.definition(folder, exclude=5)
 
 
@@ -109,13 +110,13 @@ def test_poses_come_first_and_match_loop_matrix(tmp_path):
     fwd = _line_poses(n // 2)
     P = np.concatenate([fwd, fwd[::-1]])
     folder = write_frames(tmp_path / "posed", n, size=(8, 6))
-    data.write_trajectory(folder / "CameraTrajectory.txt", np.arange(n), P)
-    (folder / data.GROUND_TRUTH_NAME).write_text("i,j\n0,50\n")   # ignored: poses come first
+    sequence.write_trajectory(folder / "CameraTrajectory.txt", np.arange(n), P)
+    (folder / sequence.GROUND_TRUTH_NAME).write_text("i,j\n0,50\n")   # ignored: poses come first
     frames = np.arange(0, n, 3)
     gt = groundtruth.for_sequence(folder, frames=frames, threshold=0.05, exclude=10)
     ref = groundtruth.loop_matrix(P[frames], threshold=0.05, exclude=10 // 3)
     assert gt.any() and (gt == ref).all()      # same as the step-wise exclusion for a uniform step
-    assert data.describe(folder)["ground_truth"] == "poses"
+    assert sequence.describe(folder)["ground_truth"] == "poses"
     assert groundtruth.definition(folder, 0.05, 10).startswith("Qi 2024 Eq. 5")
 
 
@@ -150,25 +151,25 @@ def test_bad_arguments_and_no_ground_truth(tmp_path):
     with pytest.raises(ValueError, match="tolerances"):
         groundtruth.pair_matrix([[0, 30, -1]], 40)
     bare = _pair_folder(tmp_path, 40, ["i,j"], name="bare")
-    (bare / data.GROUND_TRUTH_NAME).unlink()
+    (bare / sequence.GROUND_TRUTH_NAME).unlink()
     with pytest.raises(groundtruth.NoGroundTruthError, match="add CameraTrajectory.txt .* or ground_truth.csv"):
         groundtruth.for_sequence(bare)
     assert issubclass(groundtruth.NoGroundTruthError, FileNotFoundError)
-    assert data.describe(bare)["ground_truth"] is None
+    assert sequence.describe(bare)["ground_truth"] is None
 
 
 def test_write_loop_pairs_round_trip(tmp_path):
-    path = data.write_loop_pairs(tmp_path / "gt.csv", [[0, 10], [3, 12]])
+    path = sequence.write_loop_pairs(tmp_path / "gt.csv", [[0, 10], [3, 12]])
     assert path.read_text().splitlines()[0] == "i,j,tolerance"
-    assert data.read_loop_pairs(path, n_frames=13).tolist() == [[0, 10, 0], [3, 12, 0]]
+    assert sequence.read_loop_pairs(path, n_frames=13).tolist() == [[0, 10, 0], [3, 12, 0]]
     with pytest.raises(ValueError, match="outside"):
-        data.read_loop_pairs(path, n_frames=12)
+        sequence.read_loop_pairs(path, n_frames=12)
 
 
 def test_pair_file_reproduces_the_pose_ground_truth(tiny_sequence, tiny_pairs_sequence):
-    info = data.describe(tiny_pairs_sequence)
+    info = sequence.describe(tiny_pairs_sequence)
     assert info["ground_truth"] == "pairs" and not info["trajectory"] and not info["depth"]
-    pairs = data.read_loop_pairs(tiny_pairs_sequence)
+    pairs = sequence.read_loop_pairs(tiny_pairs_sequence)
     assert (pairs[:, 2] > 0).any(), "the fixture should exercise tolerances"
     for frames, exclude in ((None, 20), (np.arange(0, 200, 3), 20), (None, 10)):
         a = groundtruth.for_sequence(tiny_pairs_sequence, frames, exclude=exclude)
@@ -197,7 +198,7 @@ def test_far_in_time_is_the_one_rule():
 
 
 def test_described_frames_is_the_notebooks_prelude(tiny_sequence):
-    n = len(data.list_frames(tiny_sequence))
+    n = len(sequence.list_frames(tiny_sequence))
     d = groundtruth.described_frames(tiny_sequence, 3, 0.5, 10)
     assert np.array_equal(d.frames, np.arange(0, n, 3)) and d.ex == 10 // 3
     assert np.array_equal(d.gt, groundtruth.for_sequence(tiny_sequence, np.arange(0, n, 3), 0.5, 10))

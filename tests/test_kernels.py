@@ -1,4 +1,4 @@
-"""greenloop.kernels against the libraries they replace, and the fused trainer against model.fit."""
+"""greenloop.util.kernels against the libraries they replace, and the fused trainer against model.fit."""
 import cv2
 import numpy as np
 import pytest
@@ -6,7 +6,9 @@ import pytest
 pytest.importorskip("numba")
 keras = pytest.importorskip("keras")
 
-from greenloop import cnn, data, kernels  # noqa: E402
+from greenloop import cnn  # noqa: E402
+from greenloop.datasets import sequence  # noqa: E402
+from greenloop.util import kernels  # noqa: E402
 from test_cnn import _toy  # noqa: E402  (the toy frames of the CNN tests)
 
 
@@ -29,7 +31,7 @@ def test_area_shrink_declines_what_it_cannot_do():
     # preprocess_image still gives OpenCV's bytes then
     frame = np.random.default_rng(1).integers(0, 256, (100, 130, 3), dtype=np.uint8)
     ref = cv2.resize(cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY), (32, 32), interpolation=cv2.INTER_AREA)
-    assert np.array_equal(data.preprocess_image(frame, (32, 32)), ref)
+    assert np.array_equal(sequence.preprocess_image(frame, (32, 32)), ref)
 
 
 def test_preprocess_image_matches_opencv_on_640x480_frames():
@@ -37,7 +39,7 @@ def test_preprocess_image_matches_opencv_on_640x480_frames():
     for _ in range(5):
         frame = rng.integers(0, 256, (480, 640, 3), dtype=np.uint8)
         ref = cv2.resize(cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY), (32, 32), interpolation=cv2.INTER_AREA)
-        assert np.array_equal(data.preprocess_image(frame, (32, 32)), ref)
+        assert np.array_equal(sequence.preprocess_image(frame, (32, 32)), ref)
 
 
 def _conv_reference(X, K, b):
@@ -124,8 +126,8 @@ def test_fused_trainer_follows_model_fit():
     X, y = _toy(n=64, L=16)
     n_train = len(cnn.split_indices(y, 0)[0])
     kw = dict(seed=0, epochs=4, batch_size=n_train, cache=False, progress=False)
-    fused, hf, sf = cnn.train(X, y, fast="fused", **kw)
-    plain, hp, sp = cnn.train(X, y, fast="plain", **kw)
+    fused, hf, sf = cnn.train(X, y, trainer="fused", **kw)
+    plain, hp, sp = cnn.train(X, y, trainer="plain", **kw)
     assert (sf["test"] == sp["test"]).all()
     for a, b in zip(fused.get_weights(), plain.get_weights()):
         np.testing.assert_allclose(a, b, rtol=1e-3, atol=2e-5)
@@ -135,10 +137,11 @@ def test_fused_trainer_follows_model_fit():
 
 
 def test_trainer_choice():
-    assert cnn.trainer(False) == "plain" and cnn.trainer("xla") == "xla"
-    assert cnn.trainer(True) == "fused"  # numba present, no GPU on the build machine
-    with pytest.raises(ValueError, match="fast must be"):
-        cnn.trainer("turbo")
+    assert cnn.resolve_trainer("plain") == "plain" and cnn.resolve_trainer("xla") == "xla"
+    assert cnn.resolve_trainer("auto") == "fused"  # numba present, no GPU on the build machine
+    for bad in ("turbo", True, False):
+        with pytest.raises(ValueError, match="trainer must be"):
+            cnn.resolve_trainer(bad)
 
 
 def _fit_epochwise(X, Y, tr, orders, n_classes):
@@ -158,7 +161,7 @@ def test_fit_orders_are_the_orders_of_model_fit():
     C = int(y.max() + 1)
     tr, _ = cnn.split_indices(y, 0)
     assert len(tr) % 32 != 0  # a partial last batch
-    plain, _, _ = cnn.train(X, y, seed=0, epochs=3, fast="plain", cache=False, progress=False)
+    plain, _, _ = cnn.train(X, y, seed=0, epochs=3, trainer="plain", cache=False, progress=False)
     keras.utils.set_random_seed(0)
     cnn.build(C, jit_compile=False)  # fit_orders starts where model.fit would: after the build
     it = cnn.fit_orders(len(tr), 32)
@@ -180,8 +183,8 @@ def test_fused_trainer_matches_model_fit(n, L, epochs):
     (150 frames) and over five epochs (160)."""
     X, y = _toy(n=n, L=L)
     kw = dict(seed=0, epochs=epochs, cache=False, progress=False)
-    fused, hf, _ = cnn.train(X, y, fast="fused", **kw)
-    plain, hp, _ = cnn.train(X, y, fast="plain", **kw)
+    fused, hf, _ = cnn.train(X, y, trainer="fused", **kw)
+    plain, hp, _ = cnn.train(X, y, trainer="plain", **kw)
     for a, b in zip(fused.get_weights(), plain.get_weights()):
         np.testing.assert_allclose(a, b, rtol=2e-3, atol=5e-5)
     for k in ("loss", "val_loss", "accuracy", "val_accuracy"):
@@ -191,7 +194,7 @@ def test_fused_trainer_matches_model_fit(n, L, epochs):
 def test_one_blas_thread_limits_numpys_blas_inside_only():
     from threadpoolctl import threadpool_info
 
-    from greenloop import kernels
+    from greenloop.util import kernels
 
     def blas_threads():
         return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]

@@ -9,7 +9,8 @@ import cv2
 import numpy as np
 import pytest
 
-from greenloop import data, groundtruth, nordland
+from greenloop import groundtruth
+from greenloop.datasets import sequence, nordland
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared" / "real" / "nordland"
@@ -36,18 +37,18 @@ def test_build_order_ground_truth_and_metadata(tmp_path):
     src = _fake_source(tmp_path / "src")
     out = nordland.build(tmp_path / "nordland", src, tolerance=2, progress=False)
     n = len(NAMES)
-    frames = data.list_frames(out)
+    frames = sequence.list_frames(out)
     assert [p.name for p in frames] == [f"{k}.png" for k in range(2 * n)]
     # summer in numeric order of the names, then winter: winter frame k is frame n + k
     assert [_code(p) for p in frames] == [(0, v) for v in NAMES] + [(1, v) for v in NAMES]
     # (k, n + k, 2), the first two windows clipped at the start of winter: [n, n + 2], [n, n + 3]
-    assert data.read_loop_pairs(out, n_frames=2 * n).tolist() == (
+    assert sequence.read_loop_pairs(out, n_frames=2 * n).tolist() == (
         [[0, n + 1, 1], [1, n + 1, 1], [1, n + 3, 0]] + [[k, n + k, 2] for k in range(2, n)])
     meta = json.loads((out / "nordland.json").read_text())
     assert meta["frames_per_season"] == n and meta["n_frames"] == 2 * n
     assert meta["traversals"] == {"summer": [0, n], "winter": [n, 2 * n]}
     assert meta["ground_truth"]["tolerance_frames"] == 2 and (meta["width"], meta["height"]) == (16, 8)
-    info = data.describe(out)
+    info = sequence.describe(out)
     assert info["ground_truth"] == "pairs" and info["n_frames"] == 2 * n and not info["depth"]
     gt = groundtruth.for_sequence(out, exclude=1)
     assert gt[0, n] and gt[0, n + 2] and not gt[0, n + 3] and gt[n + 1, 0]
@@ -103,7 +104,7 @@ def test_make_all_builds_nordland_first(tmp_path):
                        cwd=ROOT, capture_output=True, text=True, timeout=60)
     assert r.returncode == 0, r.stderr
     lines = r.stdout.splitlines()
-    build = [k for k, ln in enumerate(lines) if f"greenloop.nordland {target}" in ln]
+    build = [k for k, ln in enumerate(lines) if f"greenloop.datasets.nordland {target}" in ln]
     runs = [k for k, ln in enumerate(lines) if "papermill" in ln]
     assert build and runs and build[0] < runs[0]
     assert "--src /some/copy" in " ".join(lines[build[0]:build[0] + 2])
@@ -115,7 +116,7 @@ def test_default_tolerance_matches_the_source_sample():
     if not sample.is_file():
         pytest.skip(f"Nordland sample ground truth not found at {sample}")
     rows = np.loadtxt(sample, delimiter=",", dtype=np.int64)
-    n = len(data.list_frames(SHARED / "summer"))
+    n = len(sequence.list_frames(SHARED / "summer"))
     assert len(rows) == -(-n // nordland.SAMPLE_STEP)             # 358 = ceil(3576 / 10)
     assert (rows[:, 0] == rows[:, 1]).all() and (rows[:, 0] == np.arange(1, len(rows) + 1)).all()
     assert (rows[:, 2] == nordland.SAMPLE_TOLERANCE).all()

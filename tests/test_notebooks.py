@@ -298,14 +298,15 @@ CHECKS = {"01_spot_grouping": _check_01, "02_training_over_seeds": _check_02,
 
 
 def _check_00_pairs(folder):
-    from greenloop import data, groundtruth
+    from greenloop import groundtruth
+    from greenloop.datasets import sequence
     row = pd.read_csv(folder / "dataset.csv").iloc[0]
     assert row.ground_truth == "pairs" and pd.isna(row.path_m)
     dataset = json.loads((folder / "manifest.json").read_text())["dataset"]
     gt = groundtruth.for_sequence(dataset, exclude=TINY["exclude"])
     assert row.loop_pairs == len(groundtruth.loop_pairs(gt)) > 0
     assert (folder / "groundtruth.png").is_file() and not (folder / "trajectory_groundtruth.png").is_file()
-    assert data.GROUND_TRUTH_NAME in (folder / "dataset.md").read_text()
+    assert sequence.GROUND_TRUTH_NAME in (folder / "dataset.md").read_text()
 
 
 def _check_03_pairs(folder):

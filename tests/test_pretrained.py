@@ -20,10 +20,10 @@ import pytest
 
 keras = pytest.importorskip("keras")
 
-from greenloop import efficientnet_lite as E  # noqa: E402
+from greenloop.backbones import efficientnet_lite as E  # noqa: E402
 from greenloop import features as F  # noqa: E402
-from greenloop import mobilenet_tflite as T  # noqa: E402
-from greenloop import torch_weights as TW  # noqa: E402
+from greenloop.backbones import mobilenet_tflite as T  # noqa: E402
+from greenloop.backbones import torch_weights as TW  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED_TFLITE = ROOT.parent / "shared" / "weights" / "mobilenet-tflite"

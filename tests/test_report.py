@@ -3,7 +3,7 @@ import json
 import pandas as pd
 import pytest
 
-from greenloop import report
+from greenloop.study import report
 
 
 def test_tables_and_assembly(tmp_path):
@@ -17,6 +17,16 @@ def test_tables_and_assembly(tmp_path):
     assert "## 01_x" in text and "| accuracy (%) |" in text and "91.5" in text and "models" not in text
     assert pd.read_csv(tmp_path / "01_x" / "paper_vs_run.csv").shape == (2, 4)
     assert not list(tmp_path.rglob(".tmp-*"))
+
+
+def test_command_line_assembles_and_refuses_a_missing_folder(tmp_path, capsys):
+    report.write_table(report.paper_vs_run([("spots", 38, 38)]), tmp_path / "01_x" / "paper_vs_run", title="T")
+    assert report.main([str(tmp_path)]) == 0
+    assert capsys.readouterr().out.strip() == str(tmp_path / "tables.md")
+    assert "## 01_x" in (tmp_path / "tables.md").read_text()
+    with pytest.raises(SystemExit) as e:
+        report.main([str(tmp_path / "nope")])
+    assert e.value.code == 2 and "no such results folder" in capsys.readouterr().err
 
 
 def test_manifest_records_machine_and_versions(tmp_path):
@@ -56,7 +66,7 @@ def test_cross_dataset_table_puts_datasets_side_by_side(tmp_path):
 
 
 def test_coverage_status_comes_from_the_outputs(tmp_path):
-    from greenloop import coverage
+    from greenloop.study import coverage
     a, b = tmp_path / "a", tmp_path / "b"
     for folder, name in ((a, "synthetic"), (b, "real")):
         report.write_json(folder / "00_dataset" / "manifest.json", {"dataset": f"data/{name}"})
@@ -74,9 +84,9 @@ def test_coverage_status_comes_from_the_outputs(tmp_path):
 
 
 def test_readme_coverage_table_is_the_generated_one():
-    """The README's coverage table is what greenloop.coverage reads from the committed results."""
+    """The README's coverage table is what greenloop.study.coverage reads from the committed results."""
     from pathlib import Path
-    from greenloop import coverage
+    from greenloop.study import coverage
     root = Path(__file__).resolve().parents[1]
     text = (root / "README.md").read_text()
     start, end = "<!-- coverage:start -->\n", "<!-- coverage:end -->"

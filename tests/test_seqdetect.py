@@ -10,7 +10,8 @@ import cv2
 import numpy as np
 import pytest
 
-from greenloop import data, evaluate, seqmatch
+from greenloop import evaluate, seqmatch
+from greenloop.datasets import sequence
 from greenloop.seqmatch import Detector
 
 from conftest import write_frames
@@ -101,7 +102,7 @@ def test_projection_and_metrics(revisit):
     c = seqmatch.closures(S, GT, t, EXCLUDE, queries=ev)
     assert c["declared"] >= c["correct"] > 0 and c["revisits"] > 0 and 0 < c["recall"] <= 1
     assert c["first_delay"] is not None and c["first_delay"] >= 0
-    r95 = seqmatch.recall_at_precision(S, GT, 0.95, EXCLUDE, queries=ev)
+    r95 = evaluate.recall_at_precision(S, GT, 0.95, EXCLUDE, queries=ev)
     assert evaluate.recall_at_100_precision(S, GT, EXCLUDE, queries=ev) <= r95 <= 1
     hi = seqmatch.choose_threshold(S, GT, EXCLUDE, queries=tune, rule="p95")
     p = seqmatch.closures(S, GT, hi, EXCLUDE, queries=tune)["precision"]
@@ -122,7 +123,7 @@ def test_patch_normalise():
 def test_frames_give_the_descriptors_of_the_folder(tmp_path, descriptor):
     folder = write_frames(tmp_path / "seq", 6, size=(50, 40))
     ref = seqmatch.describe(folder, descriptor)
-    frames = [cv2.imread(str(p), cv2.IMREAD_COLOR) for p in data.list_frames(folder)]
+    frames = [cv2.imread(str(p), cv2.IMREAD_COLOR) for p in sequence.list_frames(folder)]
     assert np.allclose(seqmatch.describe_frames(frames, descriptor), ref, atol=1e-6)
     det = Detector(None, descriptor=descriptor, exclude=2, seq_len=2)
     assert det.update_many(frames) == [] and det.frame_index == 6 and det.bytes_per_frame == 1024 * 4 + 8
@@ -156,7 +157,7 @@ def test_bad_inputs():
     with pytest.raises(ValueError, match="velocities"):
         Detector(0.5, velocities=(0.0,), contrast_window=0)
     with pytest.raises(ValueError, match="precision"):
-        seqmatch.recall_at_precision(np.zeros((3, 3)), np.eye(3, dtype=bool), 0.0, 0)
+        evaluate.recall_at_precision(np.zeros((3, 3)), np.eye(3, dtype=bool), 0.0, 0)
 
 
 def _revisit_folder(folder: Path) -> Path:

@@ -2,7 +2,8 @@ import cv2
 import numpy as np
 import pytest
 
-from greenloop import data, shift
+from greenloop import shift
+from greenloop.datasets import sequence
 
 
 def test_shift_right_zero_fills_left_column():
@@ -75,7 +76,7 @@ def test_full_resolution_offset():
 
 
 @pytest.fixture()
-def sequence(tmp_path):
+def frames_folder(tmp_path):
     """Four smooth 64x48 colour frames, downsampled 4x (to 16x12) exactly."""
     yy, xx = np.mgrid[0:48, 0:64]
     (tmp_path / "rgb").mkdir()
@@ -85,9 +86,9 @@ def sequence(tmp_path):
     return tmp_path
 
 
-def test_shift_before_downsampling_uses_the_cnn_preprocessing(sequence):
-    X = data.load_frames(sequence, size=(16, 12))
-    full = data.load_frames(sequence, size=None, dtype=np.uint8)
+def test_shift_before_downsampling_uses_the_cnn_preprocessing(frames_folder):
+    X = sequence.load_frames(frames_folder, size=(16, 12))
+    full = sequence.load_frames(frames_folder, size=None, dtype=np.uint8)
     assert full.shape == (4, 48, 64, 1)
     same = shift.shift_before_downsampling(full, 0, 0, size=(16, 12))
     assert same.dtype == np.float32 and np.array_equal(same, X)               # no shift: the CNN input
@@ -102,9 +103,9 @@ def test_shift_before_downsampling_uses_the_cnn_preprocessing(sequence):
         shift.shift_before_downsampling(full.astype(np.float32), 1)
 
 
-def test_control_inputs(sequence):
-    X = data.load_frames(sequence, size=(16, 12))
-    full = data.load_frames(sequence, size=None, dtype=np.uint8)
+def test_control_inputs(frames_folder):
+    X = sequence.load_frames(frames_folder, size=(16, 12))
+    full = sequence.load_frames(frames_folder, size=None, dtype=np.uint8)
     c = shift.control_inputs(X, full, dx=1)
     assert list(c) == list(shift.CONTROLS)
     assert all(v.shape == X.shape and v.dtype == np.float32 for v in c.values())

@@ -7,7 +7,7 @@ import pytest
 
 keras = pytest.importorskip("keras")
 
-from greenloop import shufflenet as S  # noqa: E402
+from greenloop.backbones import shufflenet as S  # noqa: E402
 
 
 def _trainable(model) -> int:

@@ -1,5 +1,5 @@
-"""greenloop.stream (Detector, preprocessing, TFLite export) and the `python -m greenloop detect` CLI.
-Correctness only; speed is measured by `python -m greenloop.bench`."""
+"""greenloop.speed.stream (Detector, preprocessing, TFLite export) and the `python -m greenloop detect` CLI.
+Correctness only; speed is measured by `python -m greenloop.speed.bench`."""
 import os
 import subprocess
 import sys
@@ -12,8 +12,9 @@ import pytest
 os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
 keras = pytest.importorskip("keras")
 
-from greenloop import cnn, data, dictionary  # noqa: E402
-from greenloop.stream import Detector, export_tflite, preprocess  # noqa: E402
+from greenloop import cnn, dictionary  # noqa: E402
+from greenloop.datasets import sequence  # noqa: E402
+from greenloop.speed.stream import Detector, export_tflite, preprocess  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -100,8 +101,8 @@ def test_preprocessing_equals_load_frames(tmp_path, ext):
     for i, shape in enumerate([(61, 97, 3), (480, 640, 3), (20, 25, 3), (32, 32, 3)]):
         img = cv2.GaussianBlur(rng.integers(0, 256, shape, dtype=np.uint8), (5, 5), 2)
         cv2.imwrite(str(folder / "rgb" / f"{i}.{ext}"), img)
-    paths = data.list_frames(folder)
-    expected = data.load_frames(folder)  # mixed native sizes, all resized to 32x32
+    paths = sequence.list_frames(folder)
+    expected = sequence.load_frames(folder)  # mixed native sizes, all resized to 32x32
     assert expected.shape == (len(paths), 32, 32, 1)
     for p, exp in zip(paths, expected):
         bgr = preprocess(cv2.imread(str(p), cv2.IMREAD_COLOR))  # a camera frame: BGR uint8
@@ -111,8 +112,8 @@ def test_preprocessing_equals_load_frames(tmp_path, ext):
     (same / "rgb").mkdir(parents=True)
     for i in range(3):
         cv2.imwrite(str(same / "rgb" / f"{i}.{ext}"), cv2.GaussianBlur(rng.integers(0, 256, (90, 120, 3), dtype=np.uint8), (5, 5), 2))
-    X = data.load_frames(same)
-    ours = np.stack([preprocess(cv2.imread(str(p))) for p in data.list_frames(same)])
+    X = sequence.load_frames(same)
+    ours = np.stack([preprocess(cv2.imread(str(p))) for p in sequence.list_frames(same)])
     assert np.array_equal(ours, X[..., 0])
 
 

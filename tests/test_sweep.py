@@ -1,4 +1,4 @@
-"""greenloop.sweep: grids and point names, a 2-point sweep of notebook 01 on a 2-worker Dask
+"""greenloop.study.sweep: grids and point names, a 2-point sweep of notebook 01 on a 2-worker Dask
 LocalCluster against the same points run one after another, and the faults: a point that raises,
 a rerun after an interruption, a worker killed mid-point."""
 import json
@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 import yaml
 
-from greenloop import sweep
+from greenloop.study import sweep
 
 ROOT = Path(__file__).resolve().parents[1]
 NB01 = ROOT / "notebooks" / "01_spot_grouping.ipynb"

@@ -1,11 +1,15 @@
-"""Tests of greenloop.synthetic: the embedded synthetic GreenHouse sequence (small and fast)."""
+"""Tests of greenloop.datasets.synthetic: the embedded synthetic GreenHouse sequence (small and fast)."""
 import json
 import math
 
 import numpy as np
 import pytest
 
-from greenloop import data, groundtruth, synthetic
+from greenloop import groundtruth
+from greenloop.datasets import sequence, synthetic
+from greenloop.datasets.synthetic.make import _parse_size
+from greenloop.datasets.synthetic.render import _grid
+from greenloop.datasets.synthetic.sensor import _sensor
 
 N, SIZE = 200, (160, 120)
 
@@ -81,30 +85,30 @@ def test_layout_and_camera_file(tiny_sequence):
     lines = (folder / "CameraTrajectory.txt").read_text().splitlines()
     assert len(lines) == N and lines[0].split()[0] == "0.000000"
     assert lines[-1].split()[0] == f"{N - 1}.000000"
-    cam = data.read_camera(folder)
+    cam = sequence.read_camera(folder)
     assert (cam["width"], cam["height"]) == SIZE
     assert cam["fx"] == pytest.approx(602.897 / 4) and cam["fy"] == pytest.approx(602.837 / 4)
     assert cam["cx"] == pytest.approx(328.28 / 4) and cam["cy"] == pytest.approx(241.4 / 4)
     assert cam["depth_scale"] == 5000.0
     meta = json.loads((folder / "synthetic.json").read_text())
     assert meta["n_frames"] == N and (meta["width"], meta["height"]) == SIZE and meta["seed"] == 0
-    assert data.describe(folder)["kind"] == "synthetic"
+    assert sequence.describe(folder)["kind"] == "synthetic"
     assert not list(folder.parent.glob(".*tmp*")), "temporary folder left behind"
 
 
 def test_frames_load_and_poses_match(tiny_sequence):
-    X = data.load_frames(tiny_sequence, progress=False)
+    X = sequence.load_frames(tiny_sequence, progress=False)
     assert X.shape == (N, 32, 32, 1) and X.dtype == np.float32
     assert 0.15 < X.mean() < 0.85 and X.std() > 0.05
-    rgb = data.load_frames(tiny_sequence, size=None, gray=False, limit=3, dtype=np.uint8)
+    rgb = sequence.load_frames(tiny_sequence, size=None, gray=False, limit=3, dtype=np.uint8)
     assert rgb.shape == (3, SIZE[1], SIZE[0], 3)
-    ids, poses = data.read_trajectory(tiny_sequence, n_frames=N)
+    ids, poses = sequence.read_trajectory(tiny_sequence, n_frames=N)
     assert np.array_equal(ids, np.arange(N))
     assert np.allclose(poses, synthetic.route(N, seed=0), atol=1e-6)
 
 
 def test_depth_is_in_plausible_metres(tiny_sequence):
-    D = data.load_depth(tiny_sequence)
+    D = sequence.load_depth(tiny_sequence)
     assert D.shape == (N, SIZE[1], SIZE[0])
     valid = D > 0
     assert 0.6 < valid.mean() < 1.0                      # holes: beyond 10 m, occlusion edges
@@ -115,7 +119,7 @@ def test_depth_is_in_plausible_metres(tiny_sequence):
 
 
 def test_images_are_a_coherent_sequence_with_a_revisit(tiny_sequence):
-    X = data.load_frames(tiny_sequence, progress=False)[..., 0].reshape(N, -1)
+    X = sequence.load_frames(tiny_sequence, progress=False)[..., 0].reshape(N, -1)
     step = np.abs(np.diff(X, axis=0)).mean(1)
     far = np.abs(X[:-60] - X[60:]).mean(1)
     assert np.median(step) < 0.5 * np.median(far)
@@ -138,8 +142,8 @@ def test_same_seed_same_bytes_any_worker_count_other_seed_differs(tiny_sequence,
     for name in ("rgb/0.png", "rgb/77.png", "depth/150.png", "CameraTrajectory.txt"):
         assert (tiny_sequence / name).read_bytes() != (other / name).read_bytes(), name
     # a different seed is the same greenhouse and route; details, jitter and lighting change
-    a = data.load_frames(tiny_sequence, progress=False)[..., 0]
-    b = data.load_frames(other, progress=False)[..., 0]
+    a = sequence.load_frames(tiny_sequence, progress=False)[..., 0]
+    b = sequence.load_frames(other, progress=False)[..., 0]
     assert np.abs(a - b).mean() < 0.8 * np.abs(a[:-60] - a[60:]).mean()
 
 
@@ -156,8 +160,8 @@ def test_noise_option_changes_pixels_not_structure():
     scene = synthetic.build_scene(0)
     poses, s = synthetic.route_world(200)
     img, depth = synthetic.render_frame(scene, poses[10], SIZE)
-    grid = synthetic._grid(SIZE)
-    outs = [synthetic._sensor(scene, img, depth, float(s[10]), grid, np.random.default_rng(5), noise)
+    grid = _grid(SIZE)
+    outs = [_sensor(scene, img, depth, float(s[10]), grid, np.random.default_rng(5), noise)
             for noise in (0.0, 0.0, 2.0)]
     assert np.array_equal(outs[0][0], outs[1][0]) and np.array_equal(outs[0][1], outs[1][1])
     diff = np.abs(outs[0][0].astype(float) - outs[2][0])
@@ -188,7 +192,7 @@ def test_existing_folder_needs_overwrite(tmp_path):
         synthetic.make_greenhouse(out, N, SIZE, progress=False)
     assert (out / "keep.txt").read_text() == "user data"
     synthetic.make_greenhouse(out, N, SIZE, progress=False, overwrite=True, workers=1)
-    assert not (out / "keep.txt").exists() and len(data.list_frames(out)) == N
+    assert not (out / "keep.txt").exists() and len(sequence.list_frames(out)) == N
     assert sorted(p.name for p in tmp_path.iterdir()) == ["seq"]
 
 
@@ -197,7 +201,7 @@ def test_cli_reports_bad_arguments(tmp_path, capsys):
     assert "n_frames >= 200" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         synthetic.main([str(tmp_path / "x"), "--size", "640by480"])
-    assert synthetic._parse_size("320x240") == (320, 240)
+    assert _parse_size("320x240") == (320, 240)
 
 
 def test_camera_intrinsics_scale_linearly():

@@ -47,11 +47,11 @@ import time
 import uuid
 from pathlib import Path
 
+import pandas as pd
 import yaml
 
-from . import report
-
-ROOT = Path(__file__).resolve().parents[1]
+from greenloop.study import report
+from greenloop.util.cache import CACHE_DIR, ROOT
 DEFAULT_DATASET = ROOT / "data" / "synthetic-greenhouse"
 TOPIC = "greenloop-sweep"            # Dask event topic: points report when they start and end
 JOBQUEUE = ("slurm", "pbs")
@@ -193,7 +193,7 @@ def point_env(cache=None) -> dict:
     """Environment every point's papermill and kernel get on top of the worker's: one shared model
     cache (``GREENLOOP_CACHE``, default $GREENLOOP_CACHE or results/models), this checkout on
     PYTHONPATH, TensorFlow's C++ logs off."""
-    cache = Path(cache or os.environ.get("GREENLOOP_CACHE") or ROOT / "results" / "models").resolve()
+    cache = Path(cache or CACHE_DIR).resolve()
     path = os.pathsep.join(p for p in (str(ROOT), os.environ.get("PYTHONPATH", "")) if p)
     return {"GREENLOOP_CACHE": str(cache), "PYTHONPATH": path, "TF_CPP_MIN_LOG_LEVEL": "2",
             "PYTHONUNBUFFERED": "1"}
@@ -519,8 +519,6 @@ def read_metric(results: Path, spec: str) -> dict:
     ``FILE.csv:COLUMN`` (a one-row CSV), or ``FILE.csv[KEY=VALUE]:COLUMN`` (the row where KEY equals
     the YAML value VALUE). Returns {COLUMN: value} plus its spread column (see ``sd_name``).
     """
-    import pandas as pd
-
     m = _METRIC.match(spec)
     if not m:
         path = results / "summary.json"
@@ -554,8 +552,6 @@ def collect(points: list[dict], notebook, metrics=()) -> "pd.DataFrame":
     """One row per point: its grid values (non-scalars as YAML flow text), status, attempts, wall
     time (s), error, the scalars of its ``<stem>/summary.json`` and the ``metrics`` (see
     ``read_metric``; read for points that finished ok)."""
-    import pandas as pd
-
     stem = Path(notebook).stem
     rows = []
     for p in points:
@@ -590,7 +586,6 @@ def figure(points: list[dict], table, metric: str, x: str | None = None, title: 
     """The swept quantity ``x`` (default: the first grid name with numeric values) against column
     ``metric`` of ``table``, one line per setting of the other grid names, error bars from the
     metric's spread column. Failed points are left out (the title counts them)."""
-    import pandas as pd
     from matplotlib.figure import Figure
 
     names = list(points[0]["values"])
@@ -632,8 +627,6 @@ def figure(points: list[dict], table, metric: str, x: str | None = None, title: 
 def write_outputs(points, table, out: Path, notebook, metric: str | None, x: str | None = None) -> Path:
     """``<out>/sweep.csv``, ``<out>/sweep.md`` and (when a metric is numeric somewhere)
     ``<out>/sweep.png``. Returns the .md path."""
-    import pandas as pd
-
     if metric is None:  # default: the first numeric summary scalar, else the wall time
         skip = set(points[0]["values"]) | {"status", "attempts", "wall_s", "error"}
         metric = next((c for c in table.columns if c not in skip

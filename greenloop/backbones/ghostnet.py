@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import torch_weights as _tw
+from greenloop.backbones import torch_weights as _tw
 
 TIMM_NAME = "ghostnet_100"
 WEIGHTS_FILENAME = "ghostnet_100.in1k.safetensors"
@@ -110,7 +110,7 @@ def keras_layer_name(timm_path: str) -> str:
     """Keras layer name of a timm module path: dots become double underscores
     (``blocks.3.0.se.conv_reduce`` -> ``blocks__3__0__se__conv_reduce``). Keras's torch backend
     forbids dots in names, and timm paths never contain ``__``, so the mapping is reversible
-    (``greenloop.torch_weights.keras_layer_name``)."""
+    (``greenloop.backbones.torch_weights.keras_layer_name``)."""
     return _tw.keras_layer_name(timm_path)
 
 
@@ -262,7 +262,7 @@ def load_timm_state_dict(model, state: dict) -> None:
     architecture, e.g. ghostnetv2 or ghostnet_130, fails here rather than loading garbage).
     """
     _tw.load_state_dict(model, state, arch=f"timm's {TIMM_NAME}",
-                        hint="use timm/ghostnet_100.in1k model.safetensors (see greenloop.ghostnet "
+                        hint="use timm/ghostnet_100.in1k model.safetensors (see greenloop.backbones.ghostnet "
                              "docs)", head_prefixes=("conv_head.", "classifier."))
 
 

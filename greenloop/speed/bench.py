@@ -1,6 +1,6 @@
-"""Speed benchmark: the paper's pipeline as written vs greenloop.stream, in one process.
+"""Speed benchmark: the paper's pipeline as written vs greenloop.speed.stream, in one process.
 
-    python -m greenloop.bench [--out results/bench] [--dataset data/synthetic-greenhouse] [--quick]
+    python -m greenloop.speed.bench [--out results/bench] [--dataset data/synthetic-greenhouse] [--quick]
                               [--accuracy-seeds 10]
 
 Measures, interleaving reference and candidates so that load from other jobs hits both alike:
@@ -12,9 +12,9 @@ Measures, interleaving reference and candidates so that load from other jobs hit
     reach on this machine;
 (b) single frames, preprocessing included: median and p99 latency, reference (``model.predict`` on
     one frame) vs ``Detector.update``;
-(c) training seconds per epoch: plain ``model.fit`` (``greenloop.cnn.train(fast=False)``) vs the
-    fast path (``fast=True``: the fused numba trainer on a CPU) and XLA ``model.fit``
-    (``fast="xla"``), and the test accuracy of each after the same epochs;
+(c) training seconds per epoch: plain ``model.fit`` (``greenloop.cnn.train(trainer="plain")``) vs
+    the fast path ("fast": ``trainer="auto"``, the fused numba trainer on a CPU) and XLA
+    ``model.fit`` (``trainer="xla"``), and the test accuracy of each after the same epochs;
 (c') the full 200-epoch protocol over seeds, plain vs fast: both accuracy distributions and the
     training wall times (through the model cache; skipped with --quick);
 (d) label agreement of every backend with Keras on all frames; and the accuracy change of a
@@ -30,6 +30,7 @@ import datetime as _dt
 import os
 import platform
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -37,6 +38,13 @@ os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
 
 import cv2  # noqa: E402
 import numpy as np  # noqa: E402
+
+from greenloop import cnn, spots  # noqa: E402
+from greenloop.datasets import sequence  # noqa: E402
+from greenloop.dictionary import LoopDetector  # noqa: E402
+from greenloop.speed.stream import Detector, export_tflite, preprocess  # noqa: E402
+from greenloop.study import report  # noqa: E402
+from greenloop.util.kernels import run_chunked  # noqa: E402
 
 WINDOW = 70
 FRAMES_PER_SPOT = 60
@@ -47,8 +55,6 @@ def _synthetic(n: int, n_raw: int, seed: int = 0):
     """Random stand-in data: (raw (n_raw, 480, 640, 3) uint8 BGR noise frames for timing,
     X (n, 32, 32, 1) float32 and y (n,) spot labels: each spot a random 32x32 gray template plus
     per-frame noise, so a classifier can learn it)."""
-    from . import spots
-
     rng = np.random.default_rng(seed)
     raw = rng.integers(0, 256, (n_raw, RAW_SIZE[1], RAW_SIZE[0], 3), dtype=np.uint8)
     y = spots.group(n, FRAMES_PER_SPOT)
@@ -59,16 +65,14 @@ def _synthetic(n: int, n_raw: int, seed: int = 0):
 
 def _load(dataset: Path):
     """(raw frames list for timing, u8 (N, 32, 32) preprocessed frames, y (N,), info dict)."""
-    from . import data, spots
-
     n_raw = 2 * WINDOW
     if dataset.is_dir():
-        paths = data.list_frames(dataset)
+        paths = sequence.list_frames(dataset)
         raw = [cv2.imread(str(p), cv2.IMREAD_COLOR) for p in paths[:n_raw]]
         if any(r is None for r in raw):
             raise ValueError(f"cannot read the first {n_raw} frames of {dataset}")
-        u8 = data.load_frames(dataset, dtype=np.uint8, progress=False)[..., 0]
-        info = {"dataset": str(dataset), "random_frames": False, **data.describe(dataset)}
+        u8 = sequence.load_frames(dataset, dtype=np.uint8, progress=False)[..., 0]
+        info = {"dataset": str(dataset), "random_frames": False, **sequence.describe(dataset)}
     else:
         n = 2260
         raw, u8 = _synthetic(n, n_raw)
@@ -89,8 +93,6 @@ def _stats(ts) -> dict:
 
 def _reference_window(model, frames, detector) -> list:
     """The paper's pipeline: preprocess each frame, model.predict the window, Python dict loop."""
-    from .stream import preprocess
-
     X = np.stack([preprocess(f) for f in frames])[..., None]
     labels = model.predict(X, batch_size=len(X), verbose=0).argmax(1)
     return [detector.update(int(c)) for c in labels]
@@ -100,8 +102,6 @@ def _gray_pass(frames) -> None:
     """The cheapest step every exact pipeline needs: one cv2.cvtColor pass over each raw frame (it
     reads every byte once), split over the detector's preprocessing threads. Its time is a floor
     for a window, so reference / floor bounds the speed-up any backend can reach on this machine."""
-    from .kernels import run_chunked
-
     def work(idx):
         for i in idx:
             cv2.cvtColor(frames[i], cv2.COLOR_BGR2GRAY)
@@ -111,9 +111,6 @@ def _gray_pass(frames) -> None:
 
 def bench_windows(model, raw, dets, rounds: int) -> dict:
     """(a) 70-frame windows from raw frames; all pipelines interleaved round by round."""
-    from .dictionary import LoopDetector
-    from .stream import preprocess
-
     n_classes = int(model.output_shape[-1])
     wins = [raw[i:i + WINDOW] for i in range(0, len(raw) - WINDOW + 1, WINDOW)]
     pre = [np.stack([preprocess(f) for f in w])[..., None] for w in wins]
@@ -148,9 +145,6 @@ def bench_windows(model, raw, dets, rounds: int) -> dict:
 
 def bench_single(model, raw, dets, n_ref: int, n_ours: int) -> dict:
     """(b) one frame at a time, preprocessing included; blocks of each pipeline interleaved."""
-    from .dictionary import LoopDetector
-    from .stream import preprocess
-
     n_classes = int(model.output_shape[-1])
     ref_dict = LoopDetector(n_classes, None)  # counts, never fires
     times = {"reference": [], **{k: [] for k in dets}}
@@ -176,16 +170,14 @@ def bench_single(model, raw, dets, n_ref: int, n_ours: int) -> dict:
 
 
 def bench_training(X, y, seeds, epochs: int) -> dict:
-    """(c) seconds per epoch and test accuracy: cnn.train(fast=False) (plain model.fit) vs fast=True
-    vs fast="xla", interleaved seed by seed (the first trainer rotates)."""
-    from . import cnn
-
-    trainers = {"plain": False, "fast": True, "xla": "xla"}
+    """(c) seconds per epoch and test accuracy: cnn.train(trainer="plain") (plain model.fit) vs
+    trainer="auto" ("fast") vs trainer="xla", interleaved seed by seed (the first trainer rotates)."""
+    trainers = {"plain": "plain", "fast": "auto", "xla": "xla"}
     runs = {kind: [] for kind in trainers}
     for i, seed in enumerate(seeds):
         order = list(runs)[i % len(runs):] + list(runs)[:i % len(runs)]  # rotate who goes first
         for kind in order:
-            model, h, split = cnn.train(X, y, seed, epochs=epochs, fast=trainers[kind],
+            model, h, split = cnn.train(X, y, seed, epochs=epochs, trainer=trainers[kind],
                                         cache=False, progress=True)
             ep = h["epoch_seconds"]
             runs[kind].append({"seed": int(seed), "seconds": h["seconds"], "epoch_seconds": ep,
@@ -202,10 +194,10 @@ def bench_training(X, y, seeds, epochs: int) -> dict:
                      "mean_test_accuracy": float(np.mean([r["test_accuracy"] for r in rs]))}
     out["epochs"] = int(epochs)
     out["n_train_frames"] = int(len(runs["plain"][0]["split"]["train"]))
-    out["trainer"] = cnn.trainer(True)
+    out["trainer"] = cnn.resolve_trainer("auto")
     out["note"] = ("seconds_per_epoch: median wall time of epochs 2.. (the first holds XLA or numba "
                    "compilation; total_seconds includes it), validation on the test split included; "
-                   "fast = cnn.train(fast=True), xla = model.fit with XLA and one call per epoch")
+                   "fast = cnn.train(trainer='auto'), xla = model.fit with XLA and one call per epoch")
     return out, runs["fast"][0]
 
 
@@ -219,11 +211,9 @@ def bench_accuracy(X, y, seeds, epochs: int) -> dict:
     it was trained, so these times are not interleaved (the per-epoch rows are).
     Returns {kind: {'seeds', 'test_accuracy', 'training_seconds'}, 'epochs': epochs}.
     """
-    from . import cnn
-
     out = {"epochs": int(epochs)}
     for kind in ("plain", "fast"):
-        runs = cnn.run_seeds(X, y, seeds, epochs=epochs, fast=kind == "fast")
+        runs = cnn.run_seeds(X, y, seeds, epochs=epochs, trainer={"plain": "plain", "fast": "auto"}[kind])
         out[kind] = {"seeds": [r["seed"] for r in runs],
                      "test_accuracy": [r["test_accuracy"] for r in runs],
                      "training_seconds": [float(r["history"]["seconds"]) for r in runs]}
@@ -243,11 +233,10 @@ def same_distribution(plain, fast) -> dict:
 
 
 def main(argv=None) -> int:
-    """CLI: time the reference and greenloop.stream, train both ways, write bench.json / .md / .csv."""
+    """CLI: time the reference and greenloop.speed.stream, train both ways, write bench.json / .md / .csv."""
     args = _parse_args(argv)
     t_start = time.perf_counter()
 
-    from .stream import Detector
 
     quick = args.quick
     raw, u8, y, info = _load(Path(args.dataset))
@@ -256,7 +245,6 @@ def main(argv=None) -> int:
     print(f"[bench] {len(u8)} frames, {n_classes} spots, random={info['random_frames']}", flush=True)
 
     model = _quick_model(X, y, n_classes)
-    import tempfile
     tmpdir = tempfile.TemporaryDirectory()
     dets = _detectors(model, Path(tmpdir.name))
 
@@ -295,7 +283,7 @@ def main(argv=None) -> int:
 
 def _parse_args(argv):
     """The command line (see the module docstring) as an argparse Namespace."""
-    ap = argparse.ArgumentParser(prog="python -m greenloop.bench", description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(prog="python -m greenloop.speed.bench", description=__doc__.split("\n")[0])
     ap.add_argument("--out", default="results/bench", help="output folder (default results/bench)")
     ap.add_argument("--dataset", default="data/synthetic-greenhouse",
                     help="sequence folder (default data/synthetic-greenhouse; random frames if missing)")
@@ -312,7 +300,6 @@ def _quick_model(X, y, n_classes: int):
     the timing is architecture-bound, and the agreement check needs only some weights."""
     import keras
 
-    from . import cnn
 
     keras.utils.set_random_seed(0)
     model = cnn.build(n_classes, jit_compile=False)
@@ -326,8 +313,6 @@ def _detectors(model, tmpdir: Path) -> dict:
     (threshold None: the dictionary counts, no closure is declared). The int8 export (written
     into ``tmpdir``) has a quarter of the dense layer's bytes to read per frame; its labels may
     differ from Keras, so it is judged by its test-accuracy change instead."""
-    from .stream import Detector, export_tflite
-
     return {"numpy": Detector(model, None, backend="numpy"),
             "tflite": Detector(model, None, backend="tflite"),
             "tflite-int8": Detector(export_tflite(model, tmpdir / "int8.tflite", quantize=True), None)}
@@ -336,8 +321,6 @@ def _detectors(model, tmpdir: Path) -> dict:
 def _agreement(model, dets: dict, X, u8) -> dict:
     """(d) per backend: how many of the frames u8 (N, 32, 32) uint8 get Keras's label (Keras on
     X (N, 32, 32, 1) float32). Returns {backend: {'frames', 'same_labels', 'fraction'}}."""
-    from . import cnn
-
     ref_labels = cnn.predict(model, X)
     agreement = {}
     for k, d in dets.items():
@@ -356,9 +339,6 @@ def _quantized_accuracy(quick: bool, fast_run: dict, epochs: int, X, y, u8, tmpd
     'keras_accuracy', 'tflite_float_accuracy', 'tflite_dynamic_range_accuracy' (fractions),
     'change_points' (percentage points), 'model' (which one)}.
     """
-    from . import cnn
-    from .stream import Detector, export_tflite
-
     if quick:
         q_model, q_split, q_desc = fast_run["model"], fast_run["split"], f"fast-path model, seed {fast_run['seed']}, {epochs} epochs"
     else:
@@ -378,8 +358,6 @@ def _quantized_accuracy(quick: bool, fast_run: dict, epochs: int, X, y, u8, tmpd
 def _result(quick, info, n_classes, default_backend, windows, single, training, accuracy,
             agreement, quant) -> dict:
     """bench.json's content: the figures plus date, machine, CPU and versions."""
-    from . import report
-
     return {
         "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
         "machine": platform.node(), "platform": platform.platform(), "cpu": report.cpu_model(),
@@ -487,16 +465,15 @@ def _write(out: Path, result: dict, rows: list[dict]) -> None:
     """Write <out>/bench.json and the table <out>/bench.md / bench.csv, and print the table."""
     import pandas as pd
 
-    from . import report
 
     info = result["data"]
     report.write_json(out / "bench.json", result)
     note = (f"Run {result['date']} on {result['cpu']}, {'random frames' if info['random_frames'] else info['dataset']}"
             f"{', --quick' if result['quick'] else ''}. Reference: cv2 preprocessing + Keras model.predict + Python "
-            f"dictionary loop; ours: greenloop.stream.Detector (default backend {result['default_backend']}). "
+            f"dictionary loop; ours: greenloop.speed.stream.Detector (default backend {result['default_backend']}). "
             f"Reference and ours interleaved in one process; tflite-int8 is the dynamic-range quantised "
             f"export, judged by its test-accuracy change, not by label equality.")
-    md = report.write_table(pd.DataFrame(rows), out / "bench", title="Speed: reference vs greenloop.stream", note=note)
+    md = report.write_table(pd.DataFrame(rows), out / "bench", title="Speed: reference vs greenloop.speed.stream", note=note)
     print(md.read_text())
 
 

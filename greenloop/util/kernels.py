@@ -10,7 +10,7 @@
   its moments flushed to zero below float32's smallest normal number, as TensorFlow's FTZ does.
 * ``area_shrink``: OpenCV's INTER_AREA shrink of a gray uint8 image by integer factors (the
   main paper's 640x480 -> 32x32 is 20 x 15), bit-identical to ``cv2.resize`` and faster than
-  it (OpenCV runs a scalar loop for factors other than 2); ``greenloop.data.preprocess_image``
+  it (OpenCV runs a scalar loop for factors other than 2); ``greenloop.datasets.sequence.preprocess_image``
   uses it after checking it against OpenCV once per image shape.
 
 Each kernel is checked against the library it replaces in tests/test_kernels.py. numba is imported
@@ -328,7 +328,7 @@ def _checked_area(shape):
     img = np.random.default_rng(0).integers(0, 256, (h, w), dtype=np.uint8)
     ours = fn(img, h // oh, w // ow, np.empty((oh, ow), np.uint8))
     if not np.array_equal(ours, cv2.resize(img, (ow, oh), interpolation=cv2.INTER_AREA)):
-        warnings.warn(f"greenloop.kernels.area_shrink differs from cv2.resize on {w}x{h} -> {ow}x{oh}; "
+        warnings.warn(f"greenloop.util.kernels.area_shrink differs from cv2.resize on {w}x{h} -> {ow}x{oh}; "
                       f"using OpenCV", RuntimeWarning, stacklevel=3)
         return None
     return fn
@@ -348,9 +348,8 @@ def one_blas_thread():
     threadpoolctl is missing: the one BLAS limit of the streaming detectors and the LSH timings.
 
     On a shared 2-core machine a 2-thread OpenBLAS matmul waits at its barrier whenever one thread
-    is preempted: measured median 5.3 ms / p99 20 ms per frame with 2 threads vs 0.35 / 0.86 ms
-    with 1 (greenloop.stream's docstring); one thread is also what one robot core would give.
-    The BLAS libraries are looked up once per process (~7 us per call afterwards).
+    is preempted, which makes per-frame latencies long-tailed; one thread is also what one robot
+    core would give. The BLAS libraries are looked up once per process.
     (cnn._fit_fused keeps its own ``threadpool_limits(limits=1)`` around training.)
     """
     blas = _blas_controller()

@@ -13,7 +13,9 @@ descriptions: nothing to measure).
 """
 from __future__ import annotations
 
+import argparse
 import json
+import sys
 from pathlib import Path
 
 import pandas as pd
@@ -145,7 +147,16 @@ def update_readme(readme, results_dirs) -> Path:
     return path
 
 
+def main(argv=None) -> int:
+    """CLI (``make readme-coverage``): refill README's coverage block from the results folders."""
+    ap = argparse.ArgumentParser(prog="python -m greenloop.study.coverage",
+                                 description="Refill a Markdown file's <!-- coverage:start --> block from results folders.")
+    ap.add_argument("markdown", help="the file to update, e.g. README.md")
+    ap.add_argument("results", nargs="+", help="results folders to read, e.g. results results/nordland")
+    args = ap.parse_args(argv)
+    print(update_readme(args.markdown, args.results))
+    return 0
+
+
 if __name__ == "__main__":
-    # python -m greenloop.coverage README.md results results/nordland
-    import sys
-    print(update_readme(sys.argv[1], sys.argv[2:]))
+    sys.exit(main())

@@ -9,15 +9,15 @@ Frames
     H x W x 3 uint8 **BGR** (what ``cv2.imread`` and ``cv2.VideoCapture`` return; pass
     ``color="rgb"`` for RGB frames), or H x W / H x W x 1 uint8 gray. Any H, W: frames are
     resized to the model's input size (32 x 32) with ``cv2.INTER_AREA`` when shrinking and
-    ``cv2.INTER_LINEAR`` when enlarging, as ``greenloop.data.load_frames`` does.
+    ``cv2.INTER_LINEAR`` when enlarging, as ``greenloop.datasets.sequence.load_frames`` does.
 
 Preprocessing and training data
-    One path: ``greenloop.data.preprocess_image`` (cvtColor BGR->gray, then INTER_AREA resize),
+    One path: ``greenloop.datasets.sequence.preprocess_image`` (cvtColor BGR->gray, then INTER_AREA resize),
     which ``load_frames`` also applies to every frame it decodes in colour. A frame from disk and
     the same frame from a live camera give bit-identical model inputs (tests/test_stream.py).
 
 Backends (all give the labels of ``argmax(model.predict(x))``; checked by tests/test_stream.py
-and by ``python -m greenloop.bench`` on every frame of the dataset)
+and by ``python -m greenloop.speed.bench`` on every frame of the dataset)
     "numpy":  the paper's CNN written out in NumPy with the weights pulled from the Keras model:
               conv 3x3 as im2col (a strided view) x (9, 32) matmul, the 28800 x 68 dense layer as
               one float32 matmul, argmax of the logits (softmax is monotonic). No extra dependency,
@@ -29,17 +29,17 @@ and by ``python -m greenloop.bench`` on every frame of the dataset)
     "keras":  ``model.predict`` (the reference; slow, for comparison only).
     "auto":   "tflite" when TensorFlow has tf.lite, else "numpy" (paper's architecture only).
 
-Why "auto" picks TFLite: in ``python -m greenloop.bench`` (reference and candidates interleaved in
+Why "auto" picks TFLite: in ``python -m greenloop.speed.bench`` (reference and candidates interleaved in
 one process; the figures are in results/bench/bench.md) TFLite has the lowest window and
 single-frame times of the backends that give Keras's labels on every frame; NumPy is the
-dependency-free fallback. A numba forward pass (the training kernels of ``greenloop.kernels``, with
+dependency-free fallback. A numba forward pass (the training kernels of ``greenloop.util.kernels``, with
 the dense layer skipping the ReLU's zero rows) was no faster than TFLite and is not offered. Costs no
 backend removes: the 28800 x 68 dense layer means reading a 7.8 MB weight matrix per forward pass
 (2.2 MFLOP/frame), and the exact preprocessing of a 640x480 BGR frame must read its 921,600 bytes
-(cvtColor). The 20x15 area shrink after it runs in ``greenloop.kernels.area_shrink`` (the same bytes
+(cvtColor). The 20x15 area shrink after it runs in ``greenloop.util.kernels.area_shrink`` (the same bytes
 as OpenCV, whose loop for this factor is scalar). The bench's floor row (one cvtColor pass over the window's frames on
 all cores) bounds the window speed-up of any pipeline that converts colour with OpenCV. NumPy's
-BLAS runs on one thread inside these calls (``_single_thread_blas``): on a loaded 2-core machine a
+BLAS runs on one thread inside these calls (``kernels.one_blas_thread``): on a loaded 2-core machine a
 two-thread matmul stalls whenever one thread is pre-empted.
 """
 from __future__ import annotations
@@ -47,14 +47,16 @@ from __future__ import annotations
 import contextlib
 import io
 import os
+import warnings
 from pathlib import Path
 
 import numpy as np
 
-from .data import preprocess_image
-from .common import positive_int, write_atomic
-from .dictionary import LoopDetector
-from .kernels import one_blas_thread, run_chunked
+from greenloop.datasets.sequence import preprocess_image
+from greenloop.dictionary import LoopDetector
+from greenloop.util.checks import positive_int
+from greenloop.util.files import write_atomic
+from greenloop.util.kernels import one_blas_thread, run_chunked
 
 BACKENDS = ("auto", "numpy", "tflite", "keras")
 COLORS = ("bgr", "rgb")
@@ -87,7 +89,7 @@ def preprocess_u8(frame: np.ndarray, size=(32, 32), color: str = "bgr") -> np.nd
     size: (width, height) in pixels.
     Returns (height, width) uint8: cvtColor to gray, then resize with INTER_AREA when the frame is
     wider than ``size`` and INTER_LINEAR otherwise (no resize when the size already matches),
-    exactly as ``greenloop.data.load_frames`` treats a frame it decoded.
+    exactly as ``greenloop.datasets.sequence.load_frames`` treats a frame it decoded.
     """
     if color not in COLORS:
         raise ValueError(f"color must be one of {COLORS}, got {color!r}")
@@ -113,7 +115,7 @@ def _load_model(model):
         if not path.is_file():
             raise FileNotFoundError(f"model file {path} not found: pass a trained .keras model "
                                     f"(greenloop.cnn.train saves them under results/models/<key>/"
-                                    f"model.keras) or a .tflite file from greenloop.stream.export_tflite")
+                                    f"model.keras) or a .tflite file from greenloop.speed.stream.export_tflite")
         suffix = path.suffix.lower()
         if suffix == ".keras":
             import keras
@@ -169,13 +171,12 @@ class _NumpyNet:
         if n_pos * w["wc"].shape[1] != w["wd"].shape[0]:
             raise ValueError(f"dense layer expects {w['wd'].shape[0]} inputs, conv gives "
                              f"{n_pos * w['wc'].shape[1]}")
-        self._blas = _single_thread_blas()
         # preallocated buffers for the single-frame path
         self._a1 = np.empty((n_pos, w["wc"].shape[1]), np.float32)
         self._h1 = np.empty((1, w["wd"].shape[1]), np.float32)
 
     def labels(self, X: np.ndarray) -> np.ndarray:
-        with self._blas():
+        with one_blas_thread():
             return self._labels(X)
 
     def _labels(self, X: np.ndarray) -> np.ndarray:
@@ -200,11 +201,6 @@ class _NumpyNet:
         return z.argmax(1).astype(np.int64)
 
 
-def _single_thread_blas():
-    """A context-manager factory: ``kernels.one_blas_thread`` (BLAS on one thread, see there)."""
-    return one_blas_thread
-
-
 class _TFLiteNet:
     """TFLite interpreters (XNNPACK): one for single frames (min(2, cores) threads), a
     multi-thread one for windows (resized to the window length on demand).
@@ -212,7 +208,6 @@ class _TFLiteNet:
 
     def __init__(self, content: bytes, num_threads: int | None = None):
         tf = _tensorflow_lite()
-        import warnings
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             self.one = tf.lite.Interpreter(model_content=content, num_threads=min(2, os.cpu_count() or 1))

@@ -2,7 +2,7 @@
 
 Source: github.com/SCAU-AIUS/SLAM-for-agricultural-equipment, folder ``dataset/``: ``rgb/``,
 ``depth/`` (2261 frames each, about 1.2 GB), ``CameraTrajectory.txt`` and ``D435i.yaml``.
-Run ``make data`` or ``python -m greenloop.download data/greenhouse``.
+Run ``make data`` or ``python -m greenloop.datasets.greenhouse data/greenhouse``.
 """
 from __future__ import annotations
 
@@ -14,7 +14,8 @@ import urllib.request
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-from .common import write_atomic
+from greenloop.util.files import write_atomic
+from greenloop.util.progress import bar as tqdm  # in the terminal, never in a notebook
 
 REPO = "SCAU-AIUS/SLAM-for-agricultural-equipment"
 BASE_URL = os.environ.get("GREENLOOP_DATA_URL",
@@ -36,7 +37,7 @@ then run the notebooks with DATASET={folder}."""
 
 
 def _fetch(url: str, dest: Path, timeout: float) -> int:
-    """Download url to dest atomically (common.write_atomic: a temporary file, then a rename).
+    """Download url to dest atomically (util.files.write_atomic: a temporary file, then a rename).
     Returns bytes written."""
     n = 0
 
@@ -76,10 +77,9 @@ def download(folder="data/greenhouse", base_url: str = BASE_URL, n_frames: int =
         except (urllib.error.URLError, OSError, TimeoutError) as e:
             raise RuntimeError(MANUAL.format(url=todo[0][0], err=e, repo=REPO, folder=folder)) from e
         todo = todo[1:]
-    from .progress import bar as tqdm  # in the terminal, not in the notebook
 
-    with ThreadPoolExecutor(workers) as pool, tqdm(total=len(jobs), initial=len(jobs) - len(todo),
-                                                 desc="GreenHouse", unit="file", disable=not progress) as bar:
+    with ThreadPoolExecutor(workers) as pool, tqdm(total=len(jobs), initial=len(jobs) - len(todo), desc="GreenHouse",
+                                                   unit="file", disable=not progress) as bar:
         futures = [pool.submit(_fetch, u, d, timeout) for u, d in todo]
         failed = []
         for f, (u, _) in zip(futures, todo):

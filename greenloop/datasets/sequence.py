@@ -33,7 +33,8 @@ import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from . import kernels
+from greenloop.util import kernels
+from greenloop.util.progress import bar as tqdm  # in the terminal, never in a notebook
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 DEPTH_SCALE = 5000.0  # D435i convention: metres = value / DEPTH_SCALE
@@ -83,7 +84,7 @@ def preprocess_image(img: np.ndarray, size=(32, 32), gray: bool = True, color: s
     (H, W, 1) gray. size: (width, height) or None to keep the size. gray: convert to gray with
     OpenCV's cvtColor (else return RGB).
     Returns (h, w) uint8 gray or (h, w, 3) uint8 RGB, resized with INTER_AREA when shrinking and
-    INTER_LINEAR when enlarging. ``load_frames`` and ``greenloop.stream`` both call this, so a
+    INTER_LINEAR when enlarging. ``load_frames`` and ``greenloop.speed.stream`` both call this, so a
     frame from disk and the same frame from a live camera give identical model inputs.
     """
     if img.ndim == 3 and img.shape[2] == 1:
@@ -98,7 +99,7 @@ def preprocess_image(img: np.ndarray, size=(32, 32), gray: bool = True, color: s
         h, w = img.shape[:2]
         if (w, h) != (int(size[0]), int(size[1])):
             # integer shrink factors of a gray frame (640x480 -> 32x32): the same bytes as
-            # cv2.resize(INTER_AREA), 4x faster (greenloop.kernels.area_shrink)
+            # cv2.resize(INTER_AREA), without OpenCV's scalar loop (greenloop.util.kernels.area_shrink)
             small = kernels.area_shrink(img, size) if w > size[0] else None
             if small is not None:
                 return small
@@ -142,7 +143,6 @@ def load_frames(folder, size=(32, 32), gray: bool = True, limit: int | None = No
     with ThreadPoolExecutor(workers) as pool:
         it = pool.map(lambda p: _read_one(p, size, gray), paths)
         if show:
-            from .progress import bar as tqdm  # in the terminal, not in the notebook
             it = tqdm(it, total=len(paths), desc=f"load {Path(folder).name}", unit="frame")
         images = list(it)
     shapes = {im.shape for im in images}
@@ -368,7 +368,7 @@ def fingerprint(folder, limit: int | None = None) -> str:
 def describe(folder) -> dict:
     """What a sequence folder holds: {'path', 'kind', 'n_frames', 'width', 'height', 'depth',
     'trajectory', 'camera', 'ground_truth'}. kind is 'synthetic' when the folder carries the
-    generator's ``synthetic.json`` (greenloop.synthetic), else 'real or user-provided'.
+    generator's ``synthetic.json`` (greenloop.datasets.synthetic), else 'real or user-provided'.
     ground_truth is what ``greenloop.groundtruth.for_sequence`` will use: 'poses'
     (CameraTrajectory.txt), 'pairs' (ground_truth.csv) or None (no ground truth)."""
     folder = Path(folder)

@@ -2,22 +2,27 @@
 
 Every notebook writes under ``<results_dir>/<notebook stem>/``; ``make`` assembles the ``*.md``
 tables there into ``results/tables.md`` without re-executing anything
-(``python -m greenloop.report results``), and the results of several datasets into one table
-(``python -m greenloop.report --datasets results/datasets.md results results/nordland``).
+(``python -m greenloop.study.report results``), and the results of several datasets into one table
+(``python -m greenloop.study.report --datasets results/datasets.md results results/nordland``).
 """
 from __future__ import annotations
 
+import argparse
 import datetime as _dt
 import json
 import os
 import platform
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import psutil
 
-from .common import write_atomic  # the one atomic file write, also report.write_atomic
+from greenloop.datasets import sequence
+from greenloop.study import coverage
+from greenloop.util.files import write_atomic  # the one atomic file write, also report.write_atomic
 
 PAPER, RUN = "paper", "this run"
 
@@ -59,8 +64,6 @@ def paper_vs_run(rows):
     rows: iterable of (quantity, paper value or None, measured value[, note]).
     Returns a DataFrame with columns: quantity | paper | this run | note.
     """
-    import pandas as pd
-
     out = []
     for r in rows:
         q, paper, run, note = (list(r) + [""])[:4]
@@ -111,12 +114,6 @@ def manifest(folder, parameters: dict, dataset: str | Path | None = None, **extr
     dataset path, fingerprint and ground-truth kind ('poses', 'pairs' or None), the wall time of
     this process so far (for a notebook executed by papermill: its kernel, i.e. the notebook's
     run time), plus any extra fields."""
-    import time
-
-    import psutil
-
-    from . import data
-
     info = {"date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
             "wall_seconds": round(time.time() - psutil.Process().create_time(), 1),
             "machine": platform.node(), "platform": platform.platform(), "cpu": cpu_model(),
@@ -124,10 +121,10 @@ def manifest(folder, parameters: dict, dataset: str | Path | None = None, **extr
     if dataset is not None:
         info["dataset"] = str(dataset)
         try:
-            info["dataset_fingerprint"] = data.fingerprint(dataset)
+            info["dataset_fingerprint"] = sequence.fingerprint(dataset)
         except (FileNotFoundError, ValueError) as e:
             info["dataset_fingerprint"] = f"unavailable: {e}"
-        info["dataset_ground_truth"] = data.ground_truth_kind(dataset)
+        info["dataset_ground_truth"] = sequence.ground_truth_kind(dataset)
     info.update(extra)
     return write_json(Path(folder) / "manifest.json", info)
 
@@ -237,21 +234,37 @@ def write_cross_dataset(results_dirs, out) -> Path:
 
 
 def write_coverage(results_dirs, out) -> Path:
-    """Write :func:`greenloop.coverage.coverage` of these results folders as ``out`` (.md, .csv)."""
-    from . import coverage
+    """Write :func:`greenloop.study.coverage.coverage` of these results folders as ``out`` (.md, .csv)."""
     return write_table(coverage.coverage(results_dirs), Path(out).with_suffix(""),
                        title="Coverage: every table and figure of the five papers",
-                       note="Status read from the results folders (greenloop.coverage): an item whose "
+                       note="Status read from the results folders (greenloop.study.coverage): an item whose "
                             "output is in none of them is 'not run'. `datasets`: where its output is.")
 
 
-if __name__ == "__main__":
-    # python -m greenloop.report [RESULTS]               -> RESULTS/tables.md
-    # python -m greenloop.report --datasets OUT DIR ...  -> OUT (.md, .csv) across datasets
-    # python -m greenloop.report --coverage OUT DIR ...  -> OUT (.md, .csv): the papers' coverage
-    if sys.argv[1:2] == ["--datasets"]:
-        print(write_cross_dataset(sys.argv[3:], sys.argv[2]))
-    elif sys.argv[1:2] == ["--coverage"]:
-        print(write_coverage(sys.argv[3:], sys.argv[2]))
+def main(argv=None) -> int:
+    """CLI (``make`` calls it): assemble RESULTS/tables.md, or with --datasets / --coverage write
+    one table across results folders. Prints the file written."""
+    ap = argparse.ArgumentParser(prog="python -m greenloop.study.report",
+                                 description="Assemble the notebooks' tables from a results folder.")
+    ap.add_argument("results", nargs="*", default=["results"],
+                    help="results folder (default results); with --datasets/--coverage: every folder to read")
+    group = ap.add_mutually_exclusive_group()
+    group.add_argument("--datasets", metavar="OUT", help="write one table across the results folders (.md, .csv)")
+    group.add_argument("--coverage", metavar="OUT", help="write the papers' coverage read from the results folders")
+    args = ap.parse_args(argv)
+    missing = [d for d in args.results if not Path(d).is_dir()]
+    if missing:
+        ap.error(f"no such results folder: {', '.join(missing)} (run `make all` first, or name another)")
+    if args.datasets:
+        print(write_cross_dataset(args.results, args.datasets))
+    elif args.coverage:
+        print(write_coverage(args.results, args.coverage))
+    elif len(args.results) != 1:
+        ap.error("give one results folder (or --datasets / --coverage for several)")
     else:
-        print(assemble_tables(*(sys.argv[1:2] or ["results"])))
+        print(assemble_tables(args.results[0]))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

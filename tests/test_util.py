@@ -1,44 +1,44 @@
-"""greenloop.common: the one integer check and the one atomic file write / folder publish."""
+"""greenloop.util: the one integer check (checks) and the one atomic file write / folder publish (files)."""
 import os
 
 import numpy as np
 import pytest
 
-from greenloop import common
+from greenloop.util import checks, files
 
 
 def test_positive_int_accepts_and_refuses_with_the_argument_named():
-    assert common.positive_int("k", 3) == 3 and type(common.positive_int("k", np.int64(3))) is int
-    assert common.positive_int("exclude", 0, 0, unit="frames") == 0
+    assert checks.positive_int("k", 3) == 3 and type(checks.positive_int("k", np.int64(3))) is int
+    assert checks.positive_int("exclude", 0, 0, unit="frames") == 0
     with pytest.raises(ValueError, match=r"^exclude must be an integer >= 0 \(frames\), got -1$"):
-        common.positive_int("exclude", -1, 0, unit="frames")
+        checks.positive_int("exclude", -1, 0, unit="frames")
     with pytest.raises(ValueError, match=r"n_bits must be an integer in \[1, 32\], got 33"):
-        common.positive_int("n_bits", 33, 1, 32)
+        checks.positive_int("n_bits", 33, 1, 32)
     for bad in (True, 2.0, "3", None, 0):
         with pytest.raises(ValueError, match="k must be an integer >= 1"):
-            common.positive_int("k", bad)
-    assert common.positive_int("seq_len", 4.0, whole_floats=True) == 4
+            checks.positive_int("k", bad)
+    assert checks.positive_int("seq_len", 4.0, whole_floats=True) == 4
     with pytest.raises(ValueError, match="seq_len must be an integer >= 1, got 4.5"):
-        common.positive_int("seq_len", 4.5, whole_floats=True)
+        checks.positive_int("seq_len", 4.5, whole_floats=True)
 
 
 def test_write_atomic_writes_text_bytes_and_callables_and_leaves_nothing_on_failure(tmp_path):
     p = tmp_path / "sub" / "a.txt"
-    assert common.write_atomic(p, "héllo") == p and p.read_text(encoding="utf-8") == "héllo"
-    common.write_atomic(p, b"\x00\x01")
+    assert files.write_atomic(p, "héllo") == p and p.read_text(encoding="utf-8") == "héllo"
+    files.write_atomic(p, b"\x00\x01")
     assert p.read_bytes() == b"\x00\x01"
-    common.write_atomic(p, lambda t: np.save(t, np.arange(3)) or os.replace(str(t) + ".npy", t))
+    files.write_atomic(p, lambda t: np.save(t, np.arange(3)) or os.replace(str(t) + ".npy", t))
     assert np.load(p).tolist() == [0, 1, 2]
 
     def fail(t):
         t.write_text("half")
         raise OSError("disk full")
     with pytest.raises(OSError, match="disk full"):
-        common.write_atomic(p, fail)
+        files.write_atomic(p, fail)
     assert np.load(p).tolist() == [0, 1, 2]                       # the old file untouched
     assert sorted(x.name for x in p.parent.iterdir()) == ["a.txt"]   # no temporary left behind
     with pytest.raises(TypeError):
-        common.write_atomic(p, 3)
+        files.write_atomic(p, 3)
 
 
 def test_publish_folder_replaces_a_folder_whole(tmp_path):
@@ -47,6 +47,6 @@ def test_publish_folder_replaces_a_folder_whole(tmp_path):
         tmp = tmp_path / f".tmp-{content}"
         tmp.mkdir()
         (tmp / "f").write_text(content)
-        assert common.publish_folder(tmp, dest) == dest
+        assert files.publish_folder(tmp, dest) == dest
         assert (dest / "f").read_text() == content and not tmp.exists()
     assert sorted(x.name for x in tmp_path.iterdir()) == ["out"]       # the old one deleted

@@ -4,7 +4,7 @@ Source (github.com/TimQuelch/seqslam, folder ``datasets/nordland_trimmed``; NRK'
 "Nordlandsbanen: minute by minute, season by season", Creative Commons; cite Suenderhauf,
 Neubert, Protzel, ICRA 2013 workshop): ``summer/images-00010.png ... images-35760.png`` and
 ``winter/`` with the same names, every 10th frame of the 10 fps recordings, 64x32 RGB. Frame k of
-summer and frame k of winter show the same place. ``build`` writes (see ``greenloop.data``)::
+summer and frame k of winter show the same place. ``build`` writes (see ``greenloop.datasets.sequence``)::
 
     rgb/0.png ... rgb/n-1.png      summer, in numeric order of the source names
     rgb/n.png ... rgb/2n-1.png     winter: winter frame k is frame n + k
@@ -24,7 +24,7 @@ its 15 mean 150 of these frames. We keep the stricter window, so that naming a p
 minutes of travel away is not counted as a loop; ``tolerance=150`` (``--tolerance 150``) gives
 the looser reading.
 
-Run ``make nordland`` or ``python -m greenloop.nordland data/nordland [--src FOLDER]``; without
+Run ``make nordland`` or ``python -m greenloop.datasets.nordland data/nordland [--src FOLDER]``; without
 ``--src`` the source is cloned (``git clone --depth 1``) into a temporary folder.
 """
 from __future__ import annotations
@@ -43,8 +43,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from . import data
-from .common import publish_folder
+from greenloop.datasets import sequence
+from greenloop.util.files import publish_folder
+from greenloop.util.progress import bar as tqdm  # in the terminal, never in a notebook
 
 SOURCE_URL = "https://github.com/TimQuelch/seqslam"
 SOURCE_SUBDIR = "datasets/nordland_trimmed"
@@ -86,7 +87,7 @@ def check_source(src) -> tuple[list[Path], list[Path], tuple[int, int]]:
     seasons = {}
     for s in SEASONS:
         try:
-            seasons[s] = data.list_frames(src / s)
+            seasons[s] = sequence.list_frames(src / s)
         except ValueError:
             raise ValueError(f"{src / s} holds no .png/.jpg images: {FIX}") from None
     summer, winter = seasons["summer"], seasons["winter"]
@@ -131,14 +132,12 @@ def alignment_pairs(n: int, tolerance: int) -> np.ndarray:
 
 def _write(tmp: Path, summer, winter, tolerance: int, meta: dict, progress: bool) -> None:
     """Copy the frames (summer then winter) and write ground_truth.csv and nordland.json."""
-    from .progress import bar as tqdm  # in the terminal, not in the notebook
-
     (tmp / "rgb").mkdir(parents=True)
     frames = summer + winter
     for k, p in enumerate(tqdm(frames, desc="nordland", unit="frame", disable=not progress)):
         shutil.copyfile(p, tmp / "rgb" / f"{k}{p.suffix.lower()}")
     n = len(summer)
-    data.write_loop_pairs(tmp / data.GROUND_TRUTH_NAME, alignment_pairs(n, tolerance))
+    sequence.write_loop_pairs(tmp / sequence.GROUND_TRUTH_NAME, alignment_pairs(n, tolerance))
     (tmp / "nordland.json").write_text(json.dumps(meta, indent=1, sort_keys=True) + "\n")
 
 
@@ -163,13 +162,13 @@ def build(out, src, tolerance: int = TOLERANCE, overwrite: bool = False, progres
                               f"folder, or pass overwrite=True (CLI: --overwrite)")
     summer, winter, (w, h) = check_source(src)
     n = len(summer)
-    meta = {"generator": "greenloop.nordland", "format": 1,
+    meta = {"generator": "greenloop.datasets.nordland", "format": 1,
             "source": source_name or str(source_folder(src)), "source_repository": SOURCE_URL,
             "source_folder": SOURCE_SUBDIR, "seasons": list(SEASONS), "frames_per_season": n,
             "n_frames": 2 * n, "width": w, "height": h,
             "traversals": {"summer": [0, n], "winter": [n, 2 * n]},
             "source_names": [summer[0].name, summer[-1].name],
-            "ground_truth": {"file": data.GROUND_TRUTH_NAME,
+            "ground_truth": {"file": sequence.GROUND_TRUTH_NAME,
                              "pairs": "summer k with winter n + k +- tolerance, clipped to winter",
                              "tolerance_frames": tolerance,
                              "default_tolerance": f"{SAMPLE_TOLERANCE}: the source's "
@@ -217,8 +216,8 @@ def clone_source(dest, url: str = SOURCE_URL, timeout: float = 20.0,
 
 
 def main(argv=None) -> int:
-    """CLI: ``python -m greenloop.nordland OUT [--src SRC] [--url URL] [--tolerance T]``."""
-    ap = argparse.ArgumentParser(prog="python -m greenloop.nordland",
+    """CLI: ``python -m greenloop.datasets.nordland OUT [--src SRC] [--url URL] [--tolerance T]``."""
+    ap = argparse.ArgumentParser(prog="python -m greenloop.datasets.nordland",
                                  description="Build the Nordland summer+winter sequence folder.")
     ap.add_argument("out", help="output sequence folder, e.g. data/nordland")
     ap.add_argument("--src", help="local source folder (summer/, winter/) or a clone of the source "
@@ -244,7 +243,7 @@ def main(argv=None) -> int:
         return 1
     meta = json.loads((out / "nordland.json").read_text())
     print(f"wrote {meta['n_frames']} frames ({meta['frames_per_season']} per season) and "
-          f"{data.GROUND_TRUTH_NAME} to {out} in {time.perf_counter() - t0:.1f} s")
+          f"{sequence.GROUND_TRUTH_NAME} to {out} in {time.perf_counter() - t0:.1f} s")
     return 0
 
 

@@ -1,0 +1,3 @@
+"""Building blocks every stage shares, importing nothing else of greenloop: integer-argument
+checks (``checks``), atomic file writes (``files``), the on-disk model and descriptor cache
+(``cache``), terminal progress bars (``progress``) and the compiled CPU kernels (``kernels``)."""
