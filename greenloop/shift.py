@@ -195,6 +195,12 @@ def perturbation_grid(predict, runs: list[dict], X: np.ndarray, labels: np.ndarr
     return grid
 
 
+def perturbation_summary(grid):
+    """:func:`perturbation_grid`'s rows (a DataFrame) summarised over runs: one row per
+    perturbation and amount (sorted), with the mean, std and min of accuracy_% (2 decimals)."""
+    return grid.groupby(["perturbation", "amount"])["accuracy_%"].agg(["mean", "std", "min"]).round(2).reset_index()
+
+
 def frame_set_scores(predict, runs: list[dict], X: np.ndarray, X1: np.ndarray, labels: np.ndarray):
     """A shift scored on each of ``FRAME_SETS``: does including the training frames change it.
 

@@ -171,6 +171,18 @@ def test_perturbation_grid_by_direction():
     assert got["rotation", 180] == got["rotation", -180] == 0.0  # column c -> 7 - c
 
 
+def test_perturbation_summary_over_runs():
+    import pandas as pd
+
+    X, y = _dots()
+    grid = pd.DataFrame(shift.perturbation_grid(_column, _runs(), X, y, shifts=[1], rotations=[180]))
+    s = shift.perturbation_summary(grid)
+    assert list(s.columns) == ["perturbation", "amount", "mean", "std", "min"]
+    assert list(zip(s.perturbation, s.amount))[:2] == [("rotation", -180), ("rotation", 180)] and len(s) == 6
+    left = s[(s.perturbation == "shift left") & (s.amount == 1)].iloc[0]      # seed 0: 0 %, seed 1: 50 %
+    assert (left["mean"], left["std"], left["min"]) == (25.0, round(np.std([0, 50], ddof=1), 2), 0.0)
+
+
 def test_frame_set_scores_subtracts_the_same_runs_test_frames():
     X, y = _dots()
     per_seed, summary = shift.frame_set_scores(_column, _runs(), X, shift.shift(X, -1), y)
