@@ -495,7 +495,7 @@ def leakage_controls(X: np.ndarray, y: np.ndarray, seeds, gaps=(0, 5, 10, 20, 40
         return {"control": control, "gap": int(gap), "seed": r["seed"],
                 "n_train": len(r["split"]["train"]), "n_test": len(r["split"]["test"]),
                 "test_acc_%": round(100 * r["test_accuracy"], 2), "final_train_acc_%": round(final, 2),
-                "converged": bool(final >= 100 * converged_at)}
+                "converged": converged(r["history"], converged_at)}
 
     rows = []
     for gap in gaps:
