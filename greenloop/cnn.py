@@ -20,6 +20,9 @@ from greenloop.util.progress import bar as tqdm   # in the terminal, never in a 
 
 SPLITS = ("random", "blocked")
 BLOCKS = ("random", "centre")   # where split="blocked" puts each spot's test block
+# the runs of ``leakage_controls``: a blocked split, a random split with its number of training
+# frames, and a blocked split with the test block centred in its spot
+LEAKAGE_CONTROLS = ("blocked", "random, same n_train", "blocked, centred")
 
 
 def build(n_classes: int, input_shape=(32, 32, 1), jit_compile="auto", steps_per_execution: int = 1):
@@ -492,19 +495,155 @@ def leakage_controls(X: np.ndarray, y: np.ndarray, seeds, gaps=(0, 5, 10, 20, 40
         return {"control": control, "gap": int(gap), "seed": r["seed"],
                 "n_train": len(r["split"]["train"]), "n_test": len(r["split"]["test"]),
                 "test_acc_%": round(100 * r["test_accuracy"], 2), "final_train_acc_%": round(final, 2),
-                "converged": bool(final >= 100 * converged_at)}
+                "converged": converged(r["history"], converged_at)}
 
     rows = []
     for gap in gaps:
         for r in run_seeds(X, y, seeds, progress, split="blocked", gap=gap, **train_kw):
-            rows.append(row("blocked", gap, r))
+            rows.append(row(LEAKAGE_CONTROLS[0], gap, r))
             # the blocked split can keep one frame more than the random 80/20 split has (per-spot
             # rounding of the test blocks at gap 0): then the control keeps all of the random split's
             n_random = len(split_indices(y, r["seed"], train_kw.get("test_size", 0.2))[0])
             m = run_seeds(X, y, [r["seed"]], progress, split="random",
                           train_size=min(len(r["split"]["train"]), n_random), **train_kw)[0]
-            rows.append(row("random, same n_train", gap, m))
+            rows.append(row(LEAKAGE_CONTROLS[1], gap, m))
     for r in run_seeds(X, y, seeds, progress, split="blocked", gap=centre_gap, block="centre",
                        **train_kw):
-        rows.append(row("blocked, centred", centre_gap, r))
+        rows.append(row(LEAKAGE_CONTROLS[2], centre_gap, r))
     return rows
+
+
+def controls_by_grouping(X: np.ndarray, labels: dict, seeds, gap: int, converged_at: float = 0.95,
+                         progress: bool = True, **train_kw) -> list[dict]:
+    """Table 1 under the leakage control: ``leakage_controls`` at one gap for every grouping.
+
+    X: (N, H, W, C) frames; labels: {L: (N,) spot labels of L frames per spot}; seeds: ints;
+    gap: frames dropped on each side of a test block, for the blocked and the centred runs alike.
+    converged_at, train_kw: as in ``leakage_controls``. Returns its rows, L after L, each with
+    'frames_per_spot': L added last.
+    """
+    return [dict(row, frames_per_spot=L) for L, y in labels.items()
+            for row in leakage_controls(X, y, seeds, gaps=[gap], centre_gap=gap, converged_at=converged_at,
+                                        progress=progress, **train_kw)]
+
+
+# ------------------------------------------------------- summaries of runs over seeds
+def converged(history: dict, converged_at: float = 0.95) -> bool:
+    """Did a run fit its training frames: its final training accuracy (a fraction in [0, 1],
+    ``history['accuracy'][-1]``) is at least converged_at (a fraction)."""
+    return bool(history["accuracy"][-1] >= converged_at)
+
+
+def first_epoch(history: dict, target: float):
+    """The first epoch (1-based) whose validation accuracy (fraction) reaches target (fraction),
+    or None when no epoch does."""
+    hit = np.flatnonzero(np.asarray(history["val_accuracy"]) >= target)
+    return int(hit[0]) + 1 if len(hit) else None
+
+
+def accuracy_over_seeds(runs: list[dict], converged_at: float = 0.95) -> dict:
+    """Test accuracy of one grouping over seeds (Table 1's columns).
+
+    runs: ``run_seeds``' dicts of one grouping (at least one). Returns {'seeds', 'acc_mean_%',
+    'acc_std_%' (0 with one seed), 'acc_median_%', 'acc_min_%', 'acc_max_%',
+    'final_train_acc_min_%' (the worst seed's final training accuracy), 'converged_seeds'
+    (``converged``), 'acc_median_converged_%' (NaN when none converged)}: accuracies in %,
+    rounded to 2 decimals.
+    """
+    acc = np.array([r["test_accuracy"] for r in runs]) * 100
+    conv = np.array([converged(r["history"], converged_at) for r in runs])
+    return {"seeds": len(acc), "acc_mean_%": acc.mean().round(2),
+            "acc_std_%": acc.std(ddof=1).round(2) if len(acc) > 1 else 0.0,
+            "acc_median_%": np.median(acc).round(2), "acc_min_%": acc.min().round(2), "acc_max_%": acc.max().round(2),
+            "final_train_acc_min_%": round(100 * min(r["history"]["accuracy"][-1] for r in runs), 2),
+            "converged_seeds": int(conv.sum()),
+            "acc_median_converged_%": np.median(acc[conv]).round(2) if conv.any() else np.nan}
+
+
+def per_seed_rows(runs_by_split: dict, target_accuracy: float = 0.98, converged_at: float = 0.95,
+                  after_epoch: int = 45) -> list[dict]:
+    """One row per run: the figures the paper gives for its learning curves (Figures 3 and 4).
+
+    runs_by_split: {split name: ``run_seeds``' dicts}. target_accuracy, converged_at: fractions.
+    Returns dicts (split, seed, n_train, n_test, test_acc_%, epoch_to_<target in %>% (first
+    epoch whose validation accuracy reaches the target, None if none), min_val_acc_after_ep<after_epoch>_%
+    (lowest validation accuracy from epoch after_epoch + 1 on, or of the last epoch in a shorter
+    run), final_train_acc_%, converged, train_seconds): accuracies in %, rounded to 2 decimals.
+    """
+    rows = []
+    for split, rs in runs_by_split.items():
+        for r in rs:
+            h = r["history"]; va = np.asarray(h["val_accuracy"])
+            rows.append({"split": split, "seed": r["seed"], "n_train": len(r["split"]["train"]),
+                         "n_test": len(r["split"]["test"]), "test_acc_%": round(100 * r["test_accuracy"], 2),
+                         f"epoch_to_{int(target_accuracy * 100)}%": first_epoch(h, target_accuracy),
+                         f"min_val_acc_after_ep{after_epoch}_%": round(100 * va[min(after_epoch, len(va) - 1):].min(), 2),
+                         "final_train_acc_%": round(100 * h["accuracy"][-1], 2),
+                         "converged": converged(h, converged_at),
+                         "train_seconds": round(h["seconds"], 1)})
+    return rows
+
+
+def seed_summary(per_seed):
+    """Test accuracy over seeds per split, from ``per_seed_rows`` as a DataFrame.
+
+    Returns a DataFrame, one row per split (sorted by name): split, seeds, converged_seeds,
+    mean, std, median, worst, best (of test_acc_%, rounded to 2 decimals) and median_of_converged
+    (median test_acc_% of the converged seeds, NaN when none).
+    """
+    summ = per_seed.groupby("split").agg(seeds=("seed", "count"), converged_seeds=("converged", "sum"),
+                                         mean=("test_acc_%", "mean"), std=("test_acc_%", "std"),
+                                         median=("test_acc_%", "median"), worst=("test_acc_%", "min"),
+                                         best=("test_acc_%", "max")).round(2).reset_index()
+    summ["median_of_converged"] = [per_seed[(per_seed.split == s) & per_seed.converged]["test_acc_%"].median()
+                                   for s in summ.split]
+    return summ
+
+
+_ACC_STATS = {"mean": lambda a: a.mean(), "std": lambda a: a.std(ddof=1) if len(a) > 1 else 0.0,
+              "median": lambda a: a.median(), "min": lambda a: a.min(), "max": lambda a: a.max()}
+
+
+def summarise_controls(runs, by, stats=("median", "min", "max")):
+    """Leakage-control runs summarised per group.
+
+    runs: DataFrame of ``leakage_controls`` rows (or ``controls_by_grouping``'s); by: the columns
+    that make a group (e.g. ["control", "gap"]); stats: which of mean, std (0 for one run),
+    median, min, max of test_acc_% to give, in that order. Returns a DataFrame, one row per group
+    in order of appearance: the by columns, seeds, converged_seeds, n_train_median, acc_<stat>_%
+    per stat, acc_median_converged_% (NaN when none converged); rounded to 2 decimals.
+    """
+    import pandas as pd
+
+    unknown = [s for s in stats if s not in _ACC_STATS]
+    if unknown:
+        raise ValueError(f"unknown stats {unknown}: choose from {list(_ACC_STATS)}")
+
+    def summarise(d):
+        acc, conv = d["test_acc_%"], d[d.converged]["test_acc_%"]
+        return pd.Series({"seeds": len(d), "converged_seeds": int(d.converged.sum()),
+                          "n_train_median": int(d.n_train.median()),
+                          **{f"acc_{s}_%": _ACC_STATS[s](acc) for s in stats},
+                          "acc_median_converged_%": conv.median() if len(conv) else np.nan})
+
+    return runs.groupby(list(by), sort=False).apply(summarise, include_groups=False).round(2).reset_index()
+
+
+def memory_points(runs):
+    """What memory of neighbours buys: per seed and gap, the random split with the blocked
+    split's number of training frames minus the blocked (and the centred-block) run.
+
+    runs: DataFrame of ``leakage_controls`` rows. Returns a DataFrame indexed by (control, gap),
+    control in "blocked", "blocked, centred" (those present), with columns memory_points_median,
+    memory_points_min, memory_points_max over seeds (points of test accuracy, rounded to 2
+    decimals); pairs missing either run are left out.
+    """
+    import pandas as pd
+
+    pair = runs.pivot_table(index=["gap", "seed"], columns="control", values="test_acc_%")
+    matched = pair[LEAKAGE_CONTROLS[1]]
+    memory = pd.concat({c: (matched - pair[c]).dropna().groupby("gap").agg(["median", "min", "max"])
+                        for c in (LEAKAGE_CONTROLS[0], LEAKAGE_CONTROLS[2]) if c in pair},
+                       names=["control"]).round(2)
+    memory.columns = [f"memory_points_{c}" for c in memory.columns]
+    return memory

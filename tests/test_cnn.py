@@ -198,3 +198,102 @@ def test_leakage_control_matches_size_within_the_random_split(monkeypatch):
     rows = cnn.leakage_controls(np.zeros((7152, 1, 1, 1), np.float32), y, [0], gaps=[0])
     blocked, matched = (r for r in rows if r["control"] in ("blocked", "random, same n_train"))
     assert blocked["n_train"] == 5722 and matched["n_train"] == 5721
+
+
+def _run(seed, test_acc, train_acc, val_acc=(0.5,), n_train=8, n_test=2, seconds=1.25):
+    """A run_seeds dict without a model: what the summaries over seeds read."""
+    return {"seed": seed, "test_accuracy": test_acc, "split": {"train": np.arange(n_train), "test": np.arange(n_test)},
+            "history": {"accuracy": [0.1, train_acc], "val_accuracy": list(val_acc), "seconds": seconds}}
+
+
+def test_converged_and_first_epoch():
+    assert cnn.converged({"accuracy": [0.2, 0.95]}, 0.95) and not cnn.converged({"accuracy": [0.99, 0.94]}, 0.95)
+    h = {"val_accuracy": [0.5, 0.97, 0.98, 0.99]}
+    assert cnn.first_epoch(h, 0.98) == 3 and cnn.first_epoch(h, 0.5) == 1 and cnn.first_epoch(h, 0.995) is None
+
+
+def test_accuracy_over_seeds_by_hand():
+    runs = [_run(0, 0.90, 0.99), _run(1, 0.80, 0.50), _run(2, 0.70, 0.96)]
+    s = cnn.accuracy_over_seeds(runs, converged_at=0.95)
+    assert list(s) == ["seeds", "acc_mean_%", "acc_std_%", "acc_median_%", "acc_min_%", "acc_max_%",
+                       "final_train_acc_min_%", "converged_seeds", "acc_median_converged_%"]
+    assert s["seeds"] == 3 and s["acc_mean_%"] == 80.0 and s["acc_std_%"] == 10.0
+    assert (s["acc_median_%"], s["acc_min_%"], s["acc_max_%"]) == (80.0, 70.0, 90.0)
+    assert s["final_train_acc_min_%"] == 50.0 and s["converged_seeds"] == 2 and s["acc_median_converged_%"] == 80.0
+    one = cnn.accuracy_over_seeds([_run(0, 0.5, 0.2)], converged_at=0.95)
+    assert one["acc_std_%"] == 0.0 and one["converged_seeds"] == 0 and np.isnan(one["acc_median_converged_%"])
+
+
+def test_per_seed_rows_and_seed_summary():
+    import pandas as pd
+
+    runs = {"random": [_run(0, 0.9, 0.99, val_acc=(0.5, 0.98, 0.97, 0.99)), _run(1, 0.7, 0.5, val_acc=(0.2, 0.3, 0.4, 0.6))],
+            "blocked": [_run(0, 0.4, 0.96, n_train=6, seconds=2.0)]}
+    rows = cnn.per_seed_rows(runs, target_accuracy=0.98, converged_at=0.95, after_epoch=2)
+    assert [(r["split"], r["seed"]) for r in rows] == [("random", 0), ("random", 1), ("blocked", 0)]
+    r0 = rows[0]
+    assert list(r0) == ["split", "seed", "n_train", "n_test", "test_acc_%", "epoch_to_98%", "min_val_acc_after_ep2_%",
+                        "final_train_acc_%", "converged", "train_seconds"]
+    assert r0["epoch_to_98%"] == 2 and r0["min_val_acc_after_ep2_%"] == 97.0 and r0["converged"] is True
+    assert rows[1]["epoch_to_98%"] is None and rows[1]["min_val_acc_after_ep2_%"] == 40.0 and rows[1]["converged"] is False
+    assert rows[2]["n_train"] == 6 and rows[2]["min_val_acc_after_ep2_%"] == 50.0   # a 1-epoch run: its last epoch
+    summ = cnn.seed_summary(pd.DataFrame(rows))
+    assert list(summ.columns) == ["split", "seeds", "converged_seeds", "mean", "std", "median", "worst", "best",
+                                  "median_of_converged"]
+    assert list(summ.split) == ["blocked", "random"]
+    rnd = summ.set_index("split").loc["random"]
+    assert (rnd.seeds, rnd.converged_seeds, rnd["mean"], rnd["worst"], rnd["best"]) == (2, 1, 80.0, 70.0, 90.0)
+    assert rnd["std"] == round(np.std([90, 70], ddof=1), 2) and rnd.median_of_converged == 90.0
+
+
+def _control_rows():
+    import pandas as pd
+
+    rows = []
+    for gap, seed, blocked, matched, centred in ((0, 0, 60.0, 80.0, 70.0), (0, 1, 50.0, 90.0, 55.0), (5, 0, 40.0, 45.0, None)):
+        for control, acc in zip(cnn.LEAKAGE_CONTROLS, (blocked, matched, centred)):
+            if acc is not None:
+                rows.append({"control": control, "gap": gap, "seed": seed, "n_train": 100 - 2 * gap + seed,
+                             "test_acc_%": acc, "converged": acc > 52})
+    return pd.DataFrame(rows)
+
+
+def test_summarise_controls_gives_the_asked_statistics_only():
+    runs = _control_rows()
+    s = cnn.summarise_controls(runs, by=["control", "gap"], stats=("mean", "std", "median"))
+    assert list(s.columns) == ["control", "gap", "seeds", "converged_seeds", "n_train_median", "acc_mean_%", "acc_std_%",
+                               "acc_median_%", "acc_median_converged_%"]
+    assert list(zip(s.control, s.gap)) == [("blocked", 0), ("random, same n_train", 0), ("blocked, centred", 0),
+                                           ("blocked", 5), ("random, same n_train", 5)]
+    b0 = s.iloc[0]
+    assert (b0.seeds, b0.converged_seeds, b0.n_train_median, b0["acc_mean_%"], b0["acc_median_converged_%"]) == (2, 1, 100, 55.0, 60.0)
+    assert b0["acc_std_%"] == round(np.std([60, 50], ddof=1), 2) and s.iloc[3]["acc_std_%"] == 0.0   # one seed: 0
+    assert np.isnan(s.iloc[3]["acc_median_converged_%"])
+    t = cnn.summarise_controls(runs, by=["gap", "control"])
+    assert list(t.columns)[5:] == ["acc_median_%", "acc_min_%", "acc_max_%", "acc_median_converged_%"]
+    assert (t.iloc[0]["acc_min_%"], t.iloc[0]["acc_max_%"]) == (50.0, 60.0)
+    with pytest.raises(ValueError):
+        cnn.summarise_controls(runs, by=["gap"], stats=("p90",))
+
+
+def test_memory_points_pairs_runs_of_one_seed_and_gap():
+    m = cnn.memory_points(_control_rows())
+    assert list(m.columns) == ["memory_points_median", "memory_points_min", "memory_points_max"]
+    assert list(m.index) == [("blocked", 0), ("blocked", 5), ("blocked, centred", 0)]
+    assert tuple(m.loc[("blocked", 0)]) == (30.0, 20.0, 40.0)        # 80 - 60, 90 - 50
+    assert tuple(m.loc[("blocked", 5)]) == (5.0, 5.0, 5.0)
+    assert tuple(m.loc[("blocked, centred", 0)]) == (22.5, 10.0, 35.0)
+
+
+def test_controls_by_grouping_runs_one_gap_per_grouping(monkeypatch):
+    asked = []
+
+    def fake(X, y, seeds, gaps, centre_gap, converged_at, progress, **kw):
+        asked.append((int(y.max()), list(gaps), centre_gap, converged_at, kw))
+        return [{"control": "blocked", "gap": gaps[0], "seed": s} for s in seeds]
+    monkeypatch.setattr(cnn, "leakage_controls", fake)
+    labels = {20: spots.group(60, 20), 30: spots.group(60, 30)}
+    rows = cnn.controls_by_grouping(np.zeros((60, 1, 1, 1), np.float32), labels, [0, 1], gap=5, converged_at=0.9, epochs=3)
+    assert asked == [(2, [5], 5, 0.9, {"epochs": 3}), (1, [5], 5, 0.9, {"epochs": 3})]
+    assert [(r["frames_per_spot"], r["seed"]) for r in rows] == [(20, 0), (20, 1), (30, 0), (30, 1)]
+    assert list(rows[0]) == ["control", "gap", "seed", "frames_per_spot"]

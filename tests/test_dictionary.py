@@ -173,3 +173,23 @@ def test_declared_pairs_and_query_closures():
     assert c["first_delay"] == (hits[0] - np.flatnonzero(rev)[0] if len(hits) else None)
     with pytest.raises(ValueError, match="same frames"):
         dictionary.declared_pairs(pred, ref[:-1], tau, ex)
+
+
+def test_tau_sweep_scores_every_threshold():
+    # the example of test_score_closures_against_ground_truth: spots of 10, frames 30..39 revisit spot 0
+    n = 40
+    ref = np.arange(n) // 10
+    gt = np.zeros((n, n), bool)
+    for k in range(10):
+        gt[k, 30 + k] = gt[30 + k, k] = True
+    pred = ref.copy()
+    pred[30:] = 0
+    pred[15] = 2
+    rows = dictionary.tau_sweep(pred, ref, gt, [3, 12, 25], exclude=5)
+    assert list(rows[0]) == ["tau", "true_events", "false_events", "true_frames", "false_frames", "revisit_recall_%",
+                             "first_delay_frames"]
+    # tau 3: spots 0, 1, 2 fire on their first traversal (frames 2-9, 12-19 but 15, 21-29 flagged false);
+    # the revisit is flagged from its first frame
+    assert tuple(rows[0].values()) == (3, 0, 3, 10, 8 + 7 + 9, 100.0, 0)
+    assert tuple(rows[1].values()) == (12, 1, 0, 9, 0, 90.0, 1)        # spot 0 reaches 12 at frame 31
+    assert tuple(rows[2].values()) == (25, 0, 0, 0, 0, 0.0, None)      # no spot reaches 25

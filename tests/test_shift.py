@@ -122,3 +122,101 @@ def test_rotate_and_errors():
     assert shift.rotate(X, 30)[0, 4, 4, 0] == pytest.approx(1, abs=1e-3)
     with pytest.raises(ValueError):
         shift.shift(np.zeros((4, 4)), 1)
+
+
+# ------------------------------------------------------------ scoring under perturbations
+def _dots():
+    """8 frames of 8x8: frame i has one bright pixel at row 3, column i, and is labelled i; the
+    "model" names the column of the brightest pixel (0 for a blank frame)."""
+    X = np.zeros((8, 8, 8, 1), np.float32)
+    X[np.arange(8), 3, np.arange(8)] = 1
+    return X, np.arange(8)
+
+
+def _column(model, X):
+    assert model == "dots"
+    return X[..., 0].max(1).argmax(1)
+
+
+def _runs():
+    return [{"seed": 0, "model": "dots", "test_accuracy": 1.0, "split": {"train": np.arange(6), "test": np.array([6, 7])}},
+            {"seed": 1, "model": "dots", "test_accuracy": 0.5, "split": {"train": np.arange(1, 7), "test": np.array([0, 7])}}]
+
+
+def test_accuracy_and_frame_sets():
+    X, y = _dots()
+    assert shift.accuracy(_column, "dots", X, y) == 100.0
+    assert shift.accuracy(_column, "dots", shift.shift(X, -1), y) == 12.5     # only frame 0: blank, read as 0
+    sets = shift.frame_sets({"train": np.array([1, 2]), "test": np.array([0])}, 3)
+    assert list(sets) == list(shift.FRAME_SETS)
+    assert [s.tolist() for s in sets.values()] == [[0, 1, 2], [1, 2], [0]]
+
+
+def test_paper_scores_all_frames_and_test_only():
+    X, y = _dots()
+    rows = shift.paper_scores(_column, _runs(), shift.shift(X, -1), y)
+    assert rows == [{"seed": 0, "original_test_%": 100.0, "shift1_all_frames_%": 12.5, "shift1_test_only_%": 0.0},
+                    {"seed": 1, "original_test_%": 50.0, "shift1_all_frames_%": 12.5, "shift1_test_only_%": 50.0}]
+
+
+def test_perturbation_grid_by_direction():
+    X, y = _dots()
+    runs = _runs()[1:]                                   # test frames 0 and 7
+    grid = shift.perturbation_grid(_column, runs, X, y, shifts=[1, 2], rotations=[180])
+    got = {(g["perturbation"], g["amount"]): g["accuracy_%"] for g in grid}
+    assert len(grid) == 4 * 2 + 2 and all(g["seed"] == 1 for g in grid)
+    assert got["shift right", 1] == 0.0                  # 0 -> column 1, 7 falls off (blank: 0)
+    assert got["shift left", 1] == 50.0                  # 0 falls off and reads as 0; 7 -> 6
+    assert got["shift up", 2] == got["shift down", 1] == 100.0   # the column does not move
+    assert got["rotation", 180] == got["rotation", -180] == 0.0  # column c -> 7 - c
+
+
+def test_perturbation_summary_over_runs():
+    import pandas as pd
+
+    X, y = _dots()
+    grid = pd.DataFrame(shift.perturbation_grid(_column, _runs(), X, y, shifts=[1], rotations=[180]))
+    s = shift.perturbation_summary(grid)
+    assert list(s.columns) == ["perturbation", "amount", "mean", "std", "min"]
+    assert list(zip(s.perturbation, s.amount))[:2] == [("rotation", -180), ("rotation", 180)] and len(s) == 6
+    left = s[(s.perturbation == "shift left") & (s.amount == 1)].iloc[0]      # seed 0: 0 %, seed 1: 50 %
+    assert (left["mean"], left["std"], left["min"]) == (25.0, round(np.std([0, 50], ddof=1), 2), 0.0)
+
+
+def test_frame_set_scores_subtracts_the_same_runs_test_frames():
+    X, y = _dots()
+    per_seed, summary = shift.frame_set_scores(_column, _runs(), X, shift.shift(X, -1), y)
+    assert len(per_seed) == 6 and list(per_seed.frames[:3]) == list(shift.FRAME_SETS)
+    assert (per_seed["unshifted_%"] == 100).all()
+    # seed 0: all 1/8, train (0..5) 1/6, test (6, 7) 0; seed 1: all 1/8, train (1..6) 0, test (0, 7) 1/2
+    assert per_seed["shift1_%"].round(2).tolist() == [12.5, 16.67, 0.0, 12.5, 0.0, 50.0]
+    assert per_seed["shift1_vs_test_only_points"].round(2).tolist() == [12.5, 16.67, 0.0, -37.5, -50.0, 0.0]
+    assert list(summary.columns) == ["frames", "n_frames", "unshifted_%", "shift1_%", "shift1_vs_test_only_points"]
+    assert list(summary.frames) == list(shift.FRAME_SETS)
+    assert summary["n_frames"].tolist() == [8, 6, 2] and summary["shift1_%"].tolist() == [12.5, 8.33, 25.0]
+    assert summary["shift1_vs_test_only_points"].tolist() == [-12.5, -16.67, 0.0]
+
+
+def test_control_scores_and_the_one_shift_table():
+    X, y = _dots()
+    full = (X * 255).astype(np.uint8)                    # native = CNN size: every full-res shift is exact
+    controls, identical = shift.control_scores(_column, _runs(), X, full, y, shifts=[1])
+    assert identical == [True] * 4
+    assert list(controls.columns) == ["direction", "shift_px", "input", "accuracy_mean_%", "accuracy_std_%",
+                                      "changed_pixels_per_frame", "mean_abs_change_per_pixel"]
+    assert len(controls) == 4 * len(shift.CONTROLS)
+    c = controls.set_index(["direction", "input"])
+    left = c.loc[("left", shift.CONTROLS[0])]
+    assert (left["accuracy_mean_%"], left["accuracy_std_%"]) == (25.0, round(np.std([0, 50], ddof=1), 2))
+    assert left.changed_pixels_per_frame == 1.9 and left.mean_abs_change_per_pixel == round(15 / 64 / 8, 4)  # 7 x 2 + 1 pixels
+    assert c.loc[("up", shift.CONTROLS[1]), "accuracy_mean_%"] == 100.0
+    # right, replicate border: frame 0's pixel is copied into column 0 too and the first maximum wins -> right
+    # (seed 1); the zero border moves it to column 1; frame 7 falls off either way
+    assert c.loc[("right", shift.CONTROLS[0]), "accuracy_mean_%"] == 0.0
+    assert c.loc[("right", shift.CONTROLS[1]), "accuracy_mean_%"] == 25.0
+    wide = shift.controls_by_direction(controls, 1, no_shift=75.0)
+    assert list(wide.columns) == ["direction", "no shift", *shift.CONTROLS, "lost_to_shift_points", "won_back_by_replicate_points"]
+    assert list(wide.direction) == list(shift.DIRECTIONS)
+    wide = wide.set_index("direction")
+    assert (wide.loc["right", "lost_to_shift_points"], wide.loc["right", "won_back_by_replicate_points"]) == (75.0, 25.0)
+    assert (wide.loc["left", "lost_to_shift_points"], wide.loc["left", "won_back_by_replicate_points"]) == (50.0, 0.0)

@@ -91,11 +91,46 @@ def _stats(ts) -> dict:
             "mean_ms": float(ts.mean()), "n": int(len(ts))}
 
 
-def _reference_window(model, frames, detector) -> list:
-    """The paper's pipeline: preprocess each frame, model.predict the window, Python dict loop."""
-    X = np.stack([preprocess(f) for f in frames])[..., None]
+def paper_window(model, X, detector) -> list:
+    """The paper's own quantity, one window: Keras ``model.predict`` on the preprocessed frames
+    X (W, 32, 32, 1) float32 in one batch of W, then the Python dictionary loop
+    (``LoopDetector.update`` per predicted label). Returns the W answers of ``update``."""
     labels = model.predict(X, batch_size=len(X), verbose=0).argmax(1)
     return [detector.update(int(c)) for c in labels]
+
+
+def _reference_window(model, frames, detector) -> list:
+    """The paper's pipeline: preprocess each frame, model.predict the window, Python dict loop."""
+    return paper_window(model, np.stack([preprocess(f) for f in frames])[..., None], detector)
+
+
+def paper_claim(model, X, n_classes: int, threshold: int | None, window: int = WINDOW, repeats: int = 200,
+                warmup: int = 5, seed: int = 0):
+    """The paper's speed claim measured as it states it: classify a window of frames and count
+    them (:func:`paper_window`, preprocessing excluded), on windows of consecutive frames.
+
+    X: (N, 32, 32, 1) float32 preprocessed frames; n_classes, threshold: the ``LoopDetector``'s
+    (one detector counts across all windows); window: frames per window (fewer when N is
+    smaller); repeats: timed windows, after warmup untimed ones; seed: seeds the windows' random
+    start frames. Returns (res, times): times (repeats,) seconds per window; res {'window_frames',
+    'median_window_s', 'p95_window_s' (s), 'frames_per_s', 'median_ms_per_frame',
+    'p95_ms_per_frame' (ms), 'repeats', 'cpu' (this machine's CPU model)}.
+    """
+    det = LoopDetector(n_classes, threshold)
+    starts = np.random.default_rng(seed).integers(0, max(1, len(X) - window), size=warmup + repeats)
+    times = []
+    for k, s in enumerate(starts):
+        batch = X[s:s + window]
+        t0 = time.perf_counter()
+        paper_window(model, batch, det)
+        dt = time.perf_counter() - t0
+        if k >= warmup:
+            times.append(dt)
+    times, n = np.array(times), len(batch)
+    res = {"window_frames": n, "median_window_s": float(np.median(times)), "p95_window_s": float(np.percentile(times, 95)),
+           "frames_per_s": float(n / np.median(times)), "median_ms_per_frame": float(1e3 * np.median(times) / n),
+           "p95_ms_per_frame": float(1e3 * np.percentile(times, 95) / n), "repeats": len(times), "cpu": report.cpu_model()}
+    return res, times
 
 
 def _gray_pass(frames) -> None:
@@ -124,10 +159,7 @@ def bench_windows(model, raw, dets, rounds: int) -> dict:
     for r in range(rounds):
         w, X = wins[r % len(wins)], pre[r % len(pre)]
         t = time.perf_counter(); _reference_window(model, w, ref_dict); times["reference"].append(time.perf_counter() - t)
-        t = time.perf_counter()
-        for c in model.predict(X, batch_size=WINDOW, verbose=0).argmax(1):
-            ref_dict.update(int(c))
-        times["reference_no_preprocessing"].append(time.perf_counter() - t)
+        t = time.perf_counter(); paper_window(model, X, ref_dict); times["reference_no_preprocessing"].append(time.perf_counter() - t)
         t = time.perf_counter(); [preprocess(f) for f in w]; times["preprocessing_only"].append(time.perf_counter() - t)
         t = time.perf_counter(); _gray_pass(w); times["gray_pass_floor"].append(time.perf_counter() - t)
         for k, d in dets.items():
@@ -167,6 +199,39 @@ def bench_single(model, raw, dets, n_ref: int, n_ours: int) -> dict:
                 f = raw[i % len(raw)]; i += 1
                 t = time.perf_counter(); upd(f); times[k].append(time.perf_counter() - t)
     return {k: _stats(v) for k, v in times.items()}
+
+
+def raw_agreement(model, dets: dict, raw, X) -> dict:
+    """How many raw frames each detector labels as Keras does: dets {backend: ``Detector``} fed
+    the raw frames raw (list of (H, W, 3) uint8 BGR), Keras ``cnn.predict`` fed X[:len(raw)]
+    (the same frames preprocessed, (N, 32, 32, 1) float32). Returns {backend: equal labels}."""
+    keras_labels = cnn.predict(model, X[: len(raw)])
+    return {b: int((d.predict(np.stack(raw)) == keras_labels).sum()) for b, d in dets.items()}
+
+
+def stream_rows(windows: dict, single: dict, same: dict, n_frames: int) -> list[dict]:
+    """The reference, each streaming backend and the floor side by side (notebook 06's table).
+
+    windows: :func:`bench_windows`' result, single: :func:`bench_single`'s (same backends),
+    same: {backend: frames labelled as Keras} (:func:`raw_agreement`) in row order, n_frames: the
+    raw frames compared. Returns one dict per pipeline: pipeline, window_frames_per_s (rounded),
+    single_median_ms and single_p99_ms (3 decimals; None for the floor), window_speed-up (the
+    reference's median window time over the row's, 1 decimal), labels_equal ("k/n").
+    """
+    ref = windows["reference"]
+    rows = [{"pipeline": "reference: cv2 + model.predict + dict loop", "window_frames_per_s": round(ref["frames_per_s"]),
+             "single_median_ms": round(single["reference"]["median_ms"], 3), "single_p99_ms": round(single["reference"]["p99_ms"], 3),
+             "window_speed-up": 1.0, "labels_equal": f"{n_frames}/{n_frames}"}]
+    for b in same:
+        rows.append({"pipeline": f"greenloop.speed.stream ({b})", "window_frames_per_s": round(windows[b]["frames_per_s"]),
+                     "single_median_ms": round(single[b]["median_ms"], 3), "single_p99_ms": round(single[b]["p99_ms"], 3),
+                     "window_speed-up": round(ref["median_ms"] / windows[b]["median_ms"], 1),
+                     "labels_equal": f"{same[b]}/{n_frames}"})
+    fl = windows["gray_pass_floor"]  # one cvtColor pass over the raw bytes: every exact pipeline pays at least this
+    rows.append({"pipeline": "floor: one cvtColor pass over the raw frames (threaded)", "window_frames_per_s": round(fl["frames_per_s"]),
+                 "single_median_ms": None, "single_p99_ms": None,
+                 "window_speed-up": round(ref["median_ms"] / fl["median_ms"], 1), "labels_equal": ""})
+    return rows
 
 
 def bench_training(X, y, seeds, epochs: int) -> dict:
