@@ -48,6 +48,7 @@ __all__ = [
     "recall_at_100_precision",
     "recall_at_k", "operating_point", "split_mask", "NoHonestSplit", "mean_per_class_accuracy",
     "mpca_threshold", "tune_then_score", "closure_counts", "loop_scores", "chance_level",
+    "revisit_queries",
     "precision_at_recall", "interpolated_precision", "overlap_recall", "relative_rates",
     "loss_per_time_saved", "honest_split", "split_summary", "whitened_variants", "median_scores",
     "swapped_split", "per_spot", "spot_errors", "same_place_errors",
@@ -483,6 +484,13 @@ def chance_level(GT, exclude: int = 150, queries=None) -> float:
     G = _check_gt(GT)
     n = G.shape[0]
     return float(pair_scores(np.zeros((n, n), np.float32), G, exclude, queries)[0].mean())
+
+
+def revisit_queries(GT, exclude: int = 150) -> np.ndarray:
+    """(N,) bool: the queries with a loop partner among their counted pairs (frame j with some
+    GT[i, j], i < j - exclude, :func:`pair_mask`). GT: (N, N) bool; exclude: frames."""
+    G = _check_gt(GT)
+    return (G & pair_mask(G.shape[0], exclude)).any(0)
 
 
 def precision_at_recall(S, GT, recall: float, exclude: int = 150, queries=None) -> float:

@@ -498,3 +498,9 @@ def test_swapped_split_tunes_on_either_part():
                                                          ("B", "PCA-whitening dim"), ("B", "median size, L2")]
     r = ev.tune_then_score(sim.median_candidates(S_l2, (1, 3)), GT, 5, evq, tune)   # B: tune late, score early
     assert rows[3]["picked"] == r["value"] and rows[3]["AP_eval_%"] == round(100 * r["AP_eval"], 2)
+
+
+def test_revisit_queries_are_the_later_frames_of_counted_loop_pairs():
+    S, GT = hand_example()                      # counted loops (0,3) (0,4) (1,5) (3,6); (2,3) is inside the band
+    assert np.flatnonzero(ev.revisit_queries(GT, EXCL)).tolist() == [3, 4, 5, 6]
+    assert np.flatnonzero(ev.revisit_queries(GT, 3)).tolist() == [4, 5]     # j - i > 3: (0,4) and (1,5)
