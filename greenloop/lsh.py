@@ -47,6 +47,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from greenloop import evaluate
 from greenloop.similarity import l2_normalise
 from greenloop.util import kernels
 from greenloop.util.checks import positive_int
@@ -56,7 +57,8 @@ __all__ = [
     "MAX_BITS", "METHODS", "hyperplanes", "codes", "hamming_masks", "probe_order_swp", "qdp_costs",
     "perturbation_sets", "probe_order_qdp", "qdp_n_probes", "BucketIndex", "build_index", "insert",
     "MatchResult", "incremental_match", "query_index", "static_match", "scanned_matrix",
-    "best_match_matrix",
+    "best_match_matrix", "table6_variants", "run_scores", "compare_variants", "scanned_pr_curve",
+    "planted_queries", "scaling_test",
 ]
 
 MAX_BITS = 32                       # codes are uint32
@@ -626,4 +628,126 @@ def best_match_matrix(result: MatchResult, floor: float = -2.0) -> np.ndarray:
     out = np.full((n, n), floor, np.float32)
     ok = result.best >= 0
     out[result.best[ok], np.flatnonzero(ok)] = result.score[ok]
+    return out
+
+
+# -------------------------------------------- Qi 2024 Table 6, Figure 7, scaling (notebook 11)
+def table6_variants(centre: bool = True, centre_frames: int = 1) -> list:
+    """The matchers of Table 6: [(name, method, centre_frames)] for :func:`incremental_match`.
+
+    Brute force, scikit-learn, SWP and QDP with hyperplanes through the origin (the paper); with
+    centre, SWP and QDP again with hyperplanes through the mean of the first ``centre_frames``
+    frames (beyond the paper; notebook 11 uses exclude + 1, in frames of the sequence).
+    """
+    out = [("brute force", "brute", 0), ("NearestNeighbors (sklearn)", "sklearn", 0),
+           ("SWP-RHLSH", "swp", 0), ("QDP-RHLSH", "qdp", 0)]
+    if centre:
+        out += [("SWP-RHLSH, centred", "swp", centre_frames), ("QDP-RHLSH, centred", "qdp", centre_frames)]
+    return out
+
+
+def run_scores(r: MatchResult, S, brute: MatchResult, GT, exclude: int, revisit) -> dict:
+    """The scores of one incremental run (notebook 11's Table 6 columns).
+
+    r, brute: :func:`incremental_match` results (keep_candidates=True) of the method and of brute
+    force on the same N frames. S: (N, N) cosine matrix of the frames. GT: (N, N) bool ground
+    truth; exclude: band in frames; revisit: (N,) bool queries with a loop partner among their
+    candidates. Returns AP_pairs_% (AP of :func:`scanned_matrix`), AP_best_% (of
+    :func:`best_match_matrix`), R@1_% (best match a loop, over revisit queries), NN_agree_% (same
+    best match as brute force), scanned_% (candidates / stored), probes_per_query, N1_at_end (NaN
+    for brute/sklearn), ms_per_query, probe_ms_per_query (ms) and total_s (s); unrounded.
+    """
+    t, hashed = r.timed, r.method in ("swp", "qdp")
+    hit = (r.best >= 0) & np.asarray(GT)[np.maximum(r.best, 0), np.arange(len(r.best))]
+    return {"AP_pairs_%": 100 * evaluate.average_precision(scanned_matrix(S, r), GT, exclude),
+            "AP_best_%": 100 * evaluate.average_precision(best_match_matrix(r), GT, exclude),
+            "R@1_%": 100 * hit[revisit].mean(), "NN_agree_%": 100 * np.mean(r.best[t] == brute.best[t]),
+            "scanned_%": 100 * np.mean(r.n_candidates[t] / r.n_stored[t]),
+            "probes_per_query": float(r.n_probes[t].mean()) if hashed else np.nan,
+            "N1_at_end": int(r.n_buckets[-1]) if hashed else np.nan,
+            "ms_per_query": r.ms_per_query, "probe_ms_per_query": 1e3 * float(r.probe_seconds[t].mean()),
+            "total_s": float(r.seconds.sum())}
+
+
+def compare_variants(per_seed, reference: str = "brute force"):
+    """Table 6: every matcher's scores averaged over hyperplane seeds, against the reference's.
+
+    per_seed: a pandas DataFrame, one row per run: backbone, weights, label, variant, seed and the
+    columns of :func:`run_scores`. reference: the variant each backbone's rates are taken against.
+    Returns a DataFrame, one row per (backbone, weights, label, variant) in first-seen order: the
+    means, AP_pairs_sd (population sd over seeds, after AP_pairs_%) and ms_sd, then R_a_% and
+    R_t_% (:func:`greenloop.evaluate.relative_rates` of AP_pairs_% and ms_per_query against the
+    reference row of the same backbone) and loss_per_1%_time (-R_a / R_t, NaN unless R_t > 0).
+    """
+    keys = ["backbone", "weights", "label", "variant"]
+    metrics = [c for c in per_seed.columns if c not in keys + ["seed"]]
+    table = per_seed.groupby(keys, sort=False)[metrics].mean().reset_index()
+    spread = per_seed.groupby(keys, sort=False)[["AP_pairs_%", "ms_per_query"]].std(ddof=0).reset_index()
+    table.insert(5, "AP_pairs_sd", spread["AP_pairs_%"].values)
+    table["ms_sd"] = spread["ms_per_query"].values
+    ref = table[table.variant == reference].set_index("backbone")
+    table["R_a_%"], table["R_t_%"] = evaluate.relative_rates(
+        table["AP_pairs_%"], table["ms_per_query"],
+        table.backbone.map(ref["AP_pairs_%"]), table.backbone.map(ref["ms_per_query"]))
+    table["loss_per_1%_time"] = evaluate.loss_per_time_saved(table["R_a_%"], table["R_t_%"])
+    return table
+
+
+def scanned_pr_curve(S, result: MatchResult, GT, exclude: int, floor: float = -2.0):
+    """Figure 7's PR curve of one incremental run, over the pairs the method scanned.
+
+    S, result, floor: as :func:`scanned_matrix`; GT, exclude: as ``evaluate.pr_curve``.
+    Returns (precision, recall), each (T,): ``evaluate.pr_curve`` of the scanned matrix without
+    the point where the never-scanned pairs (scored ``floor``) are declared loops, so the curve
+    ends at the largest recall the method reaches.
+    """
+    p, r, th = evaluate.pr_curve(scanned_matrix(S, result, floor), GT, exclude)
+    keep = np.append(th > floor, True)
+    return p[keep], r[keep]
+
+
+def planted_queries(X, rows, angle_deg: float, rng) -> np.ndarray:
+    """Queries with a planted nearest neighbour: each at ``angle_deg`` degrees from X[rows[k]].
+
+    X: (N, D) float32 unit vectors; rows: (Q,) int the planted neighbours; rng: a NumPy Generator
+    (draws one (Q, D) normal matrix). Returns (Q, D): cos(a) X[rows] + sin(a) U, U a random unit
+    vector orthogonal to X[rows[k]].
+    """
+    angle = np.deg2rad(angle_deg)
+    U = rng.standard_normal((len(rows), X.shape[1])).astype(np.float32)
+    U -= (U * X[rows]).sum(1, keepdims=True) * X[rows]
+    return np.cos(angle) * X[rows] + np.sin(angle) * U / np.linalg.norm(U, axis=1, keepdims=True)
+
+
+def scaling_test(sizes, dim: int, n_queries: int = 200, angle_deg: float = 25.0, n_bits: int = 16,
+                 seed: int = 0, radius: int = 4, qdp_probes=(1000, 1500, 500), qdp_score: str = "margin",
+                 max_seconds: float | None = 2.0) -> list:
+    """Matching time against the number of stored descriptors, every method (notebook 11).
+
+    sizes: numbers of stored descriptors; dim: their dimension. Random unit vectors (NumPy
+    Generator seeded 0) are stored, at most n_queries of them (per size) are each queried by a
+    :func:`planted_queries` neighbour at angle_deg degrees, with :func:`query_index` and at most
+    max_seconds of queries per method. n_bits, seed: the hyperplanes; radius, qdp_probes,
+    qdp_score: the probing. Returns a list of dicts, per size (increasing) and method: stored,
+    method, dim, queries_timed, ms_per_query, ms_median (ms), scanned_% (candidates / stored),
+    probes_per_query and N1 (NaN for brute/sklearn), planted_found_% (best match = planted).
+    """
+    rng = np.random.default_rng(0)
+    Xs = rng.standard_normal((int(max(sizes)), dim), dtype=np.float32)
+    Xs /= np.linalg.norm(Xs, axis=1, keepdims=True)         # random unit vectors (mean ~0: no centring needed)
+    out = []
+    for n in sorted(int(s) for s in sizes):
+        rows = rng.choice(n, min(int(n_queries), n), replace=False)
+        Q = planted_queries(Xs, rows, angle_deg, rng)
+        index = build_index(Xs[:n], hyperplanes(dim, n_bits, seed))
+        for method in METHODS:
+            r = query_index(index, Q, method, radius=radius, qdp_probes=qdp_probes, qdp_score=qdp_score,
+                            max_seconds=max_seconds)
+            hashed = method in ("swp", "qdp")
+            out.append({"stored": n, "method": method, "dim": dim, "queries_timed": len(r.best),
+                        "ms_per_query": r.ms_per_query, "ms_median": 1e3 * float(np.median(r.seconds)),
+                        "scanned_%": 100 * float(np.mean(r.n_candidates / n)),
+                        "probes_per_query": float(r.n_probes.mean()) if hashed else np.nan,
+                        "N1": index.n_buckets if hashed else np.nan,
+                        "planted_found_%": 100 * float(np.mean(r.best == rows[:len(r.best)]))})
     return out

@@ -34,7 +34,8 @@ from greenloop.util.checks import positive_int
 
 __all__ = [
     "Projection", "l2_normalise", "pca_whiten", "zca_whiten", "apply_projection",
-    "cosine_matrix", "distance_similarity", "median_filter",
+    "cosine_matrix", "distance_similarity", "median_filter", "whitened_similarities",
+    "median_candidates", "rgbd_matrices",
 ]
 
 _COV_MODES = ("sample", "scatter")
@@ -404,3 +405,39 @@ def median_filter(S, size: int, footprint: str = "square") -> np.ndarray:
     if footprint == "square":
         return ndimage.median_filter(S, size=size, mode="nearest")
     return ndimage.median_filter(S, footprint=np.eye(size, dtype=bool), mode="nearest")
+
+
+# ------------------------------------------------------------- candidate sets for tuning
+def whitened_similarities(X, dims, kind: str = "pca", eps: float = 1e-5, fit=None) -> dict:
+    """The similarity matrix of every candidate whitening dimension, for tuning the dimension.
+
+    X, dims, kind, eps, fit: as :func:`whitening_candidates` (X (N, D), L2-normalised in the
+    notebooks; fit an (N,) bool mask of the fitting frames or None for every frame).
+    Returns {kept dim: (N, N) float32 S = 1 - D / max D} (:func:`distance_similarity` of the
+    whitened descriptors), one per kept dim, in the order of dims.
+    """
+    return {k: distance_similarity(Y) for k, Y in whitening_candidates(X, dims, kind, eps, fit=fit).items()}
+
+
+def median_candidates(S, sizes) -> dict:
+    """The similarity matrix median-filtered at every candidate size, for tuning the size.
+
+    S: (N_db, N_query) similarity matrix. sizes: odd window lengths in frames (:func:`median_filter`,
+    square footprint). Returns {size: (N_db, N_query)}: S itself (not a copy) for size 1, the
+    float32 filtered matrix for the others.
+    """
+    return {s: S if s == 1 else median_filter(S, s) for s in sizes}
+
+
+def rgbd_matrices(X) -> dict:
+    """Cosine similarity matrices of an RGB-D descriptor and of each of its halves (Qi 2024 Sec. 3.1.2).
+
+    X: (N, 2 D) descriptors from ``features.extract_rgbd``: the RGB descriptor in the first D
+    columns, the depth descriptor in the last D. Returns {"RGB": (N, N), "depth": (N, N),
+    "RGB-D": (N, N)} float32 :func:`cosine_matrix` of X[:, :D], X[:, D:] and the whole X.
+    """
+    X = _features(X)
+    if X.shape[1] % 2:
+        raise ValueError(f"X must hold an RGB and a depth half of equal length, got {X.shape[1]} columns")
+    D = X.shape[1] // 2
+    return {"RGB": cosine_matrix(X[:, :D]), "depth": cosine_matrix(X[:, D:]), "RGB-D": cosine_matrix(X)}

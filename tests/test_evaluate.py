@@ -406,3 +406,119 @@ def test_spot_errors_per_seed_tallies_every_run():
     assert tuple(rows[1].values())[2:] == (3, 0, 100.0, 0, None, 0)
     assert tuple(rows[2].values())[2:] == (2, 1, 50.0, 1, 100.0, 0)
     assert all(r["errors_on_same_place_other_time"] is None for r in ev.spot_errors_per_seed(runs, labels))
+
+
+# ------------------------------------------------------ the notebooks' protocol (07-11)
+def test_loop_scores_and_chance_level_on_the_hand_example():
+    S, GT = hand_example()
+    ap = (1 + 2 / 3 + 3 / 4 + 4 / 8) / 4
+    assert ev.loop_scores(S, GT, EXCL) == {"AP_%": round(100 * ap, 2), "R@100P_%": 25.0}
+    assert list(ev.loop_scores(S, GT, EXCL, tag="_RGB")) == ["AP_RGB_%", "R@100P_RGB_%"]
+    assert ev.chance_level(GT, EXCL) == pytest.approx(4 / 10)      # 4 loops among 10 counted pairs
+    q = np.zeros(N, bool); q[6] = True                              # pairs (0,6) (1,6) (2,6) (3,6): one loop
+    assert ev.chance_level(GT, EXCL, queries=q) == pytest.approx(1 / 4)
+
+
+def test_precision_at_recall_is_the_best_precision_at_that_recall_or_more():
+    S, GT = hand_example()                      # ranked + - + + - - - + - -
+    assert ev.precision_at_recall(S, GT, 0.5, EXCL) == pytest.approx(3 / 4)   # 3 of the first 4
+    assert ev.precision_at_recall(S, GT, 1.0, EXCL) == pytest.approx(4 / 8)
+    assert ev.precision_at_recall(S, GT, 0.0, EXCL) == pytest.approx(1.0)
+
+
+def test_interpolated_precision_and_overlap_recall():
+    p, r = np.array([0.5, 1.0, 1.0]), np.array([1.0, 0.5, 0.0])
+    grid = np.array([0.0, 0.5, 0.75, 1.0])
+    assert ev.interpolated_precision(p, r, grid).tolist() == [1.0, 1.0, 0.5, 0.5]
+    assert ev.interpolated_precision(p, r[::-1] * 0.5, [0.9]).tolist() == [0.0]   # no point reaches 0.9
+    assert ev.overlap_recall(p, r, p, r, grid, 0.02) == 1.0                       # the same curve
+    p2, r2 = np.array([0.2, 1.0, 1.0]), np.array([1.0, 0.5, 0.0])                 # differs from recall 0.75 on
+    assert ev.overlap_recall(p2, r2, p, r, grid, 0.02) == 0.5
+    assert ev.overlap_recall(p2, r2, p, r, grid, 0.4) == 1.0                      # within a wide tolerance
+    p3 = np.array([0.2, 0.6, 0.6])                                                # differs already at recall 0
+    assert ev.overlap_recall(p3, r, p, r, grid, 0.02) == 1.0                      # notebook 11's rule: grid[-1]
+
+
+def test_relative_rates_and_loss_per_time_saved():
+    R_a, R_t = ev.relative_rates(50.0, 0.5, 40.0, 1.0)
+    assert (R_a, R_t) == pytest.approx((25.0, 50.0))
+    R_a, R_t = ev.relative_rates(np.array([40.0, 30.0]), np.array([2.0, 1.0]), 40.0, 2.0)
+    assert R_a.tolist() == pytest.approx([0.0, -25.0]) and R_t.tolist() == pytest.approx([0.0, 50.0])
+    loss = ev.loss_per_time_saved([-10.0, 5.0, -3.0], [20.0, -5.0, 0.0])
+    assert loss[0] == pytest.approx(0.5) and np.isnan(loss[1]) and np.isnan(loss[2])
+
+
+def _revisiting(n_place=20, dim=12, seed=0):
+    """2 n_place frames: the second half revisits the first (GT[i, i + n_place]), noisy descriptors."""
+    rng = np.random.default_rng(seed)
+    base = rng.standard_normal((n_place, dim))
+    X = np.concatenate([base, base]) + 0.3 * rng.standard_normal((2 * n_place, dim))
+    GT = np.zeros((2 * n_place, 2 * n_place), bool)
+    i = np.arange(n_place)
+    GT[i, i + n_place] = GT[i + n_place, i] = True
+    return X, GT
+
+
+def test_honest_split_and_its_summary():
+    X, GT = _revisiting()                              # revisit frames 20..39
+    tune, evq, note = ev.honest_split(40, 0.5, GT, 3)
+    t0, e0 = ev.split_mask(40, 0.5, gt=GT, gap=3)
+    assert note is None and np.array_equal(tune, t0) and np.array_equal(evq, e0)
+    assert ev.split_summary(tune, evq, GT, 3) == ("tuning queries: frames 0..29 (10 revisit frames); "
+                                                  "evaluation queries: frames 33..39 (7 revisit frames); gap 3")
+    tune, evq, note = ev.honest_split(40, 0.5, GT, 25, dropped="the tuned rows", kept="nothing else")
+    assert tune is None and evq is None
+    assert note.startswith("**No honest tuning/evaluation split:**") and note.endswith("nothing else.")
+
+
+def test_whitened_variants_pick_the_dimension_on_the_tuning_part():
+    from greenloop import similarity as sim
+    X, GT = _revisiting()
+    tune, evq = ev.split_mask(40, 0.5, gt=GT, gap=3)
+    variants, curves = ev.whitened_variants(X, GT, 5, tune, evq, pca_dim=6, dims=(2, 4, 8))
+    assert list(variants) == ["raw", "L2", "PCA-whitened, paper dim", "PCA-whitened, tuned dim", "ZCA, tuned dim"]
+    assert np.array_equal(variants["raw"][0], sim.distance_similarity(X, normalise=False))
+    assert variants["PCA-whitened, paper dim"][1] == "dim 6 (paper 6)"
+    assert list(curves) == ["pca dim", "zca dim"] and list(curves["pca dim"]) == [2, 4, 8]
+    cands = sim.whitened_similarities(sim.l2_normalise(X), (2, 4, 8), "pca", 1e-5, fit=tune)
+    pick = ev.tune_then_score(cands, GT, 5, tune, evq)["value"]
+    assert variants["PCA-whitened, tuned dim"][1] == f"dim {pick} (picked on tuning part)"
+    assert np.array_equal(variants["PCA-whitened, tuned dim"][0], cands[pick])
+    untuned, none = ev.whitened_variants(X, GT, 5, None, None, pca_dim=6, dims=(2, 4, 8))
+    assert list(untuned) == ["raw", "L2", "PCA-whitened, paper dim"] and none == {}
+    assert untuned["PCA-whitened, paper dim"][1] == "dim 6 (paper 6), fitted on every frame"
+
+
+def test_median_scores_rows_with_and_without_a_split():
+    from greenloop import similarity as sim
+    X, GT = _revisiting()
+    S = sim.distance_similarity(X)
+    tune, evq = ev.split_mask(40, 0.5, gt=GT, gap=3)
+    rows, curve = ev.median_scores(S, GT, 5, tune, evq, sizes=(1, 3))
+    assert [r["median_filter"] for r in rows] == ["none", "median (tuned)"] and list(curve) == [1, 3]
+    assert rows[0]["size"] == 1 and rows[1]["size"] == max(curve, key=curve.get)
+    assert rows[0]["AP_eval_%"] == round(100 * ev.average_precision(S, GT, 5, queries=evq), 2)
+    assert rows[0]["AP_tune_%"] == round(100 * curve[1], 2)
+    thr = ev.mpca_threshold(S, GT, 5, queries=tune)
+    assert rows[0]["MPCA_threshold"] == round(thr, 4)
+    (row,), none = ev.median_scores(S, GT, 5, None, None, sizes=(1, 3))
+    assert none is None and np.isnan(row["AP_tune_%"]) and np.isnan(row["MPCA_eval"])
+    assert row["AP_all_%"] == round(100 * ev.average_precision(S, GT, 5), 2)
+
+
+def test_swapped_split_tunes_on_either_part():
+    from greenloop import similarity as sim
+    X, GT = _revisiting()
+    S_l2 = sim.distance_similarity(X)
+    tune, evq = ev.split_mask(40, 0.5, gt=GT, gap=3)
+    rows = ev.swapped_split(X, S_l2, GT, 5, tune, evq, dims=(2, 4), sizes=(1, 3))
+    assert [(r["split"][0], r["knob"]) for r in rows] == [("A", "PCA-whitening dim"), ("A", "median size, L2"),
+                                                         ("B", "PCA-whitening dim"), ("B", "median size, L2")]
+    r = ev.tune_then_score(sim.median_candidates(S_l2, (1, 3)), GT, 5, evq, tune)   # B: tune late, score early
+    assert rows[3]["picked"] == r["value"] and rows[3]["AP_eval_%"] == round(100 * r["AP_eval"], 2)
+
+
+def test_revisit_queries_are_the_later_frames_of_counted_loop_pairs():
+    S, GT = hand_example()                      # counted loops (0,3) (0,4) (1,5) (3,6); (2,3) is inside the band
+    assert np.flatnonzero(ev.revisit_queries(GT, EXCL)).tolist() == [3, 4, 5, 6]
+    assert np.flatnonzero(ev.revisit_queries(GT, 3)).tolist() == [4, 5]     # j - i > 3: (0,4) and (1,5)

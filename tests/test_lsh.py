@@ -260,3 +260,87 @@ def test_no_query_pays_the_heap_compilation():
     lsh._heap_compiled.cache_clear()
     r = lsh.incremental_match(walk(60), "qdp", exclude=5)
     assert r.seconds.max() < 0.5                                    # loading numba takes seconds
+
+
+# ------------------------------------------------- Table 6, Figure 7, scaling (notebook 11)
+def _revisit_sequence(noise=0.05, seed=0):
+    """8 frames: 0..3 are four orthogonal unit vectors, 4..7 revisit them (GT[i, i + 4])."""
+    rng = np.random.default_rng(seed)
+    X = np.zeros((8, 16), np.float32)
+    X[np.arange(8), np.arange(8) % 4] = 1.0
+    X[4:] += noise * rng.standard_normal((4, 16)).astype(np.float32)
+    gt = np.zeros((8, 8), bool)
+    gt[np.arange(4), np.arange(4) + 4] = gt[np.arange(4) + 4, np.arange(4)] = True
+    return X, gt
+
+
+def test_table6_variants():
+    assert [v[:2] for v in lsh.table6_variants(False)] == [("brute force", "brute"), ("NearestNeighbors (sklearn)", "sklearn"),
+                                                          ("SWP-RHLSH", "swp"), ("QDP-RHLSH", "qdp")]
+    v = lsh.table6_variants(True, 7)
+    assert len(v) == 6 and v[4] == ("SWP-RHLSH, centred", "swp", 7) and v[5] == ("QDP-RHLSH, centred", "qdp", 7)
+    assert all(k == 0 for _, _, k in v[:4])
+
+
+def test_run_scores_of_brute_force_on_a_hand_made_revisit():
+    X, gt = _revisit_sequence()
+    S = cosine_matrix(X)
+    brute = lsh.incremental_match(X, "brute", exclude=2, keep_candidates=True)
+    assert brute.best[4:].tolist() == [0, 1, 2, 3]            # every revisit finds its place
+    revisit = (gt & evaluate.pair_mask(8, 2)).any(0)
+    assert np.flatnonzero(revisit).tolist() == [4, 5, 6, 7]
+    sc = lsh.run_scores(brute, S, brute, gt, 2, revisit)
+    assert sc["R@1_%"] == 100.0 and sc["NN_agree_%"] == 100.0 and sc["scanned_%"] == 100.0
+    assert sc["AP_pairs_%"] == pytest.approx(100 * evaluate.average_precision(S, gt, 2))
+    assert np.isnan(sc["probes_per_query"]) and np.isnan(sc["N1_at_end"])
+    swp = lsh.incremental_match(X, "swp", exclude=2, n_bits=8, radius=1, keep_candidates=True)
+    sw = lsh.run_scores(swp, S, brute, gt, 2, revisit)
+    assert sw["N1_at_end"] == swp.n_buckets[-1] and sw["probes_per_query"] == pytest.approx(swp.n_probes[swp.timed].mean())
+    assert sw["NN_agree_%"] == pytest.approx(100 * np.mean(swp.best[swp.timed] == brute.best[swp.timed]))
+
+
+def test_scanned_pr_curve_ends_at_the_recall_reached():
+    X, gt = _revisit_sequence()
+    S = cosine_matrix(X)
+    brute = lsh.incremental_match(X, "brute", exclude=2, keep_candidates=True)
+    p, r = lsh.scanned_pr_curve(S, brute, gt, 2)
+    p0, r0, _ = evaluate.pr_curve(S, gt, 2)
+    assert np.array_equal(p, p0) and np.array_equal(r, r0)     # brute force scans every counted pair
+    swp = lsh.incremental_match(X, "swp", exclude=2, n_bits=16, radius=0, keep_candidates=True)
+    sm = lsh.scanned_matrix(S, swp)
+    m = evaluate.pair_mask(8, 2)
+    loops_scanned = (gt & m & (sm > -2)).sum() / (gt & m).sum()
+    p, r = lsh.scanned_pr_curve(S, swp, gt, 2)
+    assert r.max() == pytest.approx(loops_scanned) and len(p) == len(r) and r[-1] == 0.0
+
+
+def test_compare_variants_averages_seeds_and_rates_against_brute_force():
+    import pandas as pd
+    base = {"backbone": "a", "weights": "w", "label": "a (w)"}
+    per_seed = pd.DataFrame([dict(base, variant="brute force", seed=0, **{"AP_pairs_%": 40.0, "ms_per_query": 2.0}),
+                             dict(base, variant="SWP-RHLSH", seed=0, **{"AP_pairs_%": 30.0, "ms_per_query": 1.0}),
+                             dict(base, variant="brute force", seed=1, **{"AP_pairs_%": 40.0, "ms_per_query": 2.0}),
+                             dict(base, variant="SWP-RHLSH", seed=1, **{"AP_pairs_%": 34.0, "ms_per_query": 3.0})])
+    t = lsh.compare_variants(per_seed)
+    assert list(t.columns) == ["backbone", "weights", "label", "variant", "AP_pairs_%", "AP_pairs_sd", "ms_per_query",
+                               "ms_sd", "R_a_%", "R_t_%", "loss_per_1%_time"]
+    swp = t.set_index("variant").loc["SWP-RHLSH"]
+    assert (swp["AP_pairs_%"], swp["AP_pairs_sd"], swp["ms_per_query"], swp["ms_sd"]) == (32.0, 2.0, 2.0, 1.0)
+    assert swp["R_a_%"] == -20.0 and swp["R_t_%"] == 0.0 and np.isnan(swp["loss_per_1%_time"])
+    per_seed.loc[3, "ms_per_query"] = 1.0                      # now half the time: R_t 50 %, loss 20 / 50
+    swp = lsh.compare_variants(per_seed).set_index("variant").loc["SWP-RHLSH"]
+    assert swp["R_t_%"] == 50.0 and swp["loss_per_1%_time"] == pytest.approx(0.4)
+
+
+def test_planted_queries_and_the_scaling_test():
+    rng = np.random.default_rng(1)
+    X = l2_normalise(rng.standard_normal((20, 32)).astype(np.float32))
+    rows = np.array([3, 7, 11])
+    Q = lsh.planted_queries(X, rows, 25.0, rng)
+    assert np.allclose(np.linalg.norm(Q, axis=1), 1, atol=1e-5)
+    assert np.allclose((Q * X[rows]).sum(1), np.cos(np.deg2rad(25.0)), atol=1e-5)
+    out = lsh.scaling_test([100, 50], 32, n_queries=5, n_bits=8, max_seconds=None)
+    assert [(o["stored"], o["method"]) for o in out] == [(n, m) for n in (50, 100) for m in lsh.METHODS]
+    brute = [o for o in out if o["method"] == "brute"]
+    assert all(o["queries_timed"] == 5 and o["planted_found_%"] == 100.0 and o["scanned_%"] == 100.0 for o in brute)
+    assert np.isnan(brute[0]["N1"]) and [o for o in out if o["method"] == "swp"][0]["N1"] >= 1

@@ -238,3 +238,30 @@ def test_whitening_candidates_fit_on_the_mask_and_keep_each_rank_once():
     assert pz.output_dim == 12                         # ZCA maps back to the input dimension
     with pytest.raises(ValueError, match="kind must be"):
         whitening_candidates(X, [3], "ica")
+
+
+def test_candidate_sets_for_tuning():
+    from greenloop.similarity import (l2_normalise, median_candidates, median_filter, whitened_similarities,
+                                      whitening_candidates)
+    rng = np.random.default_rng(0)
+    Xn = l2_normalise(rng.standard_normal((30, 6)))
+    fit = np.arange(30) < 20
+    got = whitened_similarities(Xn, [2, 4, 50], "pca", fit=fit)   # 50 is clipped to the rank (6)
+    ref = whitening_candidates(Xn, [2, 4, 50], "pca", fit=fit)
+    assert list(got) == list(ref) == [2, 4, 6]
+    for k in ref:
+        assert np.array_equal(got[k], distance_similarity(ref[k]))
+    S = distance_similarity(Xn)
+    m = median_candidates(S, [1, 3])
+    assert m[1] is S and np.array_equal(m[3], median_filter(S, 3))
+
+
+def test_rgbd_matrices_split_the_descriptor_in_halves():
+    from greenloop.similarity import rgbd_matrices
+    X = np.array([[1.0, 0.0, 0.0, 1.0], [0.0, 1.0, 0.0, 1.0]])      # RGB halves orthogonal, depth halves equal
+    S = rgbd_matrices(X)
+    assert list(S) == ["RGB", "depth", "RGB-D"]
+    assert np.allclose(S["RGB"], np.eye(2)) and np.allclose(S["depth"], 1.0)
+    assert np.allclose(S["RGB-D"], [[1.0, 0.5], [0.5, 1.0]])
+    with pytest.raises(ValueError, match="equal length"):
+        rgbd_matrices(np.ones((2, 3)))
