@@ -238,3 +238,16 @@ def test_whitening_candidates_fit_on_the_mask_and_keep_each_rank_once():
     assert pz.output_dim == 12                         # ZCA maps back to the input dimension
     with pytest.raises(ValueError, match="kind must be"):
         whitening_candidates(X, [3], "ica")
+
+
+def test_timed_cosine_matrix_returns_the_matrix_and_seconds_per_frame(monkeypatch):
+    import time
+
+    from greenloop import similarity
+    X = np.array([[1.0, 0.0], [0.0, 2.0], [1.0, 1.0]])
+    clock = iter([10.0, 10.6])                   # the matrix takes 0.6 s: 0.2 s for each of 3 frames
+    monkeypatch.setattr(time, "perf_counter", lambda: next(clock))
+    S, s = similarity.timed_cosine_matrix(X)
+    h = np.sqrt(0.5)
+    assert np.allclose(S, [[1, 0, h], [0, 1, h], [h, h, 1]], atol=1e-6) and S.dtype == np.float32
+    assert s == pytest.approx(0.2)
