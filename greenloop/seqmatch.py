@@ -67,7 +67,8 @@ _EPS = 1e-6
 
 __all__ = ["DESCRIPTORS", "Detector", "patch_normalise", "describe", "describe_frames", "normalise",
            "fit_projection", "contrast_normalise", "score_matrix",
-           "closures", "choose_threshold", "threshold_range"]
+           "closures", "choose_threshold", "threshold_range", "tune_knobs", "pick_knobs",
+           "matrix_events", "stream_matches_matrix"]
 
 
 # ------------------------------------------------------------------------------ descriptors
@@ -452,3 +453,68 @@ def choose_threshold(S, GT, exclude: int = 150, queries=None, rule: str = "f1") 
         return float(s[last][int(np.argmax(f1))])
     good = np.flatnonzero(prec >= 0.95)
     return float(s[last][good[-1]] if len(good) else s[0])
+
+
+# ------------------------------------------------------------------- the protocol of a run
+def tune_knobs(descriptors: dict, GT, exclude: int, tune, seq_lens, contrast_windows,
+               velocities=DEFAULT_VELOCITIES) -> list[dict]:
+    """AP on the tuning queries of every (descriptor, seq_len, contrast_window) combination.
+
+    descriptors: {name: (N, D) descriptors of the described frames} (:func:`describe`), in the
+    order to try them. GT: (N, N) bool ground truth; exclude: in frames of that stream.
+    tune: (N,) bool tuning queries (``evaluate.split_mask``); only their labels are read.
+    seq_lens, contrast_windows: candidate knobs, in frames; velocities as in :func:`score_matrix`.
+    Returns one dict per combination (descriptor-major, then seq_len, then contrast_window):
+    descriptor, seq_len, contrast_window, AP_tune_% (AP in %, rounded to 2 decimals).
+    """
+    rows = []
+    for d, X in descriptors.items():
+        for L in seq_lens:
+            for cw in contrast_windows:
+                S = score_matrix(X, exclude, L, velocities, cw)
+                rows.append({"descriptor": d, "seq_len": L, "contrast_window": cw,
+                             "AP_tune_%": round(100 * evaluate.average_precision(S, GT, exclude, queries=tune), 2)})
+    return rows
+
+
+def pick_knobs(rows, variants: dict) -> tuple[dict, dict]:
+    """The knobs of each variant: the tuning row with the largest AP among its descriptors.
+
+    rows: the dicts of :func:`tune_knobs` (descriptor, seq_len, contrast_window, AP_tune_%).
+    variants: {variant name: descriptors it may use}. A tie goes to the earliest row; a row whose
+    AP is NaN (no loop pair among the tuning queries) is never picked.
+    Returns (knobs, ap): knobs {name: dict(descriptor, seq_len (int), contrast_window (int))},
+    ap {name: the picked row's AP_tune_% (AP on the tuning queries, %)}. ValueError when a
+    variant has no row.
+    """
+    knobs, ap = {}, {}
+    for name, allowed in variants.items():
+        mine = [r for r in rows if r["descriptor"] in list(allowed) and not math.isnan(r["AP_tune_%"])]
+        if not mine:
+            raise ValueError(f"variant {name!r}: no tuning row with an AP for its descriptors {list(allowed)}")
+        best = max(mine, key=lambda r: r["AP_tune_%"])          # max keeps the first of equal APs
+        knobs[name] = dict(descriptor=best["descriptor"], seq_len=int(best["seq_len"]),
+                           contrast_window=int(best["contrast_window"]))
+        ap[name] = best["AP_tune_%"]
+    return knobs, ap
+
+
+def matrix_events(S, threshold: float, exclude: int, n: int) -> list[int]:
+    """The query frames a score matrix declares a closure at, as a stream of its first n frames would.
+
+    S: (N, N) scores (:func:`score_matrix`), row = database frame, column = query. Query j
+    (exclude < j < n) is declared when max_i S[i, j] over its candidates i < j - exclude reaches
+    threshold. Returns the declared j (frames of the stream), in order.
+    """
+    S = np.asarray(S)
+    return [j for j in range(exclude + 1, n) if S[:j - exclude, j].max() >= threshold]
+
+
+def stream_matches_matrix(detector: Detector, S) -> bool:
+    """Whether a streaming :class:`Detector`'s events fall on exactly the query frames where the
+    score matrix S (N, N), computed on the same descriptors, reaches its threshold
+    (:func:`matrix_events` over the ``detector.frame_index`` frames it has seen)."""
+    if detector.threshold is None:
+        raise ValueError("the detector has no threshold, so it declares nothing to compare")
+    batch = matrix_events(S, detector.threshold, detector.exclude, detector.frame_index)
+    return [e["frame"] for e in detector.events] == batch

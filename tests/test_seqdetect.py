@@ -203,3 +203,50 @@ def test_cli_detect_by_method(tmp_path):
     nomodel = subprocess.run([sys.executable, "-m", "greenloop", "detect", str(folder), "--method", "dictionary"],
                              capture_output=True, text=True, env=env, timeout=60)
     assert nomodel.returncode == 2 and "--model" in nomodel.stderr
+
+
+def test_tune_knobs_scores_every_combination_on_the_tuning_queries(revisit):
+    X, GT = revisit
+    tune, _ = evaluate.split_mask(len(X), 0.5, gt=GT, gap=10)
+    rows = seqmatch.tune_knobs({"rev": X, "noise": _walk(len(X), 7)}, GT, EXCLUDE, tune, [1, 10], [0, 6])
+    assert [(r["descriptor"], r["seq_len"], r["contrast_window"]) for r in rows] == \
+        [(d, L, w) for d in ("rev", "noise") for L in (1, 10) for w in (0, 6)]
+    S = seqmatch.score_matrix(X, EXCLUDE, 10, seqmatch.DEFAULT_VELOCITIES, 0)
+    assert rows[2]["AP_tune_%"] == round(100 * evaluate.average_precision(S, GT, EXCLUDE, queries=tune), 2)
+    by = {(r["descriptor"], r["seq_len"], r["contrast_window"]): r["AP_tune_%"] for r in rows}
+    assert by["rev", 10, 0] > by["rev", 1, 0] > by["noise", 1, 0]    # the revisit, seen better in sequence
+
+
+def test_pick_knobs_takes_the_best_tuning_row_per_variant():
+    rows = [{"descriptor": "pixels", "seq_len": 5, "contrast_window": 0, "AP_tune_%": 40.0},
+            {"descriptor": "pixels", "seq_len": 10, "contrast_window": 10, "AP_tune_%": 55.0},
+            {"descriptor": "cnn", "seq_len": 5, "contrast_window": 0, "AP_tune_%": 70.0},
+            {"descriptor": "cnn", "seq_len": 10, "contrast_window": 0, "AP_tune_%": 70.0},
+            {"descriptor": "patch", "seq_len": 5, "contrast_window": 0, "AP_tune_%": float("nan")}]
+    knobs, ap = seqmatch.pick_knobs(rows, {"all": ["pixels", "cnn", "patch"], "fast": ["pixels", "patch"]})
+    assert knobs == {"all": {"descriptor": "cnn", "seq_len": 5, "contrast_window": 0},      # first of a tie
+                     "fast": {"descriptor": "pixels", "seq_len": 10, "contrast_window": 10}}
+    assert ap == {"all": 70.0, "fast": 55.0}
+    with pytest.raises(ValueError, match="no tuning row"):
+        seqmatch.pick_knobs(rows, {"none": ["patch"]})
+
+
+def test_matrix_events_thresholds_each_querys_candidates():
+    S = np.zeros((5, 5), np.float32)
+    S[0, 2] = 0.9           # query 2 (candidate row 0 only, exclude 1): declared
+    S[2, 3] = 0.9           # row 2 is no candidate of query 3 (3 - 2 <= exclude)
+    S[1, 4] = 0.5           # query 4: declared at 0.5, not above
+    assert seqmatch.matrix_events(S, 0.5, 1, 5) == [2, 4]
+    assert seqmatch.matrix_events(S, 0.5, 1, 4) == [2]          # a stream of 4 frames never saw query 4
+    assert seqmatch.matrix_events(S, 0.95, 1, 5) == []
+
+
+def test_stream_matches_matrix(revisit):
+    X, _ = revisit
+    S = seqmatch.score_matrix(X, EXCLUDE, 10, contrast_window=0)
+    det, events = _run(X, threshold=0.55)
+    assert events and seqmatch.stream_matches_matrix(det, S)
+    det.events.pop()
+    assert not seqmatch.stream_matches_matrix(det, S)
+    with pytest.raises(ValueError, match="no threshold"):
+        seqmatch.stream_matches_matrix(Detector(None), S)
