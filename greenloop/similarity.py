@@ -36,7 +36,7 @@ from greenloop.util.checks import positive_int
 __all__ = [
     "Projection", "l2_normalise", "pca_whiten", "zca_whiten", "apply_projection",
     "cosine_matrix", "distance_similarity", "median_filter", "whitened_similarities",
-    "median_candidates", "rgbd_matrices",
+    "median_candidates", "rgbd_matrices", "whitening_candidates", "timed_cosine_matrix",
 ]
 
 _COV_MODES = ("sample", "scatter")
