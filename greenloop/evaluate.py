@@ -520,13 +520,16 @@ def overlap_recall(precision, recall, ref_precision, ref_recall, grid, tol: floa
     precision, recall and ref_precision, ref_recall: (T,) and (T_ref,) the two curves' points.
     grid: (G,) increasing recall values; tol: largest allowed difference of interpolated precision
     (:func:`interpolated_precision`, a fraction). Returns grid[k - 1] for the first grid point k
-    where the two differ by more than tol, 1.0 when they never do. As in notebook 11, a difference
-    already at grid[0] gives grid[-1] (index -1), i.e. the last grid value, not 0.
+    where the two differ by more than tol, 1.0 when they never do, 0.0 when they differ already
+    at grid[0] (notebook 11 used to index grid[-1] there and report a full overlap).
     """
     P = interpolated_precision(precision, recall, grid)
     P_ref = interpolated_precision(ref_precision, ref_recall, grid)
     off = np.abs(P - P_ref) > tol
-    return float(np.asarray(grid)[np.argmax(off) - 1]) if off.any() else 1.0
+    if not off.any():
+        return 1.0
+    k = int(np.argmax(off))
+    return float(np.asarray(grid)[k - 1]) if k > 0 else 0.0
 
 
 def relative_rates(accuracy, seconds, ref_accuracy, ref_seconds):

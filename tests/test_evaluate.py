@@ -436,7 +436,7 @@ def test_interpolated_precision_and_overlap_recall():
     assert ev.overlap_recall(p2, r2, p, r, grid, 0.02) == 0.5
     assert ev.overlap_recall(p2, r2, p, r, grid, 0.4) == 1.0                      # within a wide tolerance
     p3 = np.array([0.2, 0.6, 0.6])                                                # differs already at recall 0
-    assert ev.overlap_recall(p3, r, p, r, grid, 0.02) == 1.0                      # notebook 11's rule: grid[-1]
+    assert ev.overlap_recall(p3, r, p, r, grid, 0.02) == 0.0                      # no overlap at all
 
 
 def test_relative_rates_and_loss_per_time_saved():
