@@ -6,15 +6,13 @@ Written against the Keras 3 API only, so it runs on the TensorFlow and the JAX b
 """
 from __future__ import annotations
 
-import json
 import time
-import warnings
 from pathlib import Path
 
 import numpy as np
 
 from greenloop.util import kernels
-from greenloop.util.cache import cache_key, cached
+from greenloop.util.cache import cache_key, cached_model
 from greenloop.util.checks import positive_int
 from greenloop.util.progress import bar as tqdm   # in the terminal, never in a notebook
 
@@ -136,17 +134,6 @@ def _epoch_bar(epochs: int, desc: str):
     return EpochBar()
 
 
-def _load_cached(folder: Path):
-    import keras
-
-    with warnings.catch_warnings():   # the optimizer state is not saved for reuse: cached models only predict
-        warnings.filterwarnings("ignore", message="Skipping variable loading for optimizer", category=UserWarning)
-        model = keras.models.load_model(folder / "model.keras")
-    history = json.loads((folder / "history.json").read_text())
-    split = dict(np.load(folder / "split.npz"))
-    return model, history, split
-
-
 def train(X: np.ndarray, y: np.ndarray, seed: int, epochs: int = 200, batch_size: int = 32,
           test_size: float = 0.2, split: str = "random", n_classes: int | None = None,
           trainer: str = "auto", cache: bool | str | Path = True, progress: bool = True, gap: int = 5,
@@ -198,14 +185,7 @@ def train(X: np.ndarray, y: np.ndarray, seed: int, epochs: int = 200, batch_size
     # trained before the rename stay cached
     key = cache_key(X, y, **{"fast" if k == "trainer" else k: v for k, v in params.items()})
 
-    def save(folder, result):
-        model, history, split_ = result
-        model.save(folder / "model.keras")
-        (folder / "history.json").write_text(json.dumps(history))
-        np.savez(folder / "split.npz", **split_)
-        (folder / "params.json").write_text(json.dumps(dict(params, key=key), indent=1))
-
-    return cached(key, cache, lambda: _fit(X, y, progress, **params), save, _load_cached)
+    return cached_model(key, cache, lambda: _fit(X, y, progress, **params), params, "split.npz")
 
 
 TRAINERS = ("auto", "plain", "xla", "fused")

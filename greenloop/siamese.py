@@ -79,15 +79,13 @@ Training pairs come from a training part of the sequence only (``place_labels``,
 """
 from __future__ import annotations
 
-import json
 import time
-from pathlib import Path
 
 import numpy as np
 
 from greenloop import evaluate, features, groundtruth, similarity, spots
 from greenloop.datasets import sequence
-from greenloop.util.cache import cache_key, cached
+from greenloop.util.cache import cache_key, cached_model
 from greenloop.util.checks import positive_int
 from greenloop.util.progress import bar as tqdm  # in the terminal, never in a notebook
 
@@ -554,14 +552,6 @@ def _fit(X, labels, progress, *, seed, supervision, fusion, fusion_layer, epochs
     return descriptor, history, {"pairs": np.concatenate(all_pairs), "same": np.concatenate(all_same)}
 
 
-def _load(folder: Path):
-    import keras
-
-    model = keras.models.load_model(folder / "model.keras", compile=False)
-    history = json.loads((folder / "history.json").read_text())
-    return model, history, dict(np.load(folder / "pairs.npz"))
-
-
 def train(X, labels, seed: int = 0, supervision: str = "multitask", fusion: str = "none",
           fusion_layer: str | None = None, epochs: int = 10, n_pairs: int = 1000,
           batch_size: int = 100, positive_fraction: float = 0.5, margin: float = MARGIN,
@@ -595,18 +585,11 @@ def train(X, labels, seed: int = 0, supervision: str = "multitask", fusion: str 
                   epochs=int(epochs), n_pairs=int(n_pairs), batch_size=int(batch_size),
                   positive_fraction=float(positive_fraction), margin=float(margin), lam=float(lam),
                   width=float(width), merge=merge if fusion == "mid" else None,
-                  optimizer=optimizer, learning_rate=learning_rate, weight_decay=float(weight_decay),
-)
+                  optimizer=optimizer, learning_rate=learning_rate, weight_decay=float(weight_decay))
     key = cache_key(X, labels, **params)
 
-    def save(folder, result):
-        model, history, pairs = result
-        model.save(folder / "model.keras")
-        (folder / "history.json").write_text(json.dumps(history))
-        np.savez(folder / "pairs.npz", **pairs)
-        (folder / "params.json").write_text(json.dumps(dict(params, key=key), indent=1))
-
-    return cached(key, cache, lambda: _fit(X, labels, progress, **params), save, _load)
+    return cached_model(key, cache, lambda: _fit(X, labels, progress, **params), params, "pairs.npz",
+                        compile=False)
 
 
 # ---------------------------------------------------- scoring descriptors (notebook 10)

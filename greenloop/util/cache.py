@@ -67,3 +67,34 @@ def cached(key: str, cache, fit, save, load, marker: str = "model.keras"):
         save(tmp, result)
         publish_folder(tmp, folder)
         return result
+
+
+def cached_model(key: str, cache, fit, params: dict, arrays: str, compile: bool = True):
+    """:func:`cached` for a trained Keras model (``cnn.train``, ``siamese.train``).
+
+    fit() returns (model, history, extras): a Keras model, its JSON-able training history and a
+    dict of named arrays (the split's frame indices, the training pairs). They are kept as
+    ``model.keras``, ``history.json``, ``<arrays>`` (an .npz file name) and ``params.json`` (params
+    and the key, for a reader of the cache). compile: load the model compiled (False for models
+    whose loss Keras cannot rebuild; cached models only predict). Returns (model, history, extras).
+    """
+    def save(folder: Path, result) -> None:
+        model, history, extras = result
+        model.save(folder / "model.keras")
+        (folder / "history.json").write_text(json.dumps(history))
+        np.savez(folder / arrays, **extras)
+        (folder / "params.json").write_text(json.dumps(dict(params, key=key), indent=1, default=str))
+
+    def load(folder: Path):
+        import warnings
+
+        import keras
+
+        with warnings.catch_warnings():  # the optimizer state is not saved: cached models only predict
+            warnings.filterwarnings("ignore", message="Skipping variable loading for optimizer",
+                                    category=UserWarning)
+            model = keras.models.load_model(folder / "model.keras", compile=compile)
+        history = json.loads((folder / "history.json").read_text())
+        return model, history, dict(np.load(folder / arrays))
+
+    return cached(key, cache, fit, save, load)
