@@ -66,7 +66,7 @@ CNN_SIZE = (224, 224)                      # MobileNet v2's fixed TFLite input
 _EPS = 1e-6
 
 __all__ = ["DESCRIPTORS", "Detector", "patch_normalise", "describe", "describe_frames", "normalise",
-           "fit_projection", "contrast_normalise", "score_matrix",
+           "fit_projection", "contrast_normalise", "score_matrix", "columns_to_scores",
            "closures", "choose_threshold", "threshold_range", "tune_knobs", "pick_knobs",
            "matrix_events", "stream_matches_matrix"]
 
@@ -394,10 +394,23 @@ def score_matrix(X, exclude: int = 150, seq_len: int = 10, velocities=DEFAULT_VE
         raise ValueError("X has NaN or inf values")
     Y = normalise(X, projection)
     G = Y.astype(det.store_dtype).astype(np.float32) @ Y.T    # stored rows x queries, one product
+    return columns_to_scores(det, Y, G)
+
+
+def columns_to_scores(det: Detector, Y, G) -> np.ndarray:
+    """The (N, N) score matrix of a detector fed, column by column, a precomputed similarity.
+
+    det: a fresh :class:`Detector` (or a subclass, e.g. ``greenloop.seqslam``'s) whose stages after
+    the similarity (contrast normalisation, trajectory search) make the scores. Y: (N, D) stored
+    descriptors in stream order; G: (N, N) similarity, G[i, j] = what the stream computes between
+    stored frame i and query j. Query j sees only G[:j - exclude, j], so every column is causal.
+    Returns S (N, N) float32 as :func:`score_matrix` (non-candidates: the smallest filled score).
+    """
+    n = len(G)
     S = np.full((n, n), np.nan, np.float32)
     for j in range(n):
         c = max(j - det.exclude, 0)
-        det._match(Y[j], G[:c, j])
+        det._match(Y[j], np.asarray(G[:c, j], dtype=np.float32))
         S[:c, j] = det.last_scores
     filled = np.isfinite(S)
     S[~filled] = S[filled].min() if filled.any() else 0.0
