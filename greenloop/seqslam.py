@@ -62,8 +62,10 @@ __all__ = ["SIZE", "PATCH", "R_WINDOW", "DS", "V_MIN", "V_MAX", "V_STEP", "veloc
 
 def velocities(ds: int = DS, v_min: float = V_MIN, v_max: float = V_MAX) -> tuple:
     """OpenSeqSLAM's velocities: every integer move from v_min ds to v_max ds, divided by ds.
-    For ds = 10: (0.8, 0.9, 1.0, 1.1, 1.2). Returns a tuple of floats."""
-    ds = positive_int("ds", ds, 1)
+    For ds = 10: (0.8, 0.9, 1.0, 1.1, 1.2); ds = 0 (one frame, no trajectory): (1.0,).
+    Returns a tuple of floats."""
+    if positive_int("ds", ds, 0) == 0:
+        return (1.0,)
     lo, hi = int(math.ceil(v_min * ds - 1e-9)), int(math.floor(v_max * ds + 1e-9))
     if not 0 < lo <= hi:
         raise ValueError(f"need 0 < v_min <= v_max with at least one integer move in "
@@ -125,7 +127,7 @@ class Detector(seqmatch.Detector):
     def __init__(self, threshold=None, exclude: int = 150, ds: int = DS,
                  contrast_window: int = R_WINDOW, vs=None, color: str = "bgr"):
         vs = velocities(ds) if vs is None else tuple(vs)
-        super().__init__(None, descriptor="pixels", seq_len=positive_int("ds", ds, 1) + 1,
+        super().__init__(None, descriptor="pixels", seq_len=positive_int("ds", ds, 0) + 1,
                          velocities=vs, exclude=exclude, contrast_window=contrast_window, color=color)
         if threshold is not None and not math.isfinite(float(threshold)):
             raise ValueError(f"threshold must be a finite number or None, got {threshold!r}")
