@@ -68,7 +68,7 @@ _EPS = 1e-6
 __all__ = ["DESCRIPTORS", "Detector", "patch_normalise", "describe", "describe_frames", "normalise",
            "fit_projection", "contrast_normalise", "score_matrix", "columns_to_scores",
            "closures", "choose_threshold", "threshold_range", "tune_knobs", "pick_knobs",
-           "matrix_events", "stream_matches_matrix"]
+           "matrix_events", "stream_matches_matrix", "stream_check"]
 
 
 # ------------------------------------------------------------------------------ descriptors
@@ -541,3 +541,25 @@ def stream_matches_matrix(detector: Detector, S) -> bool:
         raise ValueError("the detector has no threshold, so it declares nothing to compare")
     batch = matrix_events(S, detector.threshold, detector.exclude, detector.frame_index)
     return [e["frame"] for e in detector.events] == batch
+
+
+def stream_check(detector: Detector, X, S, GT) -> dict:
+    """Stream every descriptor of X through ``detector`` (reset first) and compare its events with
+    the thresholded score matrix S: the check that can fail, on a stream that holds the revisit.
+
+    detector: a thresholded :class:`Detector` (or ``seqslam.Detector``) with the knobs S was made
+    with. X: (N, D) descriptors in stream order; S: (N, N) its score matrix; GT: (N, N) bool.
+    Returns dict(equal (:func:`stream_matches_matrix`), events (declared), correct_events (events
+    whose match is a ground-truth partner), revisit_queries (frames with a partner among their
+    candidates)). ``equal`` with correct_events 0 says little: report both.
+    """
+    X = np.asarray(X)
+    if len(X) != len(S):
+        raise ValueError(f"X has {len(X)} frames but S is {np.shape(S)}: the same stream, please")
+    G = np.asarray(GT, dtype=bool)
+    detector.reset()
+    for x in X:
+        detector.update_descriptor(x)
+    ok = [e for e in detector.events if G[e["match"], e["frame"]]]
+    return {"equal": stream_matches_matrix(detector, S), "events": len(detector.events),
+            "correct_events": len(ok), "revisit_queries": int(evaluate.revisit_queries(G, detector.exclude).sum())}

@@ -45,7 +45,7 @@ import math
 import numpy as np
 from scipy.spatial.distance import cdist
 
-from greenloop import seqmatch
+from greenloop import evaluate, seqmatch
 from greenloop.datasets.sequence import load_frames, preprocess_image
 from greenloop.util.checks import positive_int
 
@@ -57,7 +57,7 @@ V_MIN, V_MAX, V_STEP = 0.8, 1.2, 0.1
 
 __all__ = ["SIZE", "PATCH", "R_WINDOW", "DS", "V_MIN", "V_MAX", "V_STEP", "velocities", "offsets",
            "describe", "describe_frames", "difference_similarity", "similarity_matrix", "Detector",
-           "score_matrix"]
+           "score_matrix", "tune_knobs"]
 
 
 def velocities(ds: int = DS, v_min: float = V_MIN, v_max: float = V_MAX) -> tuple:
@@ -174,3 +174,23 @@ def score_matrix(X, exclude: int = 150, ds: int = DS, contrast_window: int = R_W
     if not len(X):
         return np.zeros((0, 0), np.float32)
     return seqmatch.columns_to_scores(det, X, similarity_matrix(X))
+
+
+def tune_knobs(X, GT, exclude: int, tune, seq_lens, contrast_windows) -> list[dict]:
+    """SeqSLAM on the tuning grid of ``seqmatch.tune_knobs`` (the same criterion, the same rows).
+
+    X: (N, 2048) SeqSLAM descriptors; GT, exclude, tune as ``seqmatch.tune_knobs``. seq_lens:
+    frames per trajectory L (ds = L - 1); contrast_windows: R_window candidates (0 = off).
+    Returns one dict per (seq_len, contrast_window): descriptor "seqslam", whitening "none",
+    seq_len, contrast_window, AUC-PR_tune_% and R@1_tune_% (``evaluate.per_query`` on the tuning
+    queries, in %, 2 decimals), for ``seqmatch.pick_knobs``.
+    """
+    S0 = similarity_matrix(X)
+    rows = []
+    for L in seq_lens:
+        for cw in contrast_windows:
+            det = Detector(None, exclude, positive_int("seq_len", L, 1) - 1, cw)
+            q = evaluate.per_query(seqmatch.columns_to_scores(det, X, S0), GT, exclude, queries=tune, ks=(1,))
+            rows.append({"descriptor": "seqslam", "whitening": "none", "seq_len": int(L), "contrast_window": int(cw),
+                         "AUC-PR_tune_%": round(100 * q["AUC-PR"], 2), "R@1_tune_%": round(100 * q["R@1"], 2)})
+    return rows

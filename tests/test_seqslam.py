@@ -146,3 +146,27 @@ def test_bad_inputs():
         det.update_descriptor(np.ones(9))
     with pytest.raises(ValueError, match="NaN"):
         det.update_descriptor(np.full(8, np.nan))
+
+
+def test_tune_knobs_rows_are_the_score_matrices_scored(revisit):
+    X, GT = revisit
+    tune, _ = evaluate.split_mask(len(X), 0.5, gt=GT, gap=12)
+    rows = seqslam.tune_knobs(X, GT, EXCLUDE, tune, [1, 11], [0, 10])
+    assert [(r["seq_len"], r["contrast_window"]) for r in rows] == [(1, 0), (1, 10), (11, 0), (11, 10)]
+    q = evaluate.per_query(seqslam.score_matrix(X, EXCLUDE, ds=10, contrast_window=10), GT, EXCLUDE, queries=tune, ks=(1,))
+    assert rows[3]["AUC-PR_tune_%"] == round(100 * q["AUC-PR"], 2) and rows[3]["descriptor"] == "seqslam"
+    knobs, _ = seqmatch.pick_knobs(rows, {"SeqSLAM": (["seqslam"], [1, 11])})
+    assert knobs["SeqSLAM"]["seq_len"] in (1, 11)
+
+
+def test_stream_check_reports_the_revisit_events(revisit):
+    X, GT = revisit
+    S = seqslam.score_matrix(X, EXCLUDE)
+    m = evaluate.best_matches(S, GT, EXCLUDE)
+    det = seqslam.Detector(float(np.median(m.score[m.correct])), exclude=EXCLUDE)
+    c = seqmatch.stream_check(det, X, S, GT)
+    assert c["equal"] and c["correct_events"] >= REPEAT // 3 and c["events"] >= c["correct_events"]
+    assert c["revisit_queries"] == REPEAT
+    S2 = S.copy()
+    S2[:, det.events[0]["frame"]] = S.min()                     # a matrix the stream did not make
+    assert not seqmatch.stream_check(det, X, S2, GT)["equal"]
