@@ -233,7 +233,7 @@ def _check_11(folder):
             assert abs(by.loc[(b, v), "AP_pairs_%"] - s["ap_full_%"][b]) < 1e-3
             # the matrix path's R@1, up to one query whose best match flips on a float near-tie of two cosines
             assert abs(by.loc[(b, v), "R@1_%"] - s["per_query_full_%"][b]["R@1"]) <= 100 / s["revisit_frames"] + 1e-3
-            assert abs(by.loc[(b, v), "AUC-PR_%"] - s["per_query_full_%"][b]["AUC-PR"]) < 0.5
+            assert abs(by.loc[(b, v), "AUC-PR_%"] - s["per_query_full_%"][b]["AUC-PR"]) <= 100 / s["revisit_frames"] + 1e-3
             assert by.loc[(b, v), "scanned_%"] == 100 and by.loc[(b, v), "NN_agree_%"] == 100
         assert by.loc[(b, "brute force"), "R_a_%"] == 0
         assert by.loc[(b, "SWP-RHLSH"), "probes_per_query"] == 2517           # 16 bits, radius 4
