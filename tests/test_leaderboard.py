@@ -161,3 +161,19 @@ def test_dictionary_row():
                           {"fps_median": 10.0, "fps_min": 9.0, "fps_max": 11.0, "decode_ms": 1.0}, 4, "evaluation queries")
     assert r["first_revisit_delay_frames"] == 8 and r["threshold"] == 70 and "0..499" in r["knobs"]
     assert r["scored_on"].startswith("evaluation queries; decisions only") and r["bytes_per_stored_frame"] == 0
+
+
+def test_method_rows_one_per_mode_with_closures_in_loop_closure_only(revisit):
+    X, GT = revisit
+    S = {"seq": seqmatch.score_matrix(X, EX, 5, contrast_window=0)}
+    tune, ev = evaluate.split_mask(len(X), 0.5, gt=GT, gap=5)
+    thr = lb.thresholds(S, GT, EX, tune, "f1")
+    meta = {"seq": {"weights": "none", "knobs": "k", "bytes_per_stored_frame": 80}}
+    speed = {"seq": {"fps_median": 10.0, "fps_min": 9.0, "fps_max": 12.0, "decode_ms": 0.5}}
+    ref = np.arange(len(X)) < N0
+    rows = lb.method_rows(S, meta, GT, EX, ev, ref, thr, speed, 2, "evaluation queries")
+    assert [r["mode"] for r in rows] == ["loop closure", "place recognition"]
+    assert rows[0]["closures_declared"] == lb.closure_columns(S["seq"], GT, thr["seq"], EX, ev, 2)["closures_declared"]
+    assert rows[1]["closures_declared"] is None and math.isnan(rows[1]["threshold"])
+    assert rows[0]["fps_min"] == rows[1]["fps_min"] == 9.0 and rows[0]["bytes_per_stored_frame"] == 80
+    assert rows[1]["R@1_%"] == lb.metric_rows(S["seq"], GT, EX, ev, ref)[1]["R@1_%"]

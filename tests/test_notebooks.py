@@ -298,8 +298,13 @@ def _check_13(folder):
     assert lc.loc["SeqSLAM (published)", "bytes_per_stored_frame"] == 64 * 32 * 4 + 4 * 11
     assert lc.loc["pixels (single frame)", "bytes_per_stored_frame"] == 32 * 32 * 4 + 4
     assert "ds 10, R_window 10" in lc.loc["SeqSLAM (published)", "knobs"]
-    decided = t.dropna(subset=["closures_declared"])
-    assert len(decided) == len(t) - 1 and (decided.closures_false <= decided.closures_declared).all()   # all but chance
+    decided = t.dropna(subset=["closures_declared"])           # every loop-closure row but chance
+    assert len(decided) == len(lc) - 1 and (decided["mode"] == "loop closure").all()
+    assert (decided.closures_false <= decided.closures_declared).all()
+    if TINY.get("reference_frames"):                             # every scored method in both modes
+        pr = t[t["mode"] == "place recognition"].set_index("method")
+        assert set(pr.index) == set(lc.dropna(subset=["R@1_%"]).index) and pr["pair_AP_%"].isna().all()
+        assert pr.loc["greenloop-seq", "R@1_%"] > pr.loc["chance (random scores)", "R@1_%"]
     assert t.scored_on.str.startswith("evaluation queries").all()
     s = json.loads((folder / "summary.json").read_text())
     start = s["timing_window"][0]

@@ -209,17 +209,24 @@ def closure_columns(S, GT, threshold, exclude: int, queries, frame_step: int) ->
             "first_revisit_delay_frames": None if c["first_delay"] is None else c["first_delay"] * int(frame_step)}
 
 
+_NO_CLOSURES = {"threshold": np.nan, "closures_declared": None, "closures_false": None,
+                "first_revisit_delay_frames": None}      # the streaming detectors run in loop-closure mode
+
+
 def method_rows(S: dict, meta: dict, GT, exclude: int, evalq, reference, thr: dict, speed: dict,
                 frame_step: int, scored_on: str) -> list[dict]:
     """Every scored method's rows (one per mode). meta: {method: dict(weights, knobs,
-    bytes_per_stored_frame)}; thr: thresholds; speed: {method: timing row + decode_ms}."""
+    bytes_per_stored_frame)}; thr: thresholds; speed: {method: timing row + decode_ms}. The
+    threshold and closure columns are the streaming detector's, which runs in loop-closure mode:
+    empty in place-recognition rows."""
     rows = []
     for name, s in S.items():
         sp = speed.get(name, {})
         common = {"method": name, **meta[name], "fps_median": sp.get("fps_median"), "fps_min": sp.get("fps_min"),
                   "fps_max": sp.get("fps_max"), "decode_ms": sp.get("decode_ms"), "scored_on": scored_on,
                   **closure_columns(s, GT, thr[name], exclude, evalq, frame_step)}
-        rows += [{**common, **m} for m in metric_rows(s, GT, exclude, evalq, reference)]
+        rows += [{**common, **m, **(_NO_CLOSURES if m["mode"] == "place recognition" else {})}
+                 for m in metric_rows(s, GT, exclude, evalq, reference)]
     return rows
 
 
