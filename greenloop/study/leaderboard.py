@@ -21,6 +21,8 @@ Knob records are dicts (``pick_knobs``): descriptor ("seqslam" for SeqSLAM), whi
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import cv2
 import numpy as np
 import pandas as pd
@@ -107,8 +109,6 @@ def detector(k: dict, threshold, exclude: int, velocities, proj: dict, weights="
         return seqslam.Detector(t, exclude, k["seq_len"] - 1, k["contrast_window"])
     p = proj.get(k["descriptor"], {}).get(k["whitening"])
     desc = k["descriptor"] if k["descriptor"] in seqmatch.DESCRIPTORS else "pixels"
-    lo, hi = seqmatch.threshold_range(k["contrast_window"])
-    t = None if t is None else min(max(t, lo), hi)
     return seqmatch.Detector(t, descriptor=desc, seq_len=k["seq_len"], velocities=velocities, exclude=exclude,
                              contrast_window=k["contrast_window"], projection=p, weights=weights)
 
@@ -247,7 +247,6 @@ def write(board: pd.DataFrame, out_dir, results_dir, title: str, note: str):
     """Write ``out_dir/leaderboard.csv`` and ``.md`` and the copy ``results_dir/leaderboard.csv``
     from ONE serialisation of the table (the same bytes, so the copy can never differ).
     Returns (csv path, md path, copy path)."""
-    from pathlib import Path
     text = board.to_csv(index=False)
     out_dir, results_dir = Path(out_dir), Path(results_dir)
     paths = (out_dir / "leaderboard.csv", out_dir / "leaderboard.md", results_dir / "leaderboard.csv")
