@@ -88,6 +88,7 @@ def test_metric_and_chance_rows_are_the_evaluate_functions(revisit):
     a = evaluate.per_query(S, GT, EX, queries=q, ks=(1, 5))
     b = evaluate.per_query(S, GT, EX, queries=q, reference=ref, ks=(1, 5))
     assert rows[0]["R@1_%"] == round(100 * a["R@1"], 2) and rows[0]["AUC-PR_%"] == round(100 * a["AUC-PR"], 2)
+    assert {k: rows[0][k] for k in lb.SPREADS} == lb.spread(S, GT, EX, q)
     assert rows[1]["R@5_%"] == round(100 * b["R@5"], 2) and rows[1]["R@100P_%"] == round(100 * b["R@100P"], 2)
     assert rows[0]["pair_AP_%"] == round(100 * evaluate.average_precision(S, GT, EX, queries=q), 2)
     assert math.isnan(rows[1]["pair_AP_%"]) and len(lb.metric_rows(S, GT, EX, q)) == 1
@@ -125,11 +126,16 @@ def test_timing_window_and_methods(revisit):
 
 
 def _board():
+    spread = {"R@1_lo_%": 85.0, "R@1_hi_%": 95.0, "AUC-PR_lo_%": 70.0, "AUC-PR_hi_%": 90.0}
     return lb.table([
         {"method": "greenloop-seq", "mode": "loop closure", "R@1_%": 90.0, "AUC-PR_%": 80.0, "R@100P_%": 40.0,
-         "fps_median": 1000.0, "fps_min": 950.0, "fps_max": 1100.0},
+         "fps_median": 1000.0, "fps_min": 950.0, "fps_max": 1100.0, **spread},
         {"method": "pixels (single frame)", "mode": "loop closure", "R@1_%": 70.0, "AUC-PR_%": 85.0, "R@100P_%": 10.0,
-         "fps_median": 900.0, "fps_min": 800.0, "fps_max": 960.0},
+         "fps_median": 900.0, "fps_min": 800.0, "fps_max": 960.0,
+         "R@1_lo_%": 60.0, "R@1_hi_%": 80.0, "AUC-PR_lo_%": 75.0, "AUC-PR_hi_%": 95.0},
+        {"method": "SeqSLAM (published)", "mode": "loop closure", "R@1_%": 50.0, "AUC-PR_%": 30.0, "R@100P_%": 0.0,
+         "fps_median": 100.0, "fps_min": 90.0, "fps_max": 110.0,
+         "R@1_lo_%": 40.0, "R@1_hi_%": 60.0, "AUC-PR_lo_%": 20.0, "AUC-PR_hi_%": 40.0},
         {"method": "chance (random scores)", "mode": "loop closure", "R@1_%": 5.0, "AUC-PR_%": 1.0, "R@100P_%": 0.0}])
 
 
@@ -139,10 +145,28 @@ def test_table_targets_and_statement():
     t = lb.targets(b, ["greenloop-seq"])
     assert t == {"greenloop-seq": {"highest_R@1": True, "highest_AUC-PR": False, "fps_min_at_least_920": True}}
     s = lb.statement(b, ["greenloop-seq"])
-    assert "R@1 90.00 %" in s and "pixels (single frame) 70.00 %" in s and "no rank is claimed" in s
-    assert "not resolved against pixels" in s                       # [950, 1100] overlaps [800, 960]
-    b.loc[1, "fps_max"] = 900.0
-    assert "faster than pixels" in lb.statement(b, ["greenloop-seq"]) and "chance: R@1 5.00 %" in s
+    assert "R@1 90.00 % [85.00, 95.00]" in s and "vs pixels (single frame) (R@1 70.00 % [60.00, 80.00]" in s
+    assert "R@1 higher than it, AUC-PR not resolved against it, not resolved against it (900 frames/s" in s
+    assert "vs SeqSLAM (published)" in s and "faster than it (100 frames/s" in s and "chance: R@1 5.00 %" in s
+    b.loc[1, "fps_max"], b.loc[1, "R@1_hi_%"] = 900.0, 86.0
+    s = lb.statement(b, ["greenloop-seq"])
+    assert "R@1 not resolved against it" in s and "faster than it (900 frames/s" in s
+
+
+def test_spread_brackets_the_metric_and_widens_with_fewer_queries(revisit):
+    X, GT = revisit
+    S = seqmatch.score_matrix(X, EX, 5, contrast_window=0)
+    q = np.zeros(len(X), bool)
+    q[N0 - 10:] = True
+    sp = lb.spread(S, GT, EX, q, block=5, n_boot=100)
+    m = evaluate.per_query(S, GT, EX, queries=q, ks=(1,))
+    assert sp["R@1_lo_%"] <= 100 * m["R@1"] <= sp["R@1_hi_%"] and sp["AUC-PR_lo_%"] <= 100 * m["AUC-PR"] <= sp["AUC-PR_hi_%"]
+    assert sp == lb.spread(S, GT, EX, q, block=5, n_boot=100)          # seeded
+    noisy = S + np.random.default_rng(3).normal(scale=0.05, size=S.shape).astype(np.float32)
+    few = np.zeros(len(X), bool)
+    few[N0 + 20:] = True
+    a, b = lb.spread(noisy, GT, EX, q, block=5), lb.spread(noisy, GT, EX, few, block=5)
+    assert b["R@1_hi_%"] - b["R@1_lo_%"] >= a["R@1_hi_%"] - a["R@1_lo_%"]
 
 
 def test_write_makes_the_copy_from_one_serialisation(tmp_path, monkeypatch):

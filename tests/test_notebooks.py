@@ -288,6 +288,10 @@ def _check_13(folder):
     for c in leaderboard.METRICS + ["pair_AP_%"]:
         assert scored[c].dropna().between(0, 100).all(), c
     assert (scored["R@5_%"] >= scored["R@1_%"]).all() and (scored["R@95P_%"] >= scored["R@100P_%"]).all()
+    m = scored.dropna(subset=["R@1_lo_%"])                       # every scored row but chance has its interval
+    assert len(m) == len(scored) - len(t[t.method.str.startswith("chance")])
+    for k in ("R@1", "AUC-PR"):
+        assert (m[f"{k}_lo_%"] <= m[f"{k}_%"] + 1e-9).all() and (m[f"{k}_%"] <= m[f"{k}_hi_%"] + 1e-9).all(), k
     # chance sits below greenloop-seq (the tiny sequence's revisit is found far above chance)
     ch = lc.loc["chance (random scores)"]
     for n in ("greenloop-seq", "SeqSLAM (published)"):

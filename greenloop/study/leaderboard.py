@@ -33,7 +33,8 @@ from greenloop.util.files import write_atomic
 
 MODES = ("loop closure", "place recognition")
 METRICS = ["R@1_%", "R@5_%", "AUC-PR_%", "R@100P_%", "R@95P_%"]
-COLUMNS = (["method", "mode", "weights", "knobs"] + METRICS +
+SPREADS = ["R@1_lo_%", "R@1_hi_%", "AUC-PR_lo_%", "AUC-PR_hi_%"]
+COLUMNS = (["method", "mode", "weights", "knobs"] + METRICS + SPREADS +
            ["pair_AP_%", "fps_median", "fps_min", "fps_max", "decode_ms", "bytes_per_stored_frame", "threshold",
             "closures_declared", "closures_false", "first_revisit_delay_frames", "scored_on"])
 SEQSLAM_PUBLISHED = {"descriptor": "seqslam", "whitening": "none", "seq_len": seqslam.DS + 1,
@@ -147,10 +148,11 @@ def thresholds(S: dict, GT, exclude: int, tune, rule: str) -> dict:
             for k, s in S.items()}
 
 
-def metric_rows(S, GT, exclude: int, queries, reference=None) -> list[dict]:
+def metric_rows(S, GT, exclude: int, queries, reference=None, block: int = 10) -> list[dict]:
     """The metric columns of one score matrix, in %: one row per database mode (loop closure;
-    place recognition too when ``reference`` is given). pair_AP_% (pairs i < j, j - i > exclude)
-    is a loop-closure quantity: NaN in the place-recognition row."""
+    place recognition too when ``reference`` is given), with the :func:`spread` of R@1 and
+    AUC-PR (bootstrap runs of ``block`` queries). pair_AP_% (pairs i < j, j - i > exclude) is a
+    loop-closure quantity: NaN in the place-recognition row."""
     rows = []
     for mode, ref in (("loop closure", None), ("place recognition", reference)):
         if mode == "place recognition" and reference is None:
@@ -158,8 +160,31 @@ def metric_rows(S, GT, exclude: int, queries, reference=None) -> list[dict]:
         q = evaluate.per_query(S, GT, exclude, queries=queries, reference=ref, ks=(1, 5))
         ap = evaluate.average_precision(S, GT, exclude, queries=queries) if ref is None else np.nan
         rows.append({"mode": mode, **{f"{k}_%": round(100 * q[k], 2) for k in ("R@1", "R@5", "AUC-PR", "R@100P", "R@95P")},
-                     "pair_AP_%": round(100 * ap, 2)})
+                     "pair_AP_%": round(100 * ap, 2), **spread(S, GT, exclude, queries, ref, block)})
     return rows
+
+
+def spread(S, GT, exclude: int, queries, reference=None, block: int = 10, n_boot: int = 200, seed: int = 0) -> dict:
+    """95 % block-bootstrap intervals of R@1 and AUC-PR over the queries, in %.
+
+    The per-query matches (``evaluate.best_matches``) are cut into runs of ``block`` consecutive
+    queries (neighbouring queries see nearly the same frames, so they are resampled together),
+    ``n_boot`` resamples of as many runs drawn with replacement, each scored by
+    ``evaluate.query_metrics``; a resample without a revisit query is drawn again. Returns
+    {"R@1_lo_%", "R@1_hi_%", "AUC-PR_lo_%", "AUC-PR_hi_%"} (2.5th and 97.5th percentiles).
+    """
+    m = evaluate.best_matches(S, GT, exclude, queries, reference, k=1)
+    runs = [np.arange(a, min(a + int(block), len(m.query))) for a in range(0, len(m.query), int(block))]
+    rng, r1, auc = np.random.default_rng(seed), [], []
+    while len(r1) < n_boot:
+        idx = np.concatenate([runs[i] for i in rng.integers(0, len(runs), len(runs))])
+        if not m.has_partner[idx].any():
+            continue
+        q = evaluate.query_metrics(evaluate.Matches(*(a[idx] for a in m[:6]), m.k), ks=(1,))
+        r1.append(q["R@1"]), auc.append(q["AUC-PR"])
+    lo, hi = np.percentile([r1, auc], [2.5, 97.5], axis=1)
+    return {"R@1_lo_%": round(100 * lo[0], 2), "R@1_hi_%": round(100 * hi[0], 2),
+            "AUC-PR_lo_%": round(100 * lo[1], 2), "AUC-PR_hi_%": round(100 * hi[1], 2)}
 
 
 def chance_rows(GT, exclude: int, queries, reference=None, scored_on: str = "") -> list[dict]:
@@ -214,9 +239,10 @@ _NO_CLOSURES = {"threshold": np.nan, "closures_declared": None, "closures_false"
 
 
 def method_rows(S: dict, meta: dict, GT, exclude: int, evalq, reference, thr: dict, speed: dict,
-                frame_step: int, scored_on: str) -> list[dict]:
+                frame_step: int, scored_on: str, block: int = 10) -> list[dict]:
     """Every scored method's rows (one per mode). meta: {method: dict(weights, knobs,
-    bytes_per_stored_frame)}; thr: thresholds; speed: {method: timing row + decode_ms}. The
+    bytes_per_stored_frame)}; thr: thresholds; speed: {method: timing row + decode_ms}; block:
+    the bootstrap run length of :func:`spread` (the notebook: its longest sequence). The
     threshold and closure columns are the streaming detector's, which runs in loop-closure mode:
     empty in place-recognition rows."""
     rows = []
@@ -226,7 +252,7 @@ def method_rows(S: dict, meta: dict, GT, exclude: int, evalq, reference, thr: di
                   "fps_max": sp.get("fps_max"), "decode_ms": sp.get("decode_ms"), "scored_on": scored_on,
                   **closure_columns(s, GT, thr[name], exclude, evalq, frame_step)}
         rows += [{**common, **m, **(_NO_CLOSURES if m["mode"] == "place recognition" else {})}
-                 for m in metric_rows(s, GT, exclude, evalq, reference)]
+                 for m in metric_rows(s, GT, exclude, evalq, reference, block)]
     return rows
 
 
@@ -257,29 +283,38 @@ def write(board: pd.DataFrame, out_dir, results_dir, title: str, note: str):
     return paths
 
 
+def _compare(a, b, lo: str, hi: str, word: tuple) -> str:
+    """'higher'/'lower' (word) when the [lo, hi] ranges of rows a and b do not overlap, else
+    'not resolved against'."""
+    if pd.isna(a[lo]) or pd.isna(b[lo]):
+        return "not compared with"
+    return word[0] if a[lo] > b[hi] else word[1] if a[hi] < b[lo] else "not resolved against"
+
+
 def statement(board: pd.DataFrame, seq_names=("greenloop-seq", "greenloop-seq-fast")) -> str:
-    """What the table holds about greenloop-seq, in sentences with the numbers and spreads:
-    per-query R@1 and AUC-PR beside the highest other row and SeqSLAM (no spread is measured for
-    them: one deterministic run, so no "best" is claimed), frames/s as median [min, max], and
-    "faster" only where the ranges do not overlap."""
+    """What the table holds about greenloop-seq, in sentences with the numbers and spreads
+    (loop closure): its R@1 and AUC-PR with their bootstrap intervals against the row with the
+    highest R@1 among the others (chance aside) and against SeqSLAM (published), frames/s as median
+    [min, max]; "higher"/"faster" only where the ranges do not overlap, else "not resolved"."""
     lc = board[board["mode"] == "loop closure"].set_index("method")
     others = lc[~lc.index.str.startswith(("greenloop-seq", "chance"))].dropna(subset=["R@1_%"])
+    rivals = list(dict.fromkeys(([others["R@1_%"].idxmax()] if len(others) else [])
+                                + (["SeqSLAM (published)"] if "SeqSLAM (published)" in others.index else [])))
     out = []
-    for n in (s for s in seq_names if s in lc.index):
+    for n in (s for s in seq_names if s in lc.index and pd.notna(lc.loc[s, "R@1_%"])):
         r = lc.loc[n]
-        best = others["R@1_%"].idxmax() if len(others) else None
-        line = f"{n}: R@1 {r['R@1_%']:.2f} %, AUC-PR {r['AUC-PR_%']:.2f} %, R@100P {r['R@100P_%']:.2f} %"
-        if best is not None:
-            b = others.loc[best]
-            line += (f"; the highest R@1 of the other rows: {best} {b['R@1_%']:.2f} % (AUC-PR {b['AUC-PR_%']:.2f} %)"
-                     "; no spread is measured for these (one run over fixed queries), so no rank is claimed")
+        line = (f"{n}: R@1 {r['R@1_%']:.2f} % [{r['R@1_lo_%']:.2f}, {r['R@1_hi_%']:.2f}], AUC-PR {r['AUC-PR_%']:.2f} % "
+                f"[{r['AUC-PR_lo_%']:.2f}, {r['AUC-PR_hi_%']:.2f}], R@100P {r['R@100P_%']:.2f} %")
         if pd.notna(r["fps_median"]):
-            line += f"; {r['fps_median']:.0f} frames/s [{r['fps_min']:.0f}, {r['fps_max']:.0f}]"
-            if best is not None and pd.notna(others.loc[best, "fps_max"]):
-                b = others.loc[best]
-                rel = ("faster than" if r["fps_min"] > b["fps_max"] else "slower than" if r["fps_max"] < b["fps_min"]
-                       else "not resolved against")
-                line += f", {rel} {best} ({b['fps_median']:.0f} [{b['fps_min']:.0f}, {b['fps_max']:.0f}])"
+            line += f", {r['fps_median']:.0f} frames/s [{r['fps_min']:.0f}, {r['fps_max']:.0f}]"
+        for b_name in rivals:
+            b = others.loc[b_name]
+            line += (f"; vs {b_name} (R@1 {b['R@1_%']:.2f} % [{b['R@1_lo_%']:.2f}, {b['R@1_hi_%']:.2f}], AUC-PR "
+                     f"{b['AUC-PR_%']:.2f} %): R@1 {_compare(r, b, 'R@1_lo_%', 'R@1_hi_%', ('higher than', 'lower than'))} it, "
+                     f"AUC-PR {_compare(r, b, 'AUC-PR_lo_%', 'AUC-PR_hi_%', ('higher than', 'lower than'))} it")
+            if pd.notna(r["fps_median"]) and pd.notna(b["fps_median"]):
+                line += (f", {_compare(r, b, 'fps_min', 'fps_max', ('faster than', 'slower than'))} it "
+                         f"({b['fps_median']:.0f} frames/s [{b['fps_min']:.0f}, {b['fps_max']:.0f}])")
         out.append(line)
     if "chance (random scores)" in lc.index:
         c = lc.loc["chance (random scores)"]
