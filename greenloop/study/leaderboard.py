@@ -313,7 +313,7 @@ def statement(board: pd.DataFrame, seq_names=("greenloop-seq", "greenloop-seq-fa
                      f"{b['AUC-PR_%']:.2f} %): R@1 {_compare(r, b, 'R@1_lo_%', 'R@1_hi_%', ('higher than', 'lower than'))} it, "
                      f"AUC-PR {_compare(r, b, 'AUC-PR_lo_%', 'AUC-PR_hi_%', ('higher than', 'lower than'))} it")
             if pd.notna(r["fps_median"]) and pd.notna(b["fps_median"]):
-                line += (f", {_compare(r, b, 'fps_min', 'fps_max', ('faster than', 'slower than'))} it "
+                line += (f", speed {_compare(r, b, 'fps_min', 'fps_max', ('faster than', 'slower than'))} it "
                          f"({b['fps_median']:.0f} frames/s [{b['fps_min']:.0f}, {b['fps_max']:.0f}])")
         out.append(line)
     if "chance (random scores)" in lc.index:
