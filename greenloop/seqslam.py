@@ -93,7 +93,7 @@ def describe(folder, step: int = 1) -> np.ndarray:
     """The SeqSLAM descriptors (N, 2048) float32 of every step-th frame of a sequence folder, the
     same values :func:`describe_frames` gives frame by frame (``load_frames`` decodes in colour
     and calls ``preprocess_image``, as the stream does)."""
-    g = load_frames(folder, size=SIZE, gray=True, step=step)[..., 0]
+    g = load_frames(folder, size=SIZE, gray=True, step=step, progress=False)[..., 0]
     return seqmatch.patch_normalise(g, PATCH)
 
 
