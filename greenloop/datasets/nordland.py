@@ -117,17 +117,7 @@ def alignment_pairs(n: int, tolerance: int) -> np.ndarray:
     k < tolerance the clipped window [n, min(2n - 1, n + k + tolerance)] as its centre and
     half-width, plus its last frame alone when its length is even.
     """
-    rows = []
-    for k in range(n):
-        if k >= tolerance:
-            rows.append((k, n + k, tolerance))
-            continue
-        hi = min(2 * n - 1, n + k + tolerance)        # window [n, hi]
-        half = (hi - n) // 2
-        rows.append((k, n + half, half))
-        if (hi - n) % 2:
-            rows.append((k, hi, 0))
-    return np.asarray(rows, dtype=np.int64).reshape(-1, 3)
+    return sequence.aligned_pairs([(0, n), (n, 2 * n)], tolerance)
 
 
 def _write(tmp: Path, summer, winter, tolerance: int, meta: dict, progress: bool) -> None:
