@@ -628,7 +628,8 @@ def ground_truth_source(folder) -> GroundTruthSource | None:
         if path is None:
             return None
     fmt = d["ground_truth_format"] or gt_formats.detect_format(path)
-    return GroundTruthSource("pairs", path, fmt, f"{path.name} ({gt_formats.FORMATS.get(fmt, fmt)})")
+    label = path.name if fmt == "pairs" else f"{path.name} ({gt_formats.FORMATS.get(fmt, fmt)})"
+    return GroundTruthSource("pairs", path, fmt, label)
 
 
 def _folder_pairs(folder: Path, n_frames: int | None) -> np.ndarray:
