@@ -127,11 +127,21 @@ results/coverage.md: $(wildcard $(DATASET_RESULTS:%=%/*/manifest.json)) greenloo
 readme-coverage: results/coverage.md ## refresh the README's coverage table from the results folders
 	$(BIN)/python -m greenloop.study.coverage README.md $(DATASET_RESULTS)
 
-$(RESULTS)/%.ipynb: notebooks/%.ipynb $(SOURCES) $(DATA_DEP) | $(STAMP)
+# Each notebook gets, in increasing precedence: what the dataset says of itself (its sequence.yaml,
+# or an exclude that fits its ground truth: $(RESULTS)/sequence_params.yaml, written by
+# greenloop.study.params), the dataset's budget, then PARAMS. A notebook that scores loops on a
+# ground truth without any loop at its exclude is not run: the same command writes an executed
+# notebook saying why (and $(RESULTS)/<stem>/skipped.md), prints the reason and the fix, and make
+# carries on.
+$(RESULTS)/%.ipynb: notebooks/%.ipynb $(SOURCES) $(DATA_DEP) $(wildcard $(DATASET)/sequence.yaml) | $(STAMP)
 	@mkdir -p $(@D)
 	@echo "== $*"
-	$(BIN)/papermill -k $(KERNEL) --execution-timeout $(TIMEOUT) --log-output --progress-bar \
-	    -p dataset $(DATASET) -p results_dir $(RESULTS) $(DATASET_PARAMS:%=-f %) $(PARAMS) $< $(@D)/.tmp-$*.ipynb
+	@rm -f $(@D)/.tmp-$*.ipynb
+	$(BIN)/python -m greenloop.study.params $< $(DATASET) $(RESULTS) --out $(@D)/.tmp-$*.ipynb -- \
+	    $(DATASET_PARAMS:%=-f %) $(PARAMS)
+	@test -f $(@D)/.tmp-$*.ipynb || $(BIN)/papermill -k $(KERNEL) --execution-timeout $(TIMEOUT) --log-output --progress-bar \
+	    -p dataset $(DATASET) -p results_dir $(RESULTS) -f $(RESULTS)/sequence_params.yaml $(DATASET_PARAMS:%=-f %) \
+	    $(PARAMS) $< $(@D)/.tmp-$*.ipynb
 	@mv $(@D)/.tmp-$*.ipynb $@
 
 $(RESULTS)/%.html: $(RESULTS)/%.ipynb
