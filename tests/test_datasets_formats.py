@@ -223,7 +223,7 @@ def test_sequence_yaml_becomes_notebook_parameters_that_params_override(tmp_path
 def test_loops_inside_the_default_window_get_a_fitting_exclude(tiny_near_loop_sequence, capsys):
     assert params.loop_distances(tiny_near_loop_sequence) == (99, 101)
     p, notes = params.sequence_parameters(tiny_near_loop_sequence)
-    assert p == {"exclude": 49}
+    assert p == {"exclude": 49, "first_traversal_end": 100}
     assert "closest loop of the ground truth is 99 frames apart" in notes[0] and "-p exclude N" in notes[0]
 
 

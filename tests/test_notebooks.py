@@ -399,7 +399,8 @@ EXCLUDING = [p for p in NOTEBOOKS if re.search(r'"exclude = \d+', p.read_text())
 def test_notebook_runs_on_a_sequence_whose_loops_lie_inside_the_default_window(
         notebook, tiny_near_loop_sequence, near_loop_results, monkeypatch, capsys):
     """The issue's user sequence: revisits 100 frames apart, inside the default 150-frame window,
-    and no PARAMS for exclude. As make does, greenloop.study.params prints the closest loop
+    and no PARAMS for exclude; two traversals/ folders, ground truth by frame index from its
+    sequence.yaml. As make does, greenloop.study.params prints the closest loop
     distance and the override, and passes exclude = 49 (half of it) before the notebook's
     parameters (TINY without its exclude); the notebook runs to the end on it."""
     from greenloop.study import params
@@ -409,7 +410,7 @@ def test_notebook_runs_on_a_sequence_whose_loops_lie_inside_the_default_window(
     assert "closest loop of the ground truth is 99 frames apart" in printed and "PARAMS='-p exclude N'" in printed
     assert not tmp.exists()                                            # not skipped: loops count at 49
     implied = yaml.safe_load((near_loop_results / params.PARAMS_NAME).read_text())
-    assert implied == {"exclude": 49}
+    assert implied == {"exclude": 49, "first_traversal_end": 100}
     folder = _run(notebook, tiny_near_loop_sequence, near_loop_results, monkeypatch,
                   parameters={**implied, **{k: v for k, v in TINY.items() if k != "exclude"}})
     cells = json.loads((near_loop_results / notebook.name).read_text())["cells"]

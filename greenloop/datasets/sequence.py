@@ -627,7 +627,8 @@ def ground_truth_source(folder) -> GroundTruthSource | None:
         path = gt_formats.find(folder)
         if path is None:
             return None
-    fmt = d["ground_truth_format"] or gt_formats.detect_format(path)
+    fmt = d["ground_truth_format"] or ("pairs" if path.name == GROUND_TRUTH_NAME
+                                       else gt_formats.detect_format(path))
     label = path.name if fmt == "pairs" else f"{path.name} ({gt_formats.FORMATS.get(fmt, fmt)})"
     return GroundTruthSource("pairs", path, fmt, label)
 
