@@ -416,3 +416,23 @@ def test_notebook_runs_on_a_sequence_whose_loops_lie_inside_the_default_window(
     cells = json.loads((near_loop_results / notebook.name).read_text())["cells"]
     injected = [c for c in cells if "injected-parameters" in c["metadata"].get("tags", [])]
     assert "exclude = 49\n" in "".join(injected[0]["source"])
+
+
+@pytest.fixture(scope="module")
+def no_counted_loop_results(tmp_path_factory):
+    return tmp_path_factory.mktemp("results-no-counted-loop")
+
+
+# the notebooks with an exclusion window that make never skips (they do more than score loops)
+NEVER_SKIPPED = [p for p in EXCLUDING if p.stem[:2] not in ("07", "08", "09", "10", "11", "12", "13")]
+
+
+@pytest.mark.parametrize("notebook", NEVER_SKIPPED, ids=[p.stem for p in NEVER_SKIPPED])
+def test_notebook_runs_when_no_loop_lies_outside_its_exclusion_window(
+        notebook, tiny_near_loop_sequence, no_counted_loop_results, monkeypatch):
+    """exclude = 150 on the near-loop sequence (every loop 99-101 frames apart) leaves no counted
+    loop; the notebooks make runs anyway (00, 03, 05) say so in their numbers and run to the end."""
+    from greenloop import groundtruth
+    assert not groundtruth.for_sequence(tiny_near_loop_sequence, exclude=150).any()
+    _run(notebook, tiny_near_loop_sequence, no_counted_loop_results, monkeypatch,
+         parameters=dict(TINY, exclude=150))
