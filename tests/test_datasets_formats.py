@@ -351,3 +351,20 @@ def test_gardenspoint_builder_on_the_real_source(tmp_path):
     assert np.flatnonzero(gt[100]).tolist() == [298, 299, 300, 301, 302, 498, 499, 500, 501, 502]
     assert np.flatnonzero(gt[0]).tolist() == [200, 201, 202, 400, 401, 402]     # clipped at each start
     assert len(groundtruth.loop_pairs(gt)) == 3 * (200 * 5 - 6)
+
+
+def test_make_skips_a_notebook_without_counted_loops_and_carries_on(tiny_near_loop_sequence, tmp_path):
+    """A real make run of 07 with PARAMS='-p exclude 120' (every loop is 99-101 frames apart): make
+    prints the reason, writes the executed notebook that says so, renders it, and exits 0."""
+    venv = Path(sys.prefix)
+    if not (venv / ".installed").is_file():
+        pytest.skip(f"{venv} was not set up by make venv")
+    res = tmp_path / "res"
+    r = subprocess.run(["make", f"{res}/07_feature_baselines.html", f"DATASET={tiny_near_loop_sequence}",
+                        f"RESULTS={res}", f"VENV={venv}", "PARAMS=-p exclude 120"], cwd=ROOT,
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "closest loop is 99 frames apart" in r.stdout and "PARAMS='-p exclude 49'" in r.stdout
+    assert "skipped" in (res / "07_feature_baselines.html").read_text()
+    assert json.loads((res / "07_feature_baselines" / "manifest.json").read_text())["skipped"].startswith("07")
+    assert not list(res.glob(".tmp-*"))

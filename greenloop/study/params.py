@@ -166,9 +166,14 @@ def skip_reason(notebook, folder, params: dict) -> str | None:
     dist = loop_distances(folder)
     closest = (f"its closest loop is {dist[0]} frames apart and its farthest {dist[1]}"
                if dist else "it has no loop at all")
-    fix = (f"write `exclude: {max(0, dist[0] // 2)}` in {Path(folder) / sequence.DESCRIPTION_NAME} or run "
-           f"make with PARAMS='-p exclude {max(0, dist[0] // 2)}'" if dist else
-           "this sequence does not revisit a place, so there is nothing to score")
+    yaml_file = Path(folder) / sequence.DESCRIPTION_NAME
+    if dist is None:
+        fix = "this sequence does not revisit a place, so there is nothing to score"
+    elif exclude < dist[1]:          # loops outside the window exist: the step misses their partners
+        fix = (f"describe every frame (`frame_step: 1` in {yaml_file} or PARAMS='-p frame_step 1'), or "
+               f"widen the ground truth's tolerance")
+    else:
+        fix = f"write `exclude: {dist[0] // 2}` in {yaml_file} or run make with PARAMS='-p exclude {dist[0] // 2}'"
     every = "all frames" if step == 1 else f"every {step}th frame"
     return (f"{stem} scores loop closures, and the ground truth of {folder} has no loop pair more than "
             f"exclude={exclude} frames apart among {every} ({closest}): skipped; to run "
