@@ -40,6 +40,7 @@ from greenloop.datasets.sequence import (DESCRIPTION_NAME, GROUND_TRUTH_NAME, la
                                          read_description, traversals, write_loop_pairs)
 from greenloop.util.files import write_atomic  # noqa: E402
 from greenloop.speed import stream  # noqa: E402
+from greenloop.study import params as study_params  # noqa: E402
 from greenloop.study import sweep  # noqa: E402
 
 
@@ -170,8 +171,9 @@ def _detect(args) -> int:
 
 
 def _sweep(args) -> int:
-    """``sweep``: one papermill run per grid point on Dask; 0 when every point is ok, else 1."""
-    base = {}
+    """``sweep``: one papermill run per grid point on Dask; 0 when every point is ok, else 1. The
+    parameters the dataset implies (its sequence.yaml: greenloop.study.params) come first, as in make."""
+    base = dict(study_params.sequence_parameters(args.dataset)[0]) if Path(args.dataset).is_dir() else {}
     for path in args.parameters_file:
         if not os.path.isfile(path):
             raise FileNotFoundError(f"parameters file {path} not found: pass a YAML file such as "

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import ast
+import json
 import sys
 from pathlib import Path
 
@@ -115,18 +116,36 @@ def _value(text: str):
     return text
 
 
+def notebook_defaults(notebook) -> dict:
+    """{name: default} of a notebook's cell tagged ``parameters`` (each top-level assignment; a
+    value that is not a literal, e.g. ``list(range(40, 125, 5))``, is evaluated when it can be
+    and kept as its source text otherwise)."""
+    cells = json.loads(Path(notebook).read_text())["cells"]
+    cell = next((c for c in cells if "parameters" in c.get("metadata", {}).get("tags", [])), None)
+    if cell is None:
+        raise ValueError(f"{notebook} has no cell tagged 'parameters': papermill cannot run it")
+    src = "".join(cell["source"])
+    out = {}
+    for node in ast.parse(src).body:
+        if isinstance(node, ast.Assign) and len(node.targets) == 1 and isinstance(node.targets[0], ast.Name):
+            text = ast.get_source_segment(src, node.value)
+            try:
+                out[node.targets[0].id] = ast.literal_eval(node.value)
+            except ValueError:
+                try:
+                    out[node.targets[0].id] = eval(text, {"__builtins__": {"list": list, "range": range}})
+                except Exception:
+                    out[node.targets[0].id] = text
+    return out
+
+
 def effective_parameters(notebook, files=(), args=()) -> dict:
     """The parameters a papermill run of ``notebook`` gets: the defaults of its parameters cell,
     then each YAML file of ``files``, then papermill's arguments ``args`` (``-f FILE``, ``-y YAML``,
     ``-p NAME VALUE``, ``-r NAME VALUE``, in papermill's order of precedence); only the names its
     parameters cell declares (papermill injects the others too, but the notebook ignores them)."""
-    import papermill
-    out, declared = {}, papermill.inspect_notebook(str(notebook))
-    for name, p in declared.items():
-        try:
-            out[name] = ast.literal_eval(p["default"])
-        except (ValueError, SyntaxError):
-            out[name] = p["default"]
+    out = notebook_defaults(notebook)
+    declared = set(out)
     args, f_files, y, p, r = list(args), list(files), [], [], []
     k = 0
     while k < len(args):
