@@ -38,8 +38,12 @@ NORDLAND  := data/nordland
 # a local copy of the Nordland source (summer/, winter/); empty: clone it from NORDLAND_URL
 NORDLAND_SRC ?= $(if $(wildcard ../shared/real/nordland/summer),../shared/real/nordland,)
 NORDLAND_URL ?= https://github.com/TimQuelch/seqslam
+GARDENSPOINT := data/gardenspoint
+# a local copy of Gardens Point Walking (day_left/, day_right/, night_right/); empty: clone GARDENSPOINT_URL
+GARDENSPOINT_SRC ?= $(if $(wildcard ../shared/real/gardenspoint/night_right),../shared/real/gardenspoint,)
+GARDENSPOINT_URL ?= https://github.com/aghagol/loop-detection
 
-.PHONY: all help venv synthetic data nordland test quick sweep bench clean-results readme-coverage
+.PHONY: all help venv synthetic data nordland gardenspoint test quick sweep bench clean-results readme-coverage
 .DEFAULT_GOAL := help
 
 help: ## this list
@@ -52,6 +56,7 @@ help: ## this list
 	@echo "  TIMEOUT=$(TIMEOUT)   per-cell execution timeout, seconds"
 	@echo "  PYTHON=$(PYTHON)   interpreter used to create $(VENV)"
 	@echo "  NORDLAND_SRC=$(NORDLAND_SRC)   local Nordland source for make nordland (empty: clone it)"
+	@echo "  GARDENSPOINT_SRC=$(GARDENSPOINT_SRC)   local Gardens Point source for make gardenspoint (empty: clone it)"
 	@echo "  GREENLOOP_WEIGHTS=$(GREENLOOP_WEIGHTS)   folder(s) of ImageNet weight files (weights=\"auto\")"
 	@echo "  make sweep: SWEEP_NOTEBOOK=$(SWEEP_NOTEBOOK)  SWEEP_GRID='$(SWEEP_GRID)' (space-separated grids)"
 	@echo "              SWEEP_METRIC='$(SWEEP_METRIC)'  SWEEP_OUT=$(SWEEP_OUT)"
@@ -89,12 +94,21 @@ $(NORDLAND)/nordland.json: | $(STAMP)
 	$(BIN)/python -m greenloop.datasets.nordland $(NORDLAND) --overwrite \
 	    $(if $(NORDLAND_SRC),--src $(NORDLAND_SRC),--url $(NORDLAND_URL))
 
-# The dataset a run needs: the synthetic default and data/nordland are built when missing; any
-# other folder must exist already.
+gardenspoint: $(GARDENSPOINT)/gardenspoint.json ## build data/gardenspoint: Gardens Point Walking, 3 traversals of 200 frames (640x360)
+
+# As Nordland: built in a temporary folder and renamed, from GARDENSPOINT_SRC or a shallow clone.
+$(GARDENSPOINT)/gardenspoint.json: | $(STAMP)
+	$(BIN)/python -m greenloop.datasets.gardenspoint $(GARDENSPOINT) --overwrite \
+	    $(if $(GARDENSPOINT_SRC),--src $(GARDENSPOINT_SRC),--url $(GARDENSPOINT_URL))
+
+# The dataset a run needs: the synthetic default, data/nordland and data/gardenspoint are built
+# when missing; any other folder must exist already.
 ifeq ($(patsubst %/,%,$(DATASET)),$(SYNTHETIC))
 DATA_DEP := $(SYNTHETIC)/synthetic.json
 else ifeq ($(patsubst %/,%,$(DATASET)),$(NORDLAND))
 DATA_DEP := $(NORDLAND)/nordland.json
+else ifeq ($(patsubst %/,%,$(DATASET)),$(GARDENSPOINT))
+DATA_DEP := $(GARDENSPOINT)/gardenspoint.json
 else
 DATA_DEP := $(DATASET)
 endif
@@ -113,11 +127,21 @@ results/coverage.md: $(wildcard $(DATASET_RESULTS:%=%/*/manifest.json)) greenloo
 readme-coverage: results/coverage.md ## refresh the README's coverage table from the results folders
 	$(BIN)/python -m greenloop.study.coverage README.md $(DATASET_RESULTS)
 
-$(RESULTS)/%.ipynb: notebooks/%.ipynb $(SOURCES) $(DATA_DEP) | $(STAMP)
+# Each notebook gets, in increasing precedence: what the dataset says of itself (its sequence.yaml,
+# or an exclude that fits its ground truth: $(RESULTS)/sequence_params.yaml, written by
+# greenloop.study.params), the dataset's budget, then PARAMS. A notebook that scores loops on a
+# ground truth without any loop at its exclude is not run: the same command writes an executed
+# notebook saying why (and $(RESULTS)/<stem>/skipped.md), prints the reason and the fix, and make
+# carries on.
+$(RESULTS)/%.ipynb: notebooks/%.ipynb $(SOURCES) $(DATA_DEP) $(wildcard $(DATASET)/sequence.yaml) | $(STAMP)
 	@mkdir -p $(@D)
 	@echo "== $*"
-	$(BIN)/papermill -k $(KERNEL) --execution-timeout $(TIMEOUT) --log-output --progress-bar \
-	    -p dataset $(DATASET) -p results_dir $(RESULTS) $(DATASET_PARAMS:%=-f %) $(PARAMS) $< $(@D)/.tmp-$*.ipynb
+	@rm -f $(@D)/.tmp-$*.ipynb
+	$(BIN)/python -m greenloop.study.params $< $(DATASET) $(RESULTS) --out $(@D)/.tmp-$*.ipynb -- \
+	    $(DATASET_PARAMS:%=-f %) $(PARAMS)
+	@test -f $(@D)/.tmp-$*.ipynb || $(BIN)/papermill -k $(KERNEL) --execution-timeout $(TIMEOUT) --log-output --progress-bar \
+	    -p dataset $(DATASET) -p results_dir $(RESULTS) -f $(RESULTS)/sequence_params.yaml $(DATASET_PARAMS:%=-f %) \
+	    $(PARAMS) $< $(@D)/.tmp-$*.ipynb
 	@mv $(@D)/.tmp-$*.ipynb $@
 
 $(RESULTS)/%.html: $(RESULTS)/%.ipynb

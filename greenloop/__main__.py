@@ -15,6 +15,10 @@ Commands
           [--dataset DIR] [--scheduler local|tcp://HOST:8786|slurm|pbs] [--workers N] [--metric SPEC]
         run the notebook once per point of the grids' cross product on Dask (greenloop.study.sweep) and
         write OUT/sweep.csv, sweep.md and sweep.png; complete points are not run again.
+    import-gt SRC [--out FOLDER/ground_truth.csv] [--format auto|vpr-bench|matrix|positions]
+          [--threshold-m M] [--reference-frames N]
+        convert a ground-truth file of a common format (greenloop.datasets.groundtruth_formats) to
+        ground_truth.csv loop pairs, checked against the frames of the output's folder.
 """
 from __future__ import annotations
 
@@ -31,8 +35,12 @@ import cv2  # noqa: E402
 import yaml  # noqa: E402
 
 from greenloop import seqmatch  # noqa: E402
-from greenloop.datasets.sequence import list_frames  # noqa: E402
+from greenloop.datasets import groundtruth_formats as gt_formats  # noqa: E402
+from greenloop.datasets.sequence import (DESCRIPTION_NAME, GROUND_TRUTH_NAME, layout, list_frames,  # noqa: E402
+                                         read_description, traversals, write_loop_pairs)
+from greenloop.util.files import write_atomic  # noqa: E402
 from greenloop.speed import stream  # noqa: E402
+from greenloop.study import params as study_params  # noqa: E402
 from greenloop.study import sweep  # noqa: E402
 
 
@@ -48,12 +56,17 @@ def _read_window(paths):
     return frames
 
 
-def _tuned_knobs(args) -> dict:
-    """greenloop-seq's knobs: from ``--tuned`` (a notebook 13 summary.json, the variant named by
-    ``--variant``), overridden by any flag given explicitly. Returns dict(descriptor, seq_len,
-    contrast_window, threshold, step, exclude), exclude and seq_len in streamed frames."""
-    knobs = dict(descriptor="pixels-patchnorm", seq_len=10, contrast_window=10, threshold=None,
-                 step=1, exclude=150)
+def _tuned_knobs(args) -> tuple[dict, list[str]]:
+    """greenloop-seq's knobs and one line per knob saying where it came from: ``--tuned`` (a
+    notebook 13 summary.json, the variant named by ``--variant``), the folder's sequence.yaml
+    (``frame_step``, ``exclude``), any flag given explicitly (which wins), else the defaults.
+    The frames are never subsampled unless asked (``--step`` or sequence.yaml's frame_step): the
+    tuned frame_step is reported, not applied. Returns (dict(descriptor, seq_len, contrast_window,
+    threshold, step, exclude), lines); exclude and seq_len in streamed frames."""
+    knobs = dict(descriptor="pixels-patchnorm", seq_len=10, contrast_window=10, threshold=None, step=1)
+    origin = dict.fromkeys(knobs, "default")
+    desc = read_description(args.folder) if Path(args.folder).is_dir() else {}
+    exclude_frames, tuned_step = 150, None       # exclude in ORIGINAL frames until the step is known
     if args.tuned:
         path = Path(args.tuned)
         if not path.is_file():
@@ -64,27 +77,43 @@ def _tuned_knobs(args) -> dict:
         if args.variant not in summary.get("knobs", {}):
             raise ValueError(f"--tuned {path} has no variant {args.variant!r} (it has "
                              f"{sorted(summary.get('knobs', {}))})")
-        knobs.update(summary["knobs"][args.variant], threshold=summary["thresholds"][args.variant],
-                     step=int(summary["frame_step"]), exclude=int(summary["exclude_steps"]))
-    for k in ("descriptor", "seq_len", "contrast_window", "threshold", "step", "exclude"):
+        knobs.update(summary["knobs"][args.variant], threshold=summary["thresholds"][args.variant])
+        origin.update({k: "--tuned" for k in summary["knobs"][args.variant]}, threshold="--tuned")
+        tuned_step = int(summary["frame_step"])
+        exclude_frames, origin["exclude"] = int(summary["exclude_steps"]) * tuned_step, "--tuned"
+    if desc.get("exclude") is not None:
+        exclude_frames, origin["exclude"] = desc["exclude"], f"{DESCRIPTION_NAME}"
+    if desc.get("frame_step") is not None:
+        knobs["step"], origin["step"] = desc["frame_step"], f"{DESCRIPTION_NAME}"
+    for k in ("descriptor", "seq_len", "contrast_window", "threshold", "step"):
         if getattr(args, k) is not None:
-            knobs[k] = getattr(args, k)
+            knobs[k], origin[k] = getattr(args, k), f"--{k.replace('_', '-')}"
     if knobs["threshold"] is None:
         raise ValueError("greenloop-seq needs a threshold chosen on your own data: pass --tuned "
                          "<results>/13_leaderboard/summary.json (notebook 13 picks the knobs and the "
                          "threshold on a tuning part) or --threshold T")
     if knobs["step"] < 1:
         raise ValueError(f"--step must be >= 1, got {knobs['step']}")
-    return knobs
+    knobs["exclude"] = exclude_frames // knobs["step"]
+    if args.exclude is not None:
+        knobs["exclude"], origin["exclude"] = args.exclude, "--exclude"
+    lines = [f"# {k} {knobs[k]} ({origin[k]})" for k in knobs]
+    if tuned_step is not None and tuned_step != knobs["step"]:
+        lines.append(f"# --tuned picked its knobs streaming every {tuned_step}th frame; here every "
+                     f"{knobs['step']} (no frame is dropped unless asked): seq_len and the contrast window "
+                     f"count streamed frames, so they span {knobs['step']}/{tuned_step} of the original frames "
+                     f"they spanned there; pass --step {tuned_step} to stream at the tuned rate")
+    return knobs, lines
 
 
 def _detect_seq(args) -> int:
     """``detect --method greenloop-seq``: greenloop.seqmatch.Detector over the frames in windows
-    (every ``step``-th frame of the folder, the rate its knobs were tuned at)."""
-    kn = _tuned_knobs(args)
+    (every ``step``-th frame of the folder: 1 unless --step or sequence.yaml says otherwise)."""
+    kn, lines = _tuned_knobs(args)
     paths = list_frames(args.folder)[::kn["step"]]
     det = seqmatch.Detector(kn["threshold"], descriptor=kn["descriptor"], seq_len=kn["seq_len"],
                             exclude=kn["exclude"], contrast_window=kn["contrast_window"])
+    print("\n".join(lines), flush=True)
     print(f"# {len(paths)} frames from {args.folder} (every {kn['step']}); greenloop-seq "
           f"({kn['descriptor']}, seq_len {det.seq_len}, exclude {det.exclude}, contrast window "
           f"{det.contrast_window}); threshold {det.threshold:g}", flush=True)
@@ -142,8 +171,9 @@ def _detect(args) -> int:
 
 
 def _sweep(args) -> int:
-    """``sweep``: one papermill run per grid point on Dask; 0 when every point is ok, else 1."""
-    base = {}
+    """``sweep``: one papermill run per grid point on Dask; 0 when every point is ok, else 1. The
+    parameters the dataset implies (its sequence.yaml: greenloop.study.params) come first, as in make."""
+    base = dict(study_params.sequence_parameters(args.dataset)[0]) if Path(args.dataset).is_dir() else {}
     for path in args.parameters_file:
         if not os.path.isfile(path):
             raise FileNotFoundError(f"parameters file {path} not found: pass a YAML file such as "
@@ -211,6 +241,49 @@ def _sweep_parser(sub) -> None:
     s.set_defaults(func=_sweep)
 
 
+def _import_gt(args) -> int:
+    """``import-gt``: a ground-truth file of another format -> ground_truth.csv (loop pairs)."""
+    src = Path(args.src)
+    out = Path(args.out) if args.out else src.parent / GROUND_TRUTH_NAME
+    folder = out.parent
+    n_frames = n_ref = None
+    try:
+        n_frames = len(list_frames(folder))
+        ts = traversals(folder)
+        n_ref = ts[0].stop if layout(folder) in ("traversals", "reference/query") else None
+    except (FileNotFoundError, ValueError):
+        pass                                   # not a sequence folder: nothing to check against
+    n_ref = args.reference_frames if args.reference_frames is not None else n_ref
+    fmt = gt_formats.detect_format(src) if args.format == "auto" else args.format
+    pairs = gt_formats.read(src, fmt, n_frames=n_frames, n_reference=n_ref, threshold_m=args.threshold_m)
+    write_atomic(out, lambda p: write_loop_pairs(p, pairs))
+    print(f"wrote {len(pairs)} loop pairs from {src} ({gt_formats.FORMATS[fmt]}"
+          f"{f', within {args.threshold_m or gt_formats.DEFAULT_THRESHOLD_M:g} m' if fmt == 'positions' else ''}"
+          f"{f', {n_ref} reference frames first' if fmt == 'vpr-bench' else ''}) to {out}"
+          f"{'' if n_frames is None else f' (checked against the {n_frames} frames of {folder})'}")
+    return 0
+
+
+def _import_gt_parser(sub) -> None:
+    """The ``import-gt`` subcommand's arguments."""
+    s = sub.add_parser("import-gt", help="convert a ground-truth file (VPR-Bench .npy, loop matrix, GPS) "
+                                         "to ground_truth.csv",
+                       description="Read a ground-truth file of a common format (greenloop.datasets."
+                                   "groundtruth_formats) and write it as ground_truth.csv loop pairs.")
+    s.add_argument("src", metavar="SRC", help="ground_truth_new.npy, a loop matrix (.npy, .mat, image) or a "
+                                              "positions / GPS .csv")
+    s.add_argument("--out", default=None, help="output file (default: ground_truth.csv beside SRC); its "
+                                               "folder's frames are used to check the frame numbers")
+    s.add_argument("--format", default="auto", choices=("auto", "vpr-bench", "matrix", "positions"),
+                   help="the file's format (default: from its name and contents)")
+    s.add_argument("--threshold-m", type=float, default=None, metavar="M",
+                   help=f"positions: frames at most M metres apart are loops (default "
+                        f"{gt_formats.DEFAULT_THRESHOLD_M:g})")
+    s.add_argument("--reference-frames", type=int, default=None, metavar="N",
+                   help="vpr-bench: reference frames before the queries (default: the folder's first traversal)")
+    s.set_defaults(func=_import_gt)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser: one subparser per command (add new commands here)."""
     ap = argparse.ArgumentParser(prog="python -m greenloop",
@@ -247,13 +320,16 @@ def build_parser() -> argparse.ArgumentParser:
                    help="per-frame descriptor (default pixels-patchnorm)")
     g.add_argument("--seq-len", type=int, default=None, help="frames per matched sequence (default 10)")
     g.add_argument("--exclude", type=int, default=None,
-                   help="only frames more than this many streamed frames older are candidates (default 150)")
+                   help="only frames more than this many streamed frames older are candidates (default: "
+                        "sequence.yaml's exclude, else --tuned's, else 150 original frames, divided by the step)")
     g.add_argument("--contrast-window", type=int, default=None,
                    help="SeqSLAM local contrast window in frames, 0 = off (default 10)")
     g.add_argument("--step", type=int, default=None,
-                   help="stream every step-th frame (default 1; --tuned: its frame_step)")
+                   help="stream every step-th frame (default: sequence.yaml's frame_step, else 1; --tuned's "
+                        "frame_step is printed, not applied)")
     d.set_defaults(func=_detect)
     _sweep_parser(sub)
+    _import_gt_parser(sub)
     return ap
 
 

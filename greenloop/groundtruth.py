@@ -195,7 +195,9 @@ def for_sequence(folder, frames=None, threshold: float = 0.5, exclude: int = 150
         raise NoGroundTruthError(
             f"{folder} has no ground truth: add {sequence.TRAJECTORY_NAMES[0]} (TUM poses, one per frame) "
             f"or {sequence.GROUND_TRUTH_NAME} (a header line, then `i,j[,tolerance]` loop pairs of 0-based "
-            f"frame numbers) to the folder")
+            f"frame numbers) to the folder, `ground_truth: aligned` to its {sequence.DESCRIPTION_NAME} "
+            f"(traversals aligned frame by frame), or import another format with "
+            f"`python -m greenloop import-gt FILE`")
     f = _check_frames(frames, n)
     if kind == "poses":
         _, poses = sequence.read_trajectory(folder, n_frames=n)
@@ -266,8 +268,8 @@ def definition(folder, threshold: float = 0.5, exclude: int = 150) -> str:
         p = sequence.read_loop_pairs(folder)
         tol = f"{p[:, 2].min()}" if len(p) and p[:, 2].min() == p[:, 2].max() else (
             f"{p[:, 2].min()}-{p[:, 2].max()}" if len(p) else "-")
-        return (f"loop pairs from {sequence.GROUND_TRUTH_NAME} ({len(p)} rows, tolerance {tol} frames), "
-                f"|i - j| > {exclude} frames")
+        return (f"loop pairs from {sequence.ground_truth_source(folder).label} ({len(p)} rows, tolerance "
+                f"{tol} frames), |i - j| > {exclude} frames")
     return "none: the folder has no poses and no loop-pair file"
 
 

@@ -82,3 +82,22 @@ def tiny_end_loop_sequence(tiny_sequence, tmp_path_factory):
     from greenloop.datasets import sequence
     sequence.write_loop_pairs(folder / sequence.GROUND_TRUTH_NAME, [(180 + k, k, 1) for k in range(20)])
     return folder
+
+
+@pytest.fixture(scope="session")
+def tiny_near_loop_sequence(tiny_sequence, tmp_path_factory):
+    """A user's two-traversal sequence whose revisits all lie inside the default 150-frame
+    exclusion window, in the traversals layout (no poses, no depth): traversals/first/ holds
+    tiny_sequence's frames 0..99 as jpg, traversals/second/ the same places again, darker and
+    shifted by 2 px (stream frames 100..199); sequence.yaml says frame k of each is one place,
+    tolerance 1 (closest loop 99 frames apart, farthest 101) and sets no exclude."""
+    folder = tmp_path_factory.mktemp("seq") / "tiny-near-loop"
+    for name in ("first", "second"):
+        (folder / "traversals" / name).mkdir(parents=True)
+    for i in range(200):
+        img = cv2.imread(str(tiny_sequence / "rgb" / f"{i % 100}.png"))
+        if i >= 100:
+            img = np.roll((img * 0.8).astype(np.uint8), 2, axis=1)
+        cv2.imwrite(str(folder / "traversals" / ("first", "second")[i // 100] / f"{i % 100}.jpg"), img)
+    (folder / "sequence.yaml").write_text("traversals: [first, second]\nground_truth: aligned\ntolerance: 1\n")
+    return folder

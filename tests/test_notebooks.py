@@ -33,8 +33,9 @@ def _noise(path) -> list[str]:
     return lines
 
 
-def _run(notebook, dataset, results, monkeypatch) -> Path:
-    """Execute one notebook on `dataset` into `results`; check what every notebook must write."""
+def _run(notebook, dataset, results, monkeypatch, parameters=None) -> Path:
+    """Execute one notebook on `dataset` into `results` (on TINY, or on `parameters` instead);
+    check what every notebook must write."""
     import papermill
 
     monkeypatch.setenv("PYTHONPATH", str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
@@ -42,7 +43,8 @@ def _run(notebook, dataset, results, monkeypatch) -> Path:
     monkeypatch.setenv("TF_CPP_MIN_LOG_LEVEL", "2")
     out = results / notebook.name
     papermill.execute_notebook(str(notebook), str(out), kernel_name="greenloop", cwd=str(ROOT),
-                               parameters=dict(TINY, dataset=str(dataset), results_dir=str(results)),
+                               parameters=dict(TINY if parameters is None else parameters,
+                                               dataset=str(dataset), results_dir=str(results)),
                                execution_timeout=600, progress_bar=False)
     noise = _noise(out)
     assert not noise, f"progress bars or log lines in the executed notebook: {noise[:3]}"
@@ -416,3 +418,55 @@ def _end_loop_10(folder):
 
 
 END_LOOP_CHECKS = {"08": _end_loop_08, "10": _end_loop_10, "12": _end_loop_12, "13": _end_loop_13}
+
+
+@pytest.fixture(scope="module")
+def near_loop_results(tmp_path_factory):
+    return tmp_path_factory.mktemp("results-near-loop")
+
+
+# the notebooks with an exclusion window (their `exclude` parameter)
+EXCLUDING = [p for p in NOTEBOOKS if re.search(r'"exclude = \d+', p.read_text())]
+
+
+@pytest.mark.parametrize("notebook", EXCLUDING, ids=[p.stem for p in EXCLUDING])
+def test_notebook_runs_on_a_sequence_whose_loops_lie_inside_the_default_window(
+        notebook, tiny_near_loop_sequence, near_loop_results, monkeypatch, capsys):
+    """The issue's user sequence: revisits 100 frames apart, inside the default 150-frame window,
+    and no PARAMS for exclude; two traversals/ folders, ground truth by frame index from its
+    sequence.yaml. As make does, greenloop.study.params prints the closest loop
+    distance and the override, and passes exclude = 49 (half of it) before the notebook's
+    parameters (TINY without its exclude); the notebook runs to the end on it."""
+    from greenloop.study import params
+    tmp = near_loop_results / f".tmp-{notebook.stem}.ipynb"
+    assert params.main([str(notebook), str(tiny_near_loop_sequence), str(near_loop_results), "--out", str(tmp)]) == 0
+    printed = capsys.readouterr().out
+    assert "closest loop of the ground truth is 99 frames apart" in printed and "PARAMS='-p exclude N'" in printed
+    assert not tmp.exists()                                            # not skipped: loops count at 49
+    implied = yaml.safe_load((near_loop_results / params.PARAMS_NAME).read_text())
+    assert implied == {"exclude": 49, "first_traversal_end": 100}
+    folder = _run(notebook, tiny_near_loop_sequence, near_loop_results, monkeypatch,
+                  parameters={**implied, **{k: v for k, v in TINY.items() if k != "exclude"}})
+    cells = json.loads((near_loop_results / notebook.name).read_text())["cells"]
+    injected = [c for c in cells if "injected-parameters" in c["metadata"].get("tags", [])]
+    assert "exclude = 49\n" in "".join(injected[0]["source"])
+
+
+@pytest.fixture(scope="module")
+def no_counted_loop_results(tmp_path_factory):
+    return tmp_path_factory.mktemp("results-no-counted-loop")
+
+
+# the notebooks with an exclusion window that make never skips (they do more than score loops)
+NEVER_SKIPPED = [p for p in EXCLUDING if p.stem[:2] not in ("07", "08", "09", "10", "11", "12", "13")]
+
+
+@pytest.mark.parametrize("notebook", NEVER_SKIPPED, ids=[p.stem for p in NEVER_SKIPPED])
+def test_notebook_runs_when_no_loop_lies_outside_its_exclusion_window(
+        notebook, tiny_near_loop_sequence, no_counted_loop_results, monkeypatch):
+    """exclude = 150 on the near-loop sequence (every loop 99-101 frames apart) leaves no counted
+    loop; the notebooks make runs anyway (00, 03, 05) say so in their numbers and run to the end."""
+    from greenloop import groundtruth
+    assert not groundtruth.for_sequence(tiny_near_loop_sequence, exclude=150).any()
+    _run(notebook, tiny_near_loop_sequence, no_counted_loop_results, monkeypatch,
+         parameters=dict(TINY, exclude=150))

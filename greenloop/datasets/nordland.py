@@ -117,17 +117,7 @@ def alignment_pairs(n: int, tolerance: int) -> np.ndarray:
     k < tolerance the clipped window [n, min(2n - 1, n + k + tolerance)] as its centre and
     half-width, plus its last frame alone when its length is even.
     """
-    rows = []
-    for k in range(n):
-        if k >= tolerance:
-            rows.append((k, n + k, tolerance))
-            continue
-        hi = min(2 * n - 1, n + k + tolerance)        # window [n, hi]
-        half = (hi - n) // 2
-        rows.append((k, n + half, half))
-        if (hi - n) % 2:
-            rows.append((k, hi, 0))
-    return np.asarray(rows, dtype=np.int64).reshape(-1, 3)
+    return sequence.aligned_pairs([(0, n), (n, 2 * n)], tolerance)
 
 
 def _write(tmp: Path, summer, winter, tolerance: int, meta: dict, progress: bool) -> None:
@@ -193,26 +183,33 @@ def _git(args: list[str], timeout: float) -> subprocess.CompletedProcess:
                           timeout=timeout, check=True)
 
 
-def clone_source(dest, url: str = SOURCE_URL, timeout: float = 20.0,
-                 clone_timeout: float = 1800.0) -> Path:
-    """``git clone --depth 1 url dest``; returns the source folder inside it.
+def shallow_clone(dest, url: str, fix: str, what: str, timeout: float = 20.0,
+                  clone_timeout: float = 1800.0) -> Path:
+    """``git clone --depth 1 url dest`` (any dataset builder's source); returns ``dest``.
 
     The remote is probed first (``git ls-remote``, ``timeout`` seconds), so an offline machine
-    fails at once. Raises RuntimeError with the fix (NORDLAND_SRC=path) when git is missing or
-    the clone fails or times out.
+    fails at once. Raises RuntimeError naming ``what`` and ending with ``fix`` when git is
+    missing or the clone fails or times out.
     """
     if shutil.which("git") is None:
-        raise RuntimeError(f"git is not installed, so the Nordland source cannot be cloned: {FIX}")
+        raise RuntimeError(f"git is not installed, so the {what} source cannot be cloned: {fix}")
     try:
         _git(["ls-remote", url, "HEAD"], timeout)
         _git(["clone", "--depth", "1", "--quiet", url, str(dest)], clone_timeout)
     except subprocess.TimeoutExpired as e:
-        raise RuntimeError(f"could not reach {url} (no answer in {e.timeout:.0f} s): {FIX}") from None
+        raise RuntimeError(f"could not reach {url} (no answer in {e.timeout:.0f} s): {fix}") from None
     except subprocess.CalledProcessError as e:
         why = (e.stderr or "").strip().splitlines()
         raise RuntimeError(f"could not clone {url} ({why[-1] if why else f'git exit {e.returncode}'}): "
-                           f"{FIX}") from None
-    return source_folder(dest)
+                           f"{fix}") from None
+    return Path(dest)
+
+
+def clone_source(dest, url: str = SOURCE_URL, timeout: float = 20.0,
+                 clone_timeout: float = 1800.0) -> Path:
+    """``git clone --depth 1 url dest`` (:func:`shallow_clone`); returns the source folder inside
+    it. Raises RuntimeError with the fix (NORDLAND_SRC=path) when the clone fails."""
+    return source_folder(shallow_clone(dest, url, FIX, "Nordland", timeout, clone_timeout))
 
 
 def main(argv=None) -> int:

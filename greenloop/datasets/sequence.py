@@ -20,6 +20,31 @@ line, then one loop pair per line::
 optional (0 when absent) and in frames: frame ``i`` is a loop with every frame ``j'`` with
 ``|j' - j| <= tolerance``, and the relation is symmetric. Blank lines and lines starting with
 ``#`` are skipped.
+
+Two more layouts hold the frames of several traversals of one route (read by the same calls):
+
+    traversals/<name>/*.jpg     one folder per traversal; the stream is the traversals in the
+                                order sequence.yaml lists them (else sorted by name), each in
+                                numeric order of its file names
+    reference/*.jpg, query/*.jpg   place recognition's two sets (``ref/`` also works): the
+                                stream is the reference frames, then the query frames
+
+``traversals(folder)`` gives each traversal's name and frame range in the stream,
+``traversal_index(folder)`` the traversal of every frame, and ``reference_frames(folder)`` the
+(N,) bool mask of the first traversal (the database of place recognition; the others query it).
+Loop ground truth may also come from ``sequence.yaml`` (``ground_truth: aligned``: frame k of every
+traversal is the same place, +- ``tolerance`` frames) or from a file in another common format
+(greenloop.datasets.groundtruth_formats), found in the folder when ground_truth.csv is absent.
+
+``sequence.yaml`` (optional) describes the sequence; :func:`read_description` reads it::
+
+    exclude: 50           # frames |i - j| <= exclude are never loops (default 150)
+    frame_step: 1         # the default step of the notebooks that describe every k-th frame
+    frame_rate: 15        # frames per second of the recording (reported only)
+    traversals: [day_left, day_right, night_right]   # traversals/ order; for rgb/: {name: [start, stop]}
+    ground_truth: aligned # or a file of the folder (ground_truth.csv, ground_truth_new.npy, gps.csv, ...)
+    tolerance: 2          # frames, for aligned
+    threshold_m: 25       # metres, for a positions / GPS file
 """
 from __future__ import annotations
 
@@ -28,12 +53,17 @@ import os
 import re
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+from typing import NamedTuple
 
 import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+import yaml
+
+from greenloop.datasets import groundtruth_formats as gt_formats
 from greenloop.util import kernels
+from greenloop.util.checks import positive_int
 from greenloop.util.progress import bar as tqdm  # in the terminal, never in a notebook
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
@@ -41,6 +71,13 @@ DEPTH_SCALE = 5000.0  # D435i convention: metres = value / DEPTH_SCALE
 TRAJECTORY_NAMES = ("CameraTrajectory.txt",)
 GROUND_TRUTH_NAME = "ground_truth.csv"
 CAMERA_NAMES = ("camera.yaml", "D435i.yaml")
+DESCRIPTION_NAME = "sequence.yaml"
+TRAVERSALS_DIR = "traversals"
+REFERENCE_DIRS = ("reference", "ref")   # place recognition's database (VPR-Bench names it ref/)
+QUERY_DIR = "query"
+ALIGNED = "aligned"
+DESCRIPTION_KEYS = ("exclude", "frame_step", "frame_rate", "traversals", "ground_truth", "tolerance",
+                    "threshold_m", "ground_truth_format")
 
 
 def _numeric_key(path: Path):
@@ -55,18 +92,27 @@ def list_frames(folder, subfolder: str = "rgb") -> list[Path]:
     folder: a sequence folder (its ``rgb/`` is used) or a folder that holds the images itself.
     Returns a list of paths to .png/.jpg/.jpeg files, ``2.png`` before ``10.png``.
     Raises FileNotFoundError if the folder does not exist and ValueError if it holds no images.
+    A folder without ``rgb/`` but with ``traversals/`` or ``reference/`` + ``query/`` gives the
+    frames of its traversals one after the other (module doc, :func:`traversals`).
     """
     folder = Path(folder)
     if not folder.is_dir():
         raise FileNotFoundError(
             f"sequence folder {folder} does not exist: run `make data` for the real GreenHouse set, "
             f"`make synthetic` for the embedded one, or point DATASET= at a folder of frames")
-    root = folder / subfolder if (folder / subfolder).is_dir() else folder
+    if subfolder == "rgb" and not (folder / subfolder).is_dir() and _traversal_dirs(folder):
+        return [p for _, d in _traversal_dirs(folder) for p in _images(d, subfolder)]
+    return _images(folder / subfolder if (folder / subfolder).is_dir() else folder, subfolder)
+
+
+def _images(root: Path, subfolder: str = "rgb") -> list[Path]:
+    """The images of one folder in numeric order (ValueError naming the folder when it has none)."""
     frames = [p for p in root.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file()]
     if not frames:
         raise ValueError(
             f"no .png/.jpg images in {root}: a sequence folder needs {subfolder}/0.png, "
-            f"{subfolder}/1.png, ... (or the images directly in the folder)")
+            f"{subfolder}/1.png, ... (or the images directly in the folder, or traversals/<name>/ "
+            f"folders of images)")
     return sorted(frames, key=_numeric_key)
 
 
@@ -256,7 +302,9 @@ def _pair_fields(path: Path, lineno: int, line: str) -> list[int]:
 def read_loop_pairs(path, n_frames: int | None = None) -> np.ndarray:
     """Read ``ground_truth.csv``: a header line, then ``i,j[,tolerance]`` per line (module doc).
 
-    path: the file, or a sequence folder holding ``ground_truth.csv``.
+    path: the file, or a sequence folder: its loop pairs from whichever source it has
+        (:func:`ground_truth_source`: ground_truth.csv, sequence.yaml's aligned traversals, or a
+        file in another format).
     n_frames: if given, every i and j must lie in 0..n_frames-1 (raises ValueError otherwise).
     Returns (P, 3) int64: columns i, j (0-based frame numbers) and tolerance (frames, >= 0; 0
     where the line has no third column), in file order. Raises FileNotFoundError when the file
@@ -264,7 +312,7 @@ def read_loop_pairs(path, n_frames: int | None = None) -> np.ndarray:
     """
     path = Path(path)
     if path.is_dir():
-        path = path / GROUND_TRUTH_NAME
+        return _folder_pairs(path, n_frames)
     if not path.is_file():
         raise FileNotFoundError(f"loop-pair file {path} not found: a sequence folder without poses "
                                 f"needs {GROUND_TRUTH_NAME} (header, then `i,j[,tolerance]` lines)")
@@ -308,13 +356,10 @@ def write_loop_pairs(path, pairs) -> Path:
 
 def ground_truth_kind(folder) -> str | None:
     """Which ground truth a sequence folder carries: 'poses' (CameraTrajectory.txt, the first
-    choice), 'pairs' (ground_truth.csv), or None."""
-    folder = Path(folder)
-    if (folder / TRAJECTORY_NAMES[0]).is_file():
-        return "poses"
-    if (folder / GROUND_TRUTH_NAME).is_file():
-        return "pairs"
-    return None
+    choice), 'pairs' (loop pairs: ground_truth.csv, sequence.yaml's aligned traversals or a file
+    in another format, :func:`ground_truth_source`), or None."""
+    src = ground_truth_source(folder)
+    return None if src is None else src.kind
 
 
 def read_camera(path) -> dict:
@@ -362,12 +407,19 @@ def fingerprint(folder, limit: int | None = None) -> str:
     for name in (TRAJECTORY_NAMES[0], GROUND_TRUTH_NAME):
         if (Path(folder) / name).is_file():
             h.update((Path(folder) / name).read_bytes())
+    src = ground_truth_source(folder)          # a ground truth in another format, sequence.yaml
+    extra = [src.path] if src is not None and src.path is not None and src.path.name not in (
+        TRAJECTORY_NAMES[0], GROUND_TRUTH_NAME) else []
+    for path in extra + [Path(folder) / DESCRIPTION_NAME]:
+        if path.is_file():
+            h.update(path.read_bytes())
     return h.hexdigest()[:12]
 
 
 def describe(folder) -> dict:
     """What a sequence folder holds: {'path', 'kind', 'n_frames', 'width', 'height', 'depth',
-    'trajectory', 'camera', 'ground_truth'}. kind is 'synthetic' when the folder carries the
+    'trajectory', 'camera', 'ground_truth', 'layout', 'traversals'}. layout as :func:`layout`;
+    traversals: "name start-stop, ..." (:func:`traversals`). kind is 'synthetic' when the folder carries the
     generator's ``synthetic.json`` (greenloop.datasets.synthetic), else 'real or user-provided'.
     ground_truth is what ``greenloop.groundtruth.for_sequence`` will use: 'poses'
     (CameraTrajectory.txt), 'pairs' (ground_truth.csv) or None (no ground truth)."""
@@ -382,4 +434,217 @@ def describe(folder) -> dict:
             "depth": (folder / "depth").is_dir(),
             "trajectory": (folder / TRAJECTORY_NAMES[0]).is_file(),
             "camera": any((folder / n).is_file() for n in CAMERA_NAMES),
-            "ground_truth": ground_truth_kind(folder)}
+            "ground_truth": ground_truth_kind(folder), "layout": layout(folder),
+            "traversals": ", ".join(f"{t.name} {t.start}-{t.stop - 1}" for t in traversals(folder))}
+
+
+# ------------------------------------------------------------- sequence.yaml and traversals
+class Traversal(NamedTuple):
+    """One traversal of a sequence: frames ``start .. stop - 1`` of the stream."""
+    name: str
+    start: int
+    stop: int
+
+
+def read_description(folder) -> dict:
+    """``sequence.yaml`` of a sequence folder (module doc), checked: {key: value or None} for every
+    key of DESCRIPTION_KEYS (None where the file or the key is absent).
+
+    exclude: int >= 0 frames; frame_step: int >= 1; frame_rate: float > 0 frames/s; traversals: a
+    list of names (traversals/ layout) or {name: [start, stop]} (an rgb/ stream); ground_truth:
+    "aligned" or a file name in the folder; tolerance: int >= 0 frames; threshold_m: float > 0
+    metres; ground_truth_format: a format of greenloop.datasets.groundtruth_formats.
+    Raises ValueError naming the file and the key for unknown keys or bad values.
+    """
+    path = Path(folder) / DESCRIPTION_NAME
+    out = dict.fromkeys(DESCRIPTION_KEYS)
+    if not path.is_file():
+        return out
+    try:
+        d = yaml.safe_load(path.read_text()) or {}
+    except yaml.YAMLError as e:
+        raise ValueError(f"{path} is not valid YAML ({str(e).splitlines()[0]}): fix it") from None
+    if not isinstance(d, dict):
+        raise ValueError(f"{path} must be a mapping `key: value` (keys {', '.join(DESCRIPTION_KEYS)})")
+    unknown = sorted(set(d) - set(DESCRIPTION_KEYS))
+    if unknown:
+        raise ValueError(f"{path}: unknown key(s) {unknown}; the keys are {', '.join(DESCRIPTION_KEYS)}")
+    for key, minimum in (("exclude", 0), ("frame_step", 1), ("tolerance", 0)):
+        if d.get(key) is not None:
+            d[key] = positive_int(f"{path}: {key}", d[key], minimum, unit="frames")
+    for key in ("frame_rate", "threshold_m"):
+        v = d.get(key)
+        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0):
+            raise ValueError(f"{path}: {key} must be a number > 0, got {v!r}")
+    for key in ("ground_truth", "ground_truth_format"):
+        if d.get(key) is not None and not isinstance(d[key], str):
+            raise ValueError(f"{path}: {key} must be a string (e.g. `ground_truth: aligned` or a file "
+                             f"name of the folder), got {d[key]!r}")
+    t = d.get("traversals")
+    if t is not None and not (isinstance(t, list) and all(isinstance(x, str) for x in t)) and not (
+            isinstance(t, dict) and all(isinstance(v, list) and len(v) == 2 for v in t.values())):
+        raise ValueError(f"{path}: traversals must be a list of names of traversals/ folders "
+                         f"([day, night]) or, for an rgb/ stream, {{name: [start, stop]}}; got {t!r}")
+    out.update(d)
+    return out
+
+
+def _traversal_dirs(folder: Path) -> list[tuple[str, Path]]:
+    """(name, folder) of each traversal of a traversals/ or reference/ + query/ layout, in stream
+    order; [] for another layout."""
+    if (folder / TRAVERSALS_DIR).is_dir():
+        found = {p.name: p for p in (folder / TRAVERSALS_DIR).iterdir() if p.is_dir()}
+        order = read_description(folder)["traversals"]
+        if isinstance(order, list):
+            missing = [n for n in order if n not in found]
+            if missing:
+                raise ValueError(f"{folder / DESCRIPTION_NAME} lists traversals {missing} that are not "
+                                 f"folders of {folder / TRAVERSALS_DIR} (it has {sorted(found)})")
+            return [(n, found[n]) for n in order]
+        return [(n, found[n]) for n in sorted(found, key=lambda n: _numeric_key(Path(n)))]
+    ref = next((folder / r for r in REFERENCE_DIRS if (folder / r).is_dir()), None)
+    if ref is not None and (folder / QUERY_DIR).is_dir():
+        return [("reference", ref), ("query", folder / QUERY_DIR)]
+    return []
+
+
+def layout(folder) -> str:
+    """How a folder holds its frames: 'rgb' (rgb/), 'traversals' (traversals/<name>/),
+    'reference/query' or 'images' (the images directly in the folder)."""
+    folder = Path(folder)
+    if (folder / "rgb").is_dir():
+        return "rgb"
+    if (folder / TRAVERSALS_DIR).is_dir():
+        return "traversals"
+    return "reference/query" if _traversal_dirs(folder) else "images"
+
+
+def traversals(folder) -> list[Traversal]:
+    """The traversals of a sequence, in stream order: [Traversal(name, start, stop)], frames
+    start .. stop - 1 of ``list_frames(folder)``.
+
+    traversals/ or reference/ + query/: one per folder. rgb/ (or images): sequence.yaml's
+    ``traversals: {name: [start, stop]}`` (sorted by start, non-overlapping, within the frames;
+    frames outside every range belong to none), else one traversal 'all' of every frame.
+    """
+    folder = Path(folder)
+    dirs = _traversal_dirs(folder) if not (folder / "rgb").is_dir() else []
+    out, start = [], 0
+    for name, d in dirs:
+        n = len(_images(d))
+        out.append(Traversal(name, start, start + n))
+        start += n
+    if out:
+        return out
+    n = len(list_frames(folder))
+    spec = read_description(folder)["traversals"]
+    if not isinstance(spec, dict):
+        return [Traversal("all", 0, n)]
+    ranges = sorted((int(a), int(b), str(k)) for k, (a, b) in spec.items())
+    for (a, b, k), nxt in zip(ranges, ranges[1:] + [(n, n, "")]):
+        if not 0 <= a < b <= min(nxt[0], n):
+            raise ValueError(f"{folder / DESCRIPTION_NAME}: traversal {k}: [{a}, {b}] must be a "
+                             f"non-empty range [start, stop) within the {n} frames, not overlapping "
+                             f"the next one")
+    return [Traversal(k, a, b) for a, b, k in ranges]
+
+
+def traversal_index(folder) -> np.ndarray:
+    """(N,) int64: the traversal of every frame of the stream, an index into ``traversals(folder)``
+    (-1 for a frame of none)."""
+    ts = traversals(folder)
+    idx = np.full(len(list_frames(folder)), -1, dtype=np.int64)
+    for k, t in enumerate(ts):
+        idx[t.start:t.stop] = k
+    return idx
+
+
+def reference_frames(folder) -> np.ndarray:
+    """(N,) bool: the frames of the first traversal (reference/ in that layout), the database of
+    place recognition; the frames of the other traversals are its queries."""
+    return traversal_index(folder) == 0
+
+
+def aligned_pairs(ranges, tolerance: int = 0) -> np.ndarray:
+    """Loop pairs of traversals aligned frame by frame: frame k of traversal a is the same place
+    as frame k of every later traversal b, +- ``tolerance`` frames, the window clipped to b.
+
+    ranges: [(start, stop)] of each traversal in the stream (e.g. ``traversals(folder)``), all of
+        one length n. tolerance: frames (>= 0).
+    Returns (P, 3) int64 ground_truth.csv rows (i, j, tolerance): for each a < b and k, the window
+    [s_b + k - tolerance, s_b + k + tolerance] cut to frames of b, as its centre and half-width
+    (plus its last frame alone when its length is even); a window left whole (or running past the
+    stream's last frame, where there are no frames) is the row (s_a + k, s_b + k, tolerance).
+    """
+    tolerance = positive_int("tolerance", tolerance, 0, unit="frames")
+    ranges = [(int(r[-2]), int(r[-1])) for r in ranges]      # Traversal(name, start, stop) or (start, stop)
+    lengths = {b - a for a, b in ranges}
+    if len(lengths) != 1:
+        raise ValueError(f"aligned ground truth needs traversals of one length (frame k of each is "
+                         f"one place), got lengths {[b - a for a, b in ranges]}: give the ground "
+                         f"truth as a file instead (ground_truth.csv, or import one)")
+    n, last = lengths.pop(), max(b for _, b in ranges)
+    rows = []
+    for ia, (sa, _) in enumerate(ranges):
+        for sb, eb in ranges[ia + 1:]:
+            for k in range(n):
+                c, lo, hi = sb + k, sb + k - tolerance, sb + k + tolerance
+                if lo >= sb and (hi < eb or eb == last):
+                    rows.append((sa + k, c, tolerance))
+                    continue
+                lo, hi = max(lo, sb), min(hi, eb - 1)
+                half = (hi - lo) // 2
+                rows.append((sa + k, lo + half, half))
+                if (hi - lo) % 2:
+                    rows.append((sa + k, hi, 0))
+    return np.asarray(rows, dtype=np.int64).reshape(-1, 3)
+
+
+class GroundTruthSource(NamedTuple):
+    """Where a folder's ground truth comes from (:func:`ground_truth_source`)."""
+    kind: str            # 'poses' or 'pairs'
+    path: Path | None    # the file read (None for sequence.yaml's aligned traversals)
+    format: str          # 'poses', 'pairs' (ground_truth.csv), 'aligned', or a groundtruth_formats format
+    label: str           # one phrase naming it, for printouts
+
+
+def ground_truth_source(folder) -> GroundTruthSource | None:
+    """The ground truth of a folder, first found: CameraTrajectory.txt (poses); sequence.yaml's
+    ``ground_truth`` (``aligned`` or a file); ground_truth.csv; a file in another format found by
+    name (greenloop.datasets.groundtruth_formats.find). None when there is none."""
+    folder = Path(folder)
+    if (folder / TRAJECTORY_NAMES[0]).is_file():
+        return GroundTruthSource("poses", folder / TRAJECTORY_NAMES[0], "poses", TRAJECTORY_NAMES[0])
+    d = read_description(folder)
+    if d["ground_truth"] == ALIGNED:
+        return GroundTruthSource("pairs", None, ALIGNED, f"{DESCRIPTION_NAME}: traversals aligned frame "
+                                 f"by frame, tolerance {d['tolerance'] or 0} frames")
+    path = folder / d["ground_truth"] if d["ground_truth"] else folder / GROUND_TRUTH_NAME
+    if d["ground_truth"] and not path.is_file():
+        raise FileNotFoundError(f"{folder / DESCRIPTION_NAME} names ground_truth: {d['ground_truth']}, "
+                                f"which is not a file of {folder}: fix the name or add the file")
+    if not path.is_file():
+        path = gt_formats.find(folder)
+        if path is None:
+            return None
+    fmt = d["ground_truth_format"] or ("pairs" if path.name == GROUND_TRUTH_NAME
+                                       else gt_formats.detect_format(path))
+    label = path.name if fmt == "pairs" else f"{path.name} ({gt_formats.FORMATS.get(fmt, fmt)})"
+    return GroundTruthSource("pairs", path, fmt, label)
+
+
+def _folder_pairs(folder: Path, n_frames: int | None) -> np.ndarray:
+    """The loop pairs of a folder from whichever source it has (ground_truth_source)."""
+    src = ground_truth_source(folder)
+    if src is None or src.kind != "pairs":
+        raise FileNotFoundError(f"{folder} has no loop pairs: add {GROUND_TRUTH_NAME} (header, then "
+                                f"`i,j[,tolerance]` lines), `ground_truth: aligned` in {DESCRIPTION_NAME}, "
+                                f"or import a file with `python -m greenloop import-gt`")
+    if src.format == "pairs":
+        return read_loop_pairs(src.path, n_frames)
+    d = read_description(folder)
+    if src.format == ALIGNED:
+        return aligned_pairs(traversals(folder), d["tolerance"] or 0)
+    n_ref = traversals(folder)[0].stop if layout(folder) in ("traversals", "reference/query") else None
+    return gt_formats.read(src.path, src.format, n_frames=n_frames, n_reference=n_ref,
+                           threshold_m=d["threshold_m"])

@@ -1,0 +1,201 @@
+"""Gardens Point Walking as a sequence folder of three traversals: day_left, day_right, night_right.
+
+Source (github.com/aghagol/loop-detection, folder ``PR_bench/GardensPointWalking``; a copy of the
+set Glover and Chen recorded at QUT, Zenodo record 4590133; cite Suenderhauf et al., "On the
+performance of ConvNet features for place recognition", IROS 2015): ``day_left/``, ``day_right/``
+and ``night_right/``, ``Image000.jpg ... Image199.jpg`` each, frame k of every traversal the same
+place of one campus walk. day_left walks the left side of the path, the other two the right side
+(a lateral viewpoint change, then an illumination change). The day traversals are 960x540, the
+night one 640x360. ``build`` writes (the traversals layout of ``greenloop.datasets.sequence``)::
+
+    traversals/day_left/0.jpg ... 199.jpg      every frame resized to one size (default 640x360,
+    traversals/day_right/...                   INTER_AREA, JPEG quality 95; a frame already of
+    traversals/night_right/...                 that size is copied byte for byte)
+    sequence.yaml       the stream order day_left, day_right, night_right (600 frames, each place
+                        revisited twice), ``ground_truth: aligned`` with a tolerance of TOLERANCE
+                        frames (VPR-Bench's) and frame_step 1 (200 frames a traversal leave nothing
+                        to subsample)
+    gardenspoint.json   source, counts, size, traversal boundaries
+
+Run ``make gardenspoint`` or ``python -m greenloop.datasets.gardenspoint data/gardenspoint
+[--src FOLDER]``; without ``--src`` the source is cloned (``git clone --depth 1``) into a
+temporary folder.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import cv2
+
+from greenloop.datasets import sequence
+from greenloop.datasets.nordland import shallow_clone
+from greenloop.util.files import publish_folder
+from greenloop.util.progress import bar as tqdm  # in the terminal, never in a notebook
+
+SOURCE_URL = "https://github.com/aghagol/loop-detection"
+SOURCE_SUBDIR = "PR_bench/GardensPointWalking"
+TRAVERSALS = ("day_left", "day_right", "night_right")
+TOLERANCE = 2                 # frames: VPR-Bench's ground truth for this set (frame k +- 2)
+SIZE = (640, 360)             # (width, height): night_right's size, the day sets shrunk to it
+JPEG_QUALITY = 95
+FIX = ("set GARDENSPOINT_SRC=path (make) or pass --src path to a local copy of the source folder "
+       f"`{SOURCE_SUBDIR}` (day_left/, day_right/, night_right/), e.g. from "
+       f"`git clone --depth 1 {SOURCE_URL}`")
+
+
+def source_folder(src) -> Path:
+    """The folder holding the three traversals: ``src`` itself or ``src/PR_bench/GardensPointWalking``
+    (a clone of the source repository). Raises FileNotFoundError naming the fix."""
+    src = Path(src)
+    for cand in (src, src / SOURCE_SUBDIR):
+        if all((cand / t).is_dir() for t in TRAVERSALS):
+            return cand
+    raise FileNotFoundError(f"Gardens Point source {src} not found or incomplete (it needs "
+                            f"{', '.join(t + '/' for t in TRAVERSALS)} with Image000.jpg ...): {FIX}")
+
+
+def check_source(src) -> dict:
+    """Validate a source folder: every traversal holds the same file names (frame k of each is
+    one place). Returns {traversal: [paths in numeric order]}; raises ValueError naming the first
+    traversal that differs and FileNotFoundError for a missing folder."""
+    src = source_folder(src)
+    found = {}
+    for t in TRAVERSALS:
+        try:
+            found[t] = sequence.list_frames(src / t)
+        except ValueError:
+            raise ValueError(f"{src / t} holds no .jpg/.png images: {FIX}") from None
+    names = [p.name for p in found[TRAVERSALS[0]]]
+    for t in TRAVERSALS[1:]:
+        other = [p.name for p in found[t]]
+        if other != names:
+            raise ValueError(f"{src / t} does not match {src / TRAVERSALS[0]} ({len(other)} vs {len(names)} "
+                             f"frames; only in {t}/: {sorted(set(other) - set(names))[:3]}, missing there: "
+                             f"{sorted(set(names) - set(other))[:3]}): frame k of every traversal must show "
+                             f"the same place, so all need the same file names")
+    return found
+
+
+def _convert(src: Path, dest: Path, size: tuple[int, int]) -> tuple[int, int]:
+    """One frame to ``dest`` at ``size`` (copied when already that size); returns its source (w, h)."""
+    img = cv2.imread(str(src), cv2.IMREAD_COLOR)
+    if img is None:
+        raise ValueError(f"cannot read image {src}: replace it from the source")
+    h, w = img.shape[:2]
+    if (w, h) == size and src.suffix.lower() in (".jpg", ".jpeg"):
+        shutil.copyfile(src, dest)
+        return w, h
+    small = cv2.resize(img, size, interpolation=cv2.INTER_AREA if w > size[0] else cv2.INTER_LINEAR)
+    if not cv2.imwrite(str(dest), small, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY]):
+        raise OSError(f"could not write {dest}")
+    return w, h
+
+
+def _description(tolerance: int) -> str:
+    """The sequence.yaml the builder writes (read by sequence.read_description)."""
+    return (f"# Gardens Point Walking (greenloop.datasets.gardenspoint): three walks of one campus route.\n"
+            f"# The stream is the traversals in this order, 600 frames; each place is revisited twice.\n"
+            f"traversals: [{', '.join(TRAVERSALS)}]\n"
+            f"# frame k of every traversal is the same place, +- tolerance frames (VPR-Bench's)\n"
+            f"ground_truth: {sequence.ALIGNED}\n"
+            f"tolerance: {tolerance}\n"
+            f"# 200 frames a traversal: the descriptor notebooks describe every frame\n"
+            f"frame_step: 1\n")
+
+
+def build(out, src, size=SIZE, tolerance: int = TOLERANCE, overwrite: bool = False,
+          progress: bool = True, source_name: str | None = None) -> Path:
+    """Build the Gardens Point sequence folder ``out`` from a local source folder (module doc).
+
+    src: the source folder (day_left/, day_right/, night_right/) or a clone of the repository.
+    size: (width, height) every frame is resized to. tolerance: ground-truth frames (>= 0).
+    overwrite: replace an existing non-empty ``out`` (otherwise FileExistsError).
+    Writes into a temporary folder beside ``out`` and renames it at the end, so a complete folder
+    means a complete build. Returns ``out`` as a Path.
+    """
+    if isinstance(tolerance, bool) or not isinstance(tolerance, int) or tolerance < 0:
+        raise ValueError(f"tolerance must be an integer >= 0 frames, got {tolerance!r}")
+    size = (int(size[0]), int(size[1]))
+    if min(size) < 1:
+        raise ValueError(f"size must be positive (width, height), got {size}")
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise FileExistsError(f"{out} exists and is not a folder: choose another output path")
+    if out.is_dir() and any(out.iterdir()) and not overwrite:
+        raise FileExistsError(f"{out} already exists and is not empty: delete it, choose another "
+                              f"folder, or pass overwrite=True (CLI: --overwrite)")
+    found = check_source(src)
+    n = len(found[TRAVERSALS[0]])
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.parent / f".{out.name}.tmp-{os.getpid()}"
+    shutil.rmtree(tmp, ignore_errors=True)
+    try:
+        native = {}
+        for t in TRAVERSALS:
+            (tmp / sequence.TRAVERSALS_DIR / t).mkdir(parents=True)
+            paths = tqdm(found[t], desc=t, unit="frame", disable=not progress)
+            native[t] = sorted({_convert(p, tmp / sequence.TRAVERSALS_DIR / t / f"{k}.jpg", size)
+                                for k, p in enumerate(paths)})
+        (tmp / sequence.DESCRIPTION_NAME).write_text(_description(tolerance))
+        meta = {"generator": "greenloop.datasets.gardenspoint", "format": 1,
+                "source": source_name or str(source_folder(src)), "source_repository": SOURCE_URL,
+                "source_folder": SOURCE_SUBDIR, "frames_per_traversal": n, "n_frames": len(TRAVERSALS) * n,
+                "width": size[0], "height": size[1], "source_sizes": {t: [list(s) for s in v] for t, v in native.items()},
+                "traversals": {t: [k * n, (k + 1) * n] for k, t in enumerate(TRAVERSALS)},
+                "source_names": [found[TRAVERSALS[0]][0].name, found[TRAVERSALS[0]][-1].name],
+                "ground_truth": {"file": sequence.DESCRIPTION_NAME, "pairs": "frame k of every traversal "
+                                 "with frame k +- tolerance of every later one", "tolerance_frames": tolerance}}
+        (tmp / "gardenspoint.json").write_text(json.dumps(meta, indent=1, sort_keys=True) + "\n")
+        publish_folder(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return out
+
+
+def main(argv=None) -> int:
+    """CLI: ``python -m greenloop.datasets.gardenspoint OUT [--src SRC] [--url URL] [--size WxH]``."""
+    ap = argparse.ArgumentParser(prog="python -m greenloop.datasets.gardenspoint",
+                                 description="Build the Gardens Point Walking sequence folder (3 traversals).")
+    ap.add_argument("out", help="output sequence folder, e.g. data/gardenspoint")
+    ap.add_argument("--src", help="local source folder (day_left/, day_right/, night_right/) or a clone of "
+                                  "the source repository; without it the source is cloned into a temporary folder")
+    ap.add_argument("--url", default=SOURCE_URL, help="repository to clone when --src is not given")
+    ap.add_argument("--size", default=f"{SIZE[0]}x{SIZE[1]}", help="WIDTHxHEIGHT of every frame (default %(default)s)")
+    ap.add_argument("--tolerance", type=int, default=TOLERANCE,
+                    help="ground-truth tolerance in frames (default %(default)s, VPR-Bench's)")
+    ap.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
+    ap.add_argument("--quiet", action="store_true", help="no progress bar")
+    a = ap.parse_args(argv)
+    t0 = time.perf_counter()
+    try:
+        w, _, h = a.size.lower().partition("x")
+        if not (w.isdigit() and h.isdigit()):
+            raise ValueError(f"--size must be WIDTHxHEIGHT in pixels (e.g. 640x360), got {a.size!r}")
+        kw = dict(size=(int(w), int(h)), tolerance=a.tolerance, overwrite=a.overwrite, progress=not a.quiet)
+        if a.src:
+            out = build(a.out, a.src, **kw)
+        else:
+            with tempfile.TemporaryDirectory(prefix="gardenspoint-src-") as tmp:
+                print(f"cloning {a.url} (no --src given) ...", file=sys.stderr, flush=True)
+                src = source_folder(shallow_clone(Path(tmp) / "loop-detection", a.url, FIX, "Gardens Point"))
+                out = build(a.out, src, source_name=f"{a.url} ({SOURCE_SUBDIR})", **kw)
+    except (RuntimeError, ValueError, FileNotFoundError, FileExistsError, OSError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 1
+    meta = json.loads((out / "gardenspoint.json").read_text())
+    print(f"wrote {meta['n_frames']} frames ({meta['frames_per_traversal']} per traversal, "
+          f"{meta['width']}x{meta['height']}) and {sequence.DESCRIPTION_NAME} to {out} in "
+          f"{time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

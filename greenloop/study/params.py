@@ -1,0 +1,249 @@
+"""The notebook parameters a sequence folder implies, and the check make runs before each notebook.
+
+``make`` runs every notebook as ``papermill -f RESULTS/sequence_params.yaml -f
+params/datasets/<name>.yaml $(PARAMS)``: later files and ``-p`` win, so a user's PARAMS overrides
+the dataset's budget, which overrides what the folder says of itself. ``sequence_params.yaml``
+is written here (:func:`sequence_parameters`) from the folder's ``sequence.yaml``
+(greenloop.datasets.sequence.read_description: ``exclude``, ``frame_step``, traversal boundaries)
+and, where it sets no ``exclude``, from its ground truth: when a loop-pair ground truth has loops
+but none more than DEFAULT_EXCLUDE frames apart, ``exclude`` becomes half the distance of its
+closest loop (EXCLUDE_RULE), so that those loops count, and one line names the distance and the
+override.
+
+Before each notebook, :func:`check` reads the parameters that notebook will get (its defaults,
+then the files and ``-p`` arguments above) and, for the notebooks that score loops (LOOP_NOTEBOOKS),
+whether the ground truth has any loop pair at that exclude and frame_step. Where it has none, the
+notebook is not run: an executed notebook that says why is written in its place and
+``<results>/<stem>/skipped.md`` records the reason, so ``make`` carries on with the next one.
+
+CLI (the Makefile's): ``python -m greenloop.study.params NOTEBOOK DATASET RESULTS --out TMP.ipynb
+-- [papermill -f/-p arguments]``.
+"""
+from __future__ import annotations
+
+import argparse
+import ast
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from greenloop import groundtruth
+from greenloop.datasets import sequence
+from greenloop.study import report
+from greenloop.util.files import write_atomic
+
+DEFAULT_EXCLUDE = 150                  # every notebook's default exclusion window, frames
+EXCLUDE_RULE = "half the distance of the closest loop"
+LOOP_NOTEBOOKS = ("07", "08", "09", "10", "11", "12", "13")   # they score loops: none, nothing to score
+PARAMS_NAME = "sequence_params.yaml"
+
+
+def loop_distances(folder) -> tuple[int, int] | None:
+    """(closest, farthest) frame distance |i - j| of the loops of a loop-pair ground truth, before
+    any exclusion window; None for poses (every neighbour is close), no ground truth or no loop."""
+    if sequence.ground_truth_kind(folder) != "pairs":
+        return None
+    n = len(sequence.list_frames(folder))
+    p = sequence.read_loop_pairs(folder, n_frames=n)
+    if not len(p):
+        return None
+    i, lo, hi = p[:, 0], np.maximum(p[:, 1] - p[:, 2], 0), np.minimum(p[:, 1] + p[:, 2], n - 1)
+    inside = (lo <= i) & (i <= hi)
+    near = np.where(inside, np.where(hi > lo, 1, np.iinfo(np.int64).max),
+                    np.minimum(np.abs(i - lo), np.abs(i - hi)))
+    far = np.where(inside & (hi == lo), -1, np.maximum(np.abs(i - lo), np.abs(i - hi)))
+    if far.max() < 1:
+        return None
+    return int(near.min()), int(far.max())
+
+
+def sequence_parameters(folder) -> tuple[dict, list[str]]:
+    """Papermill parameters a folder implies and one note per choice made for it.
+
+    Returns ({name: value}: ``exclude`` and ``frame_step`` from sequence.yaml, or ``exclude`` by
+    EXCLUDE_RULE where the default window would hide every loop; ``first_traversal_end`` (notebook
+    12) where the folder has several traversals), [sentences saying why]).
+    """
+    folder = Path(folder)
+    d = sequence.read_description(folder)
+    params, notes = {}, []
+    if d["exclude"] is not None:
+        params["exclude"] = d["exclude"]
+        notes.append(f"exclude {d['exclude']} frames from {folder / sequence.DESCRIPTION_NAME}")
+    else:
+        dist = loop_distances(folder)
+        if dist is not None and dist[1] <= DEFAULT_EXCLUDE:
+            params["exclude"] = max(0, dist[0] // 2)
+            notes.append(f"{folder}: the closest loop of the ground truth is {dist[0]} frames apart, the "
+                         f"farthest {dist[1]}, all inside the default exclusion window of {DEFAULT_EXCLUDE} "
+                         f"frames, so exclude = {params['exclude']} ({EXCLUDE_RULE}); to choose another, "
+                         f"write `exclude: N` in {folder / sequence.DESCRIPTION_NAME} or run make with "
+                         f"PARAMS='-p exclude N'")
+    if d["frame_step"] is not None:
+        params["frame_step"] = d["frame_step"]
+        notes.append(f"frame_step {d['frame_step']} from {folder / sequence.DESCRIPTION_NAME}")
+    ts = sequence.traversals(folder)
+    if len(ts) > 1:
+        params["first_traversal_end"] = ts[1].start
+        notes.append(f"first_traversal_end {ts[1].start}: the start of traversal {ts[1].name!r}")
+    return params, notes
+
+
+def write_parameters(folder, out) -> tuple[dict, list[str]]:
+    """Write :func:`sequence_parameters` of ``folder`` as a papermill YAML file ``out`` (the notes
+    as comments); returns what it wrote."""
+    params, notes = sequence_parameters(folder)
+    text = (f"# Parameters {folder} implies (greenloop.study.params); make passes this file first, so\n"
+            f"# params/datasets/<name>.yaml and PARAMS override it.\n"
+            + "".join(f"# {n}\n" for n in notes) + (yaml.safe_dump(params, sort_keys=True) if params else ""))
+    write_atomic(out, text)
+    return params, notes
+
+
+def _value(text: str):
+    """A ``-p NAME VALUE`` value as papermill reads it (bool, None, int, float, else the string)."""
+    special = {"True": True, "False": False, "None": None}
+    if text in special:
+        return special[text]
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
+
+
+def notebook_defaults(notebook) -> dict:
+    """{name: default} of a notebook's cell tagged ``parameters`` (each top-level assignment; a
+    value that is not a literal, e.g. ``list(range(40, 125, 5))``, is evaluated when it can be
+    and kept as its source text otherwise)."""
+    cells = json.loads(Path(notebook).read_text())["cells"]
+    cell = next((c for c in cells if "parameters" in c.get("metadata", {}).get("tags", [])), None)
+    if cell is None:
+        raise ValueError(f"{notebook} has no cell tagged 'parameters': papermill cannot run it")
+    src = "".join(cell["source"])
+    out = {}
+    for node in ast.parse(src).body:
+        if isinstance(node, ast.Assign) and len(node.targets) == 1 and isinstance(node.targets[0], ast.Name):
+            text = ast.get_source_segment(src, node.value)
+            try:
+                out[node.targets[0].id] = ast.literal_eval(node.value)
+            except ValueError:
+                try:
+                    out[node.targets[0].id] = eval(text, {"__builtins__": {"list": list, "range": range}})
+                except Exception:
+                    out[node.targets[0].id] = text
+    return out
+
+
+def effective_parameters(notebook, files=(), args=()) -> dict:
+    """The parameters a papermill run of ``notebook`` gets: the defaults of its parameters cell,
+    then each YAML file of ``files``, then papermill's arguments ``args`` (``-f FILE``, ``-y YAML``,
+    ``-p NAME VALUE``, ``-r NAME VALUE``, in papermill's order of precedence); only the names its
+    parameters cell declares (papermill injects the others too, but the notebook ignores them)."""
+    out = notebook_defaults(notebook)
+    declared = set(out)
+    args, f_files, y, p, r = list(args), list(files), [], [], []
+    k = 0
+    while k < len(args):
+        a = args[k]
+        if a in ("-f", "--parameters_file") and k + 1 < len(args):
+            f_files.append(args[k + 1]); k += 2
+        elif a in ("-y", "--parameters_yaml") and k + 1 < len(args):
+            y.append(args[k + 1]); k += 2
+        elif a in ("-p", "--parameters", "-r", "--parameters_raw") and k + 2 < len(args):
+            (r if a.startswith("-r") or a == "--parameters_raw" else p).append((args[k + 1], args[k + 2])); k += 3
+        else:
+            k += 1
+    for f in f_files:
+        out.update(yaml.safe_load(Path(f).read_text()) or {})
+    for text in y:
+        out.update(yaml.safe_load(text) or {})
+    out.update({n: _value(v) for n, v in p})
+    out.update(dict(r))
+    return {k: v for k, v in out.items() if k in declared}
+
+
+def skip_reason(notebook, folder, params: dict) -> str | None:
+    """Why ``notebook`` cannot run on ``folder`` with ``params`` (one sentence), or None: a
+    LOOP_NOTEBOOKS notebook needs at least one ground-truth loop pair at its exclude and frame_step."""
+    stem = Path(notebook).stem
+    if stem[:2] not in LOOP_NOTEBOOKS:
+        return None
+    if sequence.ground_truth_kind(folder) is None:
+        return (f"{stem} scores loop closures, and {folder} has no ground truth (add ground_truth.csv, "
+                f"CameraTrajectory.txt or `ground_truth: aligned` in sequence.yaml, or run "
+                f"`python -m greenloop import-gt FILE`)")
+    exclude, step = int(params.get("exclude", DEFAULT_EXCLUDE)), int(params.get("frame_step", 1) or 1)
+    frames = np.arange(0, len(sequence.list_frames(folder)), step)
+    gt = groundtruth.for_sequence(folder, frames, params.get("loop_threshold", 0.5), exclude)
+    if gt.any():
+        return None
+    dist = loop_distances(folder)
+    closest = (f"its closest loop is {dist[0]} frames apart and its farthest {dist[1]}"
+               if dist else "it has no loop at all")
+    yaml_file = Path(folder) / sequence.DESCRIPTION_NAME
+    if dist is None:
+        fix = "this sequence does not revisit a place, so there is nothing to score"
+    elif exclude < dist[1]:          # loops outside the window exist: the step misses their partners
+        fix = (f"describe every frame (`frame_step: 1` in {yaml_file} or PARAMS='-p frame_step 1'), or "
+               f"widen the ground truth's tolerance")
+    else:
+        fix = f"write `exclude: {dist[0] // 2}` in {yaml_file} or run make with PARAMS='-p exclude {dist[0] // 2}'"
+    every = "all frames" if step == 1 else f"every {step}th frame"
+    return (f"{stem} scores loop closures, and the ground truth of {folder} has no loop pair more than "
+            f"exclude={exclude} frames apart among {every} ({closest}): skipped; to run "
+            f"it, {fix}")
+
+
+def write_skipped(notebook, out, folder, results_dir, reason: str, params: dict) -> Path:
+    """Record a skipped notebook: the executed notebook ``out`` (one cell saying why) and
+    ``<results_dir>/<stem>/skipped.md`` with its manifest. Returns ``out``."""
+    import nbformat
+    stem = Path(notebook).stem
+    nb = nbformat.v4.new_notebook()
+    nb.cells = [nbformat.v4.new_markdown_cell(f"# {stem}: skipped\n\n{reason}")]
+    nb.metadata["kernelspec"] = {"name": "greenloop", "display_name": "Python (greenloop)", "language": "python"}
+    write_atomic(out, nbformat.writes(nb))
+    folder_out = Path(results_dir) / stem
+    write_atomic(folder_out / "skipped.md", f"### {stem}: skipped\n\n{reason}\n")
+    report.manifest(folder_out, params, dataset=folder, skipped=reason)
+    return Path(out)
+
+
+def main(argv=None) -> int:
+    """CLI (make's): write RESULTS/sequence_params.yaml, print its notes; when NOTEBOOK cannot run,
+    write --out as a notebook that says why and print the reason. Exit 0 either way."""
+    ap = argparse.ArgumentParser(prog="python -m greenloop.study.params",
+                                 description="Parameters a sequence folder implies; skip a notebook that "
+                                             "cannot run on it.")
+    ap.add_argument("notebook")
+    ap.add_argument("dataset")
+    ap.add_argument("results")
+    ap.add_argument("--out", required=True, help="where the executed notebook goes (written only when skipped)")
+    ap.epilog = "after --: the papermill -f/-p arguments of the run (params/datasets/*.yaml, PARAMS)"
+    argv = list(sys.argv[1:] if argv is None else argv)
+    cut = argv.index("--") if "--" in argv else len(argv)
+    a, rest = ap.parse_args(argv[:cut]), argv[cut + 1:]
+    try:
+        seq_file = Path(a.results) / PARAMS_NAME
+        _, notes = write_parameters(a.dataset, seq_file)
+        for n in notes:
+            if "closest loop" in n:
+                print(n, flush=True)
+        params = effective_parameters(a.notebook, [seq_file], rest)
+        reason = skip_reason(a.notebook, a.dataset, params)
+    except (FileNotFoundError, ValueError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    if reason:
+        write_skipped(a.notebook, a.out, a.dataset, a.results, reason, params)
+        print(reason, flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
