@@ -18,9 +18,18 @@ frame; higher = more similar). Pairs within ``exclude`` frames never count, what
 ``AP = sum_n (R_n - R_{n-1}) P_n`` over the distinct score thresholds, highest first (P_n, R_n
 the precision and recall of declaring every pair scored >= the n-th threshold a loop). It is
 *not* the trapezoidal area under the PR curve (``sklearn.metrics.auc(recall, precision)``),
-which interpolates linearly and is optimistic; it is also not a per-query mean (that is
-:func:`recall_at_k`'s place-recognition view). Numbers from tools that use another definition
-or another ground truth (other thresholds, ``exclude``, or pairs counted twice) are not comparable.
+which interpolates linearly and is optimistic. Pair AP is this study's secondary column,
+named "pair AP" wherever it appears.
+
+The field's metrics are per query (:func:`best_matches`, :func:`query_metrics`,
+:func:`per_query`, :func:`query_chance`): each query frame's candidates are ranked by score;
+Recall@K is the share of queries with a partner whose best-ranked partner is among the top K;
+the precision-recall curve ranks each query's *best* match by its score (a wrong best match,
+or a query without a partner that fires, is a false positive), and AUC-PR, R@100P and R@95P are
+read off it. Two database modes (:func:`candidate_mask`): loop closure (every earlier frame
+outside the exclusion window; the default) and place recognition (a reference traversal).
+Numbers from tools that use another definition or another ground truth (other thresholds,
+``exclude``, or pairs counted twice) are not comparable.
 
 Honest tuning
 -------------
@@ -35,6 +44,8 @@ at the very end of a sequence), no such split exists: :func:`split_mask` raises
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from sklearn.metrics import (average_precision_score, classification_report, precision_recall_curve,
                              roc_curve)
@@ -46,7 +57,8 @@ from greenloop.util.checks import positive_int
 __all__ = [
     "pair_mask", "pair_scores", "pr_curve", "average_precision", "recall_at_precision",
     "recall_at_100_precision",
-    "recall_at_k", "operating_point", "split_mask", "NoHonestSplit", "mean_per_class_accuracy",
+    "recall_at_k", "Matches", "candidate_mask", "matches", "best_matches", "query_pr_curve",
+    "query_metrics", "per_query", "query_chance", "operating_point", "split_mask", "NoHonestSplit", "mean_per_class_accuracy",
     "mpca_threshold", "tune_then_score", "closure_counts", "loop_scores", "chance_level",
     "revisit_queries",
     "precision_at_recall", "interpolated_precision", "overlap_recall", "relative_rates",
@@ -186,36 +198,208 @@ def recall_at_100_precision(S, GT, exclude: int = 150, queries=None) -> float:
 
 
 def recall_at_k(S, GT, k: int = 1, exclude: int = 150, queries=None) -> float:
-    """Place-recognition recall@k (per query, not per pair).
+    """Place-recognition recall@k (per query, not per pair): ``per_query(...)[f"R@{k}"]``.
 
-    Definition: a query is a frame j with at least one ground-truth loop partner among the
-    earlier frames i with j - i > exclude (and, if given, queries[j] True). Its candidates are
-    exactly those earlier frames i < j - exclude, ranked by S[i, j] from high to low (ties: the
-    earlier frame first). The query succeeds if any of its top k candidates is a loop (GT[i, j]).
-    Returns the fraction of queries that succeed, a float in [0, 1].
-
+    A query is a frame j with at least one ground-truth loop partner among its candidates (the
+    earlier frames i with j - i > exclude, and queries[j] if given); it succeeds if any of its top
+    k candidates, ranked by S[i, j] high to low (ties: the earlier frame first), is a loop.
     S: (N, N) similarity, higher = more similar (column j = query). GT: (N, N) bool symmetric.
-    k: integer >= 1. Raises ValueError if no frame is a query (no loops).
+    k: integer >= 1. Returns the fraction of queries that succeed, a float in [0, 1]. Raises
+    ValueError if no frame is a query (no loops).
     """
     positive_int("k", k)
-    S, G = _check_pair(S, GT)
-    n = S.shape[0]
-    cand = pair_mask(n, exclude, queries)               # [i, j]: i is a candidate of query j
-    true = G & cand
-    is_query = true.any(0)
-    if not is_query.any():
+    m = best_matches(S, GT, exclude, queries, k=k)
+    if not m.has_partner.any():
         raise ValueError(_NO_LOOPS.format(exclude=exclude,
                                           q="" if queries is None else ", in the query mask"))
-    Sq = np.asarray(S[:, is_query], dtype=np.float64)
-    cq, tq = cand[:, is_query], true[:, is_query]
+    return float(np.mean(m.hit_rank[m.has_partner] < k))
+
+
+# ------------------------------------------------------------- per-query metrics (the field's)
+class Matches(NamedTuple):
+    """Each query's ranked candidates, reduced to what the per-query metrics read. (Q,) arrays,
+    one entry per query frame with at least one candidate, in increasing frame order:
+
+    query: frame index j; match: its best candidate i (largest score; ties: smallest i);
+    score: that score; correct: the best candidate is a ground-truth partner; has_partner: some
+    candidate is; hit_rank: 0-based rank of the best-ranked partner among the candidates (score
+    high to low, ties: smaller i first), or ``k`` when that rank is >= k or there is no partner.
+    k: the cap of hit_rank (R@K is defined for K <= k).
+    """
+    query: np.ndarray
+    match: np.ndarray
+    score: np.ndarray
+    correct: np.ndarray
+    has_partner: np.ndarray
+    hit_rank: np.ndarray
+    k: int
+
+
+def candidate_mask(n: int, exclude: int = 150, queries=None, reference=None) -> np.ndarray:
+    """(n, n) bool: [i, j] True iff database frame i is a candidate of query frame j.
+
+    Two database modes. Loop closure (``reference`` None, the default): every earlier frame
+    outside the exclusion window, i < j and j - i > exclude (:func:`pair_mask`). Place
+    recognition (``reference`` a (n,) bool mask, e.g. the first traversal): the candidates of
+    query j are the reference frames, queries are the frames outside it; exclude is not used.
+    queries: optional (n,) bool mask restricting the query frames in either mode.
+    """
+    if reference is None:
+        return pair_mask(n, exclude, queries)
+    ref = np.asarray(reference)
+    if ref.shape != (n,) or ref.dtype != bool:
+        raise ValueError(f"reference must be a (N,) bool mask of database frames with N={n}, got "
+                         f"shape {ref.shape} dtype {ref.dtype}")
+    if ref.all() or not ref.any():
+        raise ValueError("reference must mark some frames (the database) and leave others (the "
+                         "queries): place recognition needs both")
+    m = ref[:, None] & ~ref[None, :]
+    q = _check_queries(queries, n)
+    return m if q is None else m & q[None, :]
+
+
+def matches(query, match, score, correct, has_partner, hit_rank, k: int) -> Matches:
+    """A validated :class:`Matches` from arrays a caller ranked itself (e.g. an index's top-k
+    lists, with no (N, N) matrix). All (Q,): query/match/hit_rank int, score float (finite),
+    correct/has_partner bool (correct implies has_partner); 0 <= hit_rank <= k, and hit_rank == 0
+    wherever correct. Returns the Matches; ValueError naming the field that is off."""
+    k = positive_int("k", k)
+    q, mt, hr = (np.asarray(a, dtype=np.int64) for a in (query, match, hit_rank))
+    sc = np.asarray(score, dtype=np.float64)
+    ok, hp = np.asarray(correct), np.asarray(has_partner)
+    if len({a.shape for a in (q, mt, hr, sc, ok, hp)}) != 1 or q.ndim != 1:
+        raise ValueError("query, match, score, correct, has_partner and hit_rank must be (Q,) "
+                         "arrays of one length")
+    if ok.dtype != bool or hp.dtype != bool:
+        raise ValueError("correct and has_partner must be bool arrays")
+    if not np.all(np.isfinite(sc)):
+        raise ValueError("score has NaN or inf values: fix the similarity")
+    if np.any(ok & ~hp) or np.any((hr < 0) | (hr > k)) or np.any(hr[ok] != 0):
+        raise ValueError("inconsistent matches: a correct best match needs a partner and hit_rank "
+                         "0, and hit_rank must lie in [0, k]")
+    return Matches(q, mt, sc, ok, hp, hr, k)
+
+
+def best_matches(S, GT, exclude: int = 150, queries=None, reference=None, k: int = 10) -> Matches:
+    """Each query's best candidate and the rank of its best-ranked partner, from a score matrix.
+
+    S: (N, N) float, higher = more similar, row = database frame, column = query. GT: (N, N)
+    bool symmetric ground truth. exclude, queries, reference: the database mode
+    (:func:`candidate_mask`). k: cap of hit_rank. Returns :class:`Matches` over the query frames
+    with at least one candidate (those without a partner included: they count as false
+    positives when they fire). Memory O(N Q); an index's top-k lists use :func:`matches`.
+    """
+    S, G = _check_pair(S, GT)
+    n = S.shape[0]
+    cand = candidate_mask(n, exclude, queries, reference)
+    js = np.flatnonzero(cand.any(0))
+    if not len(js):
+        raise ValueError(f"no query frame has a candidate: N={n} frames, exclude={exclude} "
+                         f"(and the query / reference masks) leave no database frame to match")
+    Sq, cq = np.asarray(S[:, js], dtype=np.float64), cand[:, js]
     if not np.all(np.isfinite(Sq[cq])):
         raise ValueError("S contains NaN or inf among the candidate pairs; fix the similarity")
-    # rank of the best-placed true loop = candidates ranked before it; success iff rank < k
-    best = np.where(tq, Sq, -np.inf).max(0)                            # (Q,)
+    Sm = np.where(cq, Sq, -np.inf)
+    best = Sm.argmax(0)                                           # first maximum: smallest i
+    cols = np.arange(len(js))
+    tq = G[:, js] & cq
+    has = tq.any(0)
+    top = np.where(tq, Sq, -np.inf).max(0)                        # best partner's score
     rows = np.arange(n)[:, None]
-    first = np.where(tq & (Sq == best), rows, n).min(0)               # earliest true loop at best
-    ahead = cq & ((Sq > best) | ((Sq == best) & (rows < first)))
-    return float(np.mean(ahead.sum(0) < k))
+    first = np.where(tq & (Sq == top), rows, n).min(0)
+    ahead = (cq & ((Sq > top) | ((Sq == top) & (rows < first)))).sum(0)
+    hit = np.where(has, np.minimum(ahead, k), k)
+    return matches(js, best, Sm[best, cols], G[best, js] & cq[best, cols], has, hit, k)
+
+
+def query_pr_curve(m: Matches):
+    """The per-query precision-recall curve: each query's best match, ranked by its score.
+
+    Declaring every query whose best score >= t: TP = declared and correct, FP = declared and not
+    correct (a wrong best match, or a query without a partner that fires); recall = TP / (queries
+    with a partner), precision = TP / declared. m: :class:`Matches`. Returns (precision,
+    recall, thresholds), each (T,) over the T distinct scores in decreasing order (ties are
+    declared together); no (P=1, R=0) anchor is added. ValueError if no query has a partner.
+    """
+    revisits = int(m.has_partner.sum())
+    if not revisits:
+        raise ValueError("no query has a ground-truth partner among its candidates: recall is "
+                         "undefined (the sequence may not revisit any place outside the window)")
+    order = np.argsort(-m.score, kind="stable")
+    s, hit = m.score[order], m.correct[order]
+    last = np.r_[s[1:] != s[:-1], True]
+    tp = np.cumsum(hit)[last]
+    declared = (np.arange(len(s)) + 1)[last]
+    return tp / declared, tp / revisits, s[last]
+
+
+def _recall_at(precision, recall, level: float) -> float:
+    ok = precision >= level - 1e-12
+    return float(recall[ok].max()) if ok.any() else 0.0
+
+
+def query_metrics(m: Matches, ks=(1, 5, 10)) -> dict:
+    """The field's per-query metrics of one method, as fractions in [0, 1].
+
+    m: :class:`Matches`; ks: the K of Recall@K (each <= m.k). Returns {"R@K": fraction of the
+    queries with a partner whose best-ranked partner is in the top K, for each K; "AUC-PR": the
+    step-wise area sum_n (R_n - R_{n-1}) P_n of :func:`query_pr_curve` (R_0 = 0), not the
+    trapezoid; "R@100P" / "R@95P": the largest recall with precision >= 1 / 0.95 (0.0 when
+    none); "queries": Q; "revisits": queries with a partner}.
+    """
+    ks = [positive_int("K", K) for K in ks]
+    if any(K > m.k for K in ks):
+        raise ValueError(f"R@K needs K <= k={m.k} (the cap the matches were ranked with); got {ks}")
+    p, r, _ = query_pr_curve(m)
+    hp = m.has_partner
+    out = {f"R@{K}": float(np.mean(m.hit_rank[hp] < K)) for K in ks}
+    out["AUC-PR"] = float(np.sum(np.diff(np.r_[0.0, r]) * p))
+    out["R@100P"], out["R@95P"] = _recall_at(p, r, 1.0), _recall_at(p, r, 0.95)
+    out["queries"], out["revisits"] = int(len(m.query)), int(hp.sum())
+    return out
+
+
+def per_query(S, GT, exclude: int = 150, queries=None, reference=None, ks=(1, 5, 10)) -> dict:
+    """:func:`query_metrics` of a score matrix: ``query_metrics(best_matches(S, GT, exclude,
+    queries, reference, k=max(ks)), ks)``. Arguments as in :func:`best_matches`."""
+    return query_metrics(best_matches(S, GT, exclude, queries, reference, k=max(ks)), ks)
+
+
+def query_chance(GT, exclude: int = 150, queries=None, reference=None, ks=(1, 5, 10)) -> dict:
+    """What a random score gets on :func:`query_metrics`' keys (fractions), for a chance row.
+
+    With c_j candidates and t_j partners at query j: R@K = mean over queries with a partner of
+    1 - C(c_j - t_j, K) / C(c_j, K) (exact). A random best match is correct with p_j = t_j / c_j,
+    independently, in a random order of the Q queries, so the expected step-wise area is exact:
+    AUC-PR = [H_Q sum p + ((sum p)^2 - sum p^2) (Q - H_Q) / (Q - 1)] / (Q revisits), H_Q the
+    harmonic number (the expected AP of a random ranking, times the recall it ends at). R@100P
+    is the expected run of correct queries at the top, approximated by pbar / (1 - pbar) /
+    revisits with pbar = sum p / Q (capped at the final recall sum p / revisits); R@95P is the
+    final recall where pbar >= 0.95, else R@100P. Arguments as in :func:`best_matches`.
+    """
+    G = _check_gt(GT)
+    cand = candidate_mask(G.shape[0], exclude, queries, reference)
+    has_cand = cand.any(0)
+    c = cand.sum(0)[has_cand].astype(np.float64)
+    t = (G & cand).sum(0)[has_cand].astype(np.float64)
+    rev = t > 0
+    if not rev.any():
+        raise ValueError(_NO_LOOPS.format(exclude=exclude, q="" if queries is None else ", in the query mask"))
+    out = {}
+    for K in (positive_int("K", K) for K in ks):
+        miss = np.ones(rev.sum())
+        for r in range(K):                      # C(c - t, K) / C(c, K) as a product
+            miss *= np.clip((c[rev] - t[rev] - r) / np.maximum(c[rev] - r, 1), 0, 1)
+        out[f"R@{K}"] = float(np.mean(1 - miss))
+    p = t / c
+    pbar, final = float(p.mean()), float(p.sum() / rev.sum())
+    Q, sp, h = len(c), float(p.sum()), float(np.sum(1.0 / np.arange(1, len(c) + 1)))
+    pairs = (sp ** 2 - float(np.sum(p ** 2))) * ((Q - h) / (Q - 1) if Q > 1 else 0.0)
+    out["AUC-PR"] = (h * sp + pairs) / (Q * rev.sum())
+    out["R@100P"] = min(final, pbar / (1 - pbar) / rev.sum()) if pbar < 1 else final
+    out["R@95P"] = final if pbar >= 0.95 else out["R@100P"]
+    out["queries"], out["revisits"] = int(len(c)), int(rev.sum())
+    return out
 
 
 # -------------------------------------------------------------- mean per-class accuracy
