@@ -36,15 +36,16 @@ import time
 
 import faiss
 import numpy as np
+import scipy.sparse
 
-from greenloop import lsh
+from greenloop import evaluate, lsh
 from greenloop.similarity import l2_normalise
 from greenloop.util.checks import positive_int
 
 KINDS = ("scan", "flat", "ivf", "hnsw", "swp", "qdp")
 EXACT = ("scan", "flat")
 
-__all__ = ["KINDS", "EXACT", "make_index", "stream_search", "one_thread", "topk"]
+__all__ = ["KINDS", "EXACT", "make_index", "stream_search", "one_thread", "topk", "candidate_matches"]
 
 
 def one_thread() -> None:
@@ -241,3 +242,33 @@ def stream_search(index, X, k: int = 10, exclude: int = 0, timed: bool = False):
             scores[t], ids[t] = s[0], i[0]
         secs[t] = time.perf_counter() - t0
     return (scores, ids, secs) if timed else (scores, ids)
+
+
+def candidate_matches(scores, ids, GT, exclude: int = 0) -> evaluate.Matches:
+    """Per-query matches (``evaluate.matches``) of a loop-closure stream from its top-k lists.
+
+    scores, ids: (N, k) from :func:`stream_search` (query t = frame t; ids -1 where fewer than k
+    frames were stored); GT: the ground truth as a sparse (N, N) bool matrix (scipy.sparse; a
+    dense bool array is converted), memory O(pairs). exclude: the window stream_search used, so
+    that has_partner counts partners i < t - exclude, whether retrieved or not. Queries with no
+    candidate (t <= exclude) are left out, as in ``evaluate.best_matches``. hit_rank: the rank of
+    the first partner in the list, k when none is in it. Memory O(N k): no N x N matrix; feed the
+    result to ``evaluate.query_metrics``.
+    """
+    scores, ids = np.asarray(scores), np.asarray(ids)
+    if scores.shape != ids.shape or ids.ndim != 2:
+        raise ValueError(f"scores and ids must be (N, k) arrays of one shape, got {scores.shape} and {ids.shape}")
+    n, k = ids.shape
+    G = scipy.sparse.csr_array(GT, dtype=bool)
+    if G.shape != (n, n):
+        raise ValueError(f"GT must be ({n}, {n}) for {n} queries, got shape {G.shape}")
+    exclude = positive_int("exclude", exclude, 0)
+    q = np.flatnonzero(ids[:, 0] >= 0)
+    hit = np.zeros((len(q), k), bool)
+    has = np.zeros(len(q), bool)
+    for r, t in enumerate(q):
+        partners = G.indices[G.indptr[t]:G.indptr[t + 1]]       # column t's partners (GT symmetric)
+        has[r] = np.any(partners < t - exclude)
+        hit[r] = np.isin(ids[t], partners) & (ids[t] >= 0)
+    rank = np.where(hit.any(1), hit.argmax(1), k)
+    return evaluate.matches(q, ids[q, 0], scores[q, 0], hit[:, 0], has, rank, k)
