@@ -141,3 +141,52 @@ def test_candidate_mode_closures_equal_the_reference():
         det, _ = _run(X, threshold=1.5, contrast_window=10, index=kind, k=20)
         assert [(e["frame"], e["match"]) for e in det.events] == \
                [(e["frame"], e["match"]) for e in ref.events], kind
+
+
+def _folder(path):
+    """40 smooth random colour frames, then frames 0..24 again with a little noise: 65 .png files."""
+    import cv2
+    rng = np.random.default_rng(0)
+    base = [cv2.GaussianBlur(rng.integers(0, 256, (32, 64, 3), dtype=np.uint8), (9, 9), 3) for _ in range(40)]
+    frames = base + [np.clip(f.astype(int) + rng.integers(-4, 5, f.shape), 0, 255).astype(np.uint8) for f in base[:25]]
+    path.mkdir()
+    for i, f in enumerate(frames):
+        cv2.imwrite(str(path / f"{i}.png"), f)
+    return path
+
+
+def _detect(argv, capsys):
+    from greenloop.__main__ import main
+    rc = main(argv)
+    cap = capsys.readouterr()
+    return rc, [line.split("\t")[:3] for line in cap.out.splitlines() if line[:1].isdigit()], cap.out + cap.err
+
+
+def test_detect_resumes_from_its_state_with_the_same_closures(tmp_path, capsys, monkeypatch):
+    import greenloop.__main__ as cli
+    folder = _folder(tmp_path / "rec")
+    base = ["detect", str(folder), "--method", "greenloop-seq", "--descriptor", "pixels-patchnorm",
+            "--exclude", "10", "--seq-len", "3", "--contrast-window", "0", "--threshold", "0.8",
+            "--window", "4", "--index", "hnsw", "--candidates", "5"]
+    rc, full, _ = _detect(base, capsys)
+    assert rc == 0 and len(full) >= 10 and all(int(f) >= 40 and int(m) == int(f) - 40 for f, m, _ in full)
+    state = tmp_path / "det.state"
+    rc, part1, out = _detect(base + ["--state", str(state), "--stop-after", "30", "--save-every", "8"], capsys)
+    assert rc == 0 and "stopped" in out and state.is_file() and part1 == []
+    calls = {"n": 0}
+    real_read = cli._read_window
+
+    def interrupted(paths):                       # Ctrl-C during the 3rd window of the next run
+        calls["n"] += 1
+        if calls["n"] == 3:
+            raise KeyboardInterrupt
+        return real_read(paths)
+    monkeypatch.setattr(cli, "_read_window", interrupted)
+    rc, part2, _ = _detect(base + ["--state", str(state)], capsys)
+    assert rc == 130
+    monkeypatch.setattr(cli, "_read_window", real_read)
+    rc, part3, out = _detect(base + ["--state", str(state)], capsys)
+    assert rc == 0 and "resumed at frame 38" in out and "65 frames" in out
+    assert part1 + part2 + part3 == full
+    rc, _, out = _detect(base[:-1] + ["6", "--state", str(state)], capsys)     # other options: refused
+    assert rc == 2 and "another run" in out
