@@ -133,8 +133,10 @@ def _seq_save(det: seqmatch.Detector, args, kn: dict, paths) -> None:
     """Write the detector (stored frames, index, sequence buffers, events) to ``--state``, atomically."""
     key = dict(kn, folder=str(Path(args.folder).resolve()), frames=len(paths), index=args.index,
                candidates=args.candidates)
-    write_atomic(args.state, lambda p: p.write_bytes(pickle.dumps({"key": key, "detector": det},
-                                                                  protocol=pickle.HIGHEST_PROTOCOL)))
+    def dump(path):
+        with open(path, "wb") as f:
+            pickle.dump({"key": key, "detector": det}, f, protocol=pickle.HIGHEST_PROTOCOL)
+    write_atomic(args.state, dump)
 
 
 def _seq_stream(det: seqmatch.Detector, paths, args, kn: dict) -> bool:

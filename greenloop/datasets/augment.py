@@ -19,12 +19,17 @@ chunk it is made in.
 """
 from __future__ import annotations
 
+import argparse
+from pathlib import Path
+
 import cv2
 import numpy as np
 
+from greenloop.datasets import nordland
 from greenloop.util.checks import positive_int
+from greenloop.util.progress import bar
 
-__all__ = ["pass_condition", "augment_frame", "recording"]
+__all__ = ["nordland_route", "write_recording", "pass_condition", "augment_frame", "recording"]
 
 DEFAULTS = dict(shift=3.0, zoom=0.10, gain=(0.7, 1.3), offset=30.0, blur=1.2,
                 brightness_jitter=8.0, noise=4.0)
@@ -86,3 +91,40 @@ def recording(source, start: int, stop: int, seed: int = 0, **options):
             frame = augment_frame(src[i], cond, rng, **options)    # draw every frame of the pass
             if start <= t < stop:
                 yield t, i, frame
+
+
+def nordland_route(src, gray: bool = True) -> np.ndarray:
+    """Nordland's summer then winter frames in route order: (7152, 32, 64) uint8 gray, or
+    (7152, 32, 64, 3) BGR with gray False. src: the source folder (summer/, winter/) or a clone
+    of the source repository; FileNotFoundError naming the fix without it."""
+    summer, winter, _ = nordland.check_source(nordland.source_folder(src))
+    flag = cv2.IMREAD_GRAYSCALE if gray else cv2.IMREAD_COLOR
+    return np.stack([cv2.imread(str(p), flag) for p in summer + winter])
+
+
+def write_recording(src, out, n_frames: int, seed: int = 0, progress: bool = True) -> Path:
+    """Write frames 0..n_frames-1 of the augmented recording over Nordland (colour) as
+    out/0.png ... (a folder ``python -m greenloop detect`` reads). Returns Path(out)."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    route = nordland_route(src, gray=False)
+    for t, _, f in bar(recording(route, 0, positive_int("n_frames", n_frames, 1), seed), total=n_frames,
+                       desc="recording", unit="frame", disable=not progress):
+        cv2.imwrite(str(out / f"{t}.png"), f)
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description="Write an augmented long recording over Nordland's frames "
+                                             "(module doc) as numbered PNGs.")
+    ap.add_argument("out", help="folder to write (outside the repository: 10^5 frames are ~0.5 GB)")
+    ap.add_argument("--src", default="../shared/real/nordland", help="Nordland source (summer/, winter/)")
+    ap.add_argument("--frames", type=int, default=100_000)
+    ap.add_argument("--seed", type=int, default=0)
+    a = ap.parse_args(argv)
+    write_recording(a.src, a.out, a.frames, a.seed)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
