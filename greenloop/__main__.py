@@ -11,6 +11,9 @@ Commands
           [--exclude FRAMES] [--contrast-window R] [--step N]
         greenloop's own sequence-matching detector (greenloop.seqmatch.Detector): no model, no
         poses; prints each closure (query frame, matched earlier frame, score).
+        [--index scan|flat|ivf|hnsw|swp|qdp] [--candidates K]: verify sequences on the K frames a
+        retrieval index returns (greenloop.retrieval); [--state FILE] [--save-every N]
+        [--stop-after N]: save the detector and resume from it (a progress bar goes to stderr).
     sweep NOTEBOOK --grid NAME=V1,V2,... [--grid ...] --out OUT [-f PARAMS.yaml] [-p NAME VALUE]
           [--dataset DIR] [--scheduler local|tcp://HOST:8786|slurm|pbs] [--workers N] [--metric SPEC]
         run the notebook once per point of the grids' cross product on Dask (greenloop.study.sweep) and
