@@ -190,3 +190,24 @@ def test_detect_resumes_from_its_state_with_the_same_closures(tmp_path, capsys, 
     assert part1 + part2 + part3 == full
     rc, _, out = _detect(base[:-1] + ["6", "--state", str(state)], capsys)     # other options: refused
     assert rc == 2 and "another run" in out
+
+
+def test_augmented_recording_is_the_same_in_any_chunk():
+    from greenloop.datasets import augment
+    rng = np.random.default_rng(0)
+    src = rng.integers(0, 256, (4, 16, 24), dtype=np.uint8)
+    whole = [f for _, _, f in augment.recording(src, 0, 11)]
+    part = list(augment.recording(src, 6, 10))
+    assert [(t, i) for t, i, _ in part] == [(t, t % 4) for t in range(6, 10)]
+    assert all(np.array_equal(f, whole[t]) for t, _, f in part)
+    assert not np.array_equal(whole[0], whole[4])          # a revisit is another view, not a copy
+    assert augment.pass_condition(0, 0) == {"gain": 1.0, "offset": 0.0, "blur": 0.0}
+
+
+def test_route_ground_truth_by_hand():
+    from greenloop.speed import scale
+    G = scale.route_ground_truth(12, 6, tolerance=1).toarray()
+    # places (t mod 6) mod 3: 0 1 2 0 1 2 | 0 1 2 0 1 2; frame 0 (place 0) meets places 0 and 1
+    assert np.flatnonzero(G[0]).tolist() == [1, 3, 4, 6, 7, 9, 10]
+    assert np.flatnonzero(G[2]).tolist() == [1, 4, 5, 7, 8, 10, 11]
+    assert (G == G.T).all() and not G.diagonal().any()
