@@ -58,7 +58,7 @@ __all__ = [
     "perturbation_sets", "probe_order_qdp", "qdp_n_probes", "BucketIndex", "build_index", "insert",
     "append", "options", "probe_candidates",
     "MatchResult", "incremental_match", "query_index", "static_match", "scanned_matrix",
-    "best_match_matrix", "table6_variants", "run_scores", "compare_variants", "scanned_pr_curve",
+    "best_match_matrix", "table6_variants", "query_matches", "run_scores", "compare_variants", "scanned_pr_curve",
     "planted_queries", "scaling_test",
 ]
 
@@ -683,22 +683,46 @@ def table6_variants(centre: bool = True, centre_frames: int = 1) -> list:
     return out
 
 
-def run_scores(r: MatchResult, S, brute: MatchResult, GT, exclude: int, revisit) -> dict:
+def query_matches(result: MatchResult, GT, exclude: int, floor: float = -2.0):
+    """The per-query :class:`greenloop.evaluate.Matches` of one incremental run (loop-closure mode).
+
+    result: from :func:`incremental_match`. GT: (N, N) bool ground truth; exclude: band in
+    frames (the run's). Queries: every frame with a stored candidate (j - i > exclude for some
+    i). match/score: the method's best scanned frame and its cosine; a query that scanned nothing
+    has no match and gets score ``floor`` (below every cosine: it fires only at the lowest
+    threshold) and correct False. has_partner: a GT partner among ALL its candidates (the same
+    denominator for every method). Only the best match is known, so k = 1 (R@1 only).
+    """
+    n = _incremental(result)
+    G = np.asarray(GT, dtype=bool)
+    if G.shape != (n, n):
+        raise ValueError(f"GT must be ({n}, {n}) for {n} queries, got shape {G.shape}")
+    js = np.flatnonzero(result.n_stored > 0)
+    has = (G & evaluate.candidate_mask(n, exclude))[:, js].any(0)
+    found = result.best[js] >= 0
+    match = np.where(found, result.best[js], 0)
+    score = np.where(found, result.score[js], floor)
+    correct = found & G[match, js]
+    return evaluate.matches(js, match, score, correct, has, np.where(correct, 0, 1), 1)
+
+
+def run_scores(r: MatchResult, S, brute: MatchResult, GT, exclude: int) -> dict:
     """The scores of one incremental run (notebook 11's Table 6 columns).
 
     r, brute: :func:`incremental_match` results (keep_candidates=True) of the method and of brute
     force on the same N frames. S: (N, N) cosine matrix of the frames. GT: (N, N) bool ground
-    truth; exclude: band in frames; revisit: (N,) bool queries with a loop partner among their
-    candidates. Returns AP_pairs_% (AP of :func:`scanned_matrix`), AP_best_% (of
-    :func:`best_match_matrix`), R@1_% (best match a loop, over revisit queries), NN_agree_% (same
-    best match as brute force), scanned_% (candidates / stored), probes_per_query, N1_at_end (NaN
-    for brute/sklearn), ms_per_query, probe_ms_per_query (ms) and total_s (s); unrounded.
+    truth; exclude: band in frames. Returns the per-query metrics of :func:`query_matches`
+    (``evaluate.query_metrics``, loop-closure mode): R@1_%, AUC-PR_%, R@100P_%, R@95P_%; then
+    AP_pairs_% (pair AP of :func:`scanned_matrix`, secondary), NN_agree_% (same best match as
+    brute force), scanned_% (candidates / stored), probes_per_query, N1_at_end (NaN for
+    brute/sklearn), ms_per_query, probe_ms_per_query (ms) and total_s (s); unrounded.
     """
     t, hashed = r.timed, r.method in ("swp", "qdp")
-    hit = (r.best >= 0) & np.asarray(GT)[np.maximum(r.best, 0), np.arange(len(r.best))]
-    return {"AP_pairs_%": 100 * evaluate.average_precision(scanned_matrix(S, r), GT, exclude),
-            "AP_best_%": 100 * evaluate.average_precision(best_match_matrix(r), GT, exclude),
-            "R@1_%": 100 * hit[revisit].mean(), "NN_agree_%": 100 * np.mean(r.best[t] == brute.best[t]),
+    q = evaluate.query_metrics(query_matches(r, GT, exclude), ks=(1,))
+    return {"R@1_%": 100 * q["R@1"], "AUC-PR_%": 100 * q["AUC-PR"], "R@100P_%": 100 * q["R@100P"],
+            "R@95P_%": 100 * q["R@95P"],
+            "AP_pairs_%": 100 * evaluate.average_precision(scanned_matrix(S, r), GT, exclude),
+            "NN_agree_%": 100 * np.mean(r.best[t] == brute.best[t]),
             "scanned_%": 100 * np.mean(r.n_candidates[t] / r.n_stored[t]),
             "probes_per_query": float(r.n_probes[t].mean()) if hashed else np.nan,
             "N1_at_end": int(r.n_buckets[-1]) if hashed else np.nan,
@@ -720,7 +744,7 @@ def compare_variants(per_seed, reference: str = "brute force"):
     metrics = [c for c in per_seed.columns if c not in keys + ["seed"]]
     table = per_seed.groupby(keys, sort=False)[metrics].mean().reset_index()
     spread = per_seed.groupby(keys, sort=False)[["AP_pairs_%", "ms_per_query"]].std(ddof=0).reset_index()
-    table.insert(5, "AP_pairs_sd", spread["AP_pairs_%"].values)
+    table.insert(table.columns.get_loc("AP_pairs_%") + 1, "AP_pairs_sd", spread["AP_pairs_%"].values)
     table["ms_sd"] = spread["ms_per_query"].values
     ref = table[table.variant == reference].set_index("backbone")
     table["R_a_%"], table["R_t_%"] = evaluate.relative_rates(

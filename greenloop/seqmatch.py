@@ -66,9 +66,9 @@ CNN_SIZE = (224, 224)                      # MobileNet v2's fixed TFLite input
 _EPS = 1e-6
 
 __all__ = ["DESCRIPTORS", "Detector", "patch_normalise", "describe", "describe_frames", "normalise",
-           "fit_projection", "contrast_normalise", "score_matrix",
+           "fit_projection", "contrast_normalise", "score_matrix", "columns_to_scores",
            "closures", "choose_threshold", "threshold_range", "tune_knobs", "pick_knobs",
-           "matrix_events", "stream_matches_matrix"]
+           "matrix_events", "stream_matches_matrix", "stream_check"]
 
 
 # ------------------------------------------------------------------------------ descriptors
@@ -488,10 +488,23 @@ def score_matrix(X, exclude: int = 150, seq_len: int = 10, velocities=DEFAULT_VE
         raise ValueError("X has NaN or inf values")
     Y = normalise(X, projection)
     G = Y.astype(det.store_dtype).astype(np.float32) @ Y.T    # stored rows x queries, one product
+    return columns_to_scores(det, Y, G)
+
+
+def columns_to_scores(det: Detector, Y, G) -> np.ndarray:
+    """The (N, N) score matrix of a detector fed, column by column, a precomputed similarity.
+
+    det: a fresh :class:`Detector` (or a subclass, e.g. ``greenloop.seqslam``'s) whose stages after
+    the similarity (contrast normalisation, trajectory search) make the scores. Y: (N, D) stored
+    descriptors in stream order; G: (N, N) similarity, G[i, j] = what the stream computes between
+    stored frame i and query j. Query j sees only G[:j - exclude, j], so every column is causal.
+    Returns S (N, N) float32 as :func:`score_matrix` (non-candidates: the smallest filled score).
+    """
+    n = len(G)
     S = np.full((n, n), np.nan, np.float32)
     for j in range(n):
         c = max(j - det.exclude, 0)
-        det._match(Y[j], G[:c, j])
+        det._match(Y[j], np.asarray(G[:c, j], dtype=np.float32))
         S[:c, j] = det.last_scores
     filled = np.isfinite(S)
     S[~filled] = S[filled].min() if filled.any() else 0.0
@@ -551,46 +564,56 @@ def choose_threshold(S, GT, exclude: int = 150, queries=None, rule: str = "f1") 
 
 # ------------------------------------------------------------------- the protocol of a run
 def tune_knobs(descriptors: dict, GT, exclude: int, tune, seq_lens, contrast_windows,
-               velocities=DEFAULT_VELOCITIES) -> list[dict]:
-    """AP on the tuning queries of every (descriptor, seq_len, contrast_window) combination.
+               velocities=DEFAULT_VELOCITIES, projections=None) -> list[dict]:
+    """Per-query AUC-PR on the tuning queries of every knob combination (the one tuning criterion).
 
     descriptors: {name: (N, D) descriptors of the described frames} (:func:`describe`), in the
     order to try them. GT: (N, N) bool ground truth; exclude: in frames of that stream.
     tune: (N,) bool tuning queries (``evaluate.split_mask``); only their labels are read.
-    seq_lens, contrast_windows: candidate knobs, in frames; velocities as in :func:`score_matrix`.
-    Returns one dict per combination (descriptor-major, then seq_len, then contrast_window):
-    descriptor, seq_len, contrast_window, AP_tune_% (AP in %, rounded to 2 decimals).
+    seq_lens, contrast_windows: candidate knobs, in frames (seq_len 1 = a single-frame method with
+    local contrast normalisation as its knob); velocities as in :func:`score_matrix`.
+    projections: optional {descriptor name: {label: ``similarity.Projection`` or None}}, the
+    whitening candidates of that descriptor (fitted on tuning frames, :func:`fit_projection`);
+    a descriptor not listed gets {"none": None}.
+    Returns one dict per combination (descriptor-major, then whitening, seq_len, contrast_window):
+    descriptor, whitening (label), seq_len, contrast_window, AUC-PR_tune_% and R@1_tune_%
+    (``evaluate.per_query`` on the tuning queries, loop-closure mode, in %, 2 decimals).
     """
     rows = []
+    projections = projections or {}
     for d, X in descriptors.items():
-        for L in seq_lens:
-            for cw in contrast_windows:
-                S = score_matrix(X, exclude, L, velocities, cw)
-                rows.append({"descriptor": d, "seq_len": L, "contrast_window": cw,
-                             "AP_tune_%": round(100 * evaluate.average_precision(S, GT, exclude, queries=tune), 2)})
+        for w, proj in projections.get(d, {"none": None}).items():
+            for L in seq_lens:
+                for cw in contrast_windows:
+                    q = evaluate.per_query(score_matrix(X, exclude, L, velocities, cw, proj), GT, exclude,
+                                           queries=tune, ks=(1,))
+                    rows.append({"descriptor": d, "whitening": w, "seq_len": L, "contrast_window": cw,
+                                 "AUC-PR_tune_%": round(100 * q["AUC-PR"], 2), "R@1_tune_%": round(100 * q["R@1"], 2)})
     return rows
 
 
 def pick_knobs(rows, variants: dict) -> tuple[dict, dict]:
-    """The knobs of each variant: the tuning row with the largest AP among its descriptors.
+    """The knobs of each variant: the tuning row with the largest per-query AUC-PR among its rows.
 
-    rows: the dicts of :func:`tune_knobs` (descriptor, seq_len, contrast_window, AP_tune_%).
-    variants: {variant name: descriptors it may use}. A tie goes to the earliest row; a row whose
-    AP is NaN (no loop pair among the tuning queries) is never picked.
-    Returns (knobs, ap): knobs {name: dict(descriptor, seq_len (int), contrast_window (int))},
-    ap {name: the picked row's AP_tune_% (AP on the tuning queries, %)}. ValueError when a
-    variant has no row.
+    rows: the dicts of :func:`tune_knobs` (descriptor, whitening, seq_len, contrast_window,
+    AUC-PR_tune_%). variants: {variant name: descriptors it may use}, or {name: (descriptors,
+    seq_lens)} to restrict its seq_len too (a single-frame method: (["pixels"], [1])). A tie goes
+    to the earliest row; a row whose AUC-PR is NaN is never picked.
+    Returns (knobs, score): knobs {name: dict(descriptor, whitening, seq_len (int), contrast_window
+    (int))}, score {name: the picked row's AUC-PR_tune_%}. ValueError when a variant has no row.
     """
-    knobs, ap = {}, {}
+    knobs, score = {}, {}
     for name, allowed in variants.items():
-        mine = [r for r in rows if r["descriptor"] in list(allowed) and not math.isnan(r["AP_tune_%"])]
+        descs, lens = (allowed if isinstance(allowed, tuple) else (allowed, None))
+        mine = [r for r in rows if r["descriptor"] in list(descs) and (lens is None or r["seq_len"] in list(lens))
+                and not math.isnan(r["AUC-PR_tune_%"])]
         if not mine:
-            raise ValueError(f"variant {name!r}: no tuning row with an AP for its descriptors {list(allowed)}")
-        best = max(mine, key=lambda r: r["AP_tune_%"])          # max keeps the first of equal APs
-        knobs[name] = dict(descriptor=best["descriptor"], seq_len=int(best["seq_len"]),
-                           contrast_window=int(best["contrast_window"]))
-        ap[name] = best["AP_tune_%"]
-    return knobs, ap
+            raise ValueError(f"variant {name!r}: no tuning row with an AUC-PR for its descriptors {list(descs)}")
+        best = max(mine, key=lambda r: r["AUC-PR_tune_%"])          # max keeps the first of equal scores
+        knobs[name] = dict(descriptor=best["descriptor"], whitening=best.get("whitening", "none"),
+                           seq_len=int(best["seq_len"]), contrast_window=int(best["contrast_window"]))
+        score[name] = best["AUC-PR_tune_%"]
+    return knobs, score
 
 
 def matrix_events(S, threshold: float, exclude: int, n: int) -> list[int]:
@@ -612,3 +635,25 @@ def stream_matches_matrix(detector: Detector, S) -> bool:
         raise ValueError("the detector has no threshold, so it declares nothing to compare")
     batch = matrix_events(S, detector.threshold, detector.exclude, detector.frame_index)
     return [e["frame"] for e in detector.events] == batch
+
+
+def stream_check(detector: Detector, X, S, GT) -> dict:
+    """Stream every descriptor of X through ``detector`` (reset first) and compare its events with
+    the thresholded score matrix S: the check that can fail, on a stream that holds the revisit.
+
+    detector: a thresholded :class:`Detector` (or ``seqslam.Detector``) with the knobs S was made
+    with. X: (N, D) descriptors in stream order; S: (N, N) its score matrix; GT: (N, N) bool.
+    Returns dict(equal (:func:`stream_matches_matrix`), events (declared), correct_events (events
+    whose match is a ground-truth partner), revisit_queries (frames with a partner among their
+    candidates)). ``equal`` with correct_events 0 says little: report both.
+    """
+    X = np.asarray(X)
+    if len(X) != len(S):
+        raise ValueError(f"X has {len(X)} frames but S is {np.shape(S)}: the same stream, please")
+    G = np.asarray(GT, dtype=bool)
+    detector.reset()
+    for x in X:
+        detector.update_descriptor(x)
+    ok = [e for e in detector.events if G[e["match"], e["frame"]]]
+    return {"equal": stream_matches_matrix(detector, S), "events": len(detector.events),
+            "correct_events": len(ok), "revisit_queries": int(evaluate.revisit_queries(G, detector.exclude).sum())}

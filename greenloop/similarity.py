@@ -24,7 +24,6 @@ Whitening is fitted on one set of frames and can be applied to another with
 """
 from __future__ import annotations
 
-import time
 import warnings
 from dataclasses import dataclass
 
@@ -36,7 +35,7 @@ from greenloop.util.checks import positive_int
 __all__ = [
     "Projection", "l2_normalise", "pca_whiten", "zca_whiten", "apply_projection",
     "cosine_matrix", "distance_similarity", "median_filter", "whitened_similarities",
-    "median_candidates", "rgbd_matrices", "whitening_candidates", "timed_cosine_matrix",
+    "median_candidates", "rgbd_matrices", "whitening_candidates",
 ]
 
 _COV_MODES = ("sample", "scatter")
@@ -442,15 +441,3 @@ def rgbd_matrices(X) -> dict:
         raise ValueError(f"X must hold an RGB and a depth half of equal length, got {X.shape[1]} columns")
     D = X.shape[1] // 2
     return {"RGB": cosine_matrix(X[:, :D]), "depth": cosine_matrix(X[:, D:]), "RGB-D": cosine_matrix(X)}
-
-
-def timed_cosine_matrix(X) -> tuple[np.ndarray, float]:
-    """:func:`cosine_matrix` of X with itself, and the time it took per frame.
-
-    X: (N, D) descriptors. Returns (S, seconds): S (N, N) float32 cosine similarities as
-    :func:`cosine_matrix`; seconds: wall-clock seconds of the whole matrix divided by N, the cost
-    of matching one query against the N stored frames.
-    """
-    t0 = time.perf_counter()
-    S = cosine_matrix(X)
-    return S, (time.perf_counter() - t0) / len(S)

@@ -289,14 +289,31 @@ def test_run_scores_of_brute_force_on_a_hand_made_revisit():
     assert brute.best[4:].tolist() == [0, 1, 2, 3]            # every revisit finds its place
     revisit = (gt & evaluate.pair_mask(8, 2)).any(0)
     assert np.flatnonzero(revisit).tolist() == [4, 5, 6, 7]
-    sc = lsh.run_scores(brute, S, brute, gt, 2, revisit)
+    sc = lsh.run_scores(brute, S, brute, gt, 2)
     assert sc["R@1_%"] == 100.0 and sc["NN_agree_%"] == 100.0 and sc["scanned_%"] == 100.0
+    assert sc["AUC-PR_%"] == 100.0 and sc["R@100P_%"] == 100.0 and sc["R@95P_%"] == 100.0
     assert sc["AP_pairs_%"] == pytest.approx(100 * evaluate.average_precision(S, gt, 2))
     assert np.isnan(sc["probes_per_query"]) and np.isnan(sc["N1_at_end"])
     swp = lsh.incremental_match(X, "swp", exclude=2, n_bits=8, radius=1, keep_candidates=True)
-    sw = lsh.run_scores(swp, S, brute, gt, 2, revisit)
+    sw = lsh.run_scores(swp, S, brute, gt, 2)
     assert sw["N1_at_end"] == swp.n_buckets[-1] and sw["probes_per_query"] == pytest.approx(swp.n_probes[swp.timed].mean())
     assert sw["NN_agree_%"] == pytest.approx(100 * np.mean(swp.best[swp.timed] == brute.best[swp.timed]))
+
+
+def test_query_matches_by_hand():
+    import dataclasses
+    X, gt = _revisit_sequence()
+    brute = lsh.incremental_match(X, "brute", exclude=2, keep_candidates=True)
+    m = lsh.query_matches(brute, gt, 2)
+    assert m.query.tolist() == [3, 4, 5, 6, 7] and m.has_partner.tolist() == [False, True, True, True, True]
+    assert m.correct.tolist() == [False, True, True, True, True] and m.k == 1
+    # query 5 scanned nothing: no match, score -2, below query 3's wrong match (cosine 0)
+    best, score = brute.best.copy(), brute.score.copy()
+    best[5], score[5] = lsh.NO_MATCH, -np.inf
+    miss = dataclasses.replace(brute, best=best, score=score)
+    q = evaluate.query_metrics(lsh.query_matches(miss, gt, 2), ks=(1,))
+    assert q["R@1"] == 0.75 and q["R@100P"] == 0.75 and q["AUC-PR"] == pytest.approx(0.75)
+    assert q["queries"] == 5 and q["revisits"] == 4
 
 
 def test_scanned_pr_curve_ends_at_the_recall_reached():
@@ -330,6 +347,8 @@ def test_compare_variants_averages_seeds_and_rates_against_brute_force():
     per_seed.loc[3, "ms_per_query"] = 1.0                      # now half the time: R_t 50 %, loss 20 / 50
     swp = lsh.compare_variants(per_seed).set_index("variant").loc["SWP-RHLSH"]
     assert swp["R_t_%"] == 50.0 and swp["loss_per_1%_time"] == pytest.approx(0.4)
+    per_seed.insert(5, "R@1_%", 50.0)                           # per-query columns first: the sd stays beside AP_pairs
+    assert list(lsh.compare_variants(per_seed).columns[4:7]) == ["R@1_%", "AP_pairs_%", "AP_pairs_sd"]
 
 
 def test_planted_queries_and_the_scaling_test():

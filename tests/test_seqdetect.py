@@ -208,25 +208,36 @@ def test_cli_detect_by_method(tmp_path):
 def test_tune_knobs_scores_every_combination_on_the_tuning_queries(revisit):
     X, GT = revisit
     tune, _ = evaluate.split_mask(len(X), 0.5, gt=GT, gap=10)
-    rows = seqmatch.tune_knobs({"rev": X, "noise": _walk(len(X), 7)}, GT, EXCLUDE, tune, [1, 10], [0, 6])
-    assert [(r["descriptor"], r["seq_len"], r["contrast_window"]) for r in rows] == \
-        [(d, L, w) for d in ("rev", "noise") for L in (1, 10) for w in (0, 6)]
+    proj = seqmatch.fit_projection(X[:N0], dim=8)
+    rows = seqmatch.tune_knobs({"rev": X, "noise": _walk(len(X), 7)}, GT, EXCLUDE, tune, [1, 10], [0, 6],
+                               projections={"rev": {"none": None, "pca 8": proj}})
+    assert [(r["descriptor"], r["whitening"], r["seq_len"], r["contrast_window"]) for r in rows] == \
+        [(d, w, L, c) for d, ws in (("rev", ("none", "pca 8")), ("noise", ("none",)))
+         for w in ws for L in (1, 10) for c in (0, 6)]
     S = seqmatch.score_matrix(X, EXCLUDE, 10, seqmatch.DEFAULT_VELOCITIES, 0)
-    assert rows[2]["AP_tune_%"] == round(100 * evaluate.average_precision(S, GT, EXCLUDE, queries=tune), 2)
-    by = {(r["descriptor"], r["seq_len"], r["contrast_window"]): r["AP_tune_%"] for r in rows}
-    assert by["rev", 10, 0] > by["rev", 1, 0] > by["noise", 1, 0]    # the revisit, seen better in sequence
+    q = evaluate.per_query(S, GT, EXCLUDE, queries=tune, ks=(1,))
+    assert rows[2]["AUC-PR_tune_%"] == round(100 * q["AUC-PR"], 2) and rows[2]["R@1_tune_%"] == round(100 * q["R@1"], 2)
+    Sp = seqmatch.score_matrix(X, EXCLUDE, 1, seqmatch.DEFAULT_VELOCITIES, 6, proj)
+    assert rows[5]["AUC-PR_tune_%"] == round(100 * evaluate.per_query(Sp, GT, EXCLUDE, queries=tune, ks=(1,))["AUC-PR"], 2)
+    # not the pair AP: on this revisit the two differ
+    assert rows[2]["AUC-PR_tune_%"] != round(100 * evaluate.average_precision(S, GT, EXCLUDE, queries=tune), 2)
+    by = {(r["descriptor"], r["whitening"], r["seq_len"], r["contrast_window"]): r["AUC-PR_tune_%"] for r in rows}
+    assert min(by["rev", "none", 10, 0], by["rev", "none", 1, 0]) > by["noise", "none", 1, 0] + 30   # the revisit vs noise
 
 
 def test_pick_knobs_takes_the_best_tuning_row_per_variant():
-    rows = [{"descriptor": "pixels", "seq_len": 5, "contrast_window": 0, "AP_tune_%": 40.0},
-            {"descriptor": "pixels", "seq_len": 10, "contrast_window": 10, "AP_tune_%": 55.0},
-            {"descriptor": "cnn", "seq_len": 5, "contrast_window": 0, "AP_tune_%": 70.0},
-            {"descriptor": "cnn", "seq_len": 10, "contrast_window": 0, "AP_tune_%": 70.0},
-            {"descriptor": "patch", "seq_len": 5, "contrast_window": 0, "AP_tune_%": float("nan")}]
-    knobs, ap = seqmatch.pick_knobs(rows, {"all": ["pixels", "cnn", "patch"], "fast": ["pixels", "patch"]})
-    assert knobs == {"all": {"descriptor": "cnn", "seq_len": 5, "contrast_window": 0},      # first of a tie
-                     "fast": {"descriptor": "pixels", "seq_len": 10, "contrast_window": 10}}
-    assert ap == {"all": 70.0, "fast": 55.0}
+    rows = [{"descriptor": "pixels", "whitening": "none", "seq_len": 5, "contrast_window": 0, "AUC-PR_tune_%": 40.0},
+            {"descriptor": "pixels", "whitening": "none", "seq_len": 10, "contrast_window": 10, "AUC-PR_tune_%": 55.0},
+            {"descriptor": "pixels", "whitening": "none", "seq_len": 1, "contrast_window": 10, "AUC-PR_tune_%": 30.0},
+            {"descriptor": "cnn", "whitening": "pca 8", "seq_len": 5, "contrast_window": 0, "AUC-PR_tune_%": 70.0},
+            {"descriptor": "cnn", "whitening": "none", "seq_len": 10, "contrast_window": 0, "AUC-PR_tune_%": 70.0},
+            {"descriptor": "patch", "whitening": "none", "seq_len": 5, "contrast_window": 0, "AUC-PR_tune_%": float("nan")}]
+    knobs, score = seqmatch.pick_knobs(rows, {"all": ["pixels", "cnn", "patch"], "fast": ["pixels", "patch"],
+                                              "single": (["pixels"], [1])})
+    assert knobs == {"all": {"descriptor": "cnn", "whitening": "pca 8", "seq_len": 5, "contrast_window": 0},  # first of a tie
+                     "fast": {"descriptor": "pixels", "whitening": "none", "seq_len": 10, "contrast_window": 10},
+                     "single": {"descriptor": "pixels", "whitening": "none", "seq_len": 1, "contrast_window": 10}}
+    assert score == {"all": 70.0, "fast": 55.0, "single": 30.0}
     with pytest.raises(ValueError, match="no tuning row"):
         seqmatch.pick_knobs(rows, {"none": ["patch"]})
 

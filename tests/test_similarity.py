@@ -265,16 +265,3 @@ def test_rgbd_matrices_split_the_descriptor_in_halves():
     assert np.allclose(S["RGB-D"], [[1.0, 0.5], [0.5, 1.0]])
     with pytest.raises(ValueError, match="equal length"):
         rgbd_matrices(np.ones((2, 3)))
-
-
-def test_timed_cosine_matrix_returns_the_matrix_and_seconds_per_frame(monkeypatch):
-    import time
-
-    from greenloop import similarity
-    X = np.array([[1.0, 0.0], [0.0, 2.0], [1.0, 1.0]])
-    clock = iter([10.0, 10.6])                   # the matrix takes 0.6 s: 0.2 s for each of 3 frames
-    monkeypatch.setattr(time, "perf_counter", lambda: next(clock))
-    S, s = similarity.timed_cosine_matrix(X)
-    h = np.sqrt(0.5)
-    assert np.allclose(S, [[1, 0, h], [0, 1, h], [h, h, 1]], atol=1e-6) and S.dtype == np.float32
-    assert s == pytest.approx(0.2)

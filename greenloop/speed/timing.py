@@ -1,0 +1,138 @@
+"""One timing definition for every method of the leaderboard: a decoded frame in memory -> its decision.
+
+What is timed, for every method alike (:func:`time_methods`)
+    * from a frame already decoded in memory ((H, W, 3) uint8 BGR, as ``cv2.imread`` returns it)
+      to the method's decision on it: describe the frame (preprocessing and network included),
+      match it against every frame stored at that point, store it, decide;
+    * over the frames of a window of the stream (the leaderboard: the first frames of its
+      evaluation part), with the database already holding every frame before the window, so the
+      stored count is the real one and the revisit is in it. Those stored frames are preloaded
+      from their descriptors (the notebooks' descriptor cache), untimed;
+    * ``repeats`` times (at least 3), the methods interleaved in one process (repeat r starts at
+      method r, so none always runs first on a warm or cold cache), each after one untimed
+      warm-up frame; frames/s reported as median and min-max over the repeats;
+    * with the CPU named (``greenloop.study.report.cpu_model``).
+    Decoding (``cv2.imread`` of the same files) is timed apart (:func:`decode_ms`): it is a column of
+    its own, the same for every method that reads the same files.
+
+A method is a :class:`Method`: ``start(preload)`` builds its database from the preloaded data
+(untimed) and returns a state, ``step(state, frame)`` is the timed path. :func:`detector_method`
+wraps a streaming detector that takes descriptors (``seqmatch.Detector``, ``seqslam.Detector``,
+and the single-frame methods as a ``seqmatch.Detector`` with seq_len 1), :func:`dictionary_method`
+the main paper's ``speed.stream.Detector`` (its database is its spot counters).
+"""
+from __future__ import annotations
+
+import time
+from typing import Callable, NamedTuple
+
+import cv2
+import numpy as np
+
+from greenloop.study import report
+from greenloop.util.checks import positive_int
+
+__all__ = ["Method", "detector_method", "dictionary_method", "time_methods", "decode_ms"]
+
+
+class Method(NamedTuple):
+    """One method to time. name: its row label. start: preload -> state (untimed; builds the
+    database of the frames before the window). step: (state, decoded frame) -> decision (timed)."""
+    name: str
+    start: Callable
+    step: Callable
+
+
+def detector_method(name: str, detector, describe) -> Method:
+    """A descriptor-fed streaming detector as a :class:`Method`.
+
+    detector: has ``reset()`` and ``update_descriptor(x)`` (seqmatch / seqslam Detector).
+    describe: one decoded frame (H, W, 3) uint8 BGR -> its descriptor (D,), the detector's input.
+    preload of ``start``: (n0, D) descriptors of the frames before the window, fed in order.
+    """
+    def start(X):
+        detector.reset()
+        for x in np.asarray(X):
+            detector.update_descriptor(x)
+        return detector
+
+    def step(det, frame):
+        return det.update_descriptor(describe(frame))
+    return Method(name, start, step)
+
+
+def dictionary_method(name: str, detector) -> Method:
+    """The main paper's detector (``greenloop.speed.stream.Detector``) as a :class:`Method`.
+
+    preload of ``start``: (n0,) int spot labels of the frames before the window (counted into the
+    dictionary, no event). step: ``detector.update(frame)`` (preprocess, classify, count, decide).
+    """
+    def start(labels):
+        labels = np.asarray(labels, dtype=np.int64)
+        detector.reset()
+        if len(labels):
+            detector.dictionary.add_many(labels)
+        detector.frame_index, detector.labels = len(labels), labels.tolist()
+        return detector
+
+    def step(det, frame):
+        return det.update(frame)
+    return Method(name, start, step)
+
+
+def _run_once(m: Method, preload, frames) -> float:
+    state = m.start(preload)
+    t0 = time.perf_counter()
+    for f in frames:
+        m.step(state, f)
+    return time.perf_counter() - t0
+
+
+def time_methods(methods, frames, preload: dict, repeats: int = 3) -> list[dict]:
+    """Frames per second of every method on the same decoded frames, interleaved (module doc).
+
+    methods: list of :class:`Method`. frames: list of decoded frames (H, W, 3) uint8 BGR, the
+    timed window in stream order. preload: {method name: what its ``start`` takes}.
+    repeats: >= 3 timed passes per method. Returns one dict per method, in the given order:
+    method, fps_median, fps_min, fps_max (frames/s over the repeats), ms_per_frame_median,
+    frames_timed, stored_at_start (len of the preload), repeats, cpu.
+    """
+    repeats = positive_int("repeats", repeats, 3)
+    frames = list(frames)
+    if not frames:
+        raise ValueError("frames is empty: give the decoded frames of the timed window")
+    missing = [m.name for m in methods if m.name not in preload]
+    if missing:
+        raise ValueError(f"no preload for {missing}: give each method the data of the frames before the window")
+    for m in methods:                                   # warm-up: models built, caches filled
+        m.step(m.start(preload[m.name]), frames[0])
+    secs = {m.name: [] for m in methods}
+    for r in range(repeats):
+        for m in methods[r % len(methods):] + methods[:r % len(methods)]:
+            secs[m.name].append(_run_once(m, preload[m.name], frames))
+    cpu, rows = report.cpu_model(), []
+    for m in methods:
+        fps = len(frames) / np.asarray(secs[m.name])
+        rows.append({"method": m.name, "fps_median": float(np.median(fps)), "fps_min": float(fps.min()),
+                     "fps_max": float(fps.max()), "ms_per_frame_median": float(1e3 / np.median(fps)),
+                     "frames_timed": len(frames), "stored_at_start": int(len(preload[m.name])),
+                     "repeats": repeats, "cpu": cpu})
+    return rows
+
+
+def decode_ms(paths, repeats: int = 3) -> dict:
+    """Milliseconds per frame of ``cv2.imread(path, IMREAD_COLOR)`` over the given files.
+    Returns {"decode_ms_median", "decode_ms_min", "decode_ms_max"} over ``repeats`` (>= 3) passes."""
+    repeats = positive_int("repeats", repeats, 3)
+    paths = [str(p) for p in paths]
+    if not paths:
+        raise ValueError("paths is empty: give the files of the timed window")
+    ts = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        for p in paths:
+            if cv2.imread(p, cv2.IMREAD_COLOR) is None:
+                raise ValueError(f"cannot decode {p}: not an image file OpenCV reads")
+        ts.append(1e3 * (time.perf_counter() - t0) / len(paths))
+    return {"decode_ms_median": float(np.median(ts)), "decode_ms_min": float(min(ts)),
+            "decode_ms_max": float(max(ts))}

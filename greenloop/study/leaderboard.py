@@ -1,0 +1,414 @@
+"""Notebook 13's leaderboard: every method on the same frames, metrics, tuning budget and timing.
+
+The notebook holds parameters, calls, tables and figures; the logic is here.
+
+Methods and their knobs (one tuning budget, ``seqmatch.tune_knobs`` / ``pick_knobs``: per-query
+AUC-PR on the tuning queries for every method)
+    * single-frame descriptors (CNNs, SIFT-BoVW, raw pixels): cosine of the L2-normalised
+      descriptor to every stored frame, as a ``seqmatch.Detector`` with seq_len 1; knobs: local
+      contrast normalisation window (the grid of greenloop-seq) and, for the CNNs, PCA whitening
+      fitted on the tuning frames (L2 -> whiten -> L2, cosine) at each dimension of the grid or none.
+      Notebook 08's median filter is not a knob here: its window is centred on the query (square:
+      the block of queries j - s//2 .. j + s//2; diagonal: S[i + t, j + t], |t| <= s//2), so it
+      reads future frames; its causal (look-back) form along the diagonal is a trajectory mean,
+      i.e. greenloop-seq with seq_len = the window, which is the sequence row, not a single-frame one.
+    * greenloop-seq / greenloop-seq-fast (``seqmatch``): descriptor, seq_len, contrast window.
+    * SeqSLAM (``seqslam``): the published parameters, and the same grid tuned as a second row.
+    * the main paper's CNN + dictionary: its tau = L + margin is fixed in advance (no knob).
+
+Knob records are dicts (``pick_knobs``): descriptor ("seqslam" for SeqSLAM), whitening (label,
+"none"), seq_len, contrast_window.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pandas as pd
+
+from greenloop import evaluate, features, seqmatch, seqslam
+from greenloop.speed import timing
+from greenloop.util.files import write_atomic
+
+MODES = ("loop closure", "place recognition")
+METRICS = ["R@1_%", "R@5_%", "AUC-PR_%", "R@100P_%", "R@95P_%"]
+SPREADS = ["R@1_lo_%", "R@1_hi_%", "AUC-PR_lo_%", "AUC-PR_hi_%"]
+COLUMNS = (["method", "mode", "weights", "knobs"] + METRICS + SPREADS +
+           ["pair_AP_%", "fps_median", "fps_min", "fps_max", "decode_ms", "bytes_per_stored_frame", "threshold",
+            "closures_declared", "closures_false", "first_revisit_delay_frames", "scored_on"])
+SEQSLAM_PUBLISHED = {"descriptor": "seqslam", "whitening": "none", "seq_len": seqslam.DS + 1,
+                     "contrast_window": seqslam.R_WINDOW}
+
+
+def weights_kind(label) -> str:
+    """An ExtractInfo weights label -> "imagenet" | "random init" | "none"."""
+    label = str(label)
+    return "imagenet" if label.startswith("imagenet") else ("random init" if label == "random init" else "none")
+
+
+def reference_mask(frames, reference_frames) -> np.ndarray | None:
+    """Place-recognition database: (M,) bool, described frames whose ORIGINAL index is below
+    ``reference_frames`` (the first traversal), or None (loop-closure mode only)."""
+    if reference_frames is None:
+        return None
+    ref = np.asarray(frames) < int(reference_frames)
+    if ref.all() or not ref.any():
+        raise ValueError(f"reference_frames={reference_frames} must split the described frames "
+                         f"(original {int(np.min(frames))}..{int(np.max(frames))}) into a reference and queries")
+    return ref
+
+
+def projections(feats: dict, specs, fit, dims) -> dict:
+    """Whitening candidates of each CNN descriptor: {spec: {"none": None, "pca k": Projection}}.
+    feats: {spec: (N, D)}; specs: the entries that get whitening; fit: (N,) bool frames to fit
+    on (the tuning part; None: every frame, no labels used); dims: requested dimensions (clipped
+    to the rank, the label says the kept one)."""
+    out = {}
+    for s in specs:
+        X = feats[s] if fit is None else feats[s][np.asarray(fit, dtype=bool)]
+        cands = {"none": None}
+        for k in dims:
+            p = seqmatch.fit_projection(X, int(k))
+            cands.setdefault(f"pca {p.output_dim}", p)
+        out[s] = cands
+    return out
+
+
+def variants(single_specs, seq_descriptors, fast_descriptors, seq_lens) -> dict:
+    """{method: (descriptors, seq_lens)} for ``seqmatch.pick_knobs``: each single-frame method on
+    its own descriptor at seq_len 1, greenloop-seq (-fast) on the sequence grid, SeqSLAM tuned."""
+    out = {f"{s} (single frame)": ([s], [1]) for s in single_specs}
+    out["greenloop-seq"] = (list(seq_descriptors), list(seq_lens))
+    out["greenloop-seq-fast"] = ([d for d in fast_descriptors if d in seq_descriptors], list(seq_lens))
+    out["SeqSLAM (tuned)"] = (["seqslam"], list(seq_lens))
+    return out
+
+
+def default_knobs(single_specs) -> dict:
+    """Knobs without a tuning part (no honest split): single-frame methods untuned (no contrast
+    normalisation, no whitening), SeqSLAM at its published parameters."""
+    knobs = {f"{s} (single frame)": {"descriptor": s, "whitening": "none", "seq_len": 1, "contrast_window": 0}
+             for s in single_specs}
+    knobs["SeqSLAM (published)"] = dict(SEQSLAM_PUBLISHED)
+    return knobs
+
+
+def knob_text(k: dict) -> str:
+    """One line of a method's knobs for the table."""
+    if k["descriptor"] == "seqslam":
+        return f"64x32 patch-normalised, SAD, ds {k['seq_len'] - 1}, R_window {k['contrast_window']}, v 0.8..1.2"
+    seq = "" if k["seq_len"] == 1 else f", seq_len {k['seq_len']}"
+    return f"{k['descriptor']}, whitening {k['whitening']}, contrast window {k['contrast_window']}{seq}"
+
+
+def detector(k: dict, threshold, exclude: int, velocities, proj: dict, weights="auto"):
+    """The streaming detector of a knob record: ``seqslam.Detector`` or ``seqmatch.Detector``
+    (single-frame methods: seq_len 1). threshold: float or None. proj: :func:`projections`."""
+    t = None if threshold is None or not np.isfinite(threshold) else float(threshold)
+    if k["descriptor"] == "seqslam":
+        return seqslam.Detector(t, exclude, k["seq_len"] - 1, k["contrast_window"])
+    p = proj.get(k["descriptor"], {}).get(k["whitening"])
+    desc = k["descriptor"] if k["descriptor"] in seqmatch.DESCRIPTORS else "pixels"
+    return seqmatch.Detector(t, descriptor=desc, seq_len=k["seq_len"], velocities=velocities, exclude=exclude,
+                             contrast_window=k["contrast_window"], projection=p, weights=weights)
+
+
+def score_matrices(knobs: dict, descriptors: dict, proj: dict, exclude: int, velocities) -> dict:
+    """{method: (N, N) score matrix} of every knob record: the detector's own score matrix.
+    descriptors: {descriptor name: (N, D)} ("seqslam": the SeqSLAM descriptors)."""
+    out = {}
+    for name, k in knobs.items():
+        X = descriptors[k["descriptor"]]
+        if k["descriptor"] == "seqslam":
+            out[name] = seqslam.score_matrix(X, exclude, k["seq_len"] - 1, k["contrast_window"])
+        else:
+            p = proj.get(k["descriptor"], {}).get(k["whitening"])
+            out[name] = seqmatch.score_matrix(X, exclude, k["seq_len"], velocities, k["contrast_window"], p)
+    return out
+
+
+def frame_describer(descriptor: str, weights="auto", input_size=None, vocabulary=None):
+    """One decoded BGR frame (H, W, 3) uint8 -> the raw descriptor (D,) a method stores: the
+    timed describe step. descriptor: a knob record's descriptor (a backbone entry, a seqmatch
+    descriptor or "seqslam"). SIFT-BoVW quantises against ``vocabulary`` (one frame's tf-idf)."""
+    if descriptor == "seqslam":
+        return lambda f: seqslam.describe_frames([f])[0]
+    if descriptor in seqmatch.DESCRIPTORS and descriptor != "mobilenetv2":
+        return lambda f: seqmatch.describe_frames([f], descriptor)[0]
+    kw = {"vocabulary": vocabulary} if descriptor == "sift_bovw" else {}
+    return lambda f: features.extract_spec(cv2.cvtColor(f, cv2.COLOR_BGR2RGB)[None], descriptor, weights,
+                                           input_size, progress=False, **kw)[0]
+
+
+def thresholds(S: dict, GT, exclude: int, tune, rule: str) -> dict:
+    """{method: threshold picked on the tuning queries (``seqmatch.choose_threshold``)}; NaN for
+    every method when tune is None (no tuning part)."""
+    return {k: (seqmatch.choose_threshold(s, GT, exclude, queries=tune, rule=rule) if tune is not None else np.nan)
+            for k, s in S.items()}
+
+
+def metric_rows(S, GT, exclude: int, queries, reference=None, block: int = 10) -> list[dict]:
+    """The metric columns of one score matrix, in %: one row per database mode (loop closure;
+    place recognition too when ``reference`` is given), with the :func:`spread` of R@1 and
+    AUC-PR (bootstrap runs of ``block`` queries). pair_AP_% (pairs i < j, j - i > exclude) is a
+    loop-closure quantity: NaN in the place-recognition row."""
+    rows = []
+    for mode, ref in (("loop closure", None), ("place recognition", reference)):
+        if mode == "place recognition" and reference is None:
+            continue
+        q = evaluate.per_query(S, GT, exclude, queries=queries, reference=ref, ks=(1, 5))
+        ap = evaluate.average_precision(S, GT, exclude, queries=queries) if ref is None else np.nan
+        rows.append({"mode": mode, **{f"{k}_%": round(100 * q[k], 2) for k in ("R@1", "R@5", "AUC-PR", "R@100P", "R@95P")},
+                     "pair_AP_%": round(100 * ap, 2), **spread(S, GT, exclude, queries, ref, block)})
+    return rows
+
+
+def spread(S, GT, exclude: int, queries, reference=None, block: int = 10, n_boot: int = 200, seed: int = 0) -> dict:
+    """95 % block-bootstrap intervals of R@1 and AUC-PR over the queries, in %.
+
+    The per-query matches (``evaluate.best_matches``) are cut into runs of ``block`` consecutive
+    queries (neighbouring queries see nearly the same frames, so they are resampled together),
+    ``n_boot`` resamples of as many runs drawn with replacement, each scored by
+    ``evaluate.query_metrics``; a resample without a revisit query is drawn again. Returns
+    {"R@1_lo_%", "R@1_hi_%", "AUC-PR_lo_%", "AUC-PR_hi_%"} (2.5th and 97.5th percentiles).
+    """
+    m = evaluate.best_matches(S, GT, exclude, queries, reference, k=1)
+    runs = [np.arange(a, min(a + int(block), len(m.query))) for a in range(0, len(m.query), int(block))]
+    rng, r1, auc = np.random.default_rng(seed), [], []
+    while len(r1) < n_boot:
+        idx = np.concatenate([runs[i] for i in rng.integers(0, len(runs), len(runs))])
+        if not m.has_partner[idx].any():
+            continue
+        q = evaluate.query_metrics(evaluate.Matches(*(a[idx] for a in m[:6]), m.k), ks=(1,))
+        r1.append(q["R@1"]), auc.append(q["AUC-PR"])
+    lo, hi = np.percentile([r1, auc], [2.5, 97.5], axis=1)
+    return {"R@1_lo_%": round(100 * lo[0], 2), "R@1_hi_%": round(100 * hi[0], 2),
+            "AUC-PR_lo_%": round(100 * lo[1], 2), "AUC-PR_hi_%": round(100 * hi[1], 2)}
+
+
+def chance_rows(GT, exclude: int, queries, reference=None, scored_on: str = "") -> list[dict]:
+    """The chance row(s): ``evaluate.query_chance`` per mode (pair AP: ``evaluate.chance_level``),
+    on the same queries as the methods (``scored_on`` says which)."""
+    rows = []
+    for mode, ref in (("loop closure", None), ("place recognition", reference)):
+        if mode == "place recognition" and reference is None:
+            continue
+        q = evaluate.query_chance(GT, exclude, queries=queries, reference=ref, ks=(1, 5))
+        ap = evaluate.chance_level(GT, exclude, queries=queries) if ref is None else np.nan
+        rows.append({"method": "chance (random scores)", "mode": mode, "weights": "none", "knobs": "-",
+                     **{f"{k}_%": round(100 * q[k], 2) for k in ("R@1", "R@5", "AUC-PR", "R@100P", "R@95P")},
+                     "pair_AP_%": round(100 * ap, 2), "scored_on": scored_on})
+    return rows
+
+
+def timing_methods(knobs: dict, dets: dict, describers: dict, descriptors: dict, start: int, dictionary=None):
+    """The :class:`greenloop.speed.timing.Method` list and preloads of every method.
+
+    knobs: {method: knob record}; dets: {method: its detector (:func:`detector`)}; describers:
+    {descriptor: :func:`frame_describer`}; descriptors: {descriptor: (N, D)}; start: the first
+    timed frame of the stream (described index): frames 0..start-1 are preloaded.
+    dictionary: optional (name, speed.stream.Detector, (n0,) spot labels of the original frames
+    before the window). Returns (methods, preload).
+    """
+    methods, preload = [], {}
+    for name, k in knobs.items():
+        methods.append(timing.detector_method(name, dets[name], describers[k["descriptor"]]))
+        preload[name] = descriptors[k["descriptor"]][:start]
+    if dictionary is not None:
+        name, det, labels = dictionary
+        methods.append(timing.dictionary_method(name, det))
+        preload[name] = labels
+    return methods, preload
+
+
+def closure_columns(S, GT, threshold, exclude: int, queries, frame_step: int) -> dict:
+    """threshold, closures_declared, closures_false, first_revisit_delay_frames (ORIGINAL frames)
+    of per-query closures at the threshold on the given queries (``seqmatch.closures``); None
+    where the threshold is NaN (no tuning part)."""
+    if threshold is None or not np.isfinite(threshold):
+        return {"threshold": np.nan, "closures_declared": None, "closures_false": None,
+                "first_revisit_delay_frames": None}
+    c = seqmatch.closures(S, GT, threshold, exclude, queries=queries)
+    return {"threshold": round(float(threshold), 4), "closures_declared": c["declared"], "closures_false": c["false"],
+            "first_revisit_delay_frames": None if c["first_delay"] is None else c["first_delay"] * int(frame_step)}
+
+
+_NO_CLOSURES = {"threshold": np.nan, "closures_declared": None, "closures_false": None,
+                "first_revisit_delay_frames": None}      # the streaming detectors run in loop-closure mode
+
+
+def method_rows(S: dict, meta: dict, GT, exclude: int, evalq, reference, thr: dict, speed: dict,
+                frame_step: int, scored_on: str, block: int = 10) -> list[dict]:
+    """Every scored method's rows (one per mode). meta: {method: dict(weights, knobs,
+    bytes_per_stored_frame)}; thr: thresholds; speed: {method: timing row + decode_ms}; block:
+    the bootstrap run length of :func:`spread` (the notebook: its longest sequence). The
+    threshold and closure columns are the streaming detector's, which runs in loop-closure mode:
+    empty in place-recognition rows."""
+    rows = []
+    for name, s in S.items():
+        sp = speed.get(name, {})
+        common = {"method": name, **meta[name], "fps_median": sp.get("fps_median"), "fps_min": sp.get("fps_min"),
+                  "fps_max": sp.get("fps_max"), "decode_ms": sp.get("decode_ms"), "scored_on": scored_on,
+                  **closure_columns(s, GT, thr[name], exclude, evalq, frame_step)}
+        rows += [{**common, **m, **(_NO_CLOSURES if m["mode"] == "place recognition" else {})}
+                 for m in metric_rows(s, GT, exclude, evalq, reference, block)]
+    return rows
+
+
+def table(rows) -> pd.DataFrame:
+    """The leaderboard DataFrame in :data:`COLUMNS` order (frames/s rounded to 0.1, decode ms to
+    0.01); rows may lack columns (NaN/None)."""
+    board = pd.DataFrame(rows).reindex(columns=COLUMNS)
+    return board.round({"fps_median": 1, "fps_min": 1, "fps_max": 1, "decode_ms": 2})
+
+
+def pr_curves(S: dict, GT, exclude: int, queries) -> dict:
+    """{method: (precision, recall)} per-query PR curves (loop-closure mode,
+    ``evaluate.query_pr_curve``), for the figure."""
+    return {k: evaluate.query_pr_curve(evaluate.best_matches(s, GT, exclude, queries, k=1))[:2] for k, s in S.items()}
+
+
+def write(board: pd.DataFrame, out_dir, results_dir, title: str, note: str):
+    """Write ``out_dir/leaderboard.csv`` and ``.md`` and the copy ``results_dir/leaderboard.csv``
+    from ONE serialisation of the table (the same bytes, so the copy can never differ).
+    Returns (csv path, md path, copy path)."""
+    text = board.to_csv(index=False)
+    out_dir, results_dir = Path(out_dir), Path(results_dir)
+    paths = (out_dir / "leaderboard.csv", out_dir / "leaderboard.md", results_dir / "leaderboard.csv")
+    md = f"### {title}\n\n" + board.to_markdown(index=False) + f"\n\n{note}\n"
+    write_atomic(paths[0], lambda p: p.write_text(text))
+    write_atomic(paths[1], lambda p: p.write_text(md))
+    write_atomic(paths[2], lambda p: p.write_text(text))
+    return paths
+
+
+def _compare(a, b, lo: str, hi: str, word: tuple) -> str:
+    """'higher'/'lower' (word) when the [lo, hi] ranges of rows a and b do not overlap, else
+    'not resolved against'."""
+    if pd.isna(a[lo]) or pd.isna(b[lo]):
+        return "not compared with"
+    return word[0] if a[lo] > b[hi] else word[1] if a[hi] < b[lo] else "not resolved against"
+
+
+def statement(board: pd.DataFrame, seq_names=("greenloop-seq", "greenloop-seq-fast")) -> str:
+    """What the table holds about greenloop-seq, in sentences with the numbers and spreads
+    (loop closure): its R@1 and AUC-PR with their bootstrap intervals against the row with the
+    highest R@1 among the others (chance aside) and against SeqSLAM (published), frames/s as median
+    [min, max]; "higher"/"faster" only where the ranges do not overlap, else "not resolved"."""
+    lc = board[board["mode"] == "loop closure"].set_index("method")
+    others = lc[~lc.index.str.startswith(("greenloop-seq", "chance"))].dropna(subset=["R@1_%"])
+    rivals = list(dict.fromkeys(([others["R@1_%"].idxmax()] if len(others) else [])
+                                + (["SeqSLAM (published)"] if "SeqSLAM (published)" in others.index else [])))
+    out = []
+    for n in (s for s in seq_names if s in lc.index and pd.notna(lc.loc[s, "R@1_%"])):
+        r = lc.loc[n]
+        line = (f"{n}: R@1 {r['R@1_%']:.2f} % [{r['R@1_lo_%']:.2f}, {r['R@1_hi_%']:.2f}], AUC-PR {r['AUC-PR_%']:.2f} % "
+                f"[{r['AUC-PR_lo_%']:.2f}, {r['AUC-PR_hi_%']:.2f}], R@100P {r['R@100P_%']:.2f} %")
+        if pd.notna(r["fps_median"]):
+            line += f", {r['fps_median']:.0f} frames/s [{r['fps_min']:.0f}, {r['fps_max']:.0f}]"
+        for b_name in rivals:
+            b = others.loc[b_name]
+            line += (f"; vs {b_name} (R@1 {b['R@1_%']:.2f} % [{b['R@1_lo_%']:.2f}, {b['R@1_hi_%']:.2f}], AUC-PR "
+                     f"{b['AUC-PR_%']:.2f} %): R@1 {_compare(r, b, 'R@1_lo_%', 'R@1_hi_%', ('higher than', 'lower than'))} it, "
+                     f"AUC-PR {_compare(r, b, 'AUC-PR_lo_%', 'AUC-PR_hi_%', ('higher than', 'lower than'))} it")
+            if pd.notna(r["fps_median"]) and pd.notna(b["fps_median"]):
+                line += (f", speed {_compare(r, b, 'fps_min', 'fps_max', ('faster than', 'slower than'))} it "
+                         f"({b['fps_median']:.0f} frames/s [{b['fps_min']:.0f}, {b['fps_max']:.0f}])")
+        out.append(line)
+    if "chance (random scores)" in lc.index:
+        c = lc.loc["chance (random scores)"]
+        out.append(f"chance: R@1 {c['R@1_%']:.2f} %, AUC-PR {c['AUC-PR_%']:.2f} %")
+    return "\n".join(out)
+
+
+def sequence_descriptors(dataset, names, feats: dict, infos: dict, step: int, weights="auto"):
+    """greenloop-seq's descriptors: those already in ``feats`` reused (the same frames, the same
+    values), the others from ``seqmatch.describe``. Returns ({name: (N, D)}, {name: ExtractInfo})."""
+    X, info = {}, {}
+    for d in names:
+        if d in feats:
+            X[d], info[d] = feats[d], infos[d]
+        else:
+            X[d], info[d] = seqmatch.describe(dataset, d, step=step, weights=weights, return_info=True)
+    return X, info
+
+
+def timing_window(evalq, n_frames: int):
+    """(start, stop) described indices of the timed window: the first ``n_frames`` evaluation
+    queries, so every frame before them (the revisit's first pass included) is stored. Without a
+    tuning part (evalq all True) the last ``n_frames`` frames, the same rule for every method."""
+    q = np.flatnonzero(np.asarray(evalq, dtype=bool))
+    if not len(q):
+        raise ValueError("no evaluation query to time")
+    start = int(q[0]) if q[0] > 0 else max(len(evalq) - int(n_frames), 1)
+    return start, min(start + int(n_frames), len(evalq))
+
+
+def decode_window(paths, frames, start: int, stop: int):
+    """The decoded frames (cv2.imread, BGR) of described frames start..stop-1 and their paths."""
+    sel = [paths[int(i)] for i in np.asarray(frames)[start:stop]]
+    raw = [cv2.imread(str(p), cv2.IMREAD_COLOR) for p in sel]
+    if any(r is None for r in raw):
+        raise ValueError("a frame of the timed window cannot be decoded; check the sequence folder")
+    return raw, sel
+
+
+def stream_checks(names, dets: dict, knobs: dict, descriptors: dict, S: dict, GT) -> dict:
+    """{method: ``seqmatch.stream_check``} over the whole stream (the revisit included) for the
+    named sequence methods (thresholded detectors only)."""
+    return {n: seqmatch.stream_check(dets[n], descriptors[knobs[n]["descriptor"]], S[n], GT)
+            for n in names if n in dets and dets[n].threshold is not None}
+
+
+def targets(board: pd.DataFrame, names) -> dict:
+    """{name: {"highest_R@1", "highest_AUC-PR" (strictly above every other row but chance, loop
+    closure), "fps_min_at_least_920" (the slowest repeat reaches the main paper's 920)}}."""
+    lc = board[board["mode"] == "loop closure"].dropna(subset=["R@1_%"])
+    out = {}
+    for n in names:
+        r = lc[lc.method == n]
+        if not len(r):
+            continue
+        r, rest = r.iloc[0], lc[(lc.method != n) & ~lc.method.str.startswith(("greenloop-seq", "chance"))]
+        out[n] = {"highest_R@1": bool(r["R@1_%"] > rest["R@1_%"].max()),
+                  "highest_AUC-PR": bool(r["AUC-PR_%"] > rest["AUC-PR_%"].max()),
+                  "fps_min_at_least_920": bool(pd.notna(r["fps_min"]) and r["fps_min"] >= 920)}
+    return out
+
+
+def detectors(knobs: dict, thr: dict, exclude: int, velocities, proj: dict, weights="auto") -> dict:
+    """{method: :func:`detector`} of every knob record at its threshold."""
+    return {k: detector(kn, thr.get(k), exclude, velocities, proj, weights) for k, kn in knobs.items()}
+
+
+def describers(knobs: dict, weights="auto", input_size=None, vocabulary=None) -> dict:
+    """{descriptor: :func:`frame_describer`} of every descriptor the knob records use."""
+    return {kn["descriptor"]: frame_describer(kn["descriptor"], weights, input_size, vocabulary) for kn in knobs.values()}
+
+
+def meta(knobs: dict, dets: dict, infos: dict) -> dict:
+    """{method: dict(weights, knobs, bytes_per_stored_frame)} for :func:`method_rows`. infos:
+    {descriptor: ExtractInfo} (SeqSLAM and the raw pixels: weights "none"). Read the bytes after
+    the detectors have stored a frame (after timing)."""
+    return {k: {"weights": weights_kind(infos[kn["descriptor"]].weights) if kn["descriptor"] in infos else "none",
+                "knobs": knob_text(kn), "bytes_per_stored_frame": dets[k].bytes_per_frame} for k, kn in knobs.items()}
+
+
+def knob_table(knobs: dict, score: dict) -> pd.DataFrame:
+    """One row per method: its knobs and the tuning AUC-PR it was picked by (None: not tuned)."""
+    return pd.DataFrame([{"method": k, "knobs": knob_text(v), "AUC-PR_tune_%": score.get(k)} for k, v in knobs.items()])
+
+
+def dictionary_row(name: str, tau: int, n_train: int, closures: dict, op: dict, speed: dict, frame_step: int,
+                   scored_on: str) -> dict:
+    """The dictionary's leaderboard row: decisions only (no per-query score, so no metric columns).
+    closures: ``dictionary.query_closures``; op: ``evaluate.operating_point``; speed: its timing
+    row with decode_ms."""
+    d = closures["first_delay"]
+    return {"method": name, "mode": "loop closure", "weights": "trained here",
+            "knobs": f"tau {tau}, CNN trained on original frames 0..{n_train - 1}",
+            **{c: speed.get(c) for c in ("fps_median", "fps_min", "fps_max", "decode_ms")}, "bytes_per_stored_frame": 0,
+            "threshold": tau, "closures_declared": closures["declared"], "closures_false": closures["false"],
+            "first_revisit_delay_frames": None if d is None else d * int(frame_step),
+            "scored_on": f"{scored_on}; decisions only (no score): pair precision {op['precision']:.3f}, recall {op['recall']:.3f}"}

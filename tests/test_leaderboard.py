@@ -1,0 +1,203 @@
+"""greenloop.study.leaderboard: notebook 13's logic on small hand-made data."""
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from greenloop import evaluate, seqmatch, seqslam
+from greenloop.study import leaderboard as lb
+
+N0, REPEAT, EX, DIM = 80, 40, 20, 16
+
+
+@pytest.fixture(scope="module")
+def revisit():
+    rng = np.random.default_rng(0)
+    w = np.cumsum(rng.normal(size=(N0, DIM)), 0).astype(np.float32) * 0.3
+    X = np.concatenate([w, w[:REPEAT] + rng.normal(scale=0.3, size=(REPEAT, DIM)).astype(np.float32)])
+    n = len(X)
+    GT = np.zeros((n, n), bool)
+    for k in range(REPEAT):
+        GT[max(k - 2, 0):k + 3, N0 + k] = True
+    return X, GT | GT.T
+
+
+def test_reference_mask():
+    assert lb.reference_mask([0, 4, 8, 12], None) is None
+    assert lb.reference_mask([0, 4, 8, 12], 8).tolist() == [True, True, False, False]
+    with pytest.raises(ValueError, match="split"):
+        lb.reference_mask([0, 4], 100)
+
+
+def test_projections_fit_the_given_frames_and_label_the_kept_dim(revisit):
+    X, _ = revisit
+    fit = np.zeros(len(X), bool)
+    fit[:10] = True
+    p = lb.projections({"cnn": X}, ["cnn"], fit, [4, 64])
+    assert list(p["cnn"]) == ["none", "pca 4", "pca 9"]             # 64 clipped to the rank of 10 centred frames
+    assert np.allclose(p["cnn"]["pca 4"].mean, seqmatch.fit_projection(X[:10], 4).mean)
+
+
+def test_variants_and_default_knobs():
+    v = lb.variants(["a", "pixels"], ["pixels", "cnn"], ["pixels"], [5, 10])
+    assert v["a (single frame)"] == (["a"], [1]) and v["greenloop-seq"] == (["pixels", "cnn"], [5, 10])
+    assert v["greenloop-seq-fast"] == (["pixels"], [5, 10]) and v["SeqSLAM (tuned)"] == (["seqslam"], [5, 10])
+    d = lb.default_knobs(["a"])
+    assert d["a (single frame)"] == {"descriptor": "a", "whitening": "none", "seq_len": 1, "contrast_window": 0}
+    assert d["SeqSLAM (published)"] == {"descriptor": "seqslam", "whitening": "none", "seq_len": 11, "contrast_window": 10}
+    assert lb.knob_text(d["SeqSLAM (published)"]).startswith("64x32 patch-normalised, SAD, ds 10, R_window 10")
+
+
+def test_score_matrices_are_the_detectors_matrices(revisit):
+    X, GT = revisit
+    proj = lb.projections({"cnn": X}, ["cnn"], None, [8])
+    knobs = {"single": {"descriptor": "cnn", "whitening": "pca 8", "seq_len": 1, "contrast_window": 4},
+             "seq": {"descriptor": "cnn", "whitening": "none", "seq_len": 5, "contrast_window": 0},
+             "slam": {"descriptor": "seqslam", "whitening": "none", "seq_len": 4, "contrast_window": 6}}
+    S = lb.score_matrices(knobs, {"cnn": X, "seqslam": X}, proj, EX, (1.0,))
+    assert np.array_equal(S["single"], seqmatch.score_matrix(X, EX, 1, (1.0,), 4, proj["cnn"]["pca 8"]))
+    assert np.array_equal(S["seq"], seqmatch.score_matrix(X, EX, 5, (1.0,), 0))
+    assert np.array_equal(S["slam"], seqslam.score_matrix(X, EX, 3, 6))
+    dets = lb.detectors(knobs, {"single": 0.5, "seq": float("nan")}, EX, (1.0,), proj)
+    assert isinstance(dets["slam"], seqslam.Detector) and dets["slam"].seq_len == 4 and dets["slam"].threshold is None
+    assert dets["single"].threshold == 0.5 and dets["single"].projection is proj["cnn"]["pca 8"] and dets["seq"].threshold is None
+    for x in X:
+        dets["single"].update_descriptor(x)
+    assert dets["single"].bytes_per_frame == 8 * 4 + 4
+    assert np.allclose(dets["single"].last_scores, S["single"][:len(X) - 1 - EX, -1], atol=1e-5)
+
+
+def test_frame_describers_are_the_streams_descriptors():
+    rng = np.random.default_rng(1)
+    f = rng.integers(0, 256, (48, 64, 3), dtype=np.uint8)
+    assert np.array_equal(lb.frame_describer("seqslam")(f), seqslam.describe_frames([f])[0])
+    assert np.array_equal(lb.frame_describer("pixels-patchnorm")(f), seqmatch.describe_frames([f], "pixels-patchnorm")[0])
+    d = lb.describers({"a": {"descriptor": "pixels"}, "b": {"descriptor": "seqslam"}})
+    assert set(d) == {"pixels", "seqslam"} and d["pixels"](f).shape == (1024,)
+
+
+def test_metric_and_chance_rows_are_the_evaluate_functions(revisit):
+    X, GT = revisit
+    S = seqmatch.score_matrix(X, EX, 5, contrast_window=0)
+    q = np.zeros(len(X), bool)
+    q[N0 - 10:] = True
+    ref = np.arange(len(X)) < N0
+    rows = lb.metric_rows(S, GT, EX, q, ref)
+    assert [r["mode"] for r in rows] == ["loop closure", "place recognition"]
+    a = evaluate.per_query(S, GT, EX, queries=q, ks=(1, 5))
+    b = evaluate.per_query(S, GT, EX, queries=q, reference=ref, ks=(1, 5))
+    assert rows[0]["R@1_%"] == round(100 * a["R@1"], 2) and rows[0]["AUC-PR_%"] == round(100 * a["AUC-PR"], 2)
+    assert {k: rows[0][k] for k in lb.SPREADS} == lb.spread(S, GT, EX, q)
+    assert rows[1]["R@5_%"] == round(100 * b["R@5"], 2) and rows[1]["R@100P_%"] == round(100 * b["R@100P"], 2)
+    assert rows[0]["pair_AP_%"] == round(100 * evaluate.average_precision(S, GT, EX, queries=q), 2)
+    assert math.isnan(rows[1]["pair_AP_%"]) and len(lb.metric_rows(S, GT, EX, q)) == 1
+    c = lb.chance_rows(GT, EX, q, None, "evaluation queries")
+    ch = evaluate.query_chance(GT, EX, queries=q, ks=(1, 5))
+    assert len(c) == 1 and c[0]["R@1_%"] == round(100 * ch["R@1"], 2) and c[0]["scored_on"] == "evaluation queries"
+    assert c[0]["pair_AP_%"] == round(100 * evaluate.chance_level(GT, EX, queries=q), 2)
+    assert rows[0]["R@1_%"] > c[0]["R@1_%"] + 30
+
+
+def test_thresholds_and_closures(revisit):
+    X, GT = revisit
+    S = {"seq": seqmatch.score_matrix(X, EX, 5, contrast_window=0)}
+    tune, ev = evaluate.split_mask(len(X), 0.5, gt=GT, gap=5)
+    t = lb.thresholds(S, GT, EX, tune, "f1")
+    assert t["seq"] == seqmatch.choose_threshold(S["seq"], GT, EX, queries=tune)
+    assert math.isnan(lb.thresholds(S, GT, EX, None, "f1")["seq"])
+    c = lb.closure_columns(S["seq"], GT, t["seq"], EX, ev, 4)
+    ref = seqmatch.closures(S["seq"], GT, t["seq"], EX, queries=ev)
+    assert c["closures_declared"] == ref["declared"] and c["first_revisit_delay_frames"] == 4 * ref["first_delay"]
+    assert lb.closure_columns(S["seq"], GT, float("nan"), EX, ev, 4)["closures_declared"] is None
+
+
+def test_timing_window_and_methods(revisit):
+    X, _ = revisit
+    ev = np.zeros(10, bool)
+    ev[6:] = True
+    assert lb.timing_window(ev, 3) == (6, 9) and lb.timing_window(ev, 30) == (6, 10)
+    assert lb.timing_window(np.ones(10, bool), 4) == (6, 10)             # no split: the last frames
+    knobs = {"seq": {"descriptor": "cnn", "whitening": "none", "seq_len": 3, "contrast_window": 0}}
+    dets = lb.detectors(knobs, {}, EX, (1.0,), {})
+    m, pre = lb.timing_methods(knobs, dets, {"cnn": lambda f: f}, {"cnn": X}, 50)
+    assert [x.name for x in m] == ["seq"] and len(pre["seq"]) == 50
+    assert m[0].start(pre["seq"]).frame_index == 50
+
+
+def _board():
+    spread = {"R@1_lo_%": 85.0, "R@1_hi_%": 95.0, "AUC-PR_lo_%": 70.0, "AUC-PR_hi_%": 90.0}
+    return lb.table([
+        {"method": "greenloop-seq", "mode": "loop closure", "R@1_%": 90.0, "AUC-PR_%": 80.0, "R@100P_%": 40.0,
+         "fps_median": 1000.0, "fps_min": 950.0, "fps_max": 1100.0, **spread},
+        {"method": "pixels (single frame)", "mode": "loop closure", "R@1_%": 70.0, "AUC-PR_%": 85.0, "R@100P_%": 10.0,
+         "fps_median": 900.0, "fps_min": 800.0, "fps_max": 960.0,
+         "R@1_lo_%": 60.0, "R@1_hi_%": 80.0, "AUC-PR_lo_%": 75.0, "AUC-PR_hi_%": 95.0},
+        {"method": "SeqSLAM (published)", "mode": "loop closure", "R@1_%": 50.0, "AUC-PR_%": 30.0, "R@100P_%": 0.0,
+         "fps_median": 100.0, "fps_min": 90.0, "fps_max": 110.0,
+         "R@1_lo_%": 40.0, "R@1_hi_%": 60.0, "AUC-PR_lo_%": 20.0, "AUC-PR_hi_%": 40.0},
+        {"method": "chance (random scores)", "mode": "loop closure", "R@1_%": 5.0, "AUC-PR_%": 1.0, "R@100P_%": 0.0}])
+
+
+def test_table_targets_and_statement():
+    b = _board()
+    assert list(b.columns) == lb.COLUMNS
+    t = lb.targets(b, ["greenloop-seq"])
+    assert t == {"greenloop-seq": {"highest_R@1": True, "highest_AUC-PR": False, "fps_min_at_least_920": True}}
+    s = lb.statement(b, ["greenloop-seq"])
+    assert "R@1 90.00 % [85.00, 95.00]" in s and "vs pixels (single frame) (R@1 70.00 % [60.00, 80.00]" in s
+    assert "R@1 higher than it, AUC-PR not resolved against it, speed not resolved against it (900 frames/s" in s
+    assert "vs SeqSLAM (published)" in s and "speed faster than it (100 frames/s" in s and "chance: R@1 5.00 %" in s
+    b.loc[1, "fps_max"], b.loc[1, "R@1_hi_%"] = 900.0, 86.0
+    s = lb.statement(b, ["greenloop-seq"])
+    assert "R@1 not resolved against it" in s and "speed faster than it (900 frames/s" in s
+
+
+def test_spread_brackets_the_metric_and_widens_with_fewer_queries(revisit):
+    X, GT = revisit
+    S = seqmatch.score_matrix(X, EX, 5, contrast_window=0)
+    q = np.zeros(len(X), bool)
+    q[N0 - 10:] = True
+    sp = lb.spread(S, GT, EX, q, block=5, n_boot=100)
+    m = evaluate.per_query(S, GT, EX, queries=q, ks=(1,))
+    assert sp["R@1_lo_%"] <= 100 * m["R@1"] <= sp["R@1_hi_%"] and sp["AUC-PR_lo_%"] <= 100 * m["AUC-PR"] <= sp["AUC-PR_hi_%"]
+    assert sp == lb.spread(S, GT, EX, q, block=5, n_boot=100)          # seeded
+    noisy = S + np.random.default_rng(3).normal(scale=0.05, size=S.shape).astype(np.float32)
+    few = np.zeros(len(X), bool)
+    few[N0 + 20:] = True
+    a, b = lb.spread(noisy, GT, EX, q, block=5), lb.spread(noisy, GT, EX, few, block=5)
+    assert b["R@1_hi_%"] - b["R@1_lo_%"] >= a["R@1_hi_%"] - a["R@1_lo_%"]
+
+
+def test_write_makes_the_copy_from_one_serialisation(tmp_path, monkeypatch):
+    b = _board()
+    calls = []
+    real = pd.DataFrame.to_csv
+    monkeypatch.setattr(pd.DataFrame, "to_csv", lambda self, *a, **k: calls.append(1) or real(self, *a, **k))
+    csv, md, copy = lb.write(b, tmp_path / "13_leaderboard", tmp_path, "T", "the note")
+    assert calls == [1] and copy == tmp_path / "leaderboard.csv"
+    assert csv.read_bytes() == copy.read_bytes() and pd.read_csv(copy).method.tolist() == b.method.tolist()
+    assert md.read_text().startswith("### T\n") and md.read_text().rstrip().endswith("the note")
+
+
+def test_dictionary_row():
+    r = lb.dictionary_row("dict", 70, 500, {"declared": 3, "false": 1, "first_delay": 2}, {"precision": 0.5, "recall": 0.25},
+                          {"fps_median": 10.0, "fps_min": 9.0, "fps_max": 11.0, "decode_ms": 1.0}, 4, "evaluation queries")
+    assert r["first_revisit_delay_frames"] == 8 and r["threshold"] == 70 and "0..499" in r["knobs"]
+    assert r["scored_on"].startswith("evaluation queries; decisions only") and r["bytes_per_stored_frame"] == 0
+
+
+def test_method_rows_one_per_mode_with_closures_in_loop_closure_only(revisit):
+    X, GT = revisit
+    S = {"seq": seqmatch.score_matrix(X, EX, 5, contrast_window=0)}
+    tune, ev = evaluate.split_mask(len(X), 0.5, gt=GT, gap=5)
+    thr = lb.thresholds(S, GT, EX, tune, "f1")
+    meta = {"seq": {"weights": "none", "knobs": "k", "bytes_per_stored_frame": 80}}
+    speed = {"seq": {"fps_median": 10.0, "fps_min": 9.0, "fps_max": 12.0, "decode_ms": 0.5}}
+    ref = np.arange(len(X)) < N0
+    rows = lb.method_rows(S, meta, GT, EX, ev, ref, thr, speed, 2, "evaluation queries")
+    assert [r["mode"] for r in rows] == ["loop closure", "place recognition"]
+    assert rows[0]["closures_declared"] == lb.closure_columns(S["seq"], GT, thr["seq"], EX, ev, 2)["closures_declared"]
+    assert rows[1]["closures_declared"] is None and math.isnan(rows[1]["threshold"])
+    assert rows[0]["fps_min"] == rows[1]["fps_min"] == 9.0 and rows[0]["bytes_per_stored_frame"] == 80
+    assert rows[1]["R@1_%"] == lb.metric_rows(S["seq"], GT, EX, ev, ref)[1]["R@1_%"]
