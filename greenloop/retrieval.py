@@ -138,6 +138,16 @@ class _Faiss:
     def n_stored(self) -> int:
         return int(self.index.ntotal)
 
+    def __setstate__(self, state: dict) -> None:
+        """Unpickling (a resumed stream): faiss does not serialise HNSW's level generator, so
+        its draws (one per stored frame) are replayed, and frames added after a resume get the
+        levels, hence the graph, of an uninterrupted run."""
+        self.__dict__.update(state)
+        if self.kind == "hnsw":
+            rng = self.index.hnsw.rng
+            for _ in range(self.index.ntotal):
+                rng.rand_float()
+
     def add(self, X) -> None:
         self.index.add(_rows(X, self.dim))
         if not self.trained and self.index.ntotal >= self.train_size:
