@@ -351,7 +351,8 @@ def _stream_section(path: Path) -> list[str]:
             f"{'met' if r['wall_s'] <= 900 else 'not met'}), {r['frames_per_s_reported']:.0f} frames/s with PNG decoding; "
             f"peak RSS {r['peak_rss_kB'] / 1e6:.2f} GB; {r['bytes_per_stored_frame']} B per stored frame; "
             f"state file {r['state_file_bytes'] / 1e9:.2f} GB saved {r['saves']} times; {r['closures']:,} closures, "
-            f"{r['closures_correct']:,} correct.", "", f"Notes: {r['note']}", ""]
+            f"{r['closures_correct']:,} correct.", "",
+            *([f"Resume: {r['resume_check']}.", ""] if "resume_check" in r else []), f"Notes: {r['note']}", ""]
 
 
 def main(argv=None) -> int:
