@@ -43,7 +43,7 @@ GARDENSPOINT := data/gardenspoint
 GARDENSPOINT_SRC ?= $(if $(wildcard ../shared/real/gardenspoint/night_right),../shared/real/gardenspoint,)
 GARDENSPOINT_URL ?= https://github.com/aghagol/loop-detection
 
-.PHONY: all help venv synthetic data nordland gardenspoint test quick sweep bench clean-results readme-coverage
+.PHONY: all help venv synthetic data nordland gardenspoint test quick sweep bench bench-scale clean-results readme-coverage
 .DEFAULT_GOAL := help
 
 help: ## this list
@@ -166,6 +166,12 @@ sweep: $(DATA_DEP) | $(STAMP) ## Dask sweep of SWEEP_GRID over SWEEP_NOTEBOOK (d
 bench: | $(STAMP) ## speed benchmark: streaming detector and training vs plain Keras -> results/bench/
 	$(BIN)/python -m greenloop.speed.bench --out $(RESULTS)/bench --dataset $(DATASET)
 	$(BIN)/python -m greenloop.study.report $(RESULTS)
+
+# SCALE_NOTE: a sentence for scale.md's header, e.g. what else shared the cores during the run
+SCALE_NOTE ?=
+bench-scale: | $(STAMP) ## retrieval indexes at 10^4..10^6 stored frames (augmented Nordland) -> results/bench/scale.md (~20 min, 2 cores)
+	test -d "$(NORDLAND_SRC)" || { echo "bench-scale needs Nordland's frames: set NORDLAND_SRC=path (summer/, winter/), e.g. from git clone --depth 1 $(NORDLAND_URL)"; exit 1; }
+	OMP_NUM_THREADS=1 $(BIN)/python -m greenloop.speed.scale --src $(NORDLAND_SRC) --out $(RESULTS)/bench --note "$(SCALE_NOTE)"
 
 # Optional, for the cross-checks against the torch originals only (GhostNet vs timm, the Lite0 port
 # and checkpoint reader vs efficientnet_lite_pytorch and torch.load): a CPU torch wheel where the

@@ -11,6 +11,9 @@ Commands
           [--exclude FRAMES] [--contrast-window R] [--step N]
         greenloop's own sequence-matching detector (greenloop.seqmatch.Detector): no model, no
         poses; prints each closure (query frame, matched earlier frame, score).
+        [--index scan|flat|ivf|hnsw|swp|qdp] [--candidates K]: verify sequences on the K frames a
+        retrieval index returns (greenloop.retrieval); [--state FILE] [--save-every N]
+        [--stop-after N]: save the detector and resume from it (a progress bar goes to stderr).
     sweep NOTEBOOK --grid NAME=V1,V2,... [--grid ...] --out OUT [-f PARAMS.yaml] [-p NAME VALUE]
           [--dataset DIR] [--scheduler local|tcp://HOST:8786|slurm|pbs] [--workers N] [--metric SPEC]
         run the notebook once per point of the grids' cross product on Dask (greenloop.study.sweep) and
@@ -25,6 +28,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import pickle
 import sys
 import time
 from pathlib import Path
@@ -34,7 +38,7 @@ os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
 import cv2  # noqa: E402
 import yaml  # noqa: E402
 
-from greenloop import seqmatch  # noqa: E402
+from greenloop import retrieval, seqmatch  # noqa: E402
 from greenloop.datasets import groundtruth_formats as gt_formats  # noqa: E402
 from greenloop.datasets.sequence import (DESCRIPTION_NAME, GROUND_TRUTH_NAME, layout, list_frames,  # noqa: E402
                                          read_description, traversals, write_loop_pairs)
@@ -42,6 +46,8 @@ from greenloop.util.files import write_atomic  # noqa: E402
 from greenloop.speed import stream  # noqa: E402
 from greenloop.study import params as study_params  # noqa: E402
 from greenloop.study import sweep  # noqa: E402
+from greenloop.util.files import write_atomic  # noqa: E402
+from greenloop.util.progress import bar  # noqa: E402
 
 
 def _read_window(paths):
@@ -108,26 +114,89 @@ def _tuned_knobs(args) -> tuple[dict, list[str]]:
 
 def _detect_seq(args) -> int:
     """``detect --method greenloop-seq``: greenloop.seqmatch.Detector over the frames in windows
-    (every ``step``-th frame of the folder: 1 unless --step or sequence.yaml says otherwise)."""
+    (every ``step``-th frame of the folder: 1 unless --step or sequence.yaml says otherwise); with
+    ``--index`` on the retrieved candidates only, with ``--state`` resumable (:func:`_seq_stream`)."""
     kn, lines = _tuned_knobs(args)
     paths = list_frames(args.folder)[::kn["step"]]
-    det = seqmatch.Detector(kn["threshold"], descriptor=kn["descriptor"], seq_len=kn["seq_len"],
-                            exclude=kn["exclude"], contrast_window=kn["contrast_window"])
+    det = _seq_detector(args, kn, paths)
     print("\n".join(lines), flush=True)
     print(f"# {len(paths)} frames from {args.folder} (every {kn['step']}); greenloop-seq "
           f"({kn['descriptor']}, seq_len {det.seq_len}, exclude {det.exclude}, contrast window "
-          f"{det.contrast_window}); threshold {det.threshold:g}", flush=True)
+          f"{det.contrast_window}); threshold {det.threshold:g}; candidates: "
+          f"{'every stored frame' if det.index_kind is None else f'{det.k} from {det.index_kind}'}"
+          + (f"; resumed at frame {det.frame_index}" if det.frame_index else ""), flush=True)
     print("frame\tmatch\tscore\tfile\tmatch_file", flush=True)
-    t0 = time.perf_counter()
-    for start in range(0, len(paths), args.window):
-        for e in det.update_many(_read_window(paths[start:start + args.window])):
-            print(f"{e['frame']}\t{e['match']}\t{e['score']:.4f}\t{paths[e['frame']].name}\t"
-                  f"{paths[e['match']].name}", flush=True)
+    t0, start = time.perf_counter(), det.frame_index
+    try:
+        done = _seq_stream(det, paths, args, kn)
+    except KeyboardInterrupt:
+        print(f"detect: interrupted at frame {det.frame_index}" + (
+            f"; state saved in {args.state}: run the same command again to continue" if args.state else ""),
+            file=sys.stderr)
+        return 130
     dt = time.perf_counter() - t0
     n = det.frame_index
-    print(f"# summary: {n} frames, {len(det.events)} closures, {n / dt:.1f} frames/s (decoding "
-          f"included, {dt:.2f} s); {det.bytes_per_frame} bytes per stored frame", flush=True)
+    print(f"# summary: {n} frames, {len(det.events)} closures, {(n - start) / max(dt, 1e-9):.1f} "
+          f"frames/s (decoding included, {dt:.2f} s for frames {start}..{n - 1}); "
+          f"{det.bytes_per_frame} bytes per stored frame"
+          + ("" if done else f"; stopped, state in {args.state}: run again to continue"), flush=True)
     return 0
+
+
+def _seq_detector(args, kn: dict, paths) -> seqmatch.Detector:
+    """A new Detector, or the one saved in ``--state`` (the same recording and knobs only)."""
+    key = dict(kn, folder=str(Path(args.folder).resolve()), frames=len(paths), index=args.index,
+               candidates=args.candidates)
+    if args.state and Path(args.state).is_file():
+        with open(args.state, "rb") as f:
+            saved = pickle.load(f)
+        if saved.get("key") != key:
+            raise ValueError(f"--state {args.state} was saved for another run ({saved.get('key')}); "
+                             f"pass the same folder and options, or delete the file to start over")
+        return saved["detector"]
+    if args.index is not None:
+        retrieval.one_thread()
+    return seqmatch.Detector(kn["threshold"], descriptor=kn["descriptor"], seq_len=kn["seq_len"],
+                             exclude=kn["exclude"], contrast_window=kn["contrast_window"],
+                             index=args.index, k=args.candidates)
+
+
+def _seq_save(det: seqmatch.Detector, args, kn: dict, paths) -> None:
+    """Write the detector (stored frames, index, sequence buffers, events) to ``--state``, atomically."""
+    key = dict(kn, folder=str(Path(args.folder).resolve()), frames=len(paths), index=args.index,
+               candidates=args.candidates)
+    def dump(path):
+        with open(path, "wb") as f:
+            pickle.dump({"key": key, "detector": det}, f, protocol=pickle.HIGHEST_PROTOCOL)
+    write_atomic(args.state, dump)
+
+
+def _seq_stream(det: seqmatch.Detector, paths, args, kn: dict) -> bool:
+    """Feed paths[det.frame_index:] to det in windows, printing closures, with a progress bar on
+    stderr; with --state save every --save-every frames, on Ctrl-C and at the end; stop after
+    --stop-after frames of this run. Returns whether the recording was finished."""
+    first, last_save = det.frame_index, det.frame_index
+    stop = len(paths) if args.stop_after is None else min(len(paths), first + args.stop_after)
+    progress = bar(total=len(paths), initial=first, desc="greenloop-seq", unit="frame")
+    try:
+        for start in range(first, stop, args.window):
+            chunk = paths[start:min(start + args.window, stop)]
+            for e in det.update_many(_read_window(chunk)):
+                print(f"{e['frame']}\t{e['match']}\t{e['score']:.4f}\t{paths[e['frame']].name}\t"
+                      f"{paths[e['match']].name}", flush=True)
+            progress.update(len(chunk))
+            if args.state and det.frame_index - last_save >= args.save_every:
+                _seq_save(det, args, kn, paths)
+                last_save = det.frame_index
+    except KeyboardInterrupt:
+        if args.state:
+            _seq_save(det, args, kn, paths)
+        progress.close()
+        raise
+    progress.close()
+    if args.state:
+        _seq_save(det, args, kn, paths)
+    return det.frame_index == len(paths)
 
 
 def _detect(args) -> int:
@@ -327,6 +396,17 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--step", type=int, default=None,
                    help="stream every step-th frame (default: sequence.yaml's frame_step, else 1; --tuned's "
                         "frame_step is printed, not applied)")
+    g.add_argument("--index", default=None, choices=retrieval.KINDS,
+                   help="verify sequences on the --candidates frames this index retrieves (scan, flat: "
+                        "exact; ivf, hnsw, swp, qdp: approximate) instead of on every stored frame: "
+                        "the per-frame cost stops growing with the recording (greenloop.retrieval)")
+    g.add_argument("--candidates", type=int, default=20, help="--index: frames retrieved per query (default 20)")
+    g.add_argument("--state", default=None, metavar="FILE",
+                   help="save the detector here (every --save-every frames, on Ctrl-C, at the end) and "
+                        "resume from it when it exists: the closures equal an uninterrupted run")
+    g.add_argument("--save-every", type=int, default=10000, help="--state: frames between saves (default 10000)")
+    g.add_argument("--stop-after", type=int, default=None, metavar="N",
+                   help="process at most N frames in this run, then save --state and stop")
     d.set_defaults(func=_detect)
     _sweep_parser(sub)
     _import_gt_parser(sub)

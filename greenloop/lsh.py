@@ -56,6 +56,7 @@ from greenloop.util.kernels import one_blas_thread
 __all__ = [
     "MAX_BITS", "METHODS", "hyperplanes", "codes", "hamming_masks", "probe_order_swp", "qdp_costs",
     "perturbation_sets", "probe_order_qdp", "qdp_n_probes", "BucketIndex", "build_index", "insert",
+    "append", "options", "probe_candidates",
     "MatchResult", "incremental_match", "query_index", "static_match", "scanned_matrix",
     "best_match_matrix", "table6_variants", "query_matches", "run_scores", "compare_variants", "scanned_pr_curve",
     "planted_queries", "scaling_test",
@@ -365,6 +366,23 @@ def build_index(X, H, n_stored: int | None = None, offset=None) -> BucketIndex:
     return idx
 
 
+def append(index: BucketIndex, X) -> None:
+    """Add the rows X (M, D) after those already stored (a stream's new frames): they are
+    L2-normalised, hashed with the index's hyperplanes and offset, and stored in order. Xn and
+    codes grow by doubling, so rows beyond the stored ones are spare capacity."""
+    X = _check_X(X, index.H)
+    n, m = index.n_stored, X.shape[0]
+    if n + m > len(index.Xn):
+        cap = max(2 * len(index.Xn), n + m)
+        Xn, c = np.zeros((cap, index.Xn.shape[1]), np.float32), np.zeros(cap, np.uint32)
+        Xn[:n], c[:n] = index.Xn[:n], index.codes[:n]
+        index.Xn, index.codes = Xn, c
+    index.Xn[n:n + m] = l2_normalise(X.astype(np.float32, copy=False))
+    index.codes[n:n + m] = codes(index.Xn[n:n + m], index.H, index.offset)
+    for i in range(n, n + m):
+        insert(index, i)
+
+
 def insert(index: BucketIndex, i: int) -> None:
     """Store row i of ``index.Xn`` (rows are stored in capture order: i must be n_stored)."""
     if i != index.n_stored:
@@ -377,7 +395,11 @@ def insert(index: BucketIndex, i: int) -> None:
     index.n_stored += 1
 
 
-def _options(method, radius, qdp_probes, qdp_score, theta) -> dict:
+def options(method, radius=4, qdp_probes=(1000, 1500, 500), qdp_score="margin",
+            theta=np.pi / 4) -> dict:
+    """The validated matching options of one method (a dict for :func:`probe_candidates`):
+    method in METHODS, radius (SWP), qdp_probes / qdp_score / theta (QDP), as in
+    :func:`incremental_match`. Loads the compiled QDP heap now, so no timed query pays for it."""
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     radius = positive_int("radius", radius, 0)
@@ -410,6 +432,26 @@ def _probes(index: BucketIndex, qn: np.ndarray, o: dict) -> np.ndarray:
     return probe_order_qdp(code, costs, qdp_n_probes(index.n_buckets, *o["qdp_probes"]))[0]
 
 
+def _gather(index: BucketIndex, probes: np.ndarray) -> np.ndarray:
+    """The stored rows (k,) int64 of the probed buckets, bucket by bucket in probing order."""
+    table = index.table
+    if index.occupied is not None:
+        hit = probes[index.occupied[probes]].tolist()
+    else:
+        hit = [c for c in probes.tolist() if c in table]
+    return np.fromiter(itertools.chain.from_iterable(table[c] for c in hit), np.int64)
+
+
+def probe_candidates(index: BucketIndex, qn, o: dict):
+    """The rows SWP or QDP scans for one query: (rows (k,) int64 stored rows of the probed
+    buckets, number of buckets probed). qn: (D,) float32 unit query; o: :func:`options` of
+    method "swp" or "qdp" (the cosine scan of those rows is the caller's)."""
+    if o["method"] not in ("swp", "qdp"):
+        raise ValueError(f"probe_candidates needs method 'swp' or 'qdp', got {o['method']!r}")
+    probes = _probes(index, np.asarray(qn, np.float32), o)
+    return _gather(index, probes), int(probes.size)
+
+
 def _search(index: BucketIndex, qn: np.ndarray, o: dict):
     """One unit float32 query qn (D,) against the stored rows.
     Returns (best row or NO_MATCH, its cosine or -inf, scanned rows (k,) int64 or None for
@@ -433,12 +475,7 @@ def _search(index: BucketIndex, qn: np.ndarray, o: dict):
     t0 = time.perf_counter()
     probes = _probes(index, qn, o)
     t_probe = time.perf_counter() - t0
-    table = index.table
-    if index.occupied is not None:
-        hit = probes[index.occupied[probes]].tolist()
-    else:
-        hit = [c for c in probes.tolist() if c in table]
-    cand = np.fromiter(itertools.chain.from_iterable(table[c] for c in hit), np.int64)
+    cand = _gather(index, probes)
     if cand.size == 0:
         return NO_MATCH, -np.inf, cand, 0, probes.size, t_probe
     sims = index.Xn[cand] @ qn
@@ -539,7 +576,7 @@ def incremental_match(X, method: str = "swp", exclude: int = 0, n_bits: int = 16
     keep_candidates: record every query's scanned rows (for :func:`scanned_matrix`).
     Returns a :class:`MatchResult` with one entry per frame (query t = frame t).
     """
-    o = _options(method, radius, qdp_probes, qdp_score, theta)
+    o = options(method, radius, qdp_probes, qdp_score, theta)
     exclude = positive_int("exclude", exclude, 0)
     X = np.asarray(X)
     if X.ndim != 2:
@@ -562,7 +599,7 @@ def query_index(index: BucketIndex, Q, method: str = "swp", radius: int = 4,
     queries so far took this many seconds in all (at least one query; None: all M).
     Returns a :class:`MatchResult` over the queries run (best = stored row).
     """
-    o = _options(method, radius, qdp_probes, qdp_score, theta)
+    o = options(method, radius, qdp_probes, qdp_score, theta)
     if max_seconds is not None and not max_seconds > 0:
         raise ValueError(f"max_seconds must be > 0 or None, got {max_seconds}")
     Qn = np.ascontiguousarray(l2_normalise(_check_X(Q, index.H, "Q").astype(np.float32)))

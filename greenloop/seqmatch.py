@@ -50,7 +50,7 @@ import warnings
 
 import numpy as np
 
-from greenloop import evaluate, features
+from greenloop import evaluate, features, retrieval
 from greenloop.datasets.sequence import preprocess_image
 from greenloop.similarity import apply_projection, l2_normalise, pca_whiten
 from greenloop.util.checks import positive_int
@@ -231,13 +231,25 @@ class Detector:
         i with j - i > exclude are candidates. contrast_window: SeqSLAM R_window (0 = off).
     projection: optional ``similarity.Projection`` (see :func:`fit_projection`).
     store_dtype: "float32" or "float16" for the stored descriptors. color: "bgr" or "rgb".
+    index: None (the reference: every stored frame is scored) or a ``greenloop.retrieval`` kind
+        ("scan", "flat", "ivf", "hnsw", "swp", "qdp"): candidate mode, the sequence score is
+        computed only for the ``k`` stored frames the index retrieves for the newest query
+        (``index_options``: keyword arguments of ``retrieval.make_index``). See
+        :meth:`_match_candidates` for what it computes and where it may differ from the reference.
     Attributes: ``events`` (list of {'frame', 'match', 'score'}), ``frame_index``, ``last_scores``
-    ((C,) float32 scores of the newest query's candidates), ``bytes_per_frame``.
+    ((C,) float32 scores of the newest query's candidates: every stored row 0..C-1, or in candidate
+    mode the rows ``last_candidates`` (C,) int64, ascending), ``bytes_per_frame``.
     """
 
     def __init__(self, threshold=None, descriptor: str = "pixels", seq_len: int = 10,
                  velocities=DEFAULT_VELOCITIES, exclude: int = 150, contrast_window: int = 10,
-                 projection=None, store_dtype: str = "float32", color: str = "bgr", weights="auto"):
+                 projection=None, store_dtype: str = "float32", color: str = "bgr", weights="auto",
+                 index: str | None = None, k: int = 20, index_options: dict | None = None):
+        if index is not None and index not in retrieval.KINDS:
+            raise ValueError(f"index must be None (score every stored frame) or one of "
+                             f"{retrieval.KINDS}, got {index!r}")
+        self.index_kind, self.k = index, positive_int("k", k, 1, whole_floats=True)
+        self.index_options = dict(index_options or {})
         self.descriptor = _check_descriptor(descriptor)
         self.seq_len = positive_int("seq_len", seq_len, 1, whole_floats=True)
         self.exclude = positive_int("exclude", exclude, 0, whole_floats=True)
@@ -268,14 +280,23 @@ class Detector:
         self.frame_index = 0
         self.events: list[dict] = []
         self.last_scores = np.zeros(0, np.float32)
+        self.last_candidates = np.zeros(0, np.int64)
         self._frame_shape = None
+        self._index = None                    # candidate mode: the retrieval index, made at frame 0
+        self._Q = None                        # (L, D) the last L query descriptors, newest first
+        self._qc = np.zeros(L, np.int64)      # their candidate counts c = j - exclude (0: none yet)
+        self._qpad = np.zeros(L, np.float32)  # their columns' pads (points outside stored frames)
+        self._sum = None                      # (D,) float64 sum of the indexed rows (cosine pads)
 
     @property
     def bytes_per_frame(self) -> int:
         """Bytes held per stored frame: D * itemsize (descriptor) + 4 * seq_len (column buffer);
+        in candidate mode D * itemsize + the index's ``bytes_per_frame()`` (no column buffer);
         0 before the first frame (D unknown)."""
         if self._db is None:
             return 0
+        if self._index is not None:
+            return int(self._db.shape[1] * self.store_dtype.itemsize + self._index.bytes_per_frame())
         return int(self._db.shape[1] * self.store_dtype.itemsize + 4 * self.seq_len)
 
     def _store(self, y: np.ndarray) -> None:
@@ -315,6 +336,8 @@ class Detector:
         j, c = self.frame_index, max(self.frame_index - self.exclude, 0)
         if self._db is not None and y.size != self._db.shape[1]:
             raise ValueError(f"descriptor {j} has {y.size} dims, the stream's first had {self._db.shape[1]}")
+        if self.index_kind is not None:
+            return self._match_candidates(y)
         if not c:
             return self._match(y, np.zeros(0, np.float32))
         with one_blas_thread():   # a 2-thread gemv stalls on a loaded 2-core machine
@@ -340,6 +363,77 @@ class Detector:
                 self.events.append(event)
                 return event
         return None
+
+    def _match_candidates(self, y: np.ndarray) -> dict | None:
+        """Candidate mode: the sequence score of the k frames the index retrieves for query j.
+
+        Frames 0..c-1 (c = j - exclude) are added to the index before query j (delayed insertion
+        keeps the exclusion window). For each candidate i the trajectory points (i - round(v k),
+        column j - k) are scored as in the reference: the cosine of query j - k with that stored
+        row, contrast-normalised over rows within contrast_window // 2 clipped to the c_k rows that
+        query had (:func:`contrast_normalise`), computed for the rows the points need only (one
+        (rows, L) product). Where the index returns every stored row the scores equal the
+        reference's except at points outside the stored frames: those count as the column's pad,
+        the exact column mean for cosine scores (contrast_window 0, from a running sum of the
+        stored rows) but 0 (a z-score's expected value) instead of the column's mean z-score
+        otherwise, since that mean needs the whole column. Cost per frame: k x L x (window + 1)
+        dot products, independent of the number stored (plus the index's search).
+        """
+        j, c, L = self.frame_index, max(self.frame_index - self.exclude, 0), self.seq_len
+        if self._index is None:
+            self._index = retrieval.make_index(self.index_kind, y.size, **self.index_options)
+            self._Q, self._sum = np.zeros((L, y.size), np.float32), np.zeros(y.size)
+        n_in = self._index.n_stored
+        if c > n_in:
+            new = self._db[n_in:c].astype(np.float32)
+            self._index.add(new)
+            self._sum += new.sum(0, dtype=np.float64)
+        pad = float(self._sum @ y / c) if c and self.contrast_window == 0 else 0.0
+        self._Q[1:], self._qc[1:], self._qpad[1:] = self._Q[:-1], self._qc[:-1], self._qpad[:-1]
+        self._Q[0], self._qc[0], self._qpad[0] = y, c, pad
+        self._qpad[self._qc == 0] = pad            # empty / pre-stream columns: the newest pad
+        self.last_candidates, self.last_scores = np.zeros(0, np.int64), np.zeros(0, np.float32)
+        if c:
+            ids = self._index.search(y, self.k)[1][0]
+            cand = np.unique(ids[ids >= 0])
+            self.last_candidates, self.last_scores = cand, self._candidate_scores(cand)
+        self._store(y)
+        self.frame_index += 1
+        if c and self.threshold is not None and self.last_scores.size:
+            i = int(np.argmax(self.last_scores))
+            if self.last_scores[i] >= self.threshold:
+                event = {"frame": j, "match": int(self.last_candidates[i]),
+                         "score": float(self.last_scores[i])}
+                self.events.append(event)
+                return event
+        return None
+
+    def _candidate_scores(self, cand: np.ndarray) -> np.ndarray:
+        """Best-trajectory scores (m,) float32 of the candidate rows cand (m,) (ascending)."""
+        off = self._margin - self._base                               # (V, L) row offsets
+        P = cand[:, None, None] - off[None]                           # (m, V, L) trajectory rows
+        ck = self._qc[None, None, :]
+        inside = (P >= 0) & (P < ck)
+        h = self.contrast_window // 2
+        W = P[..., None] + np.arange(-h, h + 1)                       # (m, V, L, 2h + 1) window rows
+        need = inside[..., None] & (W >= 0) & (W < ck[..., None])
+        R = np.unique(W[need])                                        # every row a point needs
+        with one_blas_thread():
+            G = (self._db[R].astype(np.float32) @ self._Q.T).astype(np.float64)   # (|R|, L)
+        col = np.broadcast_to(np.arange(self.seq_len), P.shape)
+        pi, pk = P[inside], col[inside]
+        s = G[np.searchsorted(R, pi), pk]
+        if self.contrast_window:
+            lo, hi = np.maximum(pi - h, 0), np.minimum(pi + h + 1, self._qc[pk])
+            C1 = np.vstack([np.zeros(self.seq_len), np.cumsum(G, 0)])
+            C2 = np.vstack([np.zeros(self.seq_len), np.cumsum(G * G, 0)])
+            a, b, n = np.searchsorted(R, lo), np.searchsorted(R, hi), hi - lo
+            mu = (C1[b, pk] - C1[a, pk]) / n
+            sd = np.sqrt(np.maximum((C2[b, pk] - C2[a, pk]) / n - mu * mu, 0.0))
+            s = np.where(sd > _EPS, (s - mu) / np.maximum(sd, _EPS), 0.0)
+        vals = np.broadcast_to(self._qpad, P.shape).astype(np.float32)
+        vals[inside] = s.astype(np.float32)
+        return (vals.sum(2, dtype=np.float64).max(1) / self.seq_len).astype(np.float32)
 
     def _check_frame(self, frame, index: int) -> None:
         if not isinstance(frame, np.ndarray) or frame.dtype != np.uint8 or frame.ndim not in (2, 3) \

@@ -1,0 +1,375 @@
+"""Scaling benchmark of candidate retrieval: ``make bench-scale`` -> results/bench/scale.{md,csv,png}.
+
+Data (never random vectors): Nordland's 7152 real 64x32 frames (summer then winter, the route
+order of ``greenloop.datasets.nordland``) augmented into a long recording of passes over the route
+(``greenloop.datasets.augment.recording``: per-pass gain/offset/blur, per-frame shift/zoom/
+brightness jitter/noise). Each frame -> the study's "pixels-patchnorm" descriptor (32x32 gray,
+SeqSLAM 8x8 patch normalisation, 1024-d; ``seqmatch.describe_frames``) -> PCA to ``dim``
+components (mean-centred, no whitening) fitted on the 7152 real frames only -> L2.
+
+Stored frames: the first N of the recording (N in ``sizes``); queries: frames of a later pass
+(the recording beyond the largest size), so every query revisits stored places but is no stored
+frame. Per size and method: build (add the N frames in one batch) and insert (frames added one at a
+time afterwards, mean per frame) times, per-query search latency for k = 10 (one query per call,
+one thread) p50 / p99, recall@1 = share of queries whose best candidate is the exact scan's best
+(same score within 1e-6 counts), candidates scanned (LSH), and memory per stored frame.
+Nearest-neighbour similarity quantiles of the real and the augmented descriptors are written
+beside (``neighbourhood``).
+"""
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import scipy.sparse
+
+from greenloop import evaluate, retrieval, seqmatch
+from greenloop.datasets import augment
+from greenloop.similarity import l2_normalise
+from greenloop.study import report
+from greenloop.util.kernels import one_blas_thread
+from greenloop.util.progress import bar
+
+SIZES = (10_000, 100_000, 1_000_000)
+K = 10
+# (label, kind, [search settings]): one build per kind, searched at each setting
+METHODS = (("NumPy scan", "scan", [{}]), ("faiss flat", "flat", [{}]),
+           ("IVF", "ivf", [{"nprobe": 16}, {"nprobe": 64}]),
+           ("HNSW", "hnsw", [{"ef_search": 32}, {"ef_search": 128}]),
+           ("SWP-RHLSH", "swp", [{}]), ("QDP-RHLSH", "qdp", [{}]))
+QUANTILES = (0.01, 0.1, 0.5, 0.9, 0.99)
+
+
+def fit_pca(real: np.ndarray, dim: int):
+    """(mean (1024,), components (1024, dim)) of the real frames' pixels-patchnorm descriptors."""
+    X = seqmatch.describe_frames(list(real), "pixels-patchnorm")
+    mean = X.mean(0)
+    _, _, Vt = np.linalg.svd(X - mean, full_matrices=False)
+    return mean, np.ascontiguousarray(Vt[:dim].T)
+
+
+def descriptors(real, pca, start: int, stop: int, seed: int = 0, chunk: int = 20_000,
+                progress: bool = True) -> np.ndarray:
+    """Frames start..stop-1 of the augmented recording as (n, dim) float32 unit descriptors."""
+    mean, V = pca
+    out = np.empty((stop - start, V.shape[1]), np.float32)
+    frames, t0 = [], start
+    it = augment.recording(real, start, stop, seed)
+    for t, _, f in bar(it, total=stop - start, desc="descriptors", unit="frame", disable=not progress):
+        frames.append(f)
+        if len(frames) == chunk or t == stop - 1:
+            X = seqmatch.describe_frames(frames, "pixels-patchnorm")
+            out[t0 - start:t + 1 - start] = (X - mean) @ V
+            frames, t0 = [], t + 1
+    return l2_normalise(out).astype(np.float32)
+
+
+def nn_similarity(X, Q=None, block: int = 4096) -> np.ndarray:
+    """(M,) cosine of each row of Q (default X itself, excluding the row) to its nearest row of X."""
+    same = Q is None
+    Q = X if same else Q
+    out = np.empty(len(Q), np.float32)
+    for a in range(0, len(Q), block):
+        S = X @ Q[a:a + block].T
+        if same:
+            S[np.arange(a, min(a + block, len(Q))), np.arange(S.shape[1])] = -np.inf
+        out[a:a + block] = S.max(0)
+    return out
+
+
+def neighbourhood(real_X, aug_X, aug_Q, sizes=SIZES) -> pd.DataFrame:
+    """NN-similarity quantiles side by side: the 7152 real frames among themselves, the same
+    number of augmented frames (one pass-length slice), and the queries against every stored size."""
+    n = len(real_X)
+    rows = {"real Nordland (7152, each vs the others)": nn_similarity(real_X),
+            f"augmented, first {n} (each vs the others)": nn_similarity(aug_X[:n])}
+    for size in sorted(sizes):
+        if size <= len(aug_X):
+            rows[f"queries vs {size:,} augmented stored"] = nn_similarity(aug_X[:size], aug_Q)
+    return pd.DataFrame([{"set": k, **{f"q{int(100 * q)}": float(np.quantile(v, q)) for q in QUANTILES}}
+                         for k, v in rows.items()])
+
+
+def _setting(index, opts: dict) -> str:
+    """Apply a search setting to a built index; returns its label suffix."""
+    if "nprobe" in opts:
+        index.index.nprobe = opts["nprobe"]
+        return f" nprobe {opts['nprobe']}"
+    if "ef_search" in opts:
+        index.index.hnsw.efSearch = opts["ef_search"]
+        return f" ef {opts['ef_search']}"
+    return ""
+
+
+def _search_all(index, Q, exact_best, exact_score) -> dict:
+    secs, best, score, scanned = np.zeros(len(Q)), np.zeros(len(Q), np.int64), np.zeros(len(Q)), []
+    for q in range(len(Q)):
+        t0 = time.perf_counter()
+        s, i = index.search(Q[q], K)
+        secs[q] = time.perf_counter() - t0
+        best[q], score[q] = i[0, 0], s[0, 0]
+        scanned.append(getattr(index, "last_scanned", np.nan))
+    hit = (best == exact_best) | (np.abs(score - exact_score) <= 1e-6)
+    return {"p50_ms": 1e3 * np.median(secs), "p99_ms": 1e3 * np.quantile(secs, 0.99),
+            "mean_ms": 1e3 * secs.mean(), "recall@1_%": 100 * hit.mean(),
+            "scanned_%": 100 * np.nanmean(scanned) / index.n_stored if np.isfinite(scanned).all() else np.nan}
+
+
+def bench_one(kind: str, settings, X, Q, exact_best, exact_score, n_insert: int, dim: int,
+              n_stored: int) -> list[dict]:
+    """Build on X[:n_stored], time the searches of Q at each setting, then insert n_insert more
+    frames singly. Returns one dict per setting (label suffix under "setting")."""
+    nlist = max(16, int(round(np.sqrt(n_stored))))
+    index = retrieval.make_index(kind, dim, nlist=nlist, train_size=min(n_stored, 40 * nlist))
+    with one_blas_thread():
+        t0 = time.perf_counter()
+        index.add(X[:n_stored])
+        build = time.perf_counter() - t0
+        mem = index.bytes_per_frame()
+        rows = [{"setting": _setting(index, o), **_search_all(index, Q, exact_best, exact_score)}
+                for o in settings]
+        t0 = time.perf_counter()
+        for r in range(n_stored, n_stored + n_insert):
+            index.add(X[r])
+        insert = (time.perf_counter() - t0) / max(n_insert, 1)
+    return [{**r, "build_s": build, "insert_us": 1e6 * insert, "bytes_per_frame": mem} for r in rows]
+
+
+def run(src, out, sizes=SIZES, dim: int = 64, queries=(2000, 1000, 300), n_insert: int = 1000,
+        seed: int = 0, methods=METHODS, note: str = "") -> pd.DataFrame:
+    """The whole benchmark (module doc); writes out/scale.{csv,md,png}, neighbourhood.{csv,md}."""
+    retrieval.one_thread()
+    out = Path(out)
+    real = augment.nordland_route(src)
+    pca = fit_pca(real, dim)
+    top = max(sizes) + n_insert
+    X = descriptors(real, pca, 0, top, seed)
+    qstart = (top // len(real) + 1) * len(real)          # a later pass than any stored frame
+    Qall = descriptors(real, pca, qstart, qstart + max(queries), seed, progress=False)
+    mean, V = pca
+    realX = l2_normalise(((seqmatch.describe_frames(list(real), "pixels-patchnorm") - mean) @ V)
+                                   .astype(np.float32)).astype(np.float32)
+    nb = neighbourhood(realX, X[:max(sizes)], Qall[:min(queries)], sizes)
+    report.write_table(nb, out / "neighbourhood", "Nearest-neighbour cosine similarity quantiles")
+    rows = []
+    for n, nq in zip(sorted(sizes), queries):
+        Q = Qall[:nq]
+        S = X[:n] @ Q.T
+        exact_best, exact_score = S.argmax(0), S.max(0)
+        del S
+        for label, kind, settings in bar(methods, desc=f"N={n:,}", unit="method"):
+            for r in bench_one(kind, settings, X, Q, exact_best, exact_score, n_insert, dim, n):
+                name = label + r.pop("setting")
+                rows.append({"stored": n, "method": name, "kind": kind, "queries": nq, "dim": dim, **r})
+                print(f"N={n} {name}: " + ", ".join(f"{k} {v:.4g}" for k, v in r.items()), flush=True)
+    table = pd.DataFrame(rows)
+    stream = stream_decisions(X, min(20_000, len(X)))
+    print(f"stream: {stream}", flush=True)
+    metrics = long_run_metrics(X, len(real), min(100_000, len(X)))
+    print(metrics.to_string(), flush=True)
+    _write(out, table, nb, dim, len(real), seed, stream, note, metrics)
+    return table
+
+
+def stream_decisions(X, n: int = 20_000, kind: str = "hnsw", k: int = K, seq_len: int = 10,
+                     contrast_window: int = 10, exclude: int = 150) -> dict:
+    """Per-frame decision time of greenloop-seq in candidate mode (index insert + search + the
+    sequence verification of k candidates) over the first n descriptors: p50 / p99 in ms."""
+    det = seqmatch.Detector(0.0, seq_len=seq_len, exclude=exclude, contrast_window=contrast_window,
+                            index=kind, k=k)
+    secs = np.zeros(n)
+    for t in range(n):
+        t0 = time.perf_counter()
+        det.update_descriptor(X[t])
+        secs[t] = time.perf_counter() - t0
+    tail = secs[exclude + seq_len:]
+    return {"frames": n, "index": kind, "k": k, "p50_ms": 1e3 * np.median(tail),
+            "p99_ms": 1e3 * np.quantile(tail, 0.99), "bytes_per_frame": det.bytes_per_frame}
+
+
+def route_ground_truth(n: int, m: int, tolerance: int = 2) -> scipy.sparse.csr_array:
+    """Sparse (n, n) bool ground truth of the first n frames of a recording of passes over a
+    route of m frames whose two halves are the same places (Nordland: summer, then winter): frames
+    t and u are a loop when their places ((t mod m) mod m/2) differ by at most ``tolerance``."""
+    place = (np.arange(n) % m) % (m // 2)
+    order = np.argsort(place, kind="stable")
+    rows, cols = [], []
+    bounds = np.searchsorted(place[order], np.arange(m // 2 + 1))
+    for p in range(m // 2):
+        a = order[bounds[p]:bounds[p + 1]]
+        b = order[bounds[max(p - tolerance, 0)]:bounds[min(p + tolerance, m // 2 - 1) + 1]]
+        rows.append(np.repeat(a, len(b)))
+        cols.append(np.tile(b, len(a)))
+    r, c = np.concatenate(rows), np.concatenate(cols)
+    keep = r != c
+    return scipy.sparse.csr_array((np.ones(keep.sum(), bool), (r[keep], c[keep])), shape=(n, n))
+
+
+def long_run_metrics(X, m: int, n: int = 100_000, kinds=("scan", "hnsw"), k: int = K,
+                     exclude: int = 150) -> pd.DataFrame:
+    """Per-query metrics of single-frame retrieval over an n-frame stream, no N x N matrix:
+    retrieval.stream_search (top-k lists, O(N k)) -> candidate_matches with the sparse
+    :func:`route_ground_truth` -> evaluate.query_metrics, for each index kind."""
+    X = X[:n]
+    GT = route_ground_truth(len(X), m)
+    rows = []
+    for kind in kinds:
+        t0 = time.perf_counter()
+        index = retrieval.make_index(kind, X.shape[1], nlist=316, train_size=12_640)
+        with one_blas_thread():
+            scores, ids = retrieval.stream_search(index, X, k, exclude)
+        secs = time.perf_counter() - t0
+        met = evaluate.query_metrics(retrieval.candidate_matches(scores, ids, GT, exclude), ks=(1, 5, 10))
+        rows.append({"frames": len(X), "index": kind, "k": k, "stream_s": secs,
+                     **{key: (100 * v if key not in ("queries", "revisits") else v) for key, v in met.items()},
+                     "topk_MB": (scores.nbytes + ids.nbytes) / 1e6, "GT_pairs": int(GT.nnz)})
+    return pd.DataFrame(rows)
+
+
+def targets(table: pd.DataFrame) -> pd.DataFrame:
+    """Issue 29's targets at the largest size, per method: met / not met (measured values)."""
+    big = table[table.stored == table.stored.max()]
+    exact = big[big.kind == "scan"]["recall@1_%"].iloc[0]
+    return pd.DataFrame([{"method": r.method, "stored": r.stored,
+                          "p99 <= 1 ms": f"{'met' if r.p99_ms <= 1 else 'not met'} ({r.p99_ms:.3g} ms)",
+                          "recall@1 within 1 pt of exact": f"{'met' if r['recall@1_%'] >= exact - 1 else 'not met'} "
+                                                          f"({r['recall@1_%']:.1f} %)",
+                          "<= 1 KB per frame": f"{'met' if r.bytes_per_frame <= 1024 else 'not met'} "
+                                               f"({r.bytes_per_frame:.0f} B)"}
+                         for _, r in big.iterrows()])
+
+
+def lsh_vs_faiss(table: pd.DataFrame) -> list[str]:
+    """One line per size: the RHLSH variants against the fastest faiss index with recall >= theirs."""
+    lines = []
+    for n, g in table.groupby("stored"):
+        fa = g[g.kind.isin(["flat", "ivf", "hnsw"])]
+        for _, r in g[g.kind.isin(["swp", "qdp"])].iterrows():
+            ok = fa[fa["recall@1_%"] >= r["recall@1_%"]]
+            if ok.empty:
+                lines.append(f"- N = {n:,}: {r.method} (recall@1 {r['recall@1_%']:.1f} %, p99 {r.p99_ms:.3g} ms) "
+                             f"has a higher recall@1 than every faiss index measured")
+                continue
+            b = ok.sort_values("p99_ms").iloc[0]
+            verdict = "wins" if r.p99_ms < b.p99_ms else "loses"
+            lines.append(f"- N = {n:,}: {r.method} {verdict}: p99 {r.p99_ms:.3g} ms at recall@1 "
+                         f"{r['recall@1_%']:.1f} % (scanning {r['scanned_%']:.1f} % of the stored frames), "
+                         f"against {b.method}'s {b.p99_ms:.3g} ms at {b['recall@1_%']:.1f} %; memory "
+                         f"{r.bytes_per_frame:.0f} vs {b.bytes_per_frame:.0f} B per frame")
+    return lines
+
+
+def _plot(table: pd.DataFrame, path: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(1, 3, figsize=(15, 4.2))
+    for m, g in table.groupby("method", sort=False):
+        line, = ax[0].loglog(g.stored, g.p99_ms, "o-", label=m)
+        ax[0].loglog(g.stored, g.p50_ms, "x--", color=line.get_color(), lw=0.8)
+        ax[1].semilogx(g.stored, g["recall@1_%"], "o-", label=m)
+        ax[2].semilogx(g.stored, g.bytes_per_frame, "o-", label=m)
+    ax[0].axhline(1.0, color="k", ls=":", lw=1)
+    ax[2].axhline(1024, color="k", ls=":", lw=1)
+    for a, t in zip(ax, ("search latency, k = 10 (ms): p99 solid, p50 dashed", "recall@1 vs exact scan (%)",
+                         "index memory per stored frame (B)")):
+        a.set_xlabel("stored frames")
+        a.set_title(t)
+        a.grid(alpha=0.3)
+    ax[0].legend(fontsize=7)
+    fig.tight_layout()
+    report.save_figure(fig, path)
+    plt.close(fig)
+
+
+def _write(out: Path, table, nb, dim: int, n_real: int, seed: int, stream: dict | None = None,
+           note: str = "", metrics: pd.DataFrame | None = None) -> None:
+    report.write_atomic(out / "scale.csv", lambda p: table.to_csv(p, index=False))
+    _plot(table, out / "scale.png")
+    cols = ["stored", "method", "queries", "p50_ms", "p99_ms", "recall@1_%", "bytes_per_frame",
+            "build_s", "insert_us", "scanned_%"]
+    md = [f"# Scaling benchmark: candidate retrieval at {', '.join(f'{n:,}' for n in sorted(table.stored.unique()))} stored frames",
+          "", f"Machine: {report.cpu_model()}, searches on 1 thread (faiss OpenMP and BLAS); "
+              f"written {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())} by `make bench-scale` "
+              f"(greenloop.speed.scale). {note}".rstrip(), "",
+          f"Descriptors: Nordland's {n_real} real 64x32 frames (summer, winter) augmented into passes over "
+          f"the route (greenloop.datasets.augment, seed {seed}: per pass gain U(0.7, 1.3), offset U(-30, 30) "
+          f"grey levels, Gaussian blur sigma U(0, 1.2) px; per frame zoom U(1, 1.1), shift U(-3, 3) px, "
+          f"brightness jitter U(-8, 8), noise N(0, 4^2)); each frame -> pixels-patchnorm (32x32, 1024-d) "
+          f"-> PCA to {dim} dims fitted on the real frames only -> L2. Stored: the first N frames of the "
+          f"recording; queries: frames of a later pass (not stored). k = {K}.", "",
+          "## Results", "", table[cols].to_markdown(index=False, floatfmt=".4g"), "",
+          "p50/p99: per-query search latency (one query per call); recall@1: share of queries whose best "
+          "candidate is the exact scan's (equal score within 1e-6 counts); bytes_per_frame: the index's "
+          "memory / stored frames (faiss: serialize_index size; scan: its float32 buffer; RHLSH: rows, codes, "
+          "the Python bucket table and the occupancy array); insert_us: mean time to add one frame to the "
+          "built index; scanned_%: stored frames the LSH probes scanned per query. On a machine whose cores "
+          "another job keeps busy, p99 holds the time slices a query waits for a core (a few ms whatever the "
+          "index, even where p50 is tens of microseconds); p50 and the mean (scale.csv) show the index's own cost.", "",
+          "![scale](scale.png)", "", "## Targets at the largest size", "",
+          targets(table).to_markdown(index=False), "", "## RHLSH against faiss", "", *lsh_vs_faiss(table), "",
+          "## Are the augmented descriptors realistic? Nearest-neighbour cosine quantiles", "",
+          nb.to_markdown(index=False, floatfmt=".3f"), "",
+          "Read it as: the first two rows compare one pass of augmented frames with the real frames at the "
+          "same count; the others show how close a query's nearest stored frame is as N grows. Every pass "
+          "revisits every place, so a larger store holds more near-copies of a query's place (its nearest "
+          "neighbour grows more similar with N): the large stores are denser than one real traversal, which "
+          "makes retrieval easier for every index alike. The real set's upper tail (q90 ~ 1) is exact "
+          "duplicates, frames where the train stood still.", ""]
+    if stream:
+        md += ["## greenloop-seq decision per frame (candidate mode)", "",
+               f"Detector(index={stream['index']!r}, k={stream['k']}, seq_len 10, contrast window 10, exclude "
+               f"150) over the first {stream['frames']:,} descriptors: index insert + search + sequence "
+               f"verification, p50 {stream['p50_ms']:.3g} ms, p99 {stream['p99_ms']:.3g} ms per frame; "
+               f"{stream['bytes_per_frame']} B per stored frame (descriptor + index).", ""]
+    if metrics is not None:
+        report.write_atomic(out / "long_run_metrics.csv", lambda p: metrics.to_csv(p, index=False))
+        md += ["## Per-query metrics of a long stream without an N x N matrix", "",
+               f"Single-frame retrieval (k = {K}, exclusion 150 frames) over the first {int(metrics.frames.iloc[0]):,} "
+               "frames of the recording, scored from the (N, k) top-k lists (retrieval.candidate_matches -> "
+               "evaluate.query_metrics, loop-closure mode) against a sparse ground truth: frames of the same "
+               "place +-2 route frames in any pass or season (speed.scale.route_ground_truth). Metrics in %; "
+               "topk_MB: the lists' memory (a dense float32 matrix would be 4 N^2 bytes).", "",
+               metrics.to_markdown(index=False, floatfmt=".4g"), ""]
+    md += _stream_section(out / "stream100k.json")
+    report.write_atomic(out / "scale.md", "\n".join(md))
+
+
+def _stream_section(path: Path) -> list[str]:
+    """scale.md's section on a recording streamed through the CLI, from the JSON of that measured
+    run (written by hand from /usr/bin/time -v; kept when the benchmark is rerun), if present."""
+    import json
+    if not path.is_file():
+        return []
+    r = json.loads(path.read_text())
+    return ["## A 100,000-frame recording streamed end to end through the CLI", "",
+            f"{r['recording']}. Command: `{r['command']}`.", "",
+            f"Wall time {r['wall_s']:.0f} s for {r['frames']:,} frames (target <= 900 s on 2 cores: "
+            f"{'met' if r['wall_s'] <= 900 else 'not met'}), {r['frames_per_s_reported']:.0f} frames/s with PNG decoding; "
+            f"peak RSS {r['peak_rss_kB'] / 1e6:.2f} GB; {r['bytes_per_stored_frame']} B per stored frame; "
+            f"state file {r['state_file_bytes'] / 1e9:.2f} GB saved {r['saves']} times; {r['closures']:,} closures, "
+            f"{r['closures_correct']:,} correct.", "",
+            *([f"Resume: {r['resume_check']}.", ""] if "resume_check" in r else []), f"Notes: {r['note']}", ""]
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description="Scaling benchmark of candidate retrieval (module doc).")
+    ap.add_argument("--src", default="../shared/real/nordland", help="Nordland source (summer/, winter/)")
+    ap.add_argument("--out", default="results/bench", help="output folder")
+    ap.add_argument("--sizes", type=int, nargs="+", default=list(SIZES))
+    ap.add_argument("--queries", type=int, nargs="+", default=[2000, 1000, 300],
+                    help="queries per size (same order as --sizes)")
+    ap.add_argument("--dim", type=int, default=64)
+    ap.add_argument("--note", default="", help="a sentence for the header (e.g. what shared the cores)")
+    a = ap.parse_args(argv)
+    if len(a.queries) != len(a.sizes):
+        raise SystemExit("--queries needs one count per --sizes entry")
+    run(a.src, a.out, a.sizes, a.dim, a.queries, note=a.note)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
