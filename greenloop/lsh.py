@@ -59,7 +59,6 @@ __all__ = [
     "append", "options", "probe_candidates",
     "MatchResult", "incremental_match", "query_index", "static_match", "scanned_matrix",
     "best_match_matrix", "table6_variants", "query_matches", "run_scores", "compare_variants", "scanned_pr_curve",
-    "planted_queries", "scaling_test",
 ]
 
 MAX_BITS = 32                       # codes are uint32
@@ -765,50 +764,3 @@ def scanned_pr_curve(S, result: MatchResult, GT, exclude: int, floor: float = -2
     p, r, th = evaluate.pr_curve(scanned_matrix(S, result, floor), GT, exclude)
     keep = np.append(th > floor, True)
     return p[keep], r[keep]
-
-
-def planted_queries(X, rows, angle_deg: float, rng) -> np.ndarray:
-    """Queries with a planted nearest neighbour: each at ``angle_deg`` degrees from X[rows[k]].
-
-    X: (N, D) float32 unit vectors; rows: (Q,) int the planted neighbours; rng: a NumPy Generator
-    (draws one (Q, D) normal matrix). Returns (Q, D): cos(a) X[rows] + sin(a) U, U a random unit
-    vector orthogonal to X[rows[k]].
-    """
-    angle = np.deg2rad(angle_deg)
-    U = rng.standard_normal((len(rows), X.shape[1])).astype(np.float32)
-    U -= (U * X[rows]).sum(1, keepdims=True) * X[rows]
-    return np.cos(angle) * X[rows] + np.sin(angle) * U / np.linalg.norm(U, axis=1, keepdims=True)
-
-
-def scaling_test(sizes, dim: int, n_queries: int = 200, angle_deg: float = 25.0, n_bits: int = 16,
-                 seed: int = 0, radius: int = 4, qdp_probes=(1000, 1500, 500), qdp_score: str = "margin",
-                 max_seconds: float | None = 2.0) -> list:
-    """Matching time against the number of stored descriptors, every method (notebook 11).
-
-    sizes: numbers of stored descriptors; dim: their dimension. Random unit vectors (NumPy
-    Generator seeded 0) are stored, at most n_queries of them (per size) are each queried by a
-    :func:`planted_queries` neighbour at angle_deg degrees, with :func:`query_index` and at most
-    max_seconds of queries per method. n_bits, seed: the hyperplanes; radius, qdp_probes,
-    qdp_score: the probing. Returns a list of dicts, per size (increasing) and method: stored,
-    method, dim, queries_timed, ms_per_query, ms_median (ms), scanned_% (candidates / stored),
-    probes_per_query and N1 (NaN for brute/sklearn), planted_found_% (best match = planted).
-    """
-    rng = np.random.default_rng(0)
-    Xs = rng.standard_normal((int(max(sizes)), dim), dtype=np.float32)
-    Xs /= np.linalg.norm(Xs, axis=1, keepdims=True)         # random unit vectors (mean ~0: no centring needed)
-    out = []
-    for n in sorted(int(s) for s in sizes):
-        rows = rng.choice(n, min(int(n_queries), n), replace=False)
-        Q = planted_queries(Xs, rows, angle_deg, rng)
-        index = build_index(Xs[:n], hyperplanes(dim, n_bits, seed))
-        for method in METHODS:
-            r = query_index(index, Q, method, radius=radius, qdp_probes=qdp_probes, qdp_score=qdp_score,
-                            max_seconds=max_seconds)
-            hashed = method in ("swp", "qdp")
-            out.append({"stored": n, "method": method, "dim": dim, "queries_timed": len(r.best),
-                        "ms_per_query": r.ms_per_query, "ms_median": 1e3 * float(np.median(r.seconds)),
-                        "scanned_%": 100 * float(np.mean(r.n_candidates / n)),
-                        "probes_per_query": float(r.n_probes.mean()) if hashed else np.nan,
-                        "N1": index.n_buckets if hashed else np.nan,
-                        "planted_found_%": 100 * float(np.mean(r.best == rows[:len(r.best)]))})
-    return out

@@ -349,17 +349,3 @@ def test_compare_variants_averages_seeds_and_rates_against_brute_force():
     assert swp["R_t_%"] == 50.0 and swp["loss_per_1%_time"] == pytest.approx(0.4)
     per_seed.insert(5, "R@1_%", 50.0)                           # per-query columns first: the sd stays beside AP_pairs
     assert list(lsh.compare_variants(per_seed).columns[4:7]) == ["R@1_%", "AP_pairs_%", "AP_pairs_sd"]
-
-
-def test_planted_queries_and_the_scaling_test():
-    rng = np.random.default_rng(1)
-    X = l2_normalise(rng.standard_normal((20, 32)).astype(np.float32))
-    rows = np.array([3, 7, 11])
-    Q = lsh.planted_queries(X, rows, 25.0, rng)
-    assert np.allclose(np.linalg.norm(Q, axis=1), 1, atol=1e-5)
-    assert np.allclose((Q * X[rows]).sum(1), np.cos(np.deg2rad(25.0)), atol=1e-5)
-    out = lsh.scaling_test([100, 50], 32, n_queries=5, n_bits=8, max_seconds=None)
-    assert [(o["stored"], o["method"]) for o in out] == [(n, m) for n in (50, 100) for m in lsh.METHODS]
-    brute = [o for o in out if o["method"] == "brute"]
-    assert all(o["queries_timed"] == 5 and o["planted_found_%"] == 100.0 and o["scanned_%"] == 100.0 for o in brute)
-    assert np.isnan(brute[0]["N1"]) and [o for o in out if o["method"] == "swp"][0]["N1"] >= 1

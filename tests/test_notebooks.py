@@ -242,13 +242,12 @@ def _check_11(folder):
         assert by.loc[(b, "QDP-RHLSH"), "probes_per_query"] <= 1501
     seeds = pd.read_csv(folder / "per_seed.csv")
     assert sorted(seeds[seeds.variant == "SWP-RHLSH"].seed.unique()) == TINY["lsh_seeds"]
-    sc = pd.read_csv(folder / "scaling.csv")
-    assert sorted(sc.stored.unique()) == TINY["scaling_sizes"]
-    assert sorted(sc.method.unique()) == ["brute", "qdp", "sklearn", "swp"]
-    assert (sc.queries_timed >= 1).all() and (sc.queries_timed <= TINY["scaling_queries"]).all()
-    assert (sc.ms_per_query > 0).all()
-    assert (sc[sc.method.isin(["brute", "sklearn"])]["planted_found_%"] == 100).all()
-    assert (sc[sc.method == "swp"]["scanned_%"] < 100).all()
+    sc = pd.read_csv(folder / "scaling.csv")          # the committed make bench-scale table, read as it is
+    bench = pd.read_csv(ROOT / "results" / "bench" / "scale.csv")
+    assert sc[["stored", "method", "p50_ms", "recall@1_%"]].equals(bench[["stored", "method", "p50_ms", "recall@1_%"]])
+    cmp = pd.read_csv(folder / "paper_vs_run.csv")
+    swp = cmp[cmp.iloc[:, 0].astype(str).str.startswith("stored frames from which SWP-RHLSH")]
+    assert len(swp) == 1
     assert (folder / "figure7_pr_curves.png").is_file() and (folder / "scaling.png").is_file()
 
 

@@ -229,6 +229,41 @@ def long_run_metrics(X, m: int, n: int = 100_000, kinds=("scan", "hnsw"), k: int
     return pd.DataFrame(rows)
 
 
+COLUMNS = ("stored", "method", "kind", "queries", "dim", "p50_ms", "p99_ms", "recall@1_%", "scanned_%",
+           "bytes_per_frame")
+
+
+def read_results(folder) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """The committed benchmark, for notebook 11: (scale table, neighbourhood table) from
+    ``folder``/scale.csv and neighbourhood.csv as ``make bench-scale`` writes them.
+
+    scale: one row per (stored, method) with at least COLUMNS (latencies in ms, recall in %,
+    bytes per stored frame). neighbourhood: the nearest-neighbour cosine quantiles of the real and
+    augmented sets. Raises FileNotFoundError naming ``make bench-scale`` when either is missing,
+    ValueError when a column is.
+    """
+    folder = Path(folder)
+    paths = [folder / "scale.csv", folder / "neighbourhood.csv"]
+    missing = [str(p) for p in paths if not p.is_file()]
+    if missing:
+        raise FileNotFoundError(f"{', '.join(missing)} not found: run `make bench-scale` (about 20 min on "
+                                f"2 cores) to measure the retrieval indexes, or point scale_results at "
+                                f"the folder it wrote")
+    table, nb = (pd.read_csv(p) for p in paths)
+    lost = [c for c in COLUMNS if c not in table.columns]
+    if lost:
+        raise ValueError(f"{paths[0]} lacks columns {lost}: rerun `make bench-scale`")
+    return table, nb
+
+
+def crossover(table: pd.DataFrame, method: str, reference: str = "NumPy scan") -> int | None:
+    """The smallest stored count at which ``method``'s median latency is below ``reference``'s
+    (rows of :func:`read_results`), or None when it never is."""
+    p = table.pivot(index="stored", columns="method", values="p50_ms")
+    wins = p.index[p[method] < p[reference]]
+    return int(wins.min()) if len(wins) else None
+
+
 def targets(table: pd.DataFrame) -> pd.DataFrame:
     """Issue 29's targets at the largest size, per method: met / not met (measured values)."""
     big = table[table.stored == table.stored.max()]
