@@ -64,11 +64,19 @@ DEFAULT_VELOCITIES = (0.8, 1.0, 1.25)     # SeqSLAM's V_min..V_max range around 
 PATCH = 8                                  # SeqSLAM patch-normalisation size (pixels)
 PIXEL_SIZE = (32, 32)                      # the study's raw-pixel descriptor (width, height)
 CNN_SIZE = (224, 224)                      # MobileNet v2's fixed TFLite input
-GRADIENT_SIZE = (64, 32)                   # "gradients": SeqSLAM's 64x32 gray frame (width, height)
-GRADIENT_CELL, GRADIENT_BINS = 8, 8        # 8x8-pixel cells, 8 unsigned orientation bins -> 256-d
+GRADIENT_SIZE = (128, 64)                  # "gradients": gray frame (width, height), 2:1 like SeqSLAM
+GRADIENT_CELL, GRADIENT_BINS = 16, 8       # 16x16-pixel cells (4 x 8 of them), 8 unsigned bins -> 256-d
 _EPS = 1e-6
 
-__all__ = ["DESCRIPTORS", "Detector", "patch_normalise", "gradient_histograms", "center", "calibrate_scores",
+# The named default configuration (issue 28): what `python -m greenloop detect --method
+# greenloop-seq` runs without --tuned, and what the leaderboard's greenloop-seq row reports.
+DEFAULT_NAME = "greenloop-seq-grad"
+DEFAULT_KNOBS = dict(descriptor="gradients", seq_len=10, contrast_window=0, center_window=50,
+                     velocities=(0.8, 1.0, 1.25, 1.5, 2.0, -0.8, -1.0, -1.25), calibrate=True,
+                     repeat_cos=0.995)
+DEFAULT_THRESHOLD = 4.0   # a calibrated z-score; chosen on Nordland's tuning part (see docs/usage.md)
+
+__all__ = ["DESCRIPTORS", "DEFAULT_NAME", "DEFAULT_KNOBS", "DEFAULT_THRESHOLD", "Detector", "patch_normalise", "gradient_histograms", "center", "calibrate_scores",
            "describe", "describe_frames", "normalise",
            "fit_projection", "contrast_normalise", "score_matrix",
            "closures", "choose_threshold", "threshold_range", "tune_knobs", "pick_knobs",

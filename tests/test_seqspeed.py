@@ -1,0 +1,88 @@
+"""greenloop-seq's trajectory search under speed changes and reverse revisits (issue 28), on a small
+sequence the test makes: a route of N0 random-walk descriptors, then a revisit of its first REVISIT
+places (noisy re-observations) replayed at other speeds (frames dropped or repeated), with a stop,
+or driven the opposite way. Recall@1 over the revisit queries, correct within +-2 places."""
+import numpy as np
+import pytest
+
+from greenloop import evaluate, seqmatch
+
+D, N0, REVISIT, EXCLUDE, TOL = 32, 400, 200, 50, 2
+LINES = dict(velocities=seqmatch.DEFAULT_VELOCITIES)            # today's straight-line search
+DEFAULT = {k: v for k, v in seqmatch.DEFAULT_KNOBS.items() if k != "descriptor"}
+
+
+def _walk(n, seed, a=0.9):
+    """AR(1) random walk (n, D): neighbouring places look alike, far ones do not."""
+    rng = np.random.default_rng(seed)
+    x = np.zeros((n, D))
+    x[0] = rng.normal(size=D)
+    for t in range(1, n):
+        x[t] = a * x[t - 1] + np.sqrt(1 - a * a) * rng.normal(size=D)
+    return x
+
+
+@pytest.fixture(scope="module")
+def route():
+    """(route (N0, D), the revisit's frames at 1x (REVISIT, D): place k observed with noise)."""
+    w = _walk(N0, 0)
+    return w, w[:REVISIT] + np.random.default_rng(1).normal(scale=1.3, size=(REVISIT, D))
+
+
+def replay(kind):
+    """The place each frame of a replayed revisit shows: (M,) int indices into the 1x revisit."""
+    if kind == "stop":                                  # 30 frames standing at place 100
+        return np.r_[np.arange(100), np.full(30, 100), np.arange(101, REVISIT)]
+    if kind == "reverse":
+        return np.arange(REVISIT)[::-1]
+    return np.floor(np.arange(0, REVISIT - 1e-9, float(kind))).astype(int)    # 0.5: each frame twice
+
+
+def recall_at_1(route, kind, **knobs):
+    w, r = route
+    p = replay(kind)
+    X = np.concatenate([w, r[p]])                       # repeated frames are exact copies
+    n = len(X)
+    GT = np.zeros((n, n), bool)
+    for k, q in enumerate(p):
+        GT[max(q - TOL, 0):q + TOL + 1, N0 + k] = True
+    S = seqmatch.score_matrix(X, EXCLUDE, **knobs)
+    return evaluate.per_query(S, GT | GT.T, EXCLUDE, queries=np.arange(n) >= N0)["R@1"]
+
+
+@pytest.mark.parametrize("kind", ["0.5", "0.75", "1.5", "2", "stop"])
+def test_speed_changes_cost_at_most_5_points(route, kind):
+    base = recall_at_1(route, "1", **DEFAULT)
+    assert base >= 0.85
+    assert recall_at_1(route, kind, **DEFAULT) >= base - 0.05
+
+
+def test_straight_lines_lose_the_fast_and_slow_replays(route):
+    """The check above can fail: today's search (velocities 0.8..1.25, no repeat gate) loses
+    more than 5 points on the half- and double-speed replays."""
+    base = recall_at_1(route, "1", **LINES)
+    assert recall_at_1(route, "0.5", **LINES) < base - 0.05
+    assert recall_at_1(route, "2", **LINES) < base - 0.05
+
+
+def test_reverse_revisit_is_found_and_straight_lines_miss_it(route):
+    assert recall_at_1(route, "reverse", **DEFAULT) >= recall_at_1(route, "1", **DEFAULT) - 0.05
+    assert recall_at_1(route, "reverse", **LINES) < 0.5
+
+
+def test_stream_equals_matrix_with_reverse_and_repeats(route):
+    """The streaming Detector declares exactly where its score matrix reaches the threshold, on a
+    stream holding a reversed revisit and a stop (repeat gate and negative offsets exercised)."""
+    w, r = route
+    X = np.concatenate([w, r[replay("reverse")], r[replay("stop")]])
+    S = seqmatch.score_matrix(X, EXCLUDE, **DEFAULT)
+    det = seqmatch.Detector(seqmatch.DEFAULT_THRESHOLD, exclude=EXCLUDE, **DEFAULT)
+    for x in X:
+        det.update_descriptor(x)
+    assert len(det.events) > 50
+    assert seqmatch.stream_matches_matrix(det, S)
+    for j in (N0 + 5, N0 + REVISIT + 70, len(X) - 1):     # the columns themselves, up to the
+        det.reset()                                         # rounding of gemv against gemm
+        for x in X[:j + 1]:
+            det.update_descriptor(x)
+        np.testing.assert_allclose(det.last_scores, S[:j - EXCLUDE, j], rtol=1e-4, atol=1e-4)
