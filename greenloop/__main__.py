@@ -54,7 +54,9 @@ def _tuned_knobs(args) -> dict:
     contrast_window, threshold, step, exclude), exclude and seq_len in streamed frames."""
     knobs = dict(descriptor="pixels-patchnorm", seq_len=10, contrast_window=10, threshold=None,
                  step=1, exclude=150)
-    if args.tuned:
+    if not args.tuned:   # issue 28: the named default configuration and its calibrated threshold
+        knobs.update(seqmatch.DEFAULT_KNOBS, threshold=seqmatch.DEFAULT_THRESHOLD)
+    else:
         path = Path(args.tuned)
         if not path.is_file():
             raise FileNotFoundError(f"--tuned {path}: no such file; run notebook 13 on a recording of "
@@ -84,7 +86,8 @@ def _detect_seq(args) -> int:
     kn = _tuned_knobs(args)
     paths = list_frames(args.folder)[::kn["step"]]
     det = seqmatch.Detector(kn["threshold"], descriptor=kn["descriptor"], seq_len=kn["seq_len"],
-                            exclude=kn["exclude"], contrast_window=kn["contrast_window"])
+                            exclude=kn["exclude"], contrast_window=kn["contrast_window"],
+                            **{k: kn[k] for k in ("velocities", "center_window", "calibrate", "repeat_cos") if k in kn})
     print(f"# {len(paths)} frames from {args.folder} (every {kn['step']}); greenloop-seq "
           f"({kn['descriptor']}, seq_len {det.seq_len}, exclude {det.exclude}, contrast window "
           f"{det.contrast_window}); threshold {det.threshold:g}", flush=True)

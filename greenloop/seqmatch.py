@@ -74,7 +74,7 @@ DEFAULT_NAME = "greenloop-seq-grad"
 DEFAULT_KNOBS = dict(descriptor="gradients", seq_len=10, contrast_window=0, center_window=50,
                      velocities=(0.8, 1.0, 1.25, 1.5, 2.0, -0.8, -1.0, -1.25), calibrate=True,
                      repeat_cos=0.995)
-DEFAULT_THRESHOLD = 4.0   # a calibrated z-score; chosen on Nordland's tuning part (see docs/usage.md)
+DEFAULT_THRESHOLD = 1.8   # calibrated score (calibrate_scores); Nordland's tuning part, precision >= 0.95
 
 __all__ = ["DESCRIPTORS", "DEFAULT_NAME", "DEFAULT_KNOBS", "DEFAULT_THRESHOLD", "Detector", "patch_normalise", "gradient_histograms", "center", "calibrate_scores",
            "describe", "describe_frames", "normalise",
@@ -282,15 +282,20 @@ def center(X, window: int) -> np.ndarray:
 
 
 def calibrate_scores(scores) -> np.ndarray:
-    """One query's scores as z-scores against its own candidates: (s - mean) / std (population
-    std over the C candidates). A score then says how far the best candidate stands out of this
-    query's crowd, in units that do not depend on the descriptor, the dataset or C's scale.
+    """One query's scores calibrated against its own candidates: z = (s - mean) / std (population
+    std over the C candidates), minus sqrt(2 ln C), the first-order expected maximum of C
+    independent standard normal z-scores. A score then says how far a candidate stands above
+    what the best of C unrelated candidates would reach, in units that depend neither on the
+    descriptor's scale nor (to first order) on how many frames are stored, so one threshold can
+    serve a 200-frame and a 7000-frame database.
     scores: (C,) float. Returns (C,) float32; all 0 when C < 2 or the scores are flat."""
     s = np.asarray(scores, dtype=np.float64)
     if s.size < 2:
         return np.zeros(s.size, np.float32)
     sd = s.std()
-    return ((s - s.mean()) / sd if sd > _EPS else np.zeros_like(s)).astype(np.float32)
+    if sd <= _EPS:
+        return np.zeros(s.size, np.float32)
+    return ((s - s.mean()) / sd - math.sqrt(2 * math.log(s.size))).astype(np.float32)
 
 
 def threshold_range(contrast_window: int) -> tuple[float, float]:

@@ -2,10 +2,18 @@
 sequence the test makes: a route of N0 random-walk descriptors, then a revisit of its first REVISIT
 places (noisy re-observations) replayed at other speeds (frames dropped or repeated), with a stop,
 or driven the opposite way. Recall@1 over the revisit queries, correct within +-2 places."""
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
 import numpy as np
 import pytest
 
 from greenloop import evaluate, seqmatch
+
+ROOT = Path(__file__).resolve().parents[1]
 
 D, N0, REVISIT, EXCLUDE, TOL = 32, 400, 200, 50, 2
 LINES = dict(velocities=seqmatch.DEFAULT_VELOCITIES)            # today's straight-line search
@@ -86,3 +94,33 @@ def test_stream_equals_matrix_with_reverse_and_repeats(route):
         for x in X[:j + 1]:
             det.update_descriptor(x)
         np.testing.assert_allclose(det.last_scores, S[:j - EXCLUDE, j], rtol=1e-4, atol=1e-4)
+
+
+def _drive(folder: Path, places) -> Path:
+    """A sequence folder whose frame k shows place places[k] of a smooth random panorama (64x32
+    crops 3 pixels apart): neighbouring places overlap, places far apart share nothing."""
+    rng = np.random.default_rng(7)
+    strip = cv2.GaussianBlur(rng.integers(0, 256, (32, 3 * 700 + 64)).astype(np.float32), (0, 0), 1.5)
+    strip = cv2.normalize(strip, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
+    (folder / "rgb").mkdir(parents=True)
+    for k, p in enumerate(places):
+        cv2.imwrite(str(folder / "rgb" / f"{k}.png"), cv2.cvtColor(strip[:, 3 * p:3 * p + 64], cv2.COLOR_GRAY2BGR))
+    return folder
+
+
+def _detect(folder):
+    env = dict(os.environ, PYTHONPATH=str(ROOT), TF_CPP_MIN_LOG_LEVEL="3")
+    res = subprocess.run([sys.executable, "-m", "greenloop", "detect", str(folder), "--method", "greenloop-seq"],
+                         capture_output=True, text=True, env=env, timeout=120)
+    assert res.returncode == 0, res.stderr
+    return [line.split("\t") for line in res.stdout.splitlines() if line[:1].isdigit()]
+
+
+def test_cli_default_is_silent_without_revisit_and_finds_one(tmp_path):
+    """`detect --method greenloop-seq` with no --tuned / --threshold runs the named default
+    (DEFAULT_KNOBS, DEFAULT_THRESHOLD): silent on a 500-frame drive that never comes back, and
+    closing loops on the same drive when its last 150 frames revisit places 0..149."""
+    assert _detect(_drive(tmp_path / "once", range(500))) == []
+    rows = _detect(_drive(tmp_path / "back", list(range(350)) + list(range(150))))
+    assert len(rows) >= 100
+    assert all(int(r[0]) >= 350 and abs(int(r[1]) - (int(r[0]) - 350)) <= 2 for r in rows)
