@@ -54,9 +54,9 @@ def _tuned_knobs(args) -> dict:
     contrast_window, threshold, step, exclude), exclude and seq_len in streamed frames."""
     knobs = dict(descriptor="pixels-patchnorm", seq_len=10, contrast_window=10, threshold=None,
                  step=1, exclude=150)
-    if not args.tuned:   # issue 28: the named default configuration and its calibrated threshold
+    if not args.tuned and args.threshold is None:   # issue 28: the named default, its calibrated threshold
         knobs.update(seqmatch.DEFAULT_KNOBS, threshold=seqmatch.DEFAULT_THRESHOLD)
-    else:
+    elif args.tuned:
         path = Path(args.tuned)
         if not path.is_file():
             raise FileNotFoundError(f"--tuned {path}: no such file; run notebook 13 on a recording of "
