@@ -106,7 +106,7 @@ def gradient_histograms(gray, cell: int = GRADIENT_CELL, bins: int = GRADIENT_BI
     """A HOG-like layout-keeping descriptor: per-cell histograms of gradient orientation.
 
     gray: (N, H, W) float images, H and W multiples of ``cell``. Gradients are 3x3 Sobel
-    (``cv2.Sobel``, border reflected); each pixel adds its gradient magnitude to the bin of its
+    (``cv2.Sobel``, border reflected; ``cv2.cartToPolar``); each pixel adds its gradient magnitude to the bin of its
     unsigned orientation (angle mod pi, ``bins`` equal bins, hard assignment) of its cell; each
     cell's histogram is then L2-normalised (a flat cell stays 0), which removes the cell's
     contrast and so most of an illumination change (Dalal and Triggs 2005, without blocks).
@@ -117,12 +117,16 @@ def gradient_histograms(gray, cell: int = GRADIENT_CELL, bins: int = GRADIENT_BI
         raise ValueError(f"gradient_histograms needs (N, H, W) images with H, W multiples of {cell}, "
                          f"got shape {g.shape}")
     n, h, w = g.shape
-    gx = np.stack([cv2.Sobel(x, cv2.CV_32F, 1, 0, ksize=3) for x in g])
-    gy = np.stack([cv2.Sobel(x, cv2.CV_32F, 0, 1, ksize=3) for x in g])
-    mag = np.hypot(gx, gy)
-    b = np.minimum(((np.arctan2(gy, gx) % np.pi) * (bins / np.pi)).astype(np.int64), bins - 1)
-    hist = (b[..., None] == np.arange(bins)) * mag[..., None]          # (N, H, W, bins)
-    hist = hist.reshape(n, h // cell, cell, w // cell, cell, bins).sum(axis=(2, 4), dtype=np.float32)
+    polar = [cv2.cartToPolar(cv2.Sobel(x, cv2.CV_32F, 1, 0, ksize=3), cv2.Sobel(x, cv2.CV_32F, 0, 1, ksize=3),
+                             angleInDegrees=True) for x in g]
+    mag = np.stack([p[0] for p in polar])
+    ang = np.stack([p[1] for p in polar])                      # degrees in [0, 360), ~0.3 degree accuracy
+    ang = np.where(ang >= 180.0, ang - 180.0, ang)
+    b = np.minimum((ang * np.float32(bins / 180.0)).astype(np.int64), bins - 1)
+    cells = (np.arange(h)[:, None] // cell) * (w // cell) + np.arange(w)[None, :] // cell     # (H, W)
+    m = (h // cell) * (w // cell) * bins
+    idx = (np.arange(n)[:, None, None] * m + cells[None] * bins + b).ravel()
+    hist = np.bincount(idx, weights=mag.ravel(), minlength=n * m).reshape(n, h // cell, w // cell, bins)
     norm = np.linalg.norm(hist, axis=3, keepdims=True)
     hist = np.where(norm > _EPS, hist / np.maximum(norm, _EPS), 0.0)
     return hist.reshape(n, -1).astype(np.float32)
@@ -256,11 +260,12 @@ def _ring_scores(R, rows, c: int, base) -> np.ndarray:
     Returns (c,) float32: max over velocities of the mean along the trajectory ending at (i, j).
     The sum runs over k = 0..L-1 in order in float64, one contiguous slice per point.
     """
+    R64 = R[rows, :int(base.max()) + c].astype(np.float64)     # one cast; the same values
     acc = np.zeros((base.shape[0], c), np.float64)
     for v in range(base.shape[0]):
         for k in range(base.shape[1]):
             b = base[v, k]
-            acc[v] += R[rows[k], b:b + c]
+            acc[v] += R64[k, b:b + c]
     return (acc.max(0) / R.shape[0]).astype(np.float32)
 
 
