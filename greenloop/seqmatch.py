@@ -251,21 +251,23 @@ def _offsets(seq_len: int, velocities) -> np.ndarray:
     return np.asarray(rows, dtype=np.int64).reshape(len(rows), seq_len)
 
 
-def _ring_scores(R, rows, c: int, base) -> np.ndarray:
+def _ring_scores(R, rows, c: int, base, dtype=np.float64) -> np.ndarray:
     """Best-trajectory score of each candidate row i < c of the newest query.
 
     R: (L, W) float32 ring of padded normalised columns: the column of the query k frames back is
     ring row rows[k], its value for database row r at R[rows[k], margin + r], its mean (a point
     outside the stored frames) everywhere else. base: (V, L) margin - offsets.
     Returns (c,) float32: max over velocities of the mean along the trajectory ending at (i, j).
-    The sum runs over k = 0..L-1 in order in float64, one contiguous slice per point.
+    The sum runs over k = 0..L-1 in order in ``dtype`` (float64: the scores before the calibrated
+    option existed, bit for bit; float32: 4x faster, for calibrated scores), one slice per point.
     """
-    R64 = R[rows, :int(base.max()) + c].astype(np.float64)     # one cast; the same values
-    acc = np.zeros((base.shape[0], c), np.float64)
+    Rd = R[rows, :int(base.max()) + c].astype(dtype)             # one cast; the same values
+    acc = np.zeros((base.shape[0], c), dtype)
     for v in range(base.shape[0]):
+        a = acc[v]
         for k in range(base.shape[1]):
             b = base[v, k]
-            acc[v] += R64[k, b:b + c]
+            np.add(a, Rd[k, b:b + c], out=a)
     return (acc.max(0) / R.shape[0]).astype(np.float32)
 
 
@@ -484,7 +486,8 @@ class Detector:
         if c:
             self._ensure_width(c)
             rows = (self._newest + np.arange(self.seq_len)) % self.seq_len
-            self.last_scores = _ring_scores(self._ring, rows, c, self._base)
+            self.last_scores = _ring_scores(self._ring, rows, c, self._base,
+                                            np.float32 if self.calibrate else np.float64)
             if self.calibrate:
                 self.last_scores = calibrate_scores(self.last_scores)
         else:
