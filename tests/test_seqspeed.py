@@ -124,3 +124,26 @@ def test_cli_default_is_silent_without_revisit_and_finds_one(tmp_path):
     rows = _detect(_drive(tmp_path / "back", list(range(350)) + list(range(150))))
     assert len(rows) >= 100
     assert all(int(r[0]) >= 350 and abs(int(r[1]) - (int(r[0]) - 350)) <= 2 for r in rows)
+
+
+def test_gradient_histograms_by_hand():
+    """A bright vertical bar: only the cells its two edges cross have gradients, all horizontal
+    (unsigned orientation: the rising and the falling edge both 0 degrees, bin 0), each such cell
+    L2-normalised to one; flat cells stay 0."""
+    img = np.zeros((1, 32, 64), np.float32)
+    img[:, :, 40:56] = 1.0                                # rising edge in cell column 2, falling in 3
+    H = seqmatch.gradient_histograms(img, cell=16, bins=8).reshape(2, 4, 8)
+    np.testing.assert_allclose(H[:, 2:, 0], 1.0, rtol=1e-6)
+    assert np.count_nonzero(H) == 4                       # the four cells on the edges, bin 0 only
+    rot = seqmatch.gradient_histograms(img.transpose(0, 2, 1).copy(), cell=16, bins=8).reshape(4, 2, 8)
+    np.testing.assert_allclose(rot[2, :, 4], 1.0, rtol=1e-6)   # a horizontal edge: 90 degrees, bin 4
+
+
+def test_center_and_calibrate_by_hand():
+    X = np.array([[1.0, 0.0], [3.0, 0.0], [5.0, 2.0]])
+    np.testing.assert_allclose(seqmatch.center(X, 2), [[0, 0], [1, 0], [1, 1]])   # minus the mean of itself and the one before
+    np.testing.assert_array_equal(seqmatch.center(X, 0), X)
+    s = np.array([0.0, 0.0, 0.0, 4.0])                    # mean 1, population std sqrt(3)
+    z = (s - 1.0) / np.sqrt(3.0) - np.sqrt(2 * np.log(4))
+    np.testing.assert_allclose(seqmatch.calibrate_scores(s), z, rtol=1e-6)
+    assert not seqmatch.calibrate_scores(np.ones(5)).any() and seqmatch.calibrate_scores([3.0]).tolist() == [0.0]
