@@ -73,6 +73,10 @@ def _tuned_knobs(args) -> tuple[dict, list[str]]:
     origin = dict.fromkeys(knobs, "default")
     desc = read_description(args.folder) if Path(args.folder).is_dir() else {}
     exclude_frames, tuned_step = 150, None       # exclude in ORIGINAL frames until the step is known
+    if not args.tuned and args.threshold is None:   # issue 28: the named default, its calibrated threshold
+        knobs.update(seqmatch.DEFAULT_KNOBS, threshold=seqmatch.DEFAULT_THRESHOLD)
+        origin = dict.fromkeys(knobs, f"default {seqmatch.DEFAULT_NAME}")
+        origin["step"] = "default"
     if args.tuned:
         path = Path(args.tuned)
         if not path.is_file():
@@ -156,9 +160,10 @@ def _seq_detector(args, kn: dict, paths) -> seqmatch.Detector:
         return saved["detector"]
     if args.index is not None:
         retrieval.one_thread()
+    extra = {k: kn[k] for k in ("velocities", "center_window", "calibrate", "repeat_cos") if k in kn}
     return seqmatch.Detector(kn["threshold"], descriptor=kn["descriptor"], seq_len=kn["seq_len"],
                              exclude=kn["exclude"], contrast_window=kn["contrast_window"],
-                             index=args.index, k=args.candidates)
+                             index=args.index, k=args.candidates, **extra)
 
 
 def _seq_save(det: seqmatch.Detector, args, kn: dict, paths) -> None:

@@ -48,24 +48,36 @@ import math
 import time
 import warnings
 
+import cv2
 import numpy as np
 
 from greenloop import evaluate, features, retrieval
-from greenloop.datasets.sequence import preprocess_image
+from greenloop.datasets.sequence import load_frames, preprocess_image
 from greenloop.similarity import apply_projection, l2_normalise, pca_whiten
 from greenloop.util.checks import positive_int
 from greenloop.util.kernels import one_blas_thread
 
-DESCRIPTORS = ("pixels", "pixels-patchnorm", "mobilenetv2")
+DESCRIPTORS = ("pixels", "pixels-patchnorm", "mobilenetv2", "gradients")
 COLORS = ("bgr", "rgb")
 STORE_DTYPES = ("float32", "float16")
 DEFAULT_VELOCITIES = (0.8, 1.0, 1.25)     # SeqSLAM's V_min..V_max range around unit speed
 PATCH = 8                                  # SeqSLAM patch-normalisation size (pixels)
 PIXEL_SIZE = (32, 32)                      # the study's raw-pixel descriptor (width, height)
 CNN_SIZE = (224, 224)                      # MobileNet v2's fixed TFLite input
+GRADIENT_SIZE = (128, 64)                  # "gradients": gray frame (width, height), 2:1 like SeqSLAM
+GRADIENT_CELL, GRADIENT_BINS = 16, 8       # 16x16-pixel cells (4 x 8 of them), 8 unsigned bins -> 256-d
 _EPS = 1e-6
 
-__all__ = ["DESCRIPTORS", "Detector", "patch_normalise", "describe", "describe_frames", "normalise",
+# The named default configuration (issue 28): what `python -m greenloop detect --method
+# greenloop-seq` runs without --tuned, and what the leaderboard's greenloop-seq row reports.
+DEFAULT_NAME = "greenloop-seq-grad"
+DEFAULT_KNOBS = dict(descriptor="gradients", seq_len=10, contrast_window=0, center_window=50,
+                     velocities=(0.8, 1.0, 1.25, 1.5, 2.0, -0.8, -1.0, -1.25), calibrate=True,
+                     repeat_cos=0.995)
+DEFAULT_THRESHOLD = 1.8   # calibrated score (calibrate_scores); Nordland's tuning part, precision >= 0.95
+
+__all__ = ["DESCRIPTORS", "DEFAULT_NAME", "DEFAULT_KNOBS", "DEFAULT_THRESHOLD", "Detector", "patch_normalise", "gradient_histograms", "center", "calibrate_scores",
+           "describe", "describe_frames", "normalise",
            "fit_projection", "contrast_normalise", "score_matrix", "columns_to_scores",
            "closures", "choose_threshold", "threshold_range", "tune_knobs", "pick_knobs",
            "matrix_events", "stream_matches_matrix", "stream_check"]
@@ -90,6 +102,36 @@ def patch_normalise(gray, patch: int = PATCH) -> np.ndarray:
     return z.reshape(n, h * w).astype(np.float32)
 
 
+def gradient_histograms(gray, cell: int = GRADIENT_CELL, bins: int = GRADIENT_BINS) -> np.ndarray:
+    """A HOG-like layout-keeping descriptor: per-cell histograms of gradient orientation.
+
+    gray: (N, H, W) float images, H and W multiples of ``cell``. Gradients are 3x3 Sobel
+    (``cv2.Sobel``, border reflected; ``cv2.cartToPolar``); each pixel adds its gradient magnitude to the bin of its
+    unsigned orientation (angle mod pi, ``bins`` equal bins, hard assignment) of its cell; each
+    cell's histogram is then L2-normalised (a flat cell stays 0), which removes the cell's
+    contrast and so most of an illumination change (Dalal and Triggs 2005, without blocks).
+    Returns (N, (H / cell) * (W / cell) * bins) float32, cells row-major, bins innermost.
+    """
+    g = np.asarray(gray, dtype=np.float32)
+    if g.ndim != 3 or g.shape[1] % cell or g.shape[2] % cell:
+        raise ValueError(f"gradient_histograms needs (N, H, W) images with H, W multiples of {cell}, "
+                         f"got shape {g.shape}")
+    n, h, w = g.shape
+    polar = [cv2.cartToPolar(cv2.Sobel(x, cv2.CV_32F, 1, 0, ksize=3), cv2.Sobel(x, cv2.CV_32F, 0, 1, ksize=3),
+                             angleInDegrees=True) for x in g]
+    mag = np.stack([p[0] for p in polar])
+    ang = np.stack([p[1] for p in polar])                      # degrees in [0, 360), ~0.3 degree accuracy
+    ang = np.where(ang >= 180.0, ang - 180.0, ang)
+    b = np.minimum((ang * np.float32(bins / 180.0)).astype(np.int64), bins - 1)
+    cells = (np.arange(h)[:, None] // cell) * (w // cell) + np.arange(w)[None, :] // cell     # (H, W)
+    m = (h // cell) * (w // cell) * bins
+    idx = (np.arange(n)[:, None, None] * m + cells[None] * bins + b).ravel()
+    hist = np.bincount(idx, weights=mag.ravel(), minlength=n * m).reshape(n, h // cell, w // cell, bins)
+    norm = np.linalg.norm(hist, axis=3, keepdims=True)
+    hist = np.where(norm > _EPS, hist / np.maximum(norm, _EPS), 0.0)
+    return hist.reshape(n, -1).astype(np.float32)
+
+
 def _check_descriptor(descriptor: str) -> str:
     if descriptor not in DESCRIPTORS:
         raise ValueError(f"descriptor must be one of {DESCRIPTORS}, got {descriptor!r}")
@@ -108,6 +150,8 @@ def describe(frames_or_folder, descriptor: str = "pixels", step: int = 1, weight
     seconds_per_image includes loading, preprocessing and the descriptor).
     """
     _check_descriptor(descriptor)
+    if descriptor == "gradients":
+        return _describe_gradients(frames_or_folder, step, return_info)
     name = "mobilenetv2" if descriptor == "mobilenetv2" else "pixels"
     X, info = features.extract(frames_or_folder, name, weights=weights, progress=False,
                                return_info=True, step=step)
@@ -116,6 +160,24 @@ def describe(frames_or_folder, descriptor: str = "pixels", step: int = 1, weight
         X = patch_normalise(X.reshape(-1, PIXEL_SIZE[1], PIXEL_SIZE[0]))
         info.seconds_per_image += (time.perf_counter() - t0) / max(len(X), 1)
     return (X, info) if return_info else X
+
+
+def _describe_gradients(frames_or_folder, step: int, return_info: bool):
+    """:func:`describe` for "gradients": 64x32 gray frames (``load_frames``, or ``preprocess_image``
+    of each RGB frame of an array) -> :func:`gradient_histograms` (N, 256)."""
+    t0 = time.perf_counter()
+    if isinstance(frames_or_folder, np.ndarray):
+        frames = frames_or_folder[::positive_int("step", step, 1)]
+        g = np.stack([preprocess_image(f, GRADIENT_SIZE, gray=True, color="rgb") for f in frames])
+        g = g.astype(np.float32) / np.float32(255.0)
+    else:
+        g = load_frames(frames_or_folder, size=GRADIENT_SIZE, gray=True, step=step)[..., 0]
+    X = gradient_histograms(g)
+    if not return_info:
+        return X
+    per = (time.perf_counter() - t0) / max(len(X), 1)
+    return X, features.ExtractInfo("gradients", "none", X.shape[1], len(X), GRADIENT_SIZE,
+                                   f"{GRADIENT_CELL}x{GRADIENT_CELL}-cell orientation histograms", per)
 
 
 def describe_frames(frames, descriptor: str = "pixels", color: str = "bgr", weights="auto") -> np.ndarray:
@@ -129,8 +191,11 @@ def describe_frames(frames, descriptor: str = "pixels", color: str = "bgr", weig
     if descriptor == "mobilenetv2":
         rgb = np.stack([preprocess_image(f, CNN_SIZE, gray=False, color=color) for f in frames])
         return features.extract(rgb, "mobilenetv2", weights=weights, progress=False)
-    g = np.stack([preprocess_image(f, PIXEL_SIZE, gray=True, color=color) for f in frames])
+    size = GRADIENT_SIZE if descriptor == "gradients" else PIXEL_SIZE
+    g = np.stack([preprocess_image(f, size, gray=True, color=color) for f in frames])
     g = g.astype(np.float32) / np.float32(255.0)
+    if descriptor == "gradients":
+        return gradient_histograms(g)
     return patch_normalise(g) if descriptor == "pixels-patchnorm" else g.reshape(len(g), -1)
 
 
@@ -186,17 +251,58 @@ def _offsets(seq_len: int, velocities) -> np.ndarray:
     return np.asarray(rows, dtype=np.int64).reshape(len(rows), seq_len)
 
 
-def _ring_scores(R, rows, c: int, base) -> np.ndarray:
+def _ring_scores(R, rows, c: int, base, dtype=np.float64) -> np.ndarray:
     """Best-trajectory score of each candidate row i < c of the newest query.
 
     R: (L, W) float32 ring of padded normalised columns: the column of the query k frames back is
     ring row rows[k], its value for database row r at R[rows[k], margin + r], its mean (a point
     outside the stored frames) everywhere else. base: (V, L) margin - offsets.
     Returns (c,) float32: max over velocities of the mean along the trajectory ending at (i, j).
+    The sum runs over k = 0..L-1 in order in ``dtype`` (float64: the scores before the calibrated
+    option existed, bit for bit; float32: 4x faster, for calibrated scores), one slice per point.
     """
-    idx = base[:, :, None] + np.arange(c)[None, None, :]          # (V, L, c)
-    vals = R[rows[None, :, None], idx]
-    return (vals.sum(1, dtype=np.float64).max(0) / R.shape[0]).astype(np.float32)
+    Rd = R[rows, :int(base.max()) + c].astype(dtype)             # one cast; the same values
+    acc = np.zeros((base.shape[0], c), dtype)
+    for v in range(base.shape[0]):
+        a = acc[v]
+        for k in range(base.shape[1]):
+            b = base[v, k]
+            np.add(a, Rd[k, b:b + c], out=a)
+    return (acc.max(0) / R.shape[0]).astype(np.float32)
+
+
+def center(X, window: int) -> np.ndarray:
+    """Causal standardisation of a descriptor stream: row j minus the mean of rows
+    max(0, j - window + 1)..j (its own recent past, itself included); window 0 returns X.
+
+    X: (N, D) float raw descriptors in stream order. Removes what the recent frames share (the
+    season's snow, the night's dark sky) so that the cosine compares what differs between places.
+    Returns (N, D) float32; row j is bit-identical to what :class:`Detector` computes at frame j.
+    """
+    X = np.asarray(X, dtype=np.float32)
+    if window == 0:
+        return X
+    out = np.empty_like(X)
+    for j in range(len(X)):
+        out[j] = X[j] - X[max(0, j - window + 1):j + 1].mean(axis=0)
+    return out
+
+
+def calibrate_scores(scores) -> np.ndarray:
+    """One query's scores calibrated against its own candidates: z = (s - mean) / std (population
+    std over the C candidates), minus sqrt(2 ln C), the first-order expected maximum of C
+    independent standard normal z-scores. A score then says how far a candidate stands above
+    what the best of C unrelated candidates would reach, in units that depend neither on the
+    descriptor's scale nor (to first order) on how many frames are stored, so one threshold can
+    serve a 200-frame and a 7000-frame database.
+    scores: (C,) float. Returns (C,) float32; all 0 when C < 2 or the scores are flat."""
+    s = np.asarray(scores, dtype=np.float64)
+    if s.size < 2:
+        return np.zeros(s.size, np.float32)
+    sd = s.std()
+    if sd <= _EPS:
+        return np.zeros(s.size, np.float32)
+    return ((s - s.mean()) / sd - math.sqrt(2 * math.log(s.size))).astype(np.float32)
 
 
 def threshold_range(contrast_window: int) -> tuple[float, float]:
@@ -208,9 +314,13 @@ def threshold_range(contrast_window: int) -> tuple[float, float]:
     return -z, z
 
 
-def _check_threshold(threshold, contrast_window: int):
+def _check_threshold(threshold, contrast_window: int, calibrated: bool = False):
     if threshold is None:
         return None
+    if calibrated:
+        if not math.isfinite(float(threshold)):
+            raise ValueError(f"threshold must be a finite z-score for calibrated scores, got {threshold!r}")
+        return float(threshold)
     lo, hi = threshold_range(contrast_window)
     t = float(threshold)
     if not (math.isfinite(t) and lo <= t <= hi):
@@ -236,6 +346,18 @@ class Detector:
         computed only for the ``k`` stored frames the index retrieves for the newest query
         (``index_options``: keyword arguments of ``retrieval.make_index``). See
         :meth:`_match_candidates` for what it computes and where it may differ from the reference.
+    Options (off by default, the behaviour before them):
+    center_window: W > 0 subtracts from each raw descriptor the mean of the last W raw descriptors
+        (itself included, :func:`center`) before normalising: a buffer of W x D float32, fixed.
+    calibrate: score each candidate as a z-score against the query's own candidates
+        (:func:`calibrate_scores`); the threshold is then a z-score (any finite float).
+    repeat_cos: a query whose normalised descriptor has cosine >= repeat_cos with the previous
+        frame's is a repeat (the camera stopped, or a frame duplicated by a slower replay): it is
+        matched and stored, but its column does not enter the trajectory ring, so a stop or a
+        half-speed replay keeps the trajectories' velocities. None: off.
+    Negative velocities search revisits driven the opposite way (database rows increasing while
+    the query goes back in time); a trajectory point on a row not yet a candidate counts as the
+    column's mean, as one before the first stored frame.
     Attributes: ``events`` (list of {'frame', 'match', 'score'}), ``frame_index``, ``last_scores``
     ((C,) float32 scores of the newest query's candidates: every stored row 0..C-1, or in candidate
     mode the rows ``last_candidates`` (C,) int64, ascending), ``bytes_per_frame``.
@@ -244,7 +366,8 @@ class Detector:
     def __init__(self, threshold=None, descriptor: str = "pixels", seq_len: int = 10,
                  velocities=DEFAULT_VELOCITIES, exclude: int = 150, contrast_window: int = 10,
                  projection=None, store_dtype: str = "float32", color: str = "bgr", weights="auto",
-                 index: str | None = None, k: int = 20, index_options: dict | None = None):
+                 index: str | None = None, k: int = 20, index_options: dict | None = None,
+                 center_window: int = 0, calibrate: bool = False, repeat_cos=None):
         if index is not None and index not in retrieval.KINDS:
             raise ValueError(f"index must be None (score every stored frame) or one of "
                              f"{retrieval.KINDS}, got {index!r}")
@@ -254,14 +377,23 @@ class Detector:
         self.seq_len = positive_int("seq_len", seq_len, 1, whole_floats=True)
         self.exclude = positive_int("exclude", exclude, 0, whole_floats=True)
         self.contrast_window = positive_int("contrast_window", contrast_window, 0, whole_floats=True)
-        self.threshold = _check_threshold(threshold, self.contrast_window)
+        self.center_window = positive_int("center_window", center_window, 0, whole_floats=True)
+        self.calibrate = bool(calibrate)
+        self.threshold = _check_threshold(threshold, self.contrast_window, self.calibrate)
+        if repeat_cos is not None and not (math.isfinite(float(repeat_cos)) and -1 <= float(repeat_cos) <= 1):
+            raise ValueError(f"repeat_cos must be a cosine in [-1, 1] or None, got {repeat_cos!r}")
+        self.repeat_cos = None if repeat_cos is None else float(repeat_cos)
         v = [float(x) for x in np.atleast_1d(velocities)]
-        if not v or not all(math.isfinite(x) and x > 0 for x in v):
-            raise ValueError(f"velocities must be positive numbers, got {velocities!r}")
+        if not v or not all(math.isfinite(x) and x != 0 for x in v):
+            raise ValueError(f"velocities must be non-zero numbers (negative: reverse revisits), got {velocities!r}")
         if store_dtype not in STORE_DTYPES:
             raise ValueError(f"store_dtype must be one of {STORE_DTYPES}, got {store_dtype!r}")
         if color not in COLORS:
             raise ValueError(f"color must be one of {COLORS}, got {color!r}")
+        if index is not None and (calibrate or repeat_cos is not None or min(v) < 0):
+            raise ValueError("candidate mode (index=...) scores the retrieved frames only and does not yet "
+                             "support calibrate, repeat_cos or negative (reverse) velocities: pass index=None, "
+                             "or knobs without them (e.g. the CLI's --threshold with --index)")
         self.velocities, self.projection, self.color, self.weights = tuple(v), projection, color, weights
         self.store_dtype = np.dtype(store_dtype)
         off = _offsets(self.seq_len, self.velocities)
@@ -273,7 +405,8 @@ class Detector:
         """Forget every stored frame and event."""
         self._db = None                       # (capacity, D) stored descriptors
         L = self.seq_len
-        self._ring = np.zeros((L, self._margin + 256), np.float32)   # padded columns, see _ring_scores
+        self._right = max(int(self._base.max()) - self._margin, 0)    # room for negative offsets
+        self._ring = np.zeros((L, self._margin + self._right + 256), np.float32)   # see _ring_scores
         self._pads = np.zeros(L, np.float32)
         self._empty = np.ones(L, bool)        # ring rows holding no column yet, or an empty one
         self._newest = 0
@@ -287,6 +420,9 @@ class Detector:
         self._qc = np.zeros(L, np.int64)      # their candidate counts c = j - exclude (0: none yet)
         self._qpad = np.zeros(L, np.float32)  # their columns' pads (points outside stored frames)
         self._sum = None                      # (D,) float64 sum of the indexed rows (cosine pads)
+        self._recent = None                   # (center_window, D) raw descriptors, oldest first
+        self._n_recent = 0
+        self._previous = None                 # the previous frame's normalised descriptor
 
     @property
     def bytes_per_frame(self) -> int:
@@ -309,14 +445,19 @@ class Detector:
             self._db = np.concatenate([self._db, np.empty_like(self._db)])
         self._db[j] = y
 
-    def _push_column(self, s: np.ndarray) -> None:
-        """Write the newest normalised column into the ring (dropping the one seq_len back)."""
-        R, m = self._ring, self._margin
-        if m + s.size > R.shape[1]:
-            grown = np.empty((R.shape[0], 2 * R.shape[1]), np.float32)
+    def _ensure_width(self, c: int) -> None:
+        """Grow the ring (doubling, new room filled with each column's mean) to hold c rows."""
+        R = self._ring
+        if self._margin + c + self._right > R.shape[1]:
+            grown = np.empty((R.shape[0], max(2 * R.shape[1], self._margin + c + self._right)), np.float32)
             grown[:, :R.shape[1]] = R
             grown[:, R.shape[1]:] = self._pads[:, None]
-            self._ring = R = grown
+            self._ring = grown
+
+    def _push_column(self, s: np.ndarray) -> None:
+        """Write the newest normalised column into the ring (dropping the one seq_len back)."""
+        self._ensure_width(s.size)
+        R, m = self._ring, self._margin
         r = self._newest = (self._newest - 1) % self.seq_len
         pad = float(s.mean()) if s.size else 0.0
         R[r, :] = pad
@@ -332,7 +473,7 @@ class Detector:
         x = np.asarray(x, dtype=np.float32).reshape(1, -1)
         if x.shape[1] == 0 or not np.all(np.isfinite(x)):
             raise ValueError(f"descriptor {self.frame_index} is empty or has NaN/inf values")
-        y = normalise(x, self.projection)[0]
+        y = normalise(self._centered(x), self.projection)[0]
         j, c = self.frame_index, max(self.frame_index - self.exclude, 0)
         if self._db is not None and y.size != self._db.shape[1]:
             raise ValueError(f"descriptor {j} has {y.size} dims, the stream's first had {self._db.shape[1]}")
@@ -344,14 +485,38 @@ class Detector:
             s = self._db[:c].astype(np.float32, copy=False) @ y
         return self._match(y, s)
 
+    def _centered(self, x: np.ndarray) -> np.ndarray:
+        """x (1, D) minus the mean of the last center_window raw descriptors, x included (:func:`center`)."""
+        W = self.center_window
+        if not W:
+            return x
+        if self._recent is None or self._recent.shape[1] != x.shape[1]:
+            if self._recent is not None:
+                raise ValueError(f"descriptor {self.frame_index} has {x.shape[1]} dims, the stream's "
+                                 f"first had {self._recent.shape[1]}")
+            self._recent = np.zeros((W, x.shape[1]), np.float32)
+        self._recent[:-1] = self._recent[1:].copy()
+        self._recent[-1] = x[0]
+        self._n_recent = min(self._n_recent + 1, W)
+        return x - self._recent[W - self._n_recent:].mean(axis=0)
+
+    def _is_repeat(self, y: np.ndarray) -> bool:
+        prev, self._previous = self._previous, y.copy()
+        return self.repeat_cos is not None and prev is not None and float(prev @ y) >= self.repeat_cos
+
     def _match(self, y: np.ndarray, s: np.ndarray) -> dict | None:
         """The stages after the similarity: s (C,) cosine to the C candidates of query j = frame_index."""
         j, c = self.frame_index, s.size
         s = contrast_normalise(s, self.contrast_window)
-        self._push_column(s)
+        if not self._is_repeat(y):
+            self._push_column(s)
         if c:
+            self._ensure_width(c)
             rows = (self._newest + np.arange(self.seq_len)) % self.seq_len
-            self.last_scores = _ring_scores(self._ring, rows, c, self._base)
+            self.last_scores = _ring_scores(self._ring, rows, c, self._base,
+                                            np.float32 if self.calibrate else np.float64)
+            if self.calibrate:
+                self.last_scores = calibrate_scores(self.last_scores)
         else:
             self.last_scores = s
         self._store(y)
@@ -466,7 +631,8 @@ class Detector:
 
 # ------------------------------------------------------------------------------ batch scores
 def score_matrix(X, exclude: int = 150, seq_len: int = 10, velocities=DEFAULT_VELOCITIES,
-                 contrast_window: int = 10, projection=None, store_dtype: str = "float32") -> np.ndarray:
+                 contrast_window: int = 10, projection=None, store_dtype: str = "float32",
+                 center_window: int = 0, calibrate: bool = False, repeat_cos=None) -> np.ndarray:
     """The (N, N) score matrix the streaming detector thresholds, for ``greenloop.evaluate``.
 
     X: (N, D) raw descriptors in stream order (:func:`describe`). The other arguments are those
@@ -481,12 +647,13 @@ def score_matrix(X, exclude: int = 150, seq_len: int = 10, velocities=DEFAULT_VE
         raise ValueError(f"X must be (N, D) descriptors, got shape {X.shape}")
     n = len(X)
     det = Detector(None, seq_len=seq_len, velocities=velocities, exclude=exclude,
-                   contrast_window=contrast_window, projection=projection, store_dtype=store_dtype)
+                   contrast_window=contrast_window, projection=projection, store_dtype=store_dtype,
+                   center_window=center_window, calibrate=calibrate, repeat_cos=repeat_cos)
     if n == 0:
         return np.zeros((0, 0), np.float32)
     if not np.all(np.isfinite(X)):
         raise ValueError("X has NaN or inf values")
-    Y = normalise(X, projection)
+    Y = normalise(center(X, det.center_window), projection)
     G = Y.astype(det.store_dtype).astype(np.float32) @ Y.T    # stored rows x queries, one product
     return columns_to_scores(det, Y, G)
 

@@ -195,8 +195,8 @@ def test_cli_detect_by_method(tmp_path):
                            env=env, timeout=120)
     assert tuned.returncode == 0, tuned.stderr
     assert [line.split("\t")[:2] for line in tuned.stdout.splitlines() if line[:1].isdigit()] == [r[:2] for r in rows]
-    none = subprocess.run(cmd[:7], capture_output=True, text=True, env=env, timeout=60)
-    assert none.returncode == 2 and "--tuned" in none.stderr and "--threshold" in none.stderr
+    none = subprocess.run(cmd[:7], capture_output=True, text=True, env=env, timeout=60)   # the named default
+    assert none.returncode == 0 and "greenloop-seq (gradients, seq_len 10, exclude 150" in none.stdout, none.stderr
     wrong = subprocess.run(cmd[:7] + ["--tuned", str(summary), "--variant", "greenloop-seq"], capture_output=True,
                            text=True, env=env, timeout=60)
     assert wrong.returncode == 2 and "no variant 'greenloop-seq'" in wrong.stderr

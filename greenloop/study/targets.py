@@ -1,0 +1,105 @@
+"""Issue 28's targets, each as met / not met with its measured value, from one dataset's leaderboard rows.
+
+A leaderboard row is a dict (or a pandas DataFrame row) with at least ``method`` and ``mode``
+("loop closure" / "place recognition") and the per-query metrics in percent, named as notebook 13
+writes them: ``R@1_%``, ``AUC-PR_%``, ``R@100P_%``; optionally ``fps_min`` (the slowest timing
+repeat, frames/s) and ``closures_declared`` / ``closures_false`` (at the operating threshold).
+Only what the rows hold is judged: a target whose value is absent is "not measured" (met None),
+never met.
+
+The targets (issue 28, evaluation part only, one configuration of greenloop-seq):
+    nordland      R@1 >= 95 % with seq_len <= 10, R@100P >= 60 %, R@1 above the SeqSLAM row (loop closure)
+    gardenspoint  R@1 >= 90 %, R@100P >= 50 % (place recognition: reference = the day traversal)
+    synthetic     the highest R@1 and the highest AUC-PR of every method (loop closure, chance excluded)
+    every dataset >= 920 frames/s (slowest repeat); closure precision >= 90 % at the threshold used
+"""
+from __future__ import annotations
+
+import math
+
+__all__ = ["FPS_TARGET", "PRECISION_TARGET", "dataset_kind", "issue28_targets"]
+
+FPS_TARGET = 920.0            # frames/s per stream on 2 cores, descriptor included (the main paper's)
+PRECISION_TARGET = 90.0       # % closure precision at the one threshold
+KINDS = {"nordland": "nordland", "gardens": "gardenspoint", "synthetic": "synthetic", "greenhouse": "synthetic"}
+
+
+def dataset_kind(dataset: str) -> str:
+    """"nordland", "gardenspoint" or "synthetic" from a dataset name or folder (substring match,
+    case-insensitive). ValueError naming the accepted names otherwise."""
+    low = str(dataset).lower()
+    for key, kind in KINDS.items():
+        if key in low:
+            return kind
+    raise ValueError(f"dataset {dataset!r} is none of issue 28's datasets: its name must contain one of "
+                     f"{sorted(KINDS)}")
+
+
+def _rows(rows) -> list[dict]:
+    if hasattr(rows, "to_dict"):
+        rows = rows.to_dict("records")
+    return [dict(r) for r in rows]
+
+
+def _value(row, key):
+    v = None if row is None else row.get(key)
+    return None if v is None or (isinstance(v, float) and math.isnan(v)) else float(v)
+
+
+def _judge(target: str, measured, required: str, ok) -> dict:
+    """One target: met None when the value is absent (not measured)."""
+    return {"target": target, "measured": measured, "required": required,
+            "met": None if measured is None else bool(ok(measured))}
+
+
+def _find(rows, method: str, mode: str):
+    hit = [r for r in rows if r.get("method") == method and r.get("mode") == mode]
+    return hit[0] if hit else None
+
+
+def _best_other(rows, method: str, mode: str, key: str):
+    vals = [_value(r, key) for r in rows if r.get("mode") == mode and r.get("method") != method
+            and not str(r.get("method", "")).startswith("chance")]
+    vals = [v for v in vals if v is not None]
+    return max(vals) if vals else None
+
+
+def _common(row, seq_len) -> list[dict]:
+    out = [_judge("frames/s (slowest repeat)", _value(row, "fps_min"), f">= {FPS_TARGET:g}",
+                  lambda v: v >= FPS_TARGET)]
+    n, bad = _value(row, "closures_declared"), _value(row, "closures_false")
+    prec = None if n is None or bad is None or n == 0 else 100.0 * (n - bad) / n
+    out.append(_judge("closure precision at the threshold (%)", prec, f">= {PRECISION_TARGET:g}",
+                      lambda v: v >= PRECISION_TARGET))
+    return out
+
+
+def issue28_targets(rows, dataset: str, method: str = "greenloop-seq", seqslam: str = "SeqSLAM",
+                    seq_len=None) -> list[dict]:
+    """Each issue-28 target of ``dataset`` for ``method``: a list of dicts target (text), measured
+    (float, % or frames/s; None when the rows do not hold it), required (text) and met (bool; None
+    when not measured). rows: the dataset's leaderboard rows (list of dicts or a DataFrame).
+    seq_len: the method's frames of sequence (needed for Nordland's "<= 10 frames")."""
+    rows, kind = _rows(rows), dataset_kind(dataset)
+    lc, pr = _find(rows, method, "loop closure"), _find(rows, method, "place recognition")
+    if kind == "nordland":
+        ref = _find(rows, seqslam, "loop closure")
+        r1 = _value(lc, "R@1_%")
+        out = [_judge("R@1 (%), loop closure", r1, ">= 95", lambda v: v >= 95.0),
+               _judge("frames of sequence", None if seq_len is None else float(seq_len), "<= 10", lambda v: v <= 10),
+               _judge("R@100P (%), loop closure", _value(lc, "R@100P_%"), ">= 60", lambda v: v >= 60.0)]
+        sr = _value(ref, "R@1_%")
+        out.append(_judge(f"R@1 above {seqslam} ({sr if sr is not None else 'not measured'} %)",
+                          None if sr is None else r1, f"> {sr}", lambda v: v > sr))
+        return out + _common(lc, seq_len)
+    if kind == "gardenspoint":
+        return [_judge("R@1 (%), place recognition", _value(pr, "R@1_%"), ">= 90", lambda v: v >= 90.0),
+                _judge("R@100P (%), place recognition", _value(pr, "R@100P_%"), ">= 50", lambda v: v >= 50.0)] \
+            + _common(lc if lc is not None else pr, seq_len)
+    out = []
+    for key in ("R@1_%", "AUC-PR_%"):
+        best = _best_other(rows, method, "loop closure", key)
+        mine = _value(lc, key)
+        out.append(_judge(f"highest {key[:-2]} of every method (%), loop closure", None if best is None else mine,
+                          f"> {best}", lambda v, b=best: v > b))
+    return out + _common(lc, seq_len)

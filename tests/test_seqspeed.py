@@ -1,0 +1,149 @@
+"""greenloop-seq's trajectory search under speed changes and reverse revisits (issue 28), on a small
+sequence the test makes: a route of N0 random-walk descriptors, then a revisit of its first REVISIT
+places (noisy re-observations) replayed at other speeds (frames dropped or repeated), with a stop,
+or driven the opposite way. Recall@1 over the revisit queries, correct within +-2 places."""
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from greenloop import evaluate, seqmatch
+
+ROOT = Path(__file__).resolve().parents[1]
+
+D, N0, REVISIT, EXCLUDE, TOL = 32, 400, 200, 50, 2
+LINES = dict(velocities=seqmatch.DEFAULT_VELOCITIES)            # today's straight-line search
+DEFAULT = {k: v for k, v in seqmatch.DEFAULT_KNOBS.items() if k != "descriptor"}
+
+
+def _walk(n, seed, a=0.9):
+    """AR(1) random walk (n, D): neighbouring places look alike, far ones do not."""
+    rng = np.random.default_rng(seed)
+    x = np.zeros((n, D))
+    x[0] = rng.normal(size=D)
+    for t in range(1, n):
+        x[t] = a * x[t - 1] + np.sqrt(1 - a * a) * rng.normal(size=D)
+    return x
+
+
+@pytest.fixture(scope="module")
+def route():
+    """(route (N0, D), the revisit's frames at 1x (REVISIT, D): place k observed with noise)."""
+    w = _walk(N0, 0)
+    return w, w[:REVISIT] + np.random.default_rng(1).normal(scale=1.3, size=(REVISIT, D))
+
+
+def replay(kind):
+    """The place each frame of a replayed revisit shows: (M,) int indices into the 1x revisit."""
+    if kind == "stop":                                  # 30 frames standing at place 100
+        return np.r_[np.arange(100), np.full(30, 100), np.arange(101, REVISIT)]
+    if kind == "reverse":
+        return np.arange(REVISIT)[::-1]
+    return np.floor(np.arange(0, REVISIT - 1e-9, float(kind))).astype(int)    # 0.5: each frame twice
+
+
+def recall_at_1(route, kind, **knobs):
+    w, r = route
+    p = replay(kind)
+    X = np.concatenate([w, r[p]])                       # repeated frames are exact copies
+    n = len(X)
+    GT = np.zeros((n, n), bool)
+    for k, q in enumerate(p):
+        GT[max(q - TOL, 0):q + TOL + 1, N0 + k] = True
+    S = seqmatch.score_matrix(X, EXCLUDE, **knobs)
+    return evaluate.per_query(S, GT | GT.T, EXCLUDE, queries=np.arange(n) >= N0)["R@1"]
+
+
+@pytest.mark.parametrize("kind", ["0.5", "0.75", "1.5", "2", "stop"])
+def test_speed_changes_cost_at_most_5_points(route, kind):
+    base = recall_at_1(route, "1", **DEFAULT)
+    assert base >= 0.85
+    assert recall_at_1(route, kind, **DEFAULT) >= base - 0.05
+
+
+def test_straight_lines_lose_the_fast_and_slow_replays(route):
+    """The check above can fail: today's search (velocities 0.8..1.25, no repeat gate) loses
+    more than 5 points on the half- and double-speed replays."""
+    base = recall_at_1(route, "1", **LINES)
+    assert recall_at_1(route, "0.5", **LINES) < base - 0.05
+    assert recall_at_1(route, "2", **LINES) < base - 0.05
+
+
+def test_reverse_revisit_is_found_and_straight_lines_miss_it(route):
+    assert recall_at_1(route, "reverse", **DEFAULT) >= recall_at_1(route, "1", **DEFAULT) - 0.05
+    assert recall_at_1(route, "reverse", **LINES) < 0.5
+
+
+def test_stream_equals_matrix_with_reverse_and_repeats(route):
+    """The streaming Detector declares exactly where its score matrix reaches the threshold, on a
+    stream holding a reversed revisit and a stop (repeat gate and negative offsets exercised)."""
+    w, r = route
+    X = np.concatenate([w, r[replay("reverse")], r[replay("stop")]])
+    S = seqmatch.score_matrix(X, EXCLUDE, **DEFAULT)
+    det = seqmatch.Detector(seqmatch.DEFAULT_THRESHOLD, exclude=EXCLUDE, **DEFAULT)
+    for x in X:
+        det.update_descriptor(x)
+    assert len(det.events) > 50
+    assert seqmatch.stream_matches_matrix(det, S)
+    for j in (N0 + 5, N0 + REVISIT + 70, len(X) - 1):     # the columns themselves, up to the
+        det.reset()                                         # rounding of gemv against gemm
+        for x in X[:j + 1]:
+            det.update_descriptor(x)
+        np.testing.assert_allclose(det.last_scores, S[:j - EXCLUDE, j], rtol=1e-4, atol=1e-4)
+
+
+def _drive(folder: Path, places) -> Path:
+    """A sequence folder whose frame k shows place places[k] of a smooth random panorama (64x32
+    crops 3 pixels apart): neighbouring places overlap, places far apart share nothing."""
+    rng = np.random.default_rng(7)
+    strip = cv2.GaussianBlur(rng.integers(0, 256, (32, 3 * 700 + 64)).astype(np.float32), (0, 0), 1.5)
+    strip = cv2.normalize(strip, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
+    (folder / "rgb").mkdir(parents=True)
+    for k, p in enumerate(places):
+        cv2.imwrite(str(folder / "rgb" / f"{k}.png"), cv2.cvtColor(strip[:, 3 * p:3 * p + 64], cv2.COLOR_GRAY2BGR))
+    return folder
+
+
+def _detect(folder):
+    env = dict(os.environ, PYTHONPATH=str(ROOT), TF_CPP_MIN_LOG_LEVEL="3")
+    res = subprocess.run([sys.executable, "-m", "greenloop", "detect", str(folder), "--method", "greenloop-seq"],
+                         capture_output=True, text=True, env=env, timeout=120)
+    assert res.returncode == 0, res.stderr
+    return [line.split("\t") for line in res.stdout.splitlines() if line[:1].isdigit()]
+
+
+def test_cli_default_is_silent_without_revisit_and_finds_one(tmp_path):
+    """`detect --method greenloop-seq` with no --tuned / --threshold runs the named default
+    (DEFAULT_KNOBS, DEFAULT_THRESHOLD): silent on a 500-frame drive that never comes back, and
+    closing loops on the same drive when its last 150 frames revisit places 0..149."""
+    assert _detect(_drive(tmp_path / "once", range(500))) == []
+    rows = _detect(_drive(tmp_path / "back", list(range(350)) + list(range(150))))
+    assert len(rows) >= 100
+    assert all(int(r[0]) >= 350 and abs(int(r[1]) - (int(r[0]) - 350)) <= 2 for r in rows)
+
+
+def test_gradient_histograms_by_hand():
+    """A bright vertical bar: only the cells its two edges cross have gradients, all horizontal
+    (unsigned orientation: the rising and the falling edge both 0 degrees, bin 0), each such cell
+    L2-normalised to one; flat cells stay 0."""
+    img = np.zeros((1, 32, 64), np.float32)
+    img[:, :, 40:56] = 1.0                                # rising edge in cell column 2, falling in 3
+    H = seqmatch.gradient_histograms(img, cell=16, bins=8).reshape(2, 4, 8)
+    np.testing.assert_allclose(H[:, 2:, 0], 1.0, rtol=1e-6)
+    assert np.count_nonzero(H) == 4                       # the four cells on the edges, bin 0 only
+    rot = seqmatch.gradient_histograms(img.transpose(0, 2, 1).copy(), cell=16, bins=8).reshape(4, 2, 8)
+    np.testing.assert_allclose(rot[2, :, 4], 1.0, rtol=1e-6)   # a horizontal edge: 90 degrees, bin 4
+
+
+def test_center_and_calibrate_by_hand():
+    X = np.array([[1.0, 0.0], [3.0, 0.0], [5.0, 2.0]])
+    np.testing.assert_allclose(seqmatch.center(X, 2), [[0, 0], [1, 0], [1, 1]])   # minus the mean of itself and the one before
+    np.testing.assert_array_equal(seqmatch.center(X, 0), X)
+    s = np.array([0.0, 0.0, 0.0, 4.0])                    # mean 1, population std sqrt(3)
+    z = (s - 1.0) / np.sqrt(3.0) - np.sqrt(2 * np.log(4))
+    np.testing.assert_allclose(seqmatch.calibrate_scores(s), z, rtol=1e-6)
+    assert not seqmatch.calibrate_scores(np.ones(5)).any() and seqmatch.calibrate_scores([3.0]).tolist() == [0.0]
