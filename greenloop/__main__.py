@@ -70,13 +70,13 @@ def _tuned_knobs(args) -> tuple[dict, list[str]]:
     tuned frame_step is reported, not applied. Returns (dict(descriptor, seq_len, contrast_window,
     threshold, step, exclude), lines); exclude and seq_len in streamed frames."""
     knobs = dict(descriptor="pixels-patchnorm", seq_len=10, contrast_window=10, threshold=None, step=1)
-    origin = dict.fromkeys(knobs, "default")
+    origin = dict.fromkeys([*knobs, "exclude"], "default")
     desc = read_description(args.folder) if Path(args.folder).is_dir() else {}
     exclude_frames, tuned_step = 150, None       # exclude in ORIGINAL frames until the step is known
     if not args.tuned and args.threshold is None:   # issue 28: the named default, its calibrated threshold
         knobs.update(seqmatch.DEFAULT_KNOBS, threshold=seqmatch.DEFAULT_THRESHOLD)
-        origin = dict.fromkeys(knobs, f"default {seqmatch.DEFAULT_NAME}")
-        origin["step"] = "default"
+        origin = dict(dict.fromkeys(knobs, f"default {seqmatch.DEFAULT_NAME}"), step="default",
+                      exclude="default")
     if args.tuned:
         path = Path(args.tuned)
         if not path.is_file():

@@ -201,3 +201,31 @@ def test_method_rows_one_per_mode_with_closures_in_loop_closure_only(revisit):
     assert rows[1]["closures_declared"] is None and math.isnan(rows[1]["threshold"])
     assert rows[0]["fps_min"] == rows[1]["fps_min"] == 9.0 and rows[0]["bytes_per_stored_frame"] == 80
     assert rows[1]["R@1_%"] == lb.metric_rows(S["seq"], GT, EX, ev, ref)[1]["R@1_%"]
+
+
+def test_the_named_default_is_untuned_and_keeps_its_fixed_threshold():
+    from greenloop import seqmatch
+    k = lb.named_default()
+    assert k["descriptor"] == seqmatch.DEFAULT_KNOBS["descriptor"] and k["calibrate"] is True
+    rng = np.random.default_rng(0)
+    n = 60
+    X = rng.normal(size=(n, 16)).astype(np.float32)
+    G = np.zeros((n, n), bool)
+    S = lb.score_matrices({seqmatch.DEFAULT_NAME: k}, {k["descriptor"]: X}, {}, 5, (1.0,))
+    direct = seqmatch.score_matrix(X, 5, k["seq_len"], tuple(k["velocities"]), 0, None, center_window=k["center_window"],
+                                   calibrate=True, repeat_cos=k["repeat_cos"])
+    assert np.array_equal(S[seqmatch.DEFAULT_NAME], direct)      # the record's knobs reach the detector
+    thr = lb.thresholds(S, G, 5, np.ones(n, bool), "f1")
+    assert thr[seqmatch.DEFAULT_NAME] == seqmatch.DEFAULT_THRESHOLD
+    det = lb.detector(k, thr[seqmatch.DEFAULT_NAME], 5, (1.0,), {})
+    assert det.calibrate and det.velocities == tuple(float(v) for v in k["velocities"])
+    assert "fixed threshold" in lb.knob_text(k)
+
+
+def test_issue28_table_says_when_a_dataset_is_not_one_of_its_own():
+    board = pd.DataFrame([{"method": "greenloop-seq-grad", "mode": "loop closure", "R@1_%": 50.0}])
+    t = lb.issue28_table(board, "data/my-indoor-walk", 1)
+    assert len(t) == 1 and t.met.isna().all() and "not judged" in t.note.iloc[0]
+    t = lb.issue28_table(board, "data/nordland", 8)
+    step = t[t.target.str.startswith("frame step")].iloc[0]
+    assert step.measured == 8 and step.met is False or step.met == False   # noqa: E712 (numpy bool)

@@ -24,7 +24,10 @@ def test_nordland_targets_met_and_not_met():
     assert m["frames/s (slowest repeat)"]["met"] is False                  # 919 < 920
     assert m["closure precision at the threshold (%)"]["measured"] == 90.0
     assert m["closure precision at the threshold (%)"]["met"] is True      # 90 of 100 right: exactly 90 %
-    assert issue28_targets(rows, "nordland", seq_len=11)[1]["met"] is False
+    assert {r["target"]: r for r in issue28_targets(rows, "nordland", seq_len=11)}["frames of sequence"]["met"] is False
+    step = {r["target"]: r for r in issue28_targets(rows, "nordland", seq_len=10, frame_step=8)}
+    assert step["frame step of the rows (1 = Nordland's full rate)"]["met"] is False
+    assert m["frame step of the rows (1 = Nordland's full rate)"]["met"] is None   # not given: not measured
 
 
 def test_gardenspoint_reads_place_recognition_and_absent_values_are_not_measured():

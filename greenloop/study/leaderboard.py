@@ -29,6 +29,7 @@ import pandas as pd
 
 from greenloop import evaluate, features, seqmatch, seqslam
 from greenloop.speed import timing
+from greenloop.study import targets as goals
 from greenloop.util.files import write_atomic
 
 MODES = ("loop closure", "place recognition")
@@ -94,12 +95,29 @@ def default_knobs(single_specs) -> dict:
     return knobs
 
 
+def named_default() -> dict:
+    """greenloop-seq's named default (``seqmatch.DEFAULT_NAME``) as a knob record: the CLI's
+    configuration, never tuned here, scored at the fixed ``seqmatch.DEFAULT_THRESHOLD``."""
+    k = dict(seqmatch.DEFAULT_KNOBS)
+    return dict(k, whitening="none", velocities=list(k["velocities"]), fixed_threshold=seqmatch.DEFAULT_THRESHOLD)
+
+
+def _extra(k: dict, velocities) -> dict:
+    """The seqmatch keyword arguments of a knob record beyond descriptor/seq_len/contrast window."""
+    return dict(velocities=tuple(k.get("velocities", velocities)), center_window=k.get("center_window", 0),
+                calibrate=k.get("calibrate", False), repeat_cos=k.get("repeat_cos"))
+
+
 def knob_text(k: dict) -> str:
     """One line of a method's knobs for the table."""
     if k["descriptor"] == "seqslam":
         return f"64x32 patch-normalised, SAD, ds {k['seq_len'] - 1}, R_window {k['contrast_window']}, v 0.8..1.2"
     seq = "" if k["seq_len"] == 1 else f", seq_len {k['seq_len']}"
-    return f"{k['descriptor']}, whitening {k['whitening']}, contrast window {k['contrast_window']}{seq}"
+    text = f"{k['descriptor']}, whitening {k['whitening']}, contrast window {k['contrast_window']}{seq}"
+    if "fixed_threshold" in k:
+        text += (f", centring {k['center_window']}, velocities {k['velocities']}, repeat gate {k['repeat_cos']}, "
+                 f"calibrated, fixed threshold {k['fixed_threshold']} (the CLI default, untuned)")
+    return text
 
 
 def detector(k: dict, threshold, exclude: int, velocities, proj: dict, weights="auto"):
@@ -110,8 +128,9 @@ def detector(k: dict, threshold, exclude: int, velocities, proj: dict, weights="
         return seqslam.Detector(t, exclude, k["seq_len"] - 1, k["contrast_window"])
     p = proj.get(k["descriptor"], {}).get(k["whitening"])
     desc = k["descriptor"] if k["descriptor"] in seqmatch.DESCRIPTORS else "pixels"
-    return seqmatch.Detector(t, descriptor=desc, seq_len=k["seq_len"], velocities=velocities, exclude=exclude,
-                             contrast_window=k["contrast_window"], projection=p, weights=weights)
+    return seqmatch.Detector(t, descriptor=desc, seq_len=k["seq_len"], exclude=exclude,
+                             contrast_window=k["contrast_window"], projection=p, weights=weights,
+                             **_extra(k, velocities))
 
 
 def score_matrices(knobs: dict, descriptors: dict, proj: dict, exclude: int, velocities) -> dict:
@@ -124,7 +143,8 @@ def score_matrices(knobs: dict, descriptors: dict, proj: dict, exclude: int, vel
             out[name] = seqslam.score_matrix(X, exclude, k["seq_len"] - 1, k["contrast_window"])
         else:
             p = proj.get(k["descriptor"], {}).get(k["whitening"])
-            out[name] = seqmatch.score_matrix(X, exclude, k["seq_len"], velocities, k["contrast_window"], p)
+            e = _extra(k, velocities)
+            out[name] = seqmatch.score_matrix(X, exclude, k["seq_len"], e.pop("velocities"), k["contrast_window"], p, **e)
     return out
 
 
@@ -143,9 +163,12 @@ def frame_describer(descriptor: str, weights="auto", input_size=None, vocabulary
 
 def thresholds(S: dict, GT, exclude: int, tune, rule: str) -> dict:
     """{method: threshold picked on the tuning queries (``seqmatch.choose_threshold``)}; NaN for
-    every method when tune is None (no tuning part)."""
-    return {k: (seqmatch.choose_threshold(s, GT, exclude, queries=tune, rule=rule) if tune is not None else np.nan)
-            for k, s in S.items()}
+    every method when tune is None (no tuning part); the named default keeps its fixed threshold."""
+    out = {k: (seqmatch.choose_threshold(s, GT, exclude, queries=tune, rule=rule) if tune is not None else np.nan)
+           for k, s in S.items() if k != seqmatch.DEFAULT_NAME}
+    if seqmatch.DEFAULT_NAME in S:
+        out[seqmatch.DEFAULT_NAME] = seqmatch.DEFAULT_THRESHOLD
+    return out
 
 
 def metric_rows(S, GT, exclude: int, queries, reference=None, block: int = 10) -> list[dict]:
@@ -412,3 +435,17 @@ def dictionary_row(name: str, tau: int, n_train: int, closures: dict, op: dict, 
             "threshold": tau, "closures_declared": closures["declared"], "closures_false": closures["false"],
             "first_revisit_delay_frames": None if d is None else d * int(frame_step),
             "scored_on": f"{scored_on}; decisions only (no score): pair precision {op['precision']:.3f}, recall {op['recall']:.3f}"}
+
+
+def issue28_table(board: pd.DataFrame, dataset, frame_step: int) -> pd.DataFrame:
+    """Issue 28's targets for the named default (``seqmatch.DEFAULT_NAME``) on this board, one row
+    each: target, measured, required, met (``study.targets.issue28_targets``; SeqSLAM = the
+    published row). A dataset that is none of issue 28's gives one row saying so."""
+    try:
+        rows = goals.issue28_targets(board, str(dataset), seqmatch.DEFAULT_NAME, "SeqSLAM (published)",
+                                     seq_len=seqmatch.DEFAULT_KNOBS["seq_len"], frame_step=frame_step)
+    except ValueError as e:
+        rows = [{"target": "issue 28's targets", "measured": None, "required": None, "met": None,
+                 "note": f"not judged: {e}"}]
+    return pd.DataFrame(rows)
+

@@ -75,17 +75,20 @@ def _common(row, seq_len) -> list[dict]:
 
 
 def issue28_targets(rows, dataset: str, method: str = "greenloop-seq", seqslam: str = "SeqSLAM",
-                    seq_len=None) -> list[dict]:
+                    seq_len=None, frame_step=None) -> list[dict]:
     """Each issue-28 target of ``dataset`` for ``method``: a list of dicts target (text), measured
     (float, % or frames/s; None when the rows do not hold it), required (text) and met (bool; None
     when not measured). rows: the dataset's leaderboard rows (list of dicts or a DataFrame).
-    seq_len: the method's frames of sequence (needed for Nordland's "<= 10 frames")."""
+    seq_len: the method's frames of sequence (needed for Nordland's "<= 10 frames"); frame_step:
+    the rows' frame step (Nordland's targets are at its full rate, frame_step 1)."""
     rows, kind = _rows(rows), dataset_kind(dataset)
     lc, pr = _find(rows, method, "loop closure"), _find(rows, method, "place recognition")
     if kind == "nordland":
         ref = _find(rows, seqslam, "loop closure")
         r1 = _value(lc, "R@1_%")
-        out = [_judge("R@1 (%), loop closure", r1, ">= 95", lambda v: v >= 95.0),
+        out = [_judge("frame step of the rows (1 = Nordland's full rate)", None if frame_step is None else float(frame_step),
+                      "== 1", lambda v: v == 1),
+               _judge("R@1 (%), loop closure", r1, ">= 95", lambda v: v >= 95.0),
                _judge("frames of sequence", None if seq_len is None else float(seq_len), "<= 10", lambda v: v <= 10),
                _judge("R@100P (%), loop closure", _value(lc, "R@100P_%"), ">= 60", lambda v: v >= 60.0)]
         sr = _value(ref, "R@1_%")
