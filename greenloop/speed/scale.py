@@ -37,7 +37,7 @@ SIZES = (10_000, 100_000, 1_000_000)
 K = 10
 # (label, kind, [search settings]): one build per kind, searched at each setting
 METHODS = (("NumPy scan", "scan", [{}]), ("faiss flat", "flat", [{}]),
-           ("IVF", "ivf", [{"nprobe": 16}, {"nprobe": 64}]),
+           ("IVF", "ivf", [{"nprobe": 8}, {"nprobe": 16}, {"nprobe": 64}]),
            ("HNSW", "hnsw", [{"ef_search": 32}, {"ef_search": 128}]),
            ("SWP-RHLSH", "swp", [{}]), ("QDP-RHLSH", "qdp", [{}]))
 QUANTILES = (0.01, 0.1, 0.5, 0.9, 0.99)
