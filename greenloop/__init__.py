@@ -7,3 +7,6 @@ its builders), ``backbones`` (CNN ports and their weights), ``speed`` (the strea
 its benchmark), ``study`` (results, coverage, sweeps) and ``util`` (building blocks).
 docs/ARCHITECTURE.md draws the layout and what flows through it.
 """
+from greenloop.util.progress import log_to_terminal
+
+log_to_terminal()      # log lines in the terminal that runs make, never in a rendered notebook

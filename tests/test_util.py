@@ -1,5 +1,6 @@
 """greenloop.util: the one integer check (checks) and the one atomic file write / folder publish (files)."""
 import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -50,3 +51,19 @@ def test_publish_folder_replaces_a_folder_whole(tmp_path):
         assert files.publish_folder(tmp, dest) == dest
         assert (dest / "f").read_text() == content and not tmp.exists()
     assert sorted(x.name for x in tmp_path.iterdir()) == ["out"]       # the old one deleted
+
+
+def test_log_lines_go_to_the_terminal_not_the_notebook(tmp_path):
+    """In a kernel (papermill), TensorFlow's log lines land on the kernel's own stderr once greenloop
+    is imported, so the executed notebook has no output from them."""
+    import nbformat
+    import papermill
+    nb = nbformat.v4.new_notebook()
+    nb.cells = [nbformat.v4.new_code_cell("import greenloop\nimport tensorflow as tf\n"
+                                          "tf.get_logger().warning('a log line a reader must not scroll past')")]
+    src, out = tmp_path / "a.ipynb", tmp_path / "b.ipynb"
+    nbformat.write(nb, src)
+    papermill.execute_notebook(str(src), str(out), kernel_name="greenloop", progress_bar=False,
+                               cwd=str(Path(__file__).resolve().parents[1]))
+    outputs = nbformat.read(out, as_version=4).cells[0].outputs
+    assert not any("must not scroll past" in str(o) for o in outputs), outputs
