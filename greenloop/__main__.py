@@ -73,7 +73,7 @@ def _tuned_knobs(args) -> tuple[dict, list[str]]:
     origin = dict.fromkeys([*knobs, "exclude"], "default")
     desc = read_description(args.folder) if Path(args.folder).is_dir() else {}
     exclude_frames, tuned_step = 150, None       # exclude in ORIGINAL frames until the step is known
-    if not args.tuned and args.threshold is None:   # issue 28: the named default, its calibrated threshold
+    if not args.tuned and args.threshold is None:   # the named default, its calibrated threshold
         knobs.update(seqmatch.DEFAULT_KNOBS, threshold=seqmatch.DEFAULT_THRESHOLD)
         origin = dict(dict.fromkeys(knobs, f"default {seqmatch.DEFAULT_NAME}"), step="default",
                       exclude="default")

@@ -68,7 +68,7 @@ GRADIENT_SIZE = (128, 64)                  # "gradients": gray frame (width, hei
 GRADIENT_CELL, GRADIENT_BINS = 16, 8       # 16x16-pixel cells (4 x 8 of them), 8 unsigned bins -> 256-d
 _EPS = 1e-6
 
-# The named default configuration (issue 28): what `python -m greenloop detect --method
+# The named default configuration: what `python -m greenloop detect --method
 # greenloop-seq` runs without --tuned, and what the leaderboard's greenloop-seq row reports.
 DEFAULT_NAME = "greenloop-seq-grad"
 DEFAULT_KNOBS = dict(descriptor="gradients", seq_len=10, contrast_window=0, center_window=50,

@@ -222,10 +222,10 @@ def test_the_named_default_is_untuned_and_keeps_its_fixed_threshold():
     assert "fixed threshold" in lb.knob_text(k)
 
 
-def test_issue28_table_says_when_a_dataset_is_not_one_of_its_own():
+def test_targets_table_says_when_a_dataset_is_not_one_of_its_own():
     board = pd.DataFrame([{"method": "greenloop-seq-grad", "mode": "loop closure", "R@1_%": 50.0}])
-    t = lb.issue28_table(board, "data/my-indoor-walk", 1)
+    t = lb.targets_table(board, "data/my-indoor-walk", 1)
     assert len(t) == 1 and t.met.isna().all() and "not judged" in t.note.iloc[0]
-    t = lb.issue28_table(board, "data/nordland", 8)
+    t = lb.targets_table(board, "data/nordland", 8)
     step = t[t.target.str.startswith("frame step")].iloc[0]
     assert step.measured == 8 and step.met is False or step.met == False   # noqa: E712 (numpy bool)

@@ -431,7 +431,7 @@ EXCLUDING = [p for p in NOTEBOOKS if re.search(r'"exclude = \d+', p.read_text())
 @pytest.mark.parametrize("notebook", EXCLUDING, ids=[p.stem for p in EXCLUDING])
 def test_notebook_runs_on_a_sequence_whose_loops_lie_inside_the_default_window(
         notebook, tiny_near_loop_sequence, near_loop_results, monkeypatch, capsys):
-    """The issue's user sequence: revisits 100 frames apart, inside the default 150-frame window,
+    """A user's sequence: revisits 100 frames apart, inside the default 150-frame window,
     and no PARAMS for exclude; two traversals/ folders, ground truth by frame index from its
     sequence.yaml. As make does, greenloop.study.params prints the closest loop
     distance and the override, and passes exclude = 49 (half of it) before the notebook's

@@ -1,4 +1,4 @@
-"""greenloop-seq's trajectory search under speed changes and reverse revisits (issue 28), on a small
+"""greenloop-seq's trajectory search under speed changes and reverse revisits, on a small
 sequence the test makes: a route of N0 random-walk descriptors, then a revisit of its first REVISIT
 places (noisy re-observations) replayed at other speeds (frames dropped or repeated), with a stop,
 or driven the opposite way. Recall@1 over the revisit queries, correct within +-2 places."""

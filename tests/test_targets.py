@@ -1,10 +1,10 @@
-"""greenloop.study.targets: issue 28's targets judged from hand-made leaderboard rows."""
+"""greenloop.study.targets: the detector's targets judged from hand-made leaderboard rows."""
 import math
 
 import pandas as pd
 import pytest
 
-from greenloop.study.targets import dataset_kind, issue28_targets
+from greenloop.study.targets import dataset_kind, detector_targets
 
 
 def _met(out):
@@ -15,7 +15,7 @@ def test_nordland_targets_met_and_not_met():
     rows = [{"method": "greenloop-seq", "mode": "loop closure", "R@1_%": 96.0, "R@100P_%": 59.9, "fps_min": 919.0,
              "closures_declared": 100, "closures_false": 10},
             {"method": "SeqSLAM", "mode": "loop closure", "R@1_%": 96.5, "R@100P_%": 10.0}]
-    out = issue28_targets(rows, "data/nordland", seq_len=10)
+    out = detector_targets(rows, "data/nordland", seq_len=10)
     m = {r["target"]: r for r in out}
     assert m["R@1 (%), loop closure"]["met"] is True and m["R@1 (%), loop closure"]["measured"] == 96.0
     assert m["frames of sequence"]["met"] is True
@@ -24,8 +24,8 @@ def test_nordland_targets_met_and_not_met():
     assert m["frames/s (slowest repeat)"]["met"] is False                  # 919 < 920
     assert m["closure precision at the threshold (%)"]["measured"] == 90.0
     assert m["closure precision at the threshold (%)"]["met"] is True      # 90 of 100 right: exactly 90 %
-    assert {r["target"]: r for r in issue28_targets(rows, "nordland", seq_len=11)}["frames of sequence"]["met"] is False
-    step = {r["target"]: r for r in issue28_targets(rows, "nordland", seq_len=10, frame_step=8)}
+    assert {r["target"]: r for r in detector_targets(rows, "nordland", seq_len=11)}["frames of sequence"]["met"] is False
+    step = {r["target"]: r for r in detector_targets(rows, "nordland", seq_len=10, frame_step=8)}
     assert step["frame step of the rows (1 = Nordland's full rate)"]["met"] is False
     assert m["frame step of the rows (1 = Nordland's full rate)"]["met"] is None   # not given: not measured
 
@@ -34,7 +34,7 @@ def test_gardenspoint_reads_place_recognition_and_absent_values_are_not_measured
     rows = pd.DataFrame([{"method": "greenloop-seq", "mode": "loop closure", "R@1_%": 10.0, "R@100P_%": 5.0},
                          {"method": "greenloop-seq", "mode": "place recognition", "R@1_%": 94.0,
                           "R@100P_%": 72.0, "fps_min": math.nan}])
-    m = _met(issue28_targets(rows, "Gardens Point day_right->night_right"))
+    m = _met(detector_targets(rows, "Gardens Point day_right->night_right"))
     assert m["R@1"] is True and m["R@100P"] is True                        # the loop-closure 10 % is not read
     assert m["frames/s"] is None and m["closure precision at the threshold"] is None
 
@@ -43,10 +43,10 @@ def test_synthetic_highest_of_every_method_ignores_chance():
     rows = [{"method": "greenloop-seq", "mode": "loop closure", "R@1_%": 80.0, "AUC-PR_%": 70.0},
             {"method": "SeqSLAM", "mode": "loop closure", "R@1_%": 79.0, "AUC-PR_%": 71.0},
             {"method": "chance (random scores)", "mode": "loop closure", "R@1_%": 99.0, "AUC-PR_%": 99.0}]
-    out = issue28_targets(rows, "data/synthetic-greenhouse")
+    out = detector_targets(rows, "data/synthetic-greenhouse")
     assert [r["met"] for r in out[:2]] == [True, False]
     assert out[1]["required"] == "> 71.0"
-    missing = issue28_targets(rows[1:], "synthetic")                       # no greenloop-seq row
+    missing = detector_targets(rows[1:], "synthetic")                       # no greenloop-seq row
     assert all(r["met"] is None for r in missing)
 
 

@@ -437,15 +437,15 @@ def dictionary_row(name: str, tau: int, n_train: int, closures: dict, op: dict, 
             "scored_on": f"{scored_on}; decisions only (no score): pair precision {op['precision']:.3f}, recall {op['recall']:.3f}"}
 
 
-def issue28_table(board: pd.DataFrame, dataset, frame_step: int) -> pd.DataFrame:
-    """Issue 28's targets for the named default (``seqmatch.DEFAULT_NAME``) on this board, one row
-    each: target, measured, required, met (``study.targets.issue28_targets``; SeqSLAM = the
-    published row). A dataset that is none of issue 28's gives one row saying so."""
+def targets_table(board: pd.DataFrame, dataset, frame_step: int) -> pd.DataFrame:
+    """The detector's targets for the named default (``seqmatch.DEFAULT_NAME``) on this board, one row
+    each: target, measured, required, met (``study.targets.detector_targets``; SeqSLAM = the
+    published row). A dataset that is none of the targets' gives one row saying so."""
     try:
-        rows = goals.issue28_targets(board, str(dataset), seqmatch.DEFAULT_NAME, "SeqSLAM (published)",
+        rows = goals.detector_targets(board, str(dataset), seqmatch.DEFAULT_NAME, "SeqSLAM (published)",
                                      seq_len=seqmatch.DEFAULT_KNOBS["seq_len"], frame_step=frame_step)
     except ValueError as e:
-        rows = [{"target": "issue 28's targets", "measured": None, "required": None, "met": None,
+        rows = [{"target": "the detector's targets", "measured": None, "required": None, "met": None,
                  "note": f"not judged: {e}"}]
     return pd.DataFrame(rows)
 

@@ -1,4 +1,4 @@
-"""Issue 28's targets, each as met / not met with its measured value, from one dataset's leaderboard rows.
+"""The detector's targets, each as met / not met with its measured value, from one dataset's leaderboard rows.
 
 A leaderboard row is a dict (or a pandas DataFrame row) with at least ``method`` and ``mode``
 ("loop closure" / "place recognition") and the per-query metrics in percent, named as notebook 13
@@ -7,7 +7,7 @@ repeat, frames/s) and ``closures_declared`` / ``closures_false`` (at the operati
 Only what the rows hold is judged: a target whose value is absent is "not measured" (met None),
 never met.
 
-The targets (issue 28, evaluation part only, one configuration of greenloop-seq):
+The targets (evaluation part only, one configuration of greenloop-seq):
     nordland      R@1 >= 95 % with seq_len <= 10, R@100P >= 60 %, R@1 above the SeqSLAM row (loop closure)
     gardenspoint  R@1 >= 90 %, R@100P >= 50 % (place recognition: reference = the day traversal)
     synthetic     the highest R@1 and the highest AUC-PR of every method (loop closure, chance excluded)
@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["FPS_TARGET", "PRECISION_TARGET", "dataset_kind", "issue28_targets"]
+__all__ = ["FPS_TARGET", "PRECISION_TARGET", "dataset_kind", "detector_targets"]
 
 FPS_TARGET = 920.0            # frames/s per stream on 2 cores, descriptor included (the main paper's)
 PRECISION_TARGET = 90.0       # % closure precision at the one threshold
@@ -31,7 +31,7 @@ def dataset_kind(dataset: str) -> str:
     for key, kind in KINDS.items():
         if key in low:
             return kind
-    raise ValueError(f"dataset {dataset!r} is none of issue 28's datasets: its name must contain one of "
+    raise ValueError(f"dataset {dataset!r} is none of the datasets the detector targets name: its name must contain one of "
                      f"{sorted(KINDS)}")
 
 
@@ -74,7 +74,7 @@ def _common(row, seq_len) -> list[dict]:
     return out
 
 
-def issue28_targets(rows, dataset: str, method: str = "greenloop-seq", seqslam: str = "SeqSLAM",
+def detector_targets(rows, dataset: str, method: str = "greenloop-seq", seqslam: str = "SeqSLAM",
                     seq_len=None, frame_step=None) -> list[dict]:
     """Each issue-28 target of ``dataset`` for ``method``: a list of dicts target (text), measured
     (float, % or frames/s; None when the rows do not hold it), required (text) and met (bool; None
