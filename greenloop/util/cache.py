@@ -69,6 +69,15 @@ def cached(key: str, cache, fit, save, load, marker: str = "model.keras"):
         return result
 
 
+def is_cached(key: str, cache, marker: str = "model.keras") -> bool:
+    """Whether :func:`cached` would load ``key`` instead of fitting it (``<root>/<key>/<marker>``
+    exists; cache as in :func:`cached`, False: never)."""
+    if not cache:
+        return False
+    root = CACHE_DIR if cache is True else Path(cache)
+    return (root / key / marker).is_file()
+
+
 def cached_model(key: str, cache, fit, params: dict, arrays: str, compile: bool = True):
     """:func:`cached` for a trained Keras model (``cnn.train``, ``siamese.train``).
 
