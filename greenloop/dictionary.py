@@ -273,26 +273,6 @@ def choose_threshold(pred, reference_labels, gt, taus, tune, exclude: int = 150)
     return best["tau"], rows
 
 
-def tau_sweep(pred, reference_labels, gt, taus, exclude: int = 150) -> list[dict]:
-    """The detector scored at every threshold of a sweep (:func:`score_closures` per tau).
-
-    pred, reference_labels, gt, exclude: as in :func:`score_closures`; taus: thresholds (ints >= 1).
-    Returns one dict per tau: tau, true_events, false_events, true_frames, false_frames,
-    revisit_recall_% (revisit frames flagged true / revisit frames, in %, 1 decimal; 0 without
-    revisits), first_delay_frames (frames from the start of the first revisit run with a true
-    closure to that closure, None when none has one).
-    """
-    rows = []
-    for t in taus:
-        s = score_closures(pred, reference_labels, gt, t, exclude)
-        d = [x for x in s["delays"] if x is not None]
-        rows.append({"tau": t, "true_events": s["true_events"], "false_events": s["false_events"],
-                     "true_frames": s["true_frames"], "false_frames": s["false_frames"],
-                     "revisit_recall_%": round(100 * s["revisits_detected"] / max(1, s["revisit_frames"]), 1),
-                     "first_delay_frames": d[0] if d else None})
-    return rows
-
-
 def tune_and_score(pred, reference_labels, gt, taus, tune, score, paper_tau: int,
                    exclude: int = 150) -> tuple[list[dict], list[dict]]:
     """The dictionary's τ chosen on a tuning part and scored on a scoring part, beside the paper's τ.

@@ -908,27 +908,3 @@ def same_place_errors(frames, y_pred, labels, gt) -> int:
     gt = np.asarray(gt, dtype=bool)
     wrong = y_pred != labels[frames]
     return int(sum(gt[f, labels == c].any() for f, c in zip(frames[wrong], y_pred[wrong])))
-
-
-def spot_errors_per_seed(runs_by_split: dict, labels, gt=None) -> list[dict]:
-    """Misclassified test frames of every run, as notebook 03's per-seed table.
-
-    runs_by_split: {split name: ``cnn.run_seeds``' dicts (each with 'seed', 'split' {'test': (M,)
-    frame indices}, 'test_pred' (M,) predicted spots)}; labels: (N,) spot of every frame;
-    gt: (N, N) bool ground-truth loops, or None (then errors on a revisited place are not counted).
-    Returns one dict per run: split, seed, test_frames, misclassified, accuracy_% (2 decimals),
-    errors_on_adjacent_spot, adjacent_share_% (1 decimal, None without errors) (``spot_errors``),
-    errors_on_same_place_other_time (``same_place_errors``; None without gt).
-    """
-    labels = np.asarray(labels)
-    rows = []
-    for split, runs in runs_by_split.items():
-        for r in runs:
-            test = r["split"]["test"]
-            e = spot_errors(labels[test], r["test_pred"])
-            same = None if gt is None else same_place_errors(test, r["test_pred"], labels, gt)
-            rows.append({"split": split, "seed": r["seed"], "test_frames": e["frames"], "misclassified": e["misclassified"],
-                         "accuracy_%": round(100 * e["accuracy"], 2), "errors_on_adjacent_spot": e["adjacent"],
-                         "adjacent_share_%": None if e["adjacent_share"] is None else round(100 * e["adjacent_share"], 1),
-                         "errors_on_same_place_other_time": same})
-    return rows

@@ -181,18 +181,6 @@ def test_declared_pairs_and_query_closures():
         dictionary.declared_pairs(pred, ref[:-1], tau, ex)
 
 
-def test_tau_sweep_scores_every_threshold():
-    pred, ref, gt = _revisit_example()
-    rows = dictionary.tau_sweep(pred, ref, gt, [3, 12, 25], exclude=5)
-    assert list(rows[0]) == ["tau", "true_events", "false_events", "true_frames", "false_frames", "revisit_recall_%",
-                             "first_delay_frames"]
-    # tau 3: spots 0, 1, 2 fire on their first traversal (frames 2-9, 12-19 but 15, 21-29 flagged false);
-    # the revisit is flagged from its first frame
-    assert tuple(rows[0].values()) == (3, 0, 3, 10, 8 + 7 + 9, 100.0, 0)
-    assert tuple(rows[1].values()) == (12, 1, 0, 9, 0, 90.0, 1)        # spot 0 reaches 12 at frame 31
-    assert tuple(rows[2].values()) == (25, 0, 0, 0, 0, 0.0, None)      # no spot reaches 25
-
-
 def test_tune_and_score_chooses_tau_on_one_part_and_scores_it_on_the_other():
     # the stream of test_score_closures_on_a_query_mask_and_choose_threshold: frames 6..11 revisit 0..5
     n = 12

@@ -390,24 +390,6 @@ def test_same_place_errors():
     assert ev.same_place_errors(frames, pred, labels, gt) == 1
 
 
-def test_spot_errors_per_seed_tallies_every_run():
-    labels = np.array([0, 0, 1, 1, 2, 2])
-    gt = np.zeros((6, 6), bool)
-    gt[0, 5] = gt[5, 0] = True          # frame 5 (spot 2) revisits frame 0 (spot 0)
-    runs = {"random": [{"seed": 0, "split": {"test": np.array([5, 4, 2])}, "test_pred": np.array([0, 1, 1])},
-                       {"seed": 1, "split": {"test": np.array([5, 4, 2])}, "test_pred": np.array([2, 2, 1])}],
-            "blocked": [{"seed": 0, "split": {"test": np.array([0, 3])}, "test_pred": np.array([1, 1])}]}
-    rows = ev.spot_errors_per_seed(runs, labels, gt)
-    assert list(rows[0]) == ["split", "seed", "test_frames", "misclassified", "accuracy_%", "errors_on_adjacent_spot",
-                             "adjacent_share_%", "errors_on_same_place_other_time"]
-    assert [(r["split"], r["seed"]) for r in rows] == [("random", 0), ("random", 1), ("blocked", 0)]
-    # 5 -> spot 0 (two spots away, same place), 4 -> spot 1 (adjacent); 2 right
-    assert tuple(rows[0].values())[2:] == (3, 2, 33.33, 1, 50.0, 1)
-    assert tuple(rows[1].values())[2:] == (3, 0, 100.0, 0, None, 0)
-    assert tuple(rows[2].values())[2:] == (2, 1, 50.0, 1, 100.0, 0)
-    assert all(r["errors_on_same_place_other_time"] is None for r in ev.spot_errors_per_seed(runs, labels))
-
-
 # ------------------------------------------------------ the notebooks' protocol (07-11)
 def test_loop_scores_and_chance_level_on_the_hand_example():
     S, GT = hand_example()

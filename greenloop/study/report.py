@@ -44,13 +44,33 @@ def write_json(path, obj) -> Path:
     return write_atomic(path, lambda p: p.write_text(json.dumps(obj, indent=1, default=_default)))
 
 
-def write_table(df, path, title: str | None = None, note: str | None = None) -> Path:
+def rounded(df, decimals=None, columns=None):
+    """df with its float columns rounded where a table is written (experiments return unrounded
+    frames): every numeric column to ``decimals`` places (None: left as is), the columns named in
+    ``columns`` ({column: places}) to theirs instead. Returns a new DataFrame."""
+    columns = dict(columns or {})
+    unknown = [c for c in columns if c not in df.columns]
+    if unknown:
+        raise ValueError(f"columns {unknown} to round are not in the table {list(df.columns)}: name its columns")
+    places = {c: columns.get(c, decimals) for c in df.columns}
+    return df.round({c: n for c, n in places.items() if n is not None})
+
+
+def records(df, decimals=None, columns=None) -> list[dict]:
+    """df as JSON records (one dict per row), rounded as :func:`rounded` rounds a written table."""
+    return rounded(df, decimals, columns).to_dict("records")
+
+
+def write_table(df, path, title: str | None = None, note: str | None = None, decimals=None,
+                columns=None) -> Path:
     """Write a pandas DataFrame as ``<path>.csv`` and ``<path>.md`` (a titled Markdown table).
 
     path: file path without suffix, e.g. results/01_spot_grouping/table1.
+    decimals, columns: round the written numbers (:func:`rounded`); None writes them as they are.
     Returns the .md path.
     """
     path = Path(path)
+    df = rounded(df, decimals, columns)
     write_atomic(path.with_suffix(".csv"), lambda p: df.to_csv(p, index=False))
     md = (f"### {title}\n\n" if title else "") + df.to_markdown(index=False) + "\n"
     if note:

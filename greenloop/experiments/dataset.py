@@ -1,0 +1,98 @@
+"""Notebook 00's study: what a sequence holds (frames, path, ground-truth loops), beside the real
+GreenHouse trajectory where one is found.
+
+Every table comes back unrounded; ``study.report.write_table(..., decimals=...)`` rounds it.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from greenloop import groundtruth, spots
+from greenloop.datasets import sequence
+
+# where notebook 00 looks for the real GreenHouse trajectory when none is named
+REFERENCE_CANDIDATES = ("data/greenhouse/CameraTrajectory.txt", "../shared/greenhouse/CameraTrajectory.txt")
+
+
+def _row(name: str, frames: int, ground_truth, poses, gt) -> dict:
+    pairs = None if gt is None else groundtruth.loop_pairs(gt)
+    return {"sequence": name, "frames": frames, "ground_truth": ground_truth,
+            "path_m": None if poses is None else groundtruth.path_length(poses),
+            "loop_pairs": None if gt is None else len(pairs),
+            "revisit_frames": None if gt is None else int(groundtruth.revisit_frames(gt).sum()),
+            "first_revisit_frame": int(pairs[:, 1].min()) if gt is not None and len(pairs) else None}
+
+
+def find_reference(reference_trajectory: str = ""):
+    """The real GreenHouse CameraTrajectory.txt: reference_trajectory when given, else the first
+    of ``REFERENCE_CANDIDATES`` that exists (relative to the working directory); None if none is."""
+    candidates = [reference_trajectory] if reference_trajectory else REFERENCE_CANDIDATES
+    return next((Path(c) for c in candidates if c and Path(c).is_file()), None)
+
+
+def reference(path, loop_threshold: float = 0.5, exclude: int = 150):
+    """The real trajectory at ``path``: (row, poses, pairs): its summary row (as :func:`summary`'s),
+    its (M, 4, 4) poses and its (P, 2) Eq. 5 loop pairs (``groundtruth.loop_matrix``)."""
+    _, poses = sequence.read_trajectory(path)
+    gt = groundtruth.loop_matrix(poses, loop_threshold, exclude)
+    return _row(f"real GreenHouse ({path})", len(poses), "poses", poses, gt), poses, groundtruth.loop_pairs(gt)
+
+
+def summary(dataset, info: dict, poses, gt, reference_row: dict | None = None) -> pd.DataFrame:
+    """One row per sequence: the dataset's, then the real trajectory's when given.
+
+    dataset: the sequence folder; info: ``sequence.describe(dataset)``; poses: (N, 4, 4) or None;
+    gt: (N, N) bool loops or None; reference_row: :func:`reference`'s row or None. Columns:
+    sequence, frames, ground_truth, path_m (metres; None without poses), loop_pairs,
+    revisit_frames, first_revisit_frame (None without ground truth or loops).
+    """
+    rows = [_row(f"{info['kind']} ({dataset})", len(sequence.list_frames(dataset)), info["ground_truth"], poses, gt)]
+    return pd.DataFrame(rows + ([reference_row] if reference_row else []))
+
+
+def figure_trajectory(poses, gt, gt_metric, frames_per_spot: int, titles: tuple):
+    """Top view of the path with its loop pairs, the spots on the path, and the two ground truths
+    (Eq. 5 and the metric variant) as matrices. poses: (N, 4, 4); gt, gt_metric: (N, N) bool;
+    titles: the two matrices' titles. Returns the figure."""
+    import matplotlib.pyplot as plt
+
+    t, pairs = poses[:, :3, 3], groundtruth.loop_pairs(gt)
+    fig, (ax, axs, ax1, ax2) = plt.subplots(1, 4, figsize=(21, 5.2), gridspec_kw={"width_ratios": [1, 1, 1.3, 1.3]})
+    # top view: the camera moves in x (right) and z (forward); y points down
+    sc = ax.scatter(t[:, 0], t[:, 2], c=np.arange(len(t)), s=3, cmap="viridis")
+    for i, j in pairs[:: max(1, len(pairs) // 300)]:
+        ax.plot(t[[i, j], 0], t[[i, j], 2], color="crimson", lw=0.4, alpha=0.5)
+    ax.plot(*t[0, [0, 2]], "k^", ms=9, label="start"); ax.plot(*t[-1, [0, 2]], "ks", ms=8, label="end")
+    ax.set_aspect("equal"); ax.set_xlabel("x (m)"); ax.set_ylabel("z (m)"); ax.legend(loc="best")
+    ax.set_title(f"top view, {groundtruth.path_length(poses):.1f} m; red: loop pairs")
+    fig.colorbar(sc, ax=ax, label="frame (capture order)")
+    lab = spots.group(len(t), frames_per_spot)
+    axs.scatter(t[:, 0], t[:, 2], c=lab % 20, s=3, cmap="tab20", vmin=0, vmax=19)
+    for c in range(0, int(lab.max()) + 1, max(1, (int(lab.max()) + 1) // 12)):
+        m = np.flatnonzero(lab == c)[len(np.flatnonzero(lab == c)) // 2]
+        axs.annotate(str(c + 1), t[m, [0, 2]], fontsize=7, xytext=(3, 3), textcoords="offset points")
+    axs.set_aspect("equal"); axs.set_xlabel("x (m)"); axs.set_ylabel("z (m)")
+    axs.set_title(f"spots of {frames_per_spot} frames on the path (numbered from 1)", fontsize=10)
+    im1 = ax1.imshow(gt, cmap="gray_r", interpolation="nearest"); ax1.set_title(titles[0])
+    ax2.imshow(gt_metric, cmap="gray_r", interpolation="nearest"); ax2.set_title(titles[1])
+    fig.colorbar(im1, ax=[ax1, ax2], ticks=[0, 1], label="loop (1) or not (0)", shrink=0.8)
+    for a in (ax1, ax2):
+        a.set_xlabel("frame j (index)"); a.set_ylabel("frame i (index)")
+    return fig
+
+
+def figure_reference(poses, pairs):
+    """Top view of the real trajectory (poses (M, 4, 4)) with its loop pairs ((P, 2)) in red."""
+    import matplotlib.pyplot as plt
+
+    rt = poses[:, :3, 3]
+    fig, ax = plt.subplots(figsize=(6, 5))
+    ax.scatter(rt[:, 0], rt[:, 2], c=np.arange(len(rt)), s=3)
+    for i, j in pairs[:: max(1, len(pairs) // 300)]:
+        ax.plot(rt[[i, j], 0], rt[[i, j], 2], color="crimson", lw=0.4, alpha=0.5)
+    ax.set_aspect("equal"); ax.set_title(f"real GreenHouse path: {len(pairs)} loop pairs")
+    ax.set_xlabel("x (m)"); ax.set_ylabel("z (m)")
+    return fig

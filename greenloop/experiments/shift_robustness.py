@@ -1,0 +1,225 @@
+"""Notebook 04's study: the paper's CNN scored under pixel shifts (Table 3) and small rotations,
+on all frames (the paper's protocol) and on held-out frames only, with the border and
+full-resolution controls of ``greenloop.shift``.
+
+The scoring functions take the classifier's predict function as an argument
+(``predict(model, X) -> (M,) labels``, e.g. ``greenloop.cnn.predict``). Every table comes back
+unrounded; ``study.report.write_table(..., decimals=...)`` rounds it.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from greenloop import shift as sh
+
+# the frames a shift is scored on: the paper's (all frames, training frames included), and apart
+FRAME_SETS = ("all frames (the paper's protocol)", "training frames only", "held-out test frames only")
+# how control_scores' columns are written (decimals)
+CONTROL_DECIMALS = {"accuracy_mean_%": 2, "accuracy_std_%": 2, "changed_pixels_per_frame": 1,
+                    "mean_abs_change_per_pixel": 4}
+
+
+def accuracy(predict, model, X: np.ndarray, labels: np.ndarray) -> float:
+    """Accuracy (%) of ``predict(model, X)`` against labels: X (M, H, W, C), labels (M,) int."""
+    return 100 * float(np.mean(predict(model, X) == labels))
+
+
+def frame_sets(split: dict, n_frames: int) -> dict[str, np.ndarray]:
+    """The frame indices of each of ``FRAME_SETS`` for one run: all n_frames frames, the run's
+    split['train'] and its split['test'] (arrays of frame indices)."""
+    return dict(zip(FRAME_SETS, (np.arange(n_frames), split["train"], split["test"])))
+
+
+def paper_scores(predict, runs: list[dict], X1: np.ndarray, labels: np.ndarray) -> pd.DataFrame:
+    """The paper's Table 3 per run: unshifted test accuracy beside the shifted frames' accuracy.
+
+    predict: ``predict(model, X) -> labels``; runs: ``cnn.run_seeds``' dicts ('seed', 'model',
+    'test_accuracy' (fraction), 'split' {'test'}); X1: (N, H, W, C) every frame shifted (the
+    paper's 1 px right); labels: (N,) spots. Returns a DataFrame, one row per run: seed, original_test_%,
+    shift1_all_frames_% (all N frames, training frames included: the paper's protocol) and
+    shift1_test_only_% (the held-out test frames), in %.
+    """
+    return pd.DataFrame([{"seed": r["seed"], "original_test_%": 100 * r["test_accuracy"],
+             "shift1_all_frames_%": accuracy(predict, r["model"], X1, labels),
+             "shift1_test_only_%": accuracy(predict, r["model"], X1[r["split"]["test"]], labels[r["split"]["test"]])}
+                         for r in runs])
+
+
+def perturbation_grid(predict, runs: list[dict], X: np.ndarray, labels: np.ndarray, shifts, rotations) -> pd.DataFrame:
+    """Each run's held-out test frames under every shift and rotation.
+
+    predict: ``predict(model, X) -> labels``; runs: ``cnn.run_seeds``' dicts ('seed', 'model',
+    'split' {'test'}); X: (N, H, W, C) the CNN's inputs, labels: (N,) spots; shifts: pixels,
+    applied in each of ``DIRECTIONS`` (zero border); rotations: degrees, each both ways.
+    Returns a DataFrame, one row per run and perturbation: seed, perturbation ("shift <direction>" or
+    "rotation"), amount (pixels, or signed degrees), accuracy_% of the perturbed test frames.
+    """
+    grid = []
+    for r in runs:
+        test = r["split"]["test"]
+        for name, (ux, uy) in sh.DIRECTIONS.items():
+            for s in shifts:
+                grid.append({"seed": r["seed"], "perturbation": f"shift {name}", "amount": s,
+                             "accuracy_%": accuracy(predict, r["model"], sh.shift(X[test], dx=ux * s, dy=uy * s), labels[test])})
+        for deg in rotations:
+            for sign in (1, -1):
+                grid.append({"seed": r["seed"], "perturbation": "rotation", "amount": sign * deg,
+                             "accuracy_%": accuracy(predict, r["model"], sh.rotate(X[test], sign * deg), labels[test])})
+    return pd.DataFrame(grid)
+
+
+def perturbation_summary(grid):
+    """:func:`perturbation_grid`'s rows (a DataFrame) summarised over runs: one row per
+    perturbation and amount (sorted), with the mean, std and min of accuracy_%."""
+    return grid.groupby(["perturbation", "amount"])["accuracy_%"].agg(["mean", "std", "min"]).reset_index()
+
+
+def frame_set_scores(predict, runs: list[dict], X: np.ndarray, X1: np.ndarray, labels: np.ndarray):
+    """A shift scored on each of ``FRAME_SETS``: does including the training frames change it.
+
+    predict, runs: as in :func:`perturbation_grid`; X: (N, H, W, C) the CNN's inputs, X1: the
+    same frames shifted (the paper's 1 px right), labels: (N,) spots.
+    Returns (per_seed, summary), DataFrames: per_seed one row per run and frame set (seed,
+    frames, n_frames, unshifted_% and shift1_% accuracies, shift1_vs_test_only_points: shift1_%
+    minus the same run's on the held-out test frames); summary their means per frame set, in
+    ``FRAME_SETS`` order.
+    """
+    rows = []
+    for r in runs:
+        for part, idx in frame_sets(r["split"], len(X)).items():
+            rows.append({"seed": r["seed"], "frames": part, "n_frames": len(idx),
+                         "unshifted_%": accuracy(predict, r["model"], X[idx], labels[idx]),
+                         "shift1_%": accuracy(predict, r["model"], X1[idx], labels[idx])})
+    per_seed = pd.DataFrame(rows)
+    test_only = per_seed[per_seed.frames == FRAME_SETS[2]].set_index("seed")["shift1_%"]
+    per_seed["shift1_vs_test_only_points"] = per_seed["shift1_%"] - per_seed.seed.map(test_only)
+    summary = (per_seed.groupby("frames", sort=False)[["n_frames", "unshifted_%", "shift1_%", "shift1_vs_test_only_points"]]
+               .mean().reset_index())
+    return per_seed, summary
+
+
+def control_scores(predict, runs: list[dict], X: np.ndarray, full: np.ndarray, labels: np.ndarray, shifts):
+    """Every run's held-out test frames under each of ``CONTROLS``, for every shift and direction.
+
+    predict, runs: as in :func:`perturbation_grid`; X: (N, h, w, 1) the CNN's inputs, full:
+    (N, H, W, 1) uint8 the same frames at native resolution (:func:`control_inputs`); labels: (N,)
+    spots; shifts: pixels of X, in each of ``DIRECTIONS``.
+    Returns (controls, identical): controls a DataFrame, one row per direction, shift_px and input:
+    accuracy_mean_% and accuracy_std_% over runs, changed_pixels_per_frame
+    and mean_abs_change_per_pixel ([0, 1] intensity), means over all N frames
+    (:func:`pixel_change`); identical: one bool per direction and shift, True when the
+    full-resolution shift with a zero border gave exactly the paper's input.
+    """
+    acc_rows, change_rows, identical = [], [], []
+    for name, (ux, uy) in sh.DIRECTIONS.items():
+        for s in shifts:
+            inputs = sh.control_inputs(X, full, ux * s, uy * s)
+            identical.append(bool(np.array_equal(inputs[sh.CONTROLS[0]], inputs[sh.CONTROLS[2]])))
+            for control, Xs in inputs.items():
+                n, m = sh.pixel_change(X, Xs)
+                change_rows.append({"direction": name, "shift_px": s, "input": control,
+                                    "changed_pixels_per_frame": n.mean(), "mean_abs_change_per_pixel": m.mean()})
+                acc_rows += [{"seed": r["seed"], "direction": name, "shift_px": s, "input": control,
+                              "accuracy_%": accuracy(predict, r["model"], Xs[r["split"]["test"]], labels[r["split"]["test"]])}
+                             for r in runs]
+    keys = ["direction", "shift_px", "input"]
+    controls = (pd.DataFrame(acc_rows).groupby(keys, sort=False)["accuracy_%"]
+                .agg(**{"accuracy_mean_%": "mean", "accuracy_std_%": "std"})
+                .reset_index().merge(pd.DataFrame(change_rows), on=keys))
+    return controls, identical
+
+
+def controls_by_direction(controls, shift_px: int, no_shift: float):
+    """One shift of :func:`control_scores`' table: each input's mean accuracy (%) per direction,
+    and what the border costs.
+
+    controls: :func:`control_scores`' DataFrame; shift_px: the shift (pixels) to show; no_shift:
+    the accuracy (%) of the unshifted test frames. Returns a DataFrame, one row per direction in
+    ``DIRECTIONS`` order: direction, no shift, one column per ``CONTROLS`` input,
+    lost_to_shift_points (no shift - zero border) and won_back_by_replicate_points (replicate
+    border - zero border), in points.
+    """
+    wide = controls[controls.shift_px == shift_px].pivot(index="direction", columns="input", values="accuracy_mean_%")
+    wide = wide.loc[list(sh.DIRECTIONS), list(sh.CONTROLS)].reset_index()
+    wide.insert(1, "no shift", no_shift)
+    wide["lost_to_shift_points"] = wide["no shift"] - wide[sh.CONTROLS[0]]
+    wide["won_back_by_replicate_points"] = wide[sh.CONTROLS[1]] - wide[sh.CONTROLS[0]]
+    return wide
+
+
+def controls_statement(controls_1px: pd.DataFrame, shift_px: int) -> str:
+    """One sentence per direction of :func:`controls_by_direction`'s table: the points lost to
+    the shift with the zero border and what replicating the border changes (1 decimal)."""
+    return "\n".join(
+        f"{shift_px} px {row.direction}: {row.lost_to_shift_points:.1f} points lost with the zero border; replicating "
+        f"the border changes the accuracy by {row.won_back_by_replicate_points:+.1f} points, leaving it "
+        f"{row['no shift'] - row[sh.CONTROLS[1]]:.1f} points below no shift" for _, row in controls_1px.iterrows())
+
+
+def figure_examples(X: np.ndarray, k: int, degrees: float):
+    """Frame k of X (N, H, W, 1) as the CNN sees it: original, 1 px right with the zero and the
+    replicated border, rotated by ``degrees``; below each, |change| against the original."""
+    import matplotlib.pyplot as plt
+
+    one = X[k:k + 1]
+    examples = {"original": X[k], "1 px right, zero border (paper)": sh.shift(one, dx=1)[0],
+                "1 px right, replicate border": sh.shift(one, dx=1, border="replicate")[0],
+                f"{degrees}° rotation": sh.rotate(one, degrees)[0]}
+    fig, axes = plt.subplots(2, len(examples), figsize=(3.2 * len(examples), 6.4))
+    for col, (name, img) in enumerate(examples.items()):
+        axes[0, col].imshow(img[..., 0], cmap="gray", vmin=0, vmax=1); axes[0, col].set_title(name, fontsize=9)
+        d = axes[1, col].imshow(np.abs(img - X[k])[..., 0], cmap="magma", vmin=0, vmax=0.5)
+        axes[1, col].set_title("|change| vs original", fontsize=8)
+    for ax in axes.ravel():
+        ax.axis("off")
+    fig.colorbar(d, ax=axes[1].tolist(), shrink=0.8, label="absolute change (intensity in [0, 1])")
+    fig.suptitle(f"frame {k}: the perturbations of this notebook, as the CNN's input")
+    return fig
+
+
+def figure_grid(grid: pd.DataFrame, no_shift: float):
+    """:func:`perturbation_grid`'s accuracy (mean ± std over runs) against the shift per
+    direction (left) and the rotation (right); no_shift: the unshifted accuracy (%)."""
+    import matplotlib.pyplot as plt
+
+    fig, (a, b) = plt.subplots(1, 2, figsize=(13, 4.2))
+    for name in sh.DIRECTIONS:
+        g = grid[grid.perturbation == f"shift {name}"].groupby("amount")["accuracy_%"]
+        a.errorbar(g.mean().index, g.mean(), yerr=g.std().fillna(0), marker="o", capsize=3, label=name)
+    a.axhline(no_shift, color="k", ls=":", label="no shift")
+    a.set_xscale("log", base=2); a.set_xlabel("shift (pixels at 32x32)"); a.set_ylabel("test accuracy (%)")
+    a.set_title("held-out test frames, shifted")
+    a.legend(title="direction", loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=5)
+    g = grid[grid.perturbation == "rotation"].groupby("amount")["accuracy_%"]
+    b.errorbar(g.mean().index, g.mean(), yerr=g.std().fillna(0), marker="o", capsize=3)
+    b.set_xlabel("rotation (degrees)"); b.set_ylabel("test accuracy (%)"); b.set_title("held-out test frames, rotated")
+    return fig
+
+
+def figure_controls(controls: pd.DataFrame, shifts, no_shift: float, input_shape):
+    """:func:`control_scores`' table in four panels: accuracy of right shifts, of all four
+    directions, changed pixels and mean absolute change, against the shift, one line per input;
+    input_shape: (H, W) of the CNN input. Returns the figure."""
+    import matplotlib.pyplot as plt
+
+    H, W = input_shape
+    styles = {sh.CONTROLS[0]: dict(color="C0", marker="o"), sh.CONTROLS[1]: dict(color="C1", marker="s"),
+              sh.CONTROLS[2]: dict(color="C2", marker="o", ls="--", mfc="none", ms=10),
+              sh.CONTROLS[3]: dict(color="C3", marker="s", ls="--", mfc="none", ms=10)}
+    fig, axes = plt.subplots(2, 2, figsize=(12, 8.5))
+    panels = [("accuracy_mean_%", controls.direction == "right", "test accuracy (%)", "right shifts (the paper's direction)"),
+              ("accuracy_mean_%", slice(None), "test accuracy (%), mean of 4 directions", "all four directions"),
+              ("changed_pixels_per_frame", slice(None), f"changed pixels per frame (of {H * W})", "pixels changed"),
+              ("mean_abs_change_per_pixel", slice(None), "mean absolute change per pixel ([0, 1] intensity)", "how much they changed")]
+    for ax, (col, rows, ylabel, title) in zip(axes.flat, panels):
+        for control, style in styles.items():
+            g = controls[rows][controls[rows].input == control].groupby("shift_px")[col].mean()
+            ax.plot(g.index, g.values, label=control, **style)
+        if col.startswith("accuracy"):
+            ax.axhline(no_shift, color="k", ls=":", label="no shift")
+        ax.set_xscale("log", base=2); ax.set_xticks(shifts, [str(s) for s in shifts]); ax.minorticks_off()
+        ax.set_xlabel(f"shift (pixels at {W}x{H})"); ax.set_ylabel(ylabel); ax.set_title(title)
+    fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="lower center", ncol=5, bbox_to_anchor=(0.5, 0))
+    fig.tight_layout(rect=(0, 0.05, 1, 1))
+    return fig
