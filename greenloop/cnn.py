@@ -280,14 +280,66 @@ def _array_data_adapter():
     return ArrayDataAdapter
 
 
-def _logits(Xg, Kc, bc, Wd, bd, Wo, bo):
-    """Forward pass on gray frames Xg (n, H, W): (A (n, positions*f), Z2 (n, 68), Z3 (n, C))."""
-    A = kernels.conv_relu(Xg, Kc, bc)
-    Z2 = kernels.matmul(A, Wd)
+def paper_weights(model) -> list | None:
+    """The weights of the paper's CNN as C-contiguous float32 arrays in :func:`forward`'s order, or
+    None when ``model`` has another architecture (anything but Conv2D 3x3-style valid, stride 1,
+    ReLU, one input channel -> Flatten -> Dense ReLU -> Dense softmax/linear, all with biases).
+
+    Returns [K (kh, kw, f) the conv kernel of the single input channel, bc (f,), Wd
+    (positions*f, 68), bd (68,), Wo (68, C), bo (C,)].
+    """
+    from keras import layers
+
+    core = [l for l in model.layers if not isinstance(l, (layers.InputLayer, layers.Dropout))]
+    if [type(l).__name__ for l in core] != ["Conv2D", "Flatten", "Dense", "Dense"]:
+        return None
+    conv, _, dense, out = core
+    cfg, dcfg, ocfg = conv.get_config(), dense.get_config(), out.get_config()
+    if (cfg.get("padding") != "valid" or tuple(cfg.get("strides", (1, 1))) != (1, 1)
+            or tuple(cfg.get("dilation_rate", (1, 1))) != (1, 1) or cfg.get("activation") != "relu"
+            or cfg.get("data_format", "channels_last") != "channels_last" or not cfg.get("use_bias", True)
+            or cfg.get("groups", 1) != 1 or conv.get_weights()[0].shape[2] != 1):
+        return None
+    if dcfg.get("activation") != "relu" or not dcfg.get("use_bias", True):
+        return None
+    if ocfg.get("activation") not in ("softmax", "linear") or not ocfg.get("use_bias", True):
+        return None
+    wc, bc = conv.get_weights()
+    kh, kw, _, nf = wc.shape
+    f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
+    return [f32(wc.reshape(kh, kw, nf)), f32(bc), *map(f32, dense.get_weights()), *map(f32, out.get_weights())]
+
+
+def forward(Xg: np.ndarray, params, threads: bool = True):
+    """The paper's CNN in NumPy (the one forward pass of the fused trainer and of the streaming
+    detector's "numpy" backend).
+
+    Xg: (n, H, W) float32 gray frames, C-contiguous. params: :func:`paper_weights`' six arrays.
+    threads: the dense layer's 28800-long inner dimension split over the worker threads
+    (``kernels.matmul``, what the trainer uses) or one matmul on the calling thread (a single
+    frame: handing it to the threads costs more than it saves). The conv is the numba kernel
+    ``kernels.conv_relu``, or an im2col matmul where numba is not installed.
+    Returns (A (n, positions*f) relu(conv) flattened as Keras's Flatten, Z2 (n, 68) the dense
+    layer before its ReLU, Z3 (n, C) the logits; softmax is monotonic, so argmax(Z3) is the label).
+    """
+    Kc, bc, Wd, bd, Wo, bo = params
+    A = kernels.conv_relu(Xg, Kc, bc) if kernels.available() else _conv_relu_im2col(Xg, Kc, bc)
+    Z2 = kernels.matmul(A, Wd) if threads else A @ Wd
     Z2 += bd
     Z3 = np.maximum(Z2, 0) @ Wo
     Z3 += bo
     return A, Z2, Z3
+
+
+def _conv_relu_im2col(Xg, Kc, bc):
+    """``kernels.conv_relu`` without numba: a strided (n, Ho, Wo, kh, kw) view times the (kh*kw, f)
+    kernel, plus bias, ReLU; (n, Ho*Wo*f) float32 ordered (row, column, filter)."""
+    kh, kw, nf = Kc.shape
+    win = np.lib.stride_tricks.sliding_window_view(Xg, (kh, kw), axis=(1, 2))
+    a = win.reshape(-1, kh * kw) @ Kc.reshape(kh * kw, nf)
+    a += bc
+    np.maximum(a, 0, out=a)
+    return a.reshape(len(Xg), -1)
 
 
 def _softmax_loss(Z3, y):
@@ -320,7 +372,8 @@ def _fit_fused(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size
     keras.utils.set_random_seed(seed)
     model = build(n_classes, X.shape[1:], jit_compile=False)
     conv, dense, out = (model.get_layer(n) for n in ("conv", "dense", "output"))
-    params, ksize = _fused_params(conv, dense, out)
+    params = paper_weights(model)
+    ksize = params[0].shape[:2]
     state = {"params": params, "moments": [(np.zeros_like(p), np.zeros_like(p)) for p in params],
              "ksize": ksize, "step": 0, "dW": np.empty_like(params[2]),
              "dA": np.empty((batch_size, params[2].shape[0]), np.float32)}
@@ -359,23 +412,10 @@ def _fit_fused(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size
     return model, history, {"train": train_idx, "test": test_idx}
 
 
-def _fused_params(conv, dense, out):
-    """The Keras layers' weights as C-contiguous float32 arrays, in ``_logits``'s order.
-
-    Returns ([Kc (kh, kw, f) conv kernel of the single input channel, bc (f,), Wd (positions*f, 68),
-    bd (68,), Wo (68, C), bo (C,)], (kh, kw) kernel size in pixels).
-    """
-    wc, bc = conv.get_weights()
-    kh, kw, _, nf = wc.shape
-    f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
-    return [f32(wc.reshape(kh, kw, nf)), f32(bc), *map(f32, dense.get_weights()),
-            *map(f32, out.get_weights())], (kh, kw)
-
-
 def _fused_step(state: dict, Xg: np.ndarray, y: np.ndarray, idx: np.ndarray):
     """One Adam step on the batch ``idx`` (b,) of gray frames Xg (N, H, W) with labels y (N,).
 
-    state: 'params' (the six arrays of ``_fused_params``, updated in place), 'moments' (Adam's
+    state: 'params' (the six arrays of ``paper_weights``, updated in place), 'moments' (Adam's
     first and second moments, like params), 'ksize' (kh, kw), 'step' (Adam's step count,
     incremented), 'dW' (positions*f, 68) and 'dA' (batch_size, positions*f) float32 scratch.
     Returns (correct predictions, summed loss) of the batch before the step.
@@ -384,7 +424,7 @@ def _fused_step(state: dict, Xg: np.ndarray, y: np.ndarray, idx: np.ndarray):
     Kc, bc, Wd, bd, Wo, bo = params
     b = len(idx)
     Xb = Xg[idx]
-    A, Z2, Z3 = _logits(Xb, Kc, bc, Wd, bd, Wo, bo)
+    A, Z2, Z3 = forward(Xb, params)
     prob, loss = _softmax_loss(Z3, y[idx])
     correct = float((Z3.argmax(1) == y[idx]).sum())
     loss_sum = float(loss.sum())
@@ -407,11 +447,11 @@ def _fused_step(state: dict, Xg: np.ndarray, y: np.ndarray, idx: np.ndarray):
 
 def _fused_validate(params, Xg: np.ndarray, y: np.ndarray, test_idx: np.ndarray):
     """(summed loss, correct predictions) on the frames ``test_idx`` of Xg (N, H, W), in batches
-    of 256; params: the six arrays of ``_fused_params``."""
+    of 256; params: the six arrays of ``paper_weights``."""
     val_loss = val_correct = 0.0
     for s in range(0, len(test_idx), 256):
         idx = test_idx[s:s + 256]
-        Z3 = _logits(Xg[idx], *params)[2]
+        Z3 = forward(Xg[idx], params)[2]
         val_loss += float(_softmax_loss(Z3, y[idx])[1].sum())
         val_correct += float((Z3.argmax(1) == y[idx]).sum())
     return val_loss, val_correct

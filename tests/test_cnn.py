@@ -191,3 +191,26 @@ def test_revisit_predictions_scores_the_same_models_on_the_revisit(monkeypatch):
     assert rev["blocked", 4]["right"].tolist() == [True, False, True, False]
     with pytest.raises(ValueError, match="acceptable"):
         cnn.revisit_predictions(X_first, np.repeat([0, 1], 5), X_rev, acceptable[:3], [0])
+
+
+def test_forward_is_the_keras_model_and_one_conv_with_or_without_numba():
+    """cnn.forward (the fused trainer's and the stream's NumPy pass) gives Keras's logits; the
+    im2col conv used without numba equals the numba kernel; other architectures get no weights."""
+    import keras
+
+    from greenloop.util import kernels
+    keras.utils.set_random_seed(3)
+    model = cnn.build(5, (10, 12, 1), jit_compile=False)
+    X = np.random.default_rng(0).random((7, 10, 12, 1), dtype=np.float32)
+    params = cnn.paper_weights(model)
+    assert [a.shape for a in params] == [(3, 3, 32), (32,), (8 * 10 * 32, 68), (68,), (68, 5), (5,)]
+    A, Z2, Z3 = cnn.forward(np.ascontiguousarray(X[..., 0]), params)
+    keras_logits = keras.Model(model.inputs, model.get_layer("output").output)  # softmax of the logits
+    np.testing.assert_allclose(np.exp(Z3) / np.exp(Z3).sum(1, keepdims=True), keras_logits.predict(X, verbose=0), atol=1e-5)
+    assert np.array_equal(cnn.forward(np.ascontiguousarray(X[..., 0]), params, threads=False)[2].argmax(1), Z3.argmax(1))
+    im2col = cnn._conv_relu_im2col(np.ascontiguousarray(X[..., 0]), params[0], params[1])
+    if kernels.available():
+        np.testing.assert_allclose(im2col, kernels.conv_relu(np.ascontiguousarray(X[..., 0]), params[0], params[1]), atol=1e-5)
+    np.testing.assert_allclose(im2col, A, atol=1e-5)
+    other = keras.Sequential([keras.Input((10, 12, 1)), keras.layers.Flatten(), keras.layers.Dense(3)])
+    assert cnn.paper_weights(other) is None

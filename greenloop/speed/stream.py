@@ -18,10 +18,11 @@ Preprocessing and training data
 
 Backends (all give the labels of ``argmax(model.predict(x))``; checked by tests/test_stream.py
 and by ``python -m greenloop.speed.bench`` on every frame of the dataset)
-    "numpy":  the paper's CNN written out in NumPy with the weights pulled from the Keras model:
-              conv 3x3 as im2col (a strided view) x (9, 32) matmul, the 28800 x 68 dense layer as
-              one float32 matmul, argmax of the logits (softmax is monotonic). No extra dependency,
-              instant to build.
+    "numpy":  the paper's CNN written out in NumPy with the weights pulled from the Keras model
+              (``greenloop.cnn.forward``, the fused trainer's own forward pass): conv 3x3 + ReLU
+              (numba's ``kernels.conv_relu``, or im2col without numba), the 28800 x 68 dense layer
+              as float32 matmuls (split over the worker threads for a window), argmax of the logits
+              (softmax is monotonic). No extra dependency, instant to build.
     "tflite": TensorFlow's own TFLite interpreter (XNNPACK delegate), converted in memory from the
               Keras model or loaded from a ``.tflite`` file; one interpreter for single frames (2
               threads: the 7.8 MB dense layer is read from memory for every frame, and two cores
@@ -52,6 +53,7 @@ from pathlib import Path
 
 import numpy as np
 
+from greenloop import cnn
 from greenloop.datasets.sequence import preprocess_image
 from greenloop.dictionary import LoopDetector
 from greenloop.util.checks import positive_int
@@ -129,76 +131,22 @@ def _load_model(model):
                      f"got {type(model).__name__}")
 
 
-def _paper_weights(model) -> dict | None:
-    """Weights of the paper's CNN (Conv2D 3x3 ReLU valid stride 1 -> Flatten -> Dense ReLU ->
-    Dense softmax/linear) or None when ``model`` has another architecture."""
-    from keras import layers
-
-    core = [l for l in model.layers if not isinstance(l, (layers.InputLayer, layers.Dropout))]
-    kinds = [type(l).__name__ for l in core]
-    if kinds != ["Conv2D", "Flatten", "Dense", "Dense"]:
-        return None
-    conv, _, dense, out = core
-    cfg = conv.get_config()
-    if (cfg.get("padding") != "valid" or tuple(cfg.get("strides", (1, 1))) != (1, 1)
-            or tuple(cfg.get("dilation_rate", (1, 1))) != (1, 1) or cfg.get("activation") != "relu"
-            or cfg.get("data_format", "channels_last") != "channels_last" or not cfg.get("use_bias", True)
-            or cfg.get("groups", 1) != 1):
-        return None
-    if dense.get_config().get("activation") != "relu" or not dense.get_config().get("use_bias", True):
-        return None
-    if out.get_config().get("activation") not in ("softmax", "linear") or not out.get_config().get("use_bias", True):
-        return None
-    wc, bc = conv.get_weights()
-    wd, bd = dense.get_weights()
-    wo, bo = out.get_weights()
-    kh, kw, cin, nf = wc.shape
-    if cin != 1:
-        return None
-    f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
-    return {"wc": f32(wc.reshape(kh * kw, nf)), "bc": f32(bc), "k": (kh, kw),
-            "wd": f32(wd), "bd": f32(bd), "wo": f32(wo), "bo": f32(bo)}
-
-
 class _NumpyNet:
-    """The paper's CNN in NumPy. labels(X (N, H, W) float32) -> (N,) int64."""
+    """The paper's CNN in NumPy (``greenloop.cnn.forward``, the fused trainer's forward pass) on
+    one BLAS thread. params: ``cnn.paper_weights``' arrays; hw: (H, W) of the input.
+    labels(X (N, H, W) float32) -> (N,) int64."""
 
-    def __init__(self, w: dict, hw):
-        self.w = w
-        kh, kw = w["k"]
-        self.out_hw = (hw[0] - kh + 1, hw[1] - kw + 1)
-        n_pos = self.out_hw[0] * self.out_hw[1]
-        if n_pos * w["wc"].shape[1] != w["wd"].shape[0]:
-            raise ValueError(f"dense layer expects {w['wd'].shape[0]} inputs, conv gives "
-                             f"{n_pos * w['wc'].shape[1]}")
-        # preallocated buffers for the single-frame path
-        self._a1 = np.empty((n_pos, w["wc"].shape[1]), np.float32)
-        self._h1 = np.empty((1, w["wd"].shape[1]), np.float32)
+    def __init__(self, params: list, hw):
+        self.params = params
+        kh, kw, nf = params[0].shape
+        n_in = (hw[0] - kh + 1) * (hw[1] - kw + 1) * nf
+        if n_in != params[2].shape[0]:
+            raise ValueError(f"dense layer expects {params[2].shape[0]} inputs, conv gives {n_in}")
 
     def labels(self, X: np.ndarray) -> np.ndarray:
+        X = np.ascontiguousarray(X, dtype=np.float32)
         with one_blas_thread():
-            return self._labels(X)
-
-    def _labels(self, X: np.ndarray) -> np.ndarray:
-        w = self.w
-        n = X.shape[0]
-        kh, kw = w["k"]
-        win = np.lib.stride_tricks.sliding_window_view(X, (kh, kw), axis=(1, 2))  # (N, Ho, Wo, kh, kw)
-        cols = win.reshape(-1, kh * kw)
-        if n == 1:
-            a = np.matmul(cols, w["wc"], out=self._a1)
-            h = self._h1
-        else:
-            a = cols @ w["wc"]
-            h = None
-        a += w["bc"]
-        np.maximum(a, 0, out=a)
-        h = np.matmul(a.reshape(n, -1), w["wd"], out=h)
-        h += w["bd"]
-        np.maximum(h, 0, out=h)
-        z = h @ w["wo"]
-        z += w["bo"]
-        return z.argmax(1).astype(np.int64)
+            return cnn.forward(X, self.params, threads=len(X) > 1)[2].argmax(1).astype(np.int64)
 
 
 class _TFLiteNet:
@@ -338,7 +286,7 @@ class Detector:
             hw = shape[:2]
             out_classes = int(keras_model.output_shape[-1])
             if backend in ("auto", "numpy"):
-                w = _paper_weights(keras_model)
+                w = cnn.paper_weights(keras_model)
                 if w is None and backend == "numpy":
                     raise ValueError("backend='numpy' needs the paper's CNN (Conv2D 3x3 ReLU -> Flatten -> "
                                      "Dense ReLU -> Dense); use backend='tflite' or 'keras' for this model")
