@@ -414,3 +414,18 @@ def test_speed_claim_is_the_benchs_table(monkeypatch):
     assert asked == {"w": (210, {"numpy": "numpy", "tflite": "tflite"}, 20), "s": (50, 1000)} and shape == (6, 8, 3)
     assert table["window_speed-up"].tolist() == [1.0, 5.0, 4.0, 100.0]
     assert table.labels_equal.tolist() == ["210/210", "210/210", "209/210", ""] and set(timings) == {"windows", "single", "labels_equal"}
+
+
+# ------------------------------------------------------------ rounding where a table is written
+def test_write_table_rounds_only_what_it_is_asked_to(tmp_path):
+    df = pd.DataFrame({"name": ["a", "b"], "acc_%": [100 / 3, 12.346], "n": [3, 4], "s": [1.26, None]})
+    r = report.rounded(df, 2, {"s": 1})
+    assert r["acc_%"].tolist() == [33.33, 12.35] and r["s"].iloc[0] == 1.3 and np.isnan(r["s"].iloc[1])
+    assert report.rounded(df)["acc_%"].iloc[0] == 100 / 3 and df["acc_%"].iloc[0] == 100 / 3   # no copy rounded in place
+    assert report.rounded(df, columns={"acc_%": 0})["acc_%"].tolist() == [33.0, 12.0]
+    assert report.records(df, 1)[0] == {"name": "a", "acc_%": 33.3, "n": 3, "s": 1.3}
+    with pytest.raises(ValueError, match="not in the table"):
+        report.rounded(df, 2, {"missing": 1})
+    report.write_table(df, tmp_path / "t", decimals=1)
+    assert (tmp_path / "t.csv").read_text().splitlines()[1] == "a,33.3,3,1.3"
+    assert "33.3" in (tmp_path / "t.md").read_text() and "33.33" not in (tmp_path / "t.md").read_text()
