@@ -300,15 +300,15 @@ def _table6_rows(t: pd.DataFrame, ov: pd.DataFrame, paper6: dict, note: str, n_s
     rows = []
     for v, (ap_, sec, ra, rt, loss) in paper6.items():
         r = t.loc[v]
-        rows += [(f"{v}: average accuracy rate / AP (%)", ap_, round(r["AP_pairs_%"], 2),
-                  f"{note}; AP over scanned pairs, mean of {n_seeds} hyperplane seeds"),
+        rows += [(f"{v}: average accuracy rate / AP (%)", ap_, r["AP_pairs_%"],
+                  f"{note}; AP over scanned pairs, mean of {n_seeds} hyperplane seeds", 2),
                  (f"{v}: average matching time", f"{sec} s", f"{r['ms_per_query']:.3f} ms per query ({r['total_s']:.3f} s per sequence)",
                   f"the paper does not say per query or per sequence; {report.cpu_model()}")]
         if ra is not None:
-            rows += [(f"{v}: R_a accuracy change (%)", ra, round(r["R_a_%"], 2), "vs brute force"),
-                     (f"{v}: R_t time saved (%)", rt, round(r["R_t_%"], 2), "vs brute force; negative = slower"),
+            rows += [(f"{v}: R_a accuracy change (%)", ra, r["R_a_%"], "vs brute force", 2),
+                     (f"{v}: R_t time saved (%)", rt, r["R_t_%"], "vs brute force; negative = slower", 2),
                      (f"{v}: accuracy loss per 1 % time saved", loss,
-                      "no time saved" if not r["R_t_%"] > 0 else round(r["loss_per_1%_time"], 3), "-R_a / R_t"),
+                      "no time saved" if not r["R_t_%"] > 0 else r["loss_per_1%_time"], "-R_a / R_t", 3),
                      (f"{v}: PR curve overlaps brute force's up to recall", "~0.8 (Figure 7)" if v.startswith("SWP") else "~0.5 (Figure 7)",
                       ov.loc[v, "overlap_recall"], f"interpolated precision within {tol}; hyperplane seed {seed}")]
     return rows
@@ -323,8 +323,8 @@ def _scaling_rows(scaling: pd.DataFrame) -> list:
                      won if won is not None else f"never up to {int(scaling.stored.max()):,}",
                      f"make bench-scale, {int(scaling.dim.iloc[0])}-D augmented Nordland descriptors; beyond the paper"))
         rows.append((f"{m} at {int(scaling.stored.max()):,} stored frames: recall@1 vs the exact scan (%)", None,
-                     round(float(big.loc[m, "recall@1_%"]), 1),
-                     f"scans {big.loc[m, 'scanned_%']:.1f} % of the stored frames; make bench-scale"))
+                     float(big.loc[m, "recall@1_%"]),
+                     f"scans {big.loc[m, 'scanned_%']:.1f} % of the stored frames; make bench-scale", 1))
     return rows
 
 
