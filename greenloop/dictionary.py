@@ -12,9 +12,12 @@ other on random label streams.
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
-from greenloop.evaluate import closure_counts
+from greenloop import cnn, spots
+from greenloop.evaluate import closure_counts, operating_point
 from greenloop.groundtruth import far_in_time, revisit_frames
 from greenloop.util.checks import positive_int
 
@@ -330,3 +333,47 @@ def tune_and_score(pred, reference_labels, gt, taus, tune, score, paper_tau: int
                     "events": s["events"], "false_events": s["false_events"],
                     "first_delay_frames": next((d for d in s["delays"] if d is not None), None)})
     return out, curve
+
+
+# --------------------------------------------- the detector trained, run and scored (07, 13)
+class SpotDetector(NamedTuple):
+    """The main paper's detector of :func:`operating_points`. run: ``cnn.run_seeds``' record of
+    the spot CNN (model, seed, history, split, test_accuracy, test_pred). labels: (T,) int64 spot
+    of every frame (``spots.group``). pred: (T,) int64 spot the CNN predicts for every frame.
+    n_train: frames 0..n_train-1 it was trained on (split at random 80/20 by ``cnn.train``)."""
+    run: dict
+    labels: np.ndarray
+    pred: np.ndarray
+    n_train: int
+
+
+def operating_points(X, frames_per_spot: int, taus, frames, gt, exclude: int = 150, exclude_steps: int | None = None,
+                     n_train: int | None = None, queries=None, seed: int = 0, progress: bool = True,
+                     **train_kw) -> tuple[SpotDetector, list[dict]]:
+    """Train the spot CNN on the first frames, predict every frame, score the dictionary at each tau.
+
+    X: (T, H, W, C) every frame of the sequence in capture order (``sequence.load_frames``).
+    frames_per_spot: L. taus: thresholds (ints >= 1). frames: (M,) original indices of the
+    described frames, gt: (M, M) bool their ground truth; exclude: band in original frames (the
+    declared pairs, :func:`declared_pairs`), exclude_steps: the same band in steps of ``frames``
+    (scoring; default exclude). n_train: train on frames 0..n_train-1 only (e.g. the frames
+    before an evaluation part; default every frame). queries: optional (M,) bool mask of the
+    scored queries. seed, progress, train_kw (epochs, batch_size, ...): ``cnn.run_seeds``.
+    Returns (detector, points): one dict per tau with tau, flagged_frames (frames flagged over the
+    whole stream), closures (:func:`query_closures`) and op (``evaluate.operating_point`` of the
+    declared pairs among the described frames).
+    """
+    X = np.asarray(X)
+    n_train = len(X) if n_train is None else positive_int("n_train", n_train, 1, len(X), unit="frames")
+    y = spots.group(len(X), frames_per_spot)
+    run_ = cnn.run_seeds(X[:n_train], y[:n_train], [seed], progress=progress, **train_kw)[0]
+    pred = cnn.predict(run_["model"], X)
+    f = np.asarray(frames)
+    ex = exclude if exclude_steps is None else exclude_steps
+    points = []
+    for tau in taus:
+        D = declared_pairs(pred, y, tau, exclude)[np.ix_(f, f)]
+        points.append({"tau": tau, "flagged_frames": int(run(pred, int(max(y.max(), pred.max()) + 1), tau).sum()),
+                       "closures": query_closures(D, gt, queries=queries), "op": operating_point(D, gt, ex, queries=queries)})
+    return SpotDetector(run_, y, pred, n_train), points
+
