@@ -121,7 +121,7 @@ def test_dictionary_scores_is_tune_and_score_on_each_model_on_the_honest_split(m
     truth = (np.arange(120) % 60) // 10
     preds = {0: truth, 1: np.where(np.arange(120) % 3 == 0, 5 - truth, truth)}
     monkeypatch.setattr(cnn, "predict", lambda model, X: preds[model])
-    tuned = rp.dictionary_scores(t, [(7, 0), (8, 1)], [5, 10, 15, 20], 0.5, 10, 10, 5)
+    tuned = rp.dictionary_scores(t, [{"seed": 7, "model": 0}, {"seed": 8, "model": 1}], [5, 10, 15, 20], 0.5, 10, 10, 5)
     tune, score, note = evaluate.honest_split(120, 0.5, t.GT, 10)
     assert note is None and tuned.note is None and tuned.scored == "scoring part"
     assert tuned.tau_paper == dictionary.threshold(10, 0.1, 10)["tau"] == 20
@@ -140,7 +140,7 @@ def test_dictionary_scores_is_tune_and_score_on_each_model_on_the_honest_split(m
 def test_dictionary_scores_without_an_honest_split_scores_the_papers_tau_on_every_frame(monkeypatch):
     t = _traversal(n=70, first=62, L=10)          # 8 revisit frames, all within L = 10 of each other
     monkeypatch.setattr(cnn, "predict", lambda model, X: (np.arange(70) % 62) // 10 % 6)
-    tuned = rp.dictionary_scores(t, [(0, None)], [5, 10], 0.5, 10, 10, 5)
+    tuned = rp.dictionary_scores(t, [{"seed": 0, "model": None}], [5, 10], 0.5, 10, 10, 5)
     assert tuned.note.startswith("**No honest tuning/evaluation split:**") and "τ chosen on a tuning part" in tuned.note
     assert tuned.scored == "whole sequence, no split" and tuned.text == ""
     assert tuned.table.tau_rule.tolist() == ["paper: L + Δ, every frame (no honest split)"]

@@ -158,12 +158,13 @@ def tune_and_score(pred, reference_labels, gt, taus, tune, score, paper_tau: int
     return out, curve
 
 
-def dictionary_scores(t: FirstTraversal, models, tau_list, tune_fraction: float, frames_per_spot: int,
+def dictionary_scores(t: FirstTraversal, runs, tau_list, tune_fraction: float, frames_per_spot: int,
                       margin: int, exclude: int) -> Tuned:
     """The dictionary table: over the whole sequence, on each model's predictions, τ chosen on a
     tuning part of the revisits and scored on the other part, beside the paper's τ = L + Δ.
 
-    t: :func:`first_traversal`. models: [(seed, trained CNN)] (the random-split runs). tau_list:
+    t: :func:`first_traversal`. runs: ``cnn.run_seeds``' list (dicts with seed and model; the
+    random-split runs in notebook 12). tau_list:
     candidate τ; tune_fraction: share of the revisit frames in the tuning part
     (``evaluate.honest_split`` with a gap of frames_per_spot frames); margin: the paper's Δ;
     exclude: frames. Frames after the first traversal belong to no spot. Where no honest split
@@ -176,10 +177,10 @@ def dictionary_scores(t: FirstTraversal, models, tau_list, tune_fraction: float,
     ref = np.r_[t.y, -np.ones(N - t.n_ref, dtype=np.int64)]
     tau_paper = dictionary.threshold(frames_per_spot, 0.1, margin)["tau"]
     rows, curve = [], []
-    for seed, model in models:
-        rules, c = tune_and_score(cnn.predict(model, t.X), ref, t.GT, tau_list, tune, score, tau_paper, exclude)
-        rows += [{"seed": seed, **row} for row in rules]
-        curve += [{"seed": seed, **row} for row in c]
+    for r in runs:
+        rules, c = tune_and_score(cnn.predict(r["model"], t.X), ref, t.GT, tau_list, tune, score, tau_paper, exclude)
+        rows += [{"seed": r["seed"], **row} for row in rules]
+        curve += [{"seed": r["seed"], **row} for row in c]
     text = "" if note else (f"tuning part: frames < {int(np.flatnonzero(tune)[-1]) + 1}; scoring part: frames >= "
                             f"{int(np.flatnonzero(score)[0])} ({int((score & np.tril(t.GT, -1).any(1)).sum())} revisit frames)")
     return Tuned(pd.DataFrame(rows), pd.DataFrame(curve), tau_paper, note,
