@@ -182,7 +182,8 @@ def dictionary_scores(t: FirstTraversal, runs, tau_list, tune_fraction: float, f
         rows += [{"seed": r["seed"], **row} for row in rules]
         curve += [{"seed": r["seed"], **row} for row in c]
     text = "" if note else (f"tuning part: frames < {int(np.flatnonzero(tune)[-1]) + 1}; scoring part: frames >= "
-                            f"{int(np.flatnonzero(score)[0])} ({int((score & np.tril(t.GT, -1).any(1)).sum())} revisit frames)")
+                            f"{int(np.flatnonzero(score)[0])} ({int((score & np.tril(t.GT, -1).any(1)).sum())} "
+                            f"revisit frames)")
     return Tuned(pd.DataFrame(rows), pd.DataFrame(curve), tau_paper, note,
                  "scoring part" if note is None else "whole sequence, no split", text)
 
@@ -198,19 +199,22 @@ def paper_vs_run(per_seed: pd.DataFrame, tuned: Tuned, frames_per_spot: int) -> 
     d = tuned.table
     chosen, paper = d[d.tau_rule.str.startswith("chosen")], d[~d.tau_rule.str.startswith("chosen")]
     split = tuned.note is None
+    acc = "in_traversal_test_acc_%"
     return report.paper_vs_run([
-        (f"test accuracy, random 80/20 split, L = {frames_per_spot} (%)", 98, _over_seeds(per_seed, "random", "in_traversal_test_acc_%"),
+        (f"test accuracy, random 80/20 split, L = {frames_per_spot} (%)", 98, _over_seeds(per_seed, "random", acc),
          "paper: all frames of the real GreenHouse set; here the first traversal only"),
-        ("test accuracy, blocked split (%)", None, _over_seeds(per_seed, "blocked", "in_traversal_test_acc_%"),
+        ("test accuracy, blocked split (%)", None, _over_seeds(per_seed, "blocked", acc),
          "beyond the paper: no near-duplicate neighbour in training"),
         ("revisit accuracy, random-split models (%)", None, _over_seeds(per_seed, "random", "revisit_acc_%"),
          "beyond the paper: frames never trained on, a real return to the place"),
-        ("revisit accuracy, blocked-split models (%)", None, _over_seeds(per_seed, "blocked", "revisit_acc_%"), "beyond the paper"),
-        ("dictionary τ", 70, f"chosen on the tuning part: {sorted(chosen.tau.unique().tolist())}" if split else NOT_AVAILABLE,
+        ("revisit accuracy, blocked-split models (%)", None, _over_seeds(per_seed, "blocked", "revisit_acc_%"),
+         "beyond the paper"),
+        ("dictionary τ", 70,
+         f"chosen on the tuning part: {sorted(chosen.tau.unique().tolist())}" if split else NOT_AVAILABLE,
          "paper: L + Δ = 60 + 10, argued from accuracy, never scored"),
         ("dictionary precision / recall on the scoring part, chosen τ", None,
-         f"{chosen.precision.mean():.3f} / {chosen.recall.mean():.3f} (mean of {len(chosen)} seeds)" if split else NOT_AVAILABLE,
-         "frame level"),
+         f"{chosen.precision.mean():.3f} / {chosen.recall.mean():.3f} (mean of {len(chosen)} seeds)" if split
+         else NOT_AVAILABLE, "frame level"),
         (f"dictionary precision / recall on the {tuned.scored}, τ = {tuned.tau_paper}", None,
          f"{paper.precision.mean():.3f} / {paper.recall.mean():.3f} (mean of {len(paper)} seeds)", "frame level"),
     ])
@@ -224,7 +228,8 @@ def figure_accuracy(per_seed: pd.DataFrame, runs, revisit, queries, frames_per_s
 
     fig, axes = plt.subplots(1, 2, figsize=(13, 4.2), gridspec_kw={"width_ratios": [1, 2]})
     ax = axes[0]
-    for k, (split, col) in enumerate([(s, c) for s in ("random", "blocked") for c in ("in_traversal_test_acc_%", "revisit_acc_%")]):
+    cols = [(s, c) for s in ("random", "blocked") for c in ("in_traversal_test_acc_%", "revisit_acc_%")]
+    for k, (split, col) in enumerate(cols):
         v = per_seed[per_seed.split == split][col]
         ax.scatter(np.full(len(v), k), v, color="C0" if col.startswith("in") else "C3", zorder=3)
         ax.hlines(v.median(), k - 0.3, k + 0.3, color="k", lw=1.5)
@@ -237,8 +242,10 @@ def figure_accuracy(per_seed: pd.DataFrame, runs, revisit, queries, frames_per_s
     for split, ls in (("random", "-"), ("blocked", "--")):
         for r in runs[split]:
             ok = revisit[split, r["seed"]]["right"].astype(float)
-            ax.plot(queries, 100 * np.convolve(ok, np.ones(win) / win, mode="same"), ls=ls, lw=1, label=f"{split}, seed {r['seed']}")
-    ax.set_xlabel("revisit frame (index in the sequence)"); ax.set_ylabel(f"revisit accuracy (%), running mean of {win} frames")
+            ax.plot(queries, 100 * np.convolve(ok, np.ones(win) / win, mode="same"), ls=ls, lw=1,
+                    label=f"{split}, seed {r['seed']}")
+    ax.set_xlabel("revisit frame (index in the sequence)")
+    ax.set_ylabel(f"revisit accuracy (%), running mean of {win} frames")
     ax.set_ylim(0, 102); ax.grid(alpha=0.3); ax.legend(fontsize=7, ncol=2, loc="lower left")
     ax.set_title("where along the revisit the places are recognised", fontsize=10)
     fig.tight_layout()
@@ -260,9 +267,10 @@ def figure_examples(dataset, t: FirstTraversal, pred, right, examples: int, seed
     import matplotlib.pyplot as plt
 
     paths = sequence.list_frames(dataset)
-    ok, wrong = np.flatnonzero(right), np.flatnonzero(~right)
-    pick = [(q, True) for q in ok[np.linspace(0, len(ok) - 1, min(examples, len(ok))).astype(int)]] if len(ok) else []
-    pick += [(q, False) for q in wrong[np.linspace(0, len(wrong) - 1, min(examples, len(wrong))).astype(int)]] if len(wrong) else []
+    pick = []
+    for good, idx in ((True, np.flatnonzero(right)), (False, np.flatnonzero(~right))):    # spread along the revisit
+        if len(idx):
+            pick += [(q, good) for q in idx[np.linspace(0, len(idx) - 1, min(examples, len(idx))).astype(int)]]
     if not pick:
         return None
     fig, axes = plt.subplots(len(pick), 3, figsize=(8, 2.1 * len(pick)), squeeze=False)
@@ -272,7 +280,8 @@ def figure_examples(dataset, t: FirstTraversal, pred, right, examples: int, seed
         named = int(np.flatnonzero(t.y == c)[len(np.flatnonzero(t.y == c)) // 2])
         for ax, (i, title) in zip(row, [(f, f"revisit frame {f}"), (mate, f"its partner {mate} (spot {t.y[mate]})"),
                                          (named, f"named spot {c} (frame {named}) {'right' if good else 'WRONG'}")]):
-            ax.imshow(_rgb(paths[i])); ax.set_title(title, fontsize=8, color="k" if good or i != named else "C3"); ax.axis("off")
+            ax.imshow(_rgb(paths[i])); ax.axis("off")
+            ax.set_title(title, fontsize=8, color="k" if good or i != named else "C3")
     fig.suptitle(f"seed {seed}, random-split model: revisit frames named right (top) and wrong (bottom)", fontsize=9)
     fig.tight_layout(rect=(0, 0, 1, 0.97))
     return fig

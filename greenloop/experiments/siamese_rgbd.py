@@ -207,13 +207,14 @@ def fusions(s: Setup, sup: Runs, fusion_supervision: str, mid_layers, merge: str
     Without depth the table is three "skipped" rows and nothing is trained.
     """
     if not s.has_depth:
-        return Runs(pd.DataFrame([{"descriptor": f, "weights": "trained here", "label": f"scnn {f} fusion (trained here)",
-                                   "status": "skipped: the dataset has no depth/ folder"}
-                                  for f in ("early", "mid-level", "late")]), {}, {}, {}, [])
+        rows = [{"descriptor": f, "weights": "trained here", "label": f"scnn {f} fusion (trained here)",
+                 "status": "skipped: the dataset has no depth/ folder"} for f in ("early", "mid-level", "late")]
+        return Runs(pd.DataFrame(rows), {}, {}, {}, [])
     kw = {"supervision": fusion_supervision}
-    specs = ([("early", "scnn early fusion", dict(kw, fusion="early"))]
-             + [(f"mid {layer}", f"scnn mid-level fusion at {layer}", dict(kw, fusion="mid", fusion_layer=layer, merge=merge))
-                for layer in mid_layers] + [("late", "scnn late fusion", dict(kw, fusion="late"))])
+    mids = [(f"mid {layer}", f"scnn mid-level fusion at {layer}",
+             dict(kw, fusion="mid", fusion_layer=layer, merge=merge)) for layer in mid_layers]
+    specs = ([("early", "scnn early fusion", dict(kw, fusion="early"))] + mids
+             + [("late", "scnn late fusion", dict(kw, fusion="late"))])
     runs = _fit_all(s, specs, train_kw, s.X)
     rows = runs.table.to_dict("records")
     ref = sup.table[sup.table.supervision == fusion_supervision]
@@ -258,8 +259,9 @@ def timing(s: Setup, sup: Runs, fus: Runs, dataset, fusion_supervision: str, mid
     with warnings.catch_warnings():    # tiny frames may hold fewer SIFT descriptors than words: timing only
         warnings.simplefilter("ignore", UserWarning)
         t_sift = features.extract(native, "sift_bovw", progress=False, return_info=True)[1].seconds_per_image
-    rows.append({"descriptor": "sift_bovw (SIFT + 500-word quantisation)", "weights": "none", "label": "sift_bovw (none)",
-                 "input": f"{s.info['width']}x{s.info['height']}", "s_per_image_batched": t_sift,
+    rows.append({"descriptor": "sift_bovw (SIFT + 500-word quantisation)", "weights": "none",
+                 "label": "sift_bovw (none)", "input": f"{s.info['width']}x{s.info['height']}",
+                 "s_per_image_batched": t_sift,
                  "s_per_image_one_at_a_time": t_sift})
     return pd.DataFrame(rows), len(native)
 
@@ -281,9 +283,9 @@ def _supervision_rows(s: Setup, sup: Runs, supervisions) -> list:
 
 def _fusion_rows(s: Setup, fus: Runs, mid_layers, merge: str, dataset) -> tuple[list, list]:
     if not s.has_depth:
-        return ([("RGB-D fusion (Figure 9, Table 2)", "late fusion best", "skipped", f"{dataset} has no depth/ folder")],
-                [(f"AP, mid-level fusion at {layer}", PAPER_T2.get(layer), "skipped", f"{dataset} has no depth/ folder")
-                 for layer in mid_layers])
+        why = f"{dataset} has no depth/ folder"
+        return ([("RGB-D fusion (Figure 9, Table 2)", "late fusion best", "skipped", why)],
+                [(f"AP, mid-level fusion at {layer}", PAPER_T2.get(layer), "skipped", why) for layer in mid_layers])
     t = fus.table
     mid = t[t.fusion == "mid"].set_index("layer")
     t2 = [(f"AP, mid-level fusion at {layer}", PAPER_T2.get(layer), round(mid.loc[layer, "AP_%"] / 100, 4),
@@ -294,8 +296,8 @@ def _fusion_rows(s: Setup, fus: Runs, mid_layers, merge: str, dataset) -> tuple[
     cmp = [("best mid-level layer (Table 2)", "conv2 (AP 0.8111)", UNRESOLVED,
             f"highest AP of this one run at {top} ({mid.loc[top, 'AP_%'] / 100:.4f}); no spread over seeds; not tuned"),
            ("best fusion", "late", UNRESOLVED,
-            f"early {fz.loc['early', 'AP_%']:.2f} %, highest mid {mid.loc[top, 'AP_%']:.2f} %, late {fz.loc['late', 'AP_%']:.2f} %"
-            f"; one seed each"),
+            f"early {fz.loc['early', 'AP_%']:.2f} %, highest mid {mid.loc[top, 'AP_%']:.2f} %, "
+            f"late {fz.loc['late', 'AP_%']:.2f} %; one seed each"),
            ("precision at 82 % recall, late fusion", 0.92,
             f"{evaluate.precision_at_recall(fus.sims['late'], s.GT, 0.82, s.ex, queries=s.held):.3f}",
             "NYU vs the held-out part here"),
@@ -307,15 +309,19 @@ def _fusion_rows(s: Setup, fus: Runs, mid_layers, merge: str, dataset) -> tuple[
 def _timing_rows(tim: pd.DataFrame) -> list:
     tt = tim.set_index("descriptor")
     cpu = report.cpu_model()
-    rows = [(f"extraction time per image, CPU (s): {d}", PAPER_T3["scnn"][0] if d.startswith("scnn") else PAPER_T3["bovw"],
-             f"{tt.loc[d, 's_per_image_one_at_a_time']:.5f} one at a time; {tt.loc[d, 's_per_image_batched']:.5f} batched",
+    rows = [(f"extraction time per image, CPU (s): {d}",
+             PAPER_T3["scnn"][0] if d.startswith("scnn") else PAPER_T3["bovw"],
+             f"{tt.loc[d, 's_per_image_one_at_a_time']:.5f} one at a time; "
+             f"{tt.loc[d, 's_per_image_batched']:.5f} batched",
              f"{tt.loc[d, 'label']}; input {tt.loc[d, 'input']}; {cpu}"
              + ("; paper: 227x227 AlexNet-size SCNN, Caffe" if d.startswith("scnn") else "; paper: BoVW, Matlab"))
             for d in tt.index]
-    return rows + [("extraction time per image, GPU (s): SCNN", PAPER_T3["scnn"][1], "not measured", "no GPU on this machine"),
+    return rows + [("extraction time per image, GPU (s): SCNN", PAPER_T3["scnn"][1], "not measured",
+                    "no GPU on this machine"),
                    ("extraction time per image, CPU (s): CNN (AlexNet)", PAPER_T3["cnn"][0], "not run",
                     "no AlexNet with Places weights here"),
-                   ("extraction time per image, CPU (s): GIST", PAPER_T3["gist"], "not run", "GIST is not in greenloop.features")]
+                   ("extraction time per image, CPU (s): GIST", PAPER_T3["gist"], "not run",
+                    "GIST is not in greenloop.features")]
 
 
 def paper_vs_run(s: Setup, sup: Runs, fus: Runs, tim: pd.DataFrame, supervisions, mid_layers, merge: str,
@@ -333,9 +339,9 @@ def note(s: Setup, frame_step: int, dataset) -> str:
     f, held, train = s.frames, s.held, s.train
     return (f"AP = sklearn step-wise average precision over pairs > {s.ex} steps ({s.ex * frame_step} original frames) "
             f"apart whose later frame is in the held-out part ({int(held.sum())} frames from frame {f[held][0]}); "
-            f"similarity = -L2 distance of the fc7 descriptors; {len(f)} frames (frame_step {frame_step}) of {dataset}; "
-            f"weights: 'trained here' = trained in this run on the training part (frames {f[train][0]}..{f[train][-1]}), "
-            f"'random init' = untrained; chance AP {100 * s.chance:.2f} %.")
+            f"similarity = -L2 distance of the fc7 descriptors; {len(f)} frames (frame_step {frame_step}) of "
+            f"{dataset}; weights: 'trained here' = trained in this run on the training part (frames "
+            f"{f[train][0]}..{f[train][-1]}), 'random init' = untrained; chance AP {100 * s.chance:.2f} %.")
 
 
 def summary(s: Setup, sup_table, fusion_table, timing_table, frame_step: int, trained) -> dict:
@@ -425,7 +431,8 @@ def figure_training_loss(sup: Runs, fus: Runs, fusion_supervision: str, has_dept
     axes[1].set_title(f"RGB-D networks ({fusion_supervision}): training loss per epoch" if has_depth
                       else "RGB-D networks: skipped (no depth/)", fontsize=10)
     for ax in axes:
-        ax.set_xlabel("epoch"); ax.set_ylabel("loss (its own supervision's units)"); ax.set_yscale("log"); ax.grid(alpha=0.3)
+        ax.set_xlabel("epoch"); ax.set_ylabel("loss (its own supervision's units)")
+        ax.set_yscale("log"); ax.grid(alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0)
     fig.tight_layout()
