@@ -296,44 +296,6 @@ def tau_sweep(pred, reference_labels, gt, taus, exclude: int = 150) -> list[dict
     return rows
 
 
-def tune_and_score(pred, reference_labels, gt, taus, tune, score, paper_tau: int,
-                   exclude: int = 150) -> tuple[list[dict], list[dict]]:
-    """The dictionary's τ chosen on a tuning part and scored on a scoring part, beside the paper's τ.
-
-    pred, reference_labels, gt, exclude: as in :func:`score_closures` ((T,) labels, (T, T) bool).
-    taus: candidate thresholds (detections); tune, score: (T,) bool masks of the tuning and the
-    scoring frames (``evaluate.split_mask``), or both None when no honest split exists: then
-    nothing is chosen and only the paper's τ (fixed in advance) is scored, on every frame.
-    paper_tau: the paper's τ = L + Δ (:func:`threshold`).
-    Returns (rules, curve). rules: one dict per τ rule ("chosen on the tuning part" by
-    :func:`choose_threshold`, then "paper: L + Δ"; only "paper: L + Δ, every frame (no honest
-    split)" without a split): tau_rule, tau, precision, recall (4 decimals), flagged_frames,
-    false_frames, events, false_events, first_delay_frames (the first run of revisit frames'
-    delay that is not None, else None). curve: one dict per candidate τ: tau, tune_f1 (NaN
-    without a split), score_precision, score_recall (frame level, on the scoring part).
-    """
-    if (tune is None) != (score is None):
-        raise ValueError("tune and score must both be masks, or both None (no honest split)")
-    if tune is not None:
-        tau, tune_rows = choose_threshold(pred, reference_labels, gt, taus, tune, exclude)
-        f1 = {row["tau"]: row["f1"] for row in tune_rows}
-        rules = (("chosen on the tuning part", tau), ("paper: L + Δ", paper_tau))
-    else:
-        rules = (("paper: L + Δ, every frame (no honest split)", paper_tau),)
-    curve = []
-    for t in taus:
-        s = score_closures(pred, reference_labels, gt, t, exclude, queries=score)
-        curve.append({"tau": t, "tune_f1": f1[int(t)] if tune is not None else np.nan,
-                      "score_precision": s["precision"], "score_recall": s["recall"]})
-    out = []
-    for rule, t in rules:
-        s = score_closures(pred, reference_labels, gt, t, exclude, queries=score)
-        out.append({"tau_rule": rule, "tau": t, "precision": round(s["precision"], 4),
-                    "recall": round(s["recall"], 4), "flagged_frames": s["flagged"], "false_frames": s["false_frames"],
-                    "events": s["events"], "false_events": s["false_events"],
-                    "first_delay_frames": next((d for d in s["delays"] if d is not None), None)})
-    return out, curve
-
 
 # --------------------------------------------- the detector trained, run and scored (07, 13)
 class SpotDetector(NamedTuple):
