@@ -1,23 +1,10 @@
-"""Notebook 13's leaderboard: every method on the same frames, metrics, tuning budget and timing.
+"""Notebook 13's leaderboard rows: metrics, spreads, chance, closures, tables, the statement, the writes.
 
-The notebook holds parameters, calls, tables and figures; the logic is here.
-
-Methods and their knobs (one tuning budget, ``seqmatch.tune_knobs`` / ``pick_knobs``: per-query
-AUC-PR on the tuning queries for every method)
-    * single-frame descriptors (CNNs, SIFT-BoVW, raw pixels): cosine of the L2-normalised
-      descriptor to every stored frame, as a ``seqmatch.Detector`` with seq_len 1; knobs: local
-      contrast normalisation window (the grid of greenloop-seq) and, for the CNNs, PCA whitening
-      fitted on the tuning frames (L2 -> whiten -> L2, cosine) at each dimension of the grid or none.
-      Notebook 08's median filter is not a knob here: its window is centred on the query (square:
-      the block of queries j - s//2 .. j + s//2; diagonal: S[i + t, j + t], |t| <= s//2), so it
-      reads future frames; its causal (look-back) form along the diagonal is a trajectory mean,
-      i.e. greenloop-seq with seq_len = the window, which is the sequence row, not a single-frame one.
-    * greenloop-seq / greenloop-seq-fast (``seqmatch``): descriptor, seq_len, contrast window.
-    * SeqSLAM (``seqslam``): the published parameters, and the same grid tuned as a second row.
-    * the main paper's CNN + dictionary: its tau = L + margin is fixed in advance (no knob).
-
-Knob records are dicts (``pick_knobs``): descriptor ("seqslam" for SeqSLAM), whitening (label,
-"none"), seq_len, contrast_window.
+The detectors, their knobs and their tuning are registered in ``greenloop.detectors`` (one entry
+per family); ``greenloop.experiments.leaderboard`` runs them on one dataset under one tuning
+budget (per-query AUC-PR on the tuning queries) and builds the tables with the functions here,
+which know nothing of any one detector: a row is a method's (M, M) score matrix, its threshold,
+its timing row and its meta (weights, knob text, bytes per stored frame).
 """
 from __future__ import annotations
 
@@ -27,7 +14,7 @@ import cv2
 import numpy as np
 import pandas as pd
 
-from greenloop import evaluate, features, seqmatch, seqslam
+from greenloop import evaluate, seqmatch
 from greenloop.speed import timing
 from greenloop.study import targets as goals
 from greenloop.util.files import write_atomic
@@ -38,8 +25,6 @@ SPREADS = ["R@1_lo_%", "R@1_hi_%", "AUC-PR_lo_%", "AUC-PR_hi_%"]
 COLUMNS = (["method", "mode", "weights", "knobs"] + METRICS + SPREADS +
            ["pair_AP_%", "fps_median", "fps_min", "fps_max", "decode_ms", "bytes_per_stored_frame", "threshold",
             "closures_declared", "closures_false", "first_revisit_delay_frames", "scored_on"])
-SEQSLAM_PUBLISHED = {"descriptor": "seqslam", "whitening": "none", "seq_len": seqslam.DS + 1,
-                     "contrast_window": seqslam.R_WINDOW}
 
 
 def weights_kind(label) -> str:
@@ -60,115 +45,22 @@ def reference_mask(frames, reference_frames) -> np.ndarray | None:
     return ref
 
 
-def projections(feats: dict, specs, fit, dims) -> dict:
-    """Whitening candidates of each CNN descriptor: {spec: {"none": None, "pca k": Projection}}.
-    feats: {spec: (N, D)}; specs: the entries that get whitening; fit: (N,) bool frames to fit
-    on (the tuning part; None: every frame, no labels used); dims: requested dimensions (clipped
-    to the rank, the label says the kept one)."""
-    out = {}
-    for s in specs:
-        X = feats[s] if fit is None else feats[s][np.asarray(fit, dtype=bool)]
-        cands = {"none": None}
-        for k in dims:
-            p = seqmatch.fit_projection(X, int(k))
-            cands.setdefault(f"pca {p.output_dim}", p)
-        out[s] = cands
-    return out
 
 
-def variants(single_specs, seq_descriptors, fast_descriptors, seq_lens) -> dict:
-    """{method: (descriptors, seq_lens)} for ``seqmatch.pick_knobs``: each single-frame method on
-    its own descriptor at seq_len 1, greenloop-seq (-fast) on the sequence grid, SeqSLAM tuned."""
-    out = {f"{s} (single frame)": ([s], [1]) for s in single_specs}
-    out["greenloop-seq"] = (list(seq_descriptors), list(seq_lens))
-    out["greenloop-seq-fast"] = ([d for d in fast_descriptors if d in seq_descriptors], list(seq_lens))
-    out["SeqSLAM (tuned)"] = (["seqslam"], list(seq_lens))
-    return out
 
 
-def default_knobs(single_specs) -> dict:
-    """Knobs without a tuning part (no honest split): single-frame methods untuned (no contrast
-    normalisation, no whitening), SeqSLAM at its published parameters."""
-    knobs = {f"{s} (single frame)": {"descriptor": s, "whitening": "none", "seq_len": 1, "contrast_window": 0}
-             for s in single_specs}
-    knobs["SeqSLAM (published)"] = dict(SEQSLAM_PUBLISHED)
-    return knobs
 
 
-def named_default() -> dict:
-    """greenloop-seq's named default (``seqmatch.DEFAULT_NAME``) as a knob record: the CLI's
-    configuration, never tuned here, scored at the fixed ``seqmatch.DEFAULT_THRESHOLD``."""
-    k = dict(seqmatch.DEFAULT_KNOBS)
-    return dict(k, whitening="none", velocities=list(k["velocities"]), fixed_threshold=seqmatch.DEFAULT_THRESHOLD)
 
 
-def _extra(k: dict, velocities) -> dict:
-    """The seqmatch keyword arguments of a knob record beyond descriptor/seq_len/contrast window."""
-    return dict(velocities=tuple(k.get("velocities", velocities)), center_window=k.get("center_window", 0),
-                calibrate=k.get("calibrate", False), repeat_cos=k.get("repeat_cos"))
 
-
-def knob_text(k: dict) -> str:
-    """One line of a method's knobs for the table."""
-    if k["descriptor"] == "seqslam":
-        return f"64x32 patch-normalised, SAD, ds {k['seq_len'] - 1}, R_window {k['contrast_window']}, v 0.8..1.2"
-    seq = "" if k["seq_len"] == 1 else f", seq_len {k['seq_len']}"
-    text = f"{k['descriptor']}, whitening {k['whitening']}, contrast window {k['contrast_window']}{seq}"
-    if "fixed_threshold" in k:
-        text += (f", centring {k['center_window']}, velocities {k['velocities']}, repeat gate {k['repeat_cos']}, "
-                 f"calibrated, fixed threshold {k['fixed_threshold']} (the CLI default, untuned)")
-    return text
-
-
-def detector(k: dict, threshold, exclude: int, velocities, proj: dict, weights="auto"):
-    """The streaming detector of a knob record: ``seqslam.Detector`` or ``seqmatch.Detector``
-    (single-frame methods: seq_len 1). threshold: float or None. proj: :func:`projections`."""
-    t = None if threshold is None or not np.isfinite(threshold) else float(threshold)
-    if k["descriptor"] == "seqslam":
-        return seqslam.Detector(t, exclude, k["seq_len"] - 1, k["contrast_window"])
-    p = proj.get(k["descriptor"], {}).get(k["whitening"])
-    desc = k["descriptor"] if k["descriptor"] in seqmatch.DESCRIPTORS else "pixels"
-    return seqmatch.Detector(t, descriptor=desc, seq_len=k["seq_len"], exclude=exclude,
-                             contrast_window=k["contrast_window"], projection=p, weights=weights,
-                             **_extra(k, velocities))
-
-
-def score_matrices(knobs: dict, descriptors: dict, proj: dict, exclude: int, velocities) -> dict:
-    """{method: (N, N) score matrix} of every knob record: the detector's own score matrix.
-    descriptors: {descriptor name: (N, D)} ("seqslam": the SeqSLAM descriptors)."""
-    out = {}
-    for name, k in knobs.items():
-        X = descriptors[k["descriptor"]]
-        if k["descriptor"] == "seqslam":
-            out[name] = seqslam.score_matrix(X, exclude, k["seq_len"] - 1, k["contrast_window"])
-        else:
-            p = proj.get(k["descriptor"], {}).get(k["whitening"])
-            e = _extra(k, velocities)
-            out[name] = seqmatch.score_matrix(X, exclude, k["seq_len"], e.pop("velocities"), k["contrast_window"], p, **e)
-    return out
-
-
-def frame_describer(descriptor: str, weights="auto", input_size=None, vocabulary=None):
-    """One decoded BGR frame (H, W, 3) uint8 -> the raw descriptor (D,) a method stores: the
-    timed describe step. descriptor: a knob record's descriptor (a backbone entry, a seqmatch
-    descriptor or "seqslam"). SIFT-BoVW quantises against ``vocabulary`` (one frame's tf-idf)."""
-    if descriptor == "seqslam":
-        return lambda f: seqslam.describe_frames([f])[0]
-    if descriptor in seqmatch.DESCRIPTORS and descriptor != "mobilenetv2":
-        return lambda f: seqmatch.describe_frames([f], descriptor)[0]
-    kw = {"vocabulary": vocabulary} if descriptor == "sift_bovw" else {}
-    return lambda f: features.extract_spec(cv2.cvtColor(f, cv2.COLOR_BGR2RGB)[None], descriptor, weights,
-                                           input_size, progress=False, **kw)[0]
-
-
-def thresholds(S: dict, GT, exclude: int, tune, rule: str) -> dict:
+def thresholds(S: dict, GT, exclude: int, tune, rule: str, fixed: dict | None = None) -> dict:
     """{method: threshold picked on the tuning queries (``seqmatch.choose_threshold``)}; NaN for
-    every method when tune is None (no tuning part); the named default keeps its fixed threshold."""
-    out = {k: (seqmatch.choose_threshold(s, GT, exclude, queries=tune, rule=rule) if tune is not None else np.nan)
-           for k, s in S.items() if k != seqmatch.DEFAULT_NAME}
-    if seqmatch.DEFAULT_NAME in S:
-        out[seqmatch.DEFAULT_NAME] = seqmatch.DEFAULT_THRESHOLD
-    return out
+    every method when tune is None (no tuning part); a method in ``fixed`` ({method: threshold},
+    e.g. the named default's ``fixed_threshold``) keeps that one."""
+    fixed = fixed or {}
+    return {k: (fixed[k] if k in fixed else seqmatch.choose_threshold(s, GT, exclude, queries=tune, rule=rule)
+                if tune is not None else np.nan) for k, s in S.items()}
 
 
 def metric_rows(S, GT, exclude: int, queries, reference=None, block: int = 10) -> list[dict]:
@@ -228,15 +120,15 @@ def chance_rows(GT, exclude: int, queries, reference=None, scored_on: str = "") 
 def timing_methods(knobs: dict, dets: dict, describers: dict, descriptors: dict, start: int, dictionary=None):
     """The :class:`greenloop.speed.timing.Method` list and preloads of every method.
 
-    knobs: {method: knob record}; dets: {method: its detector (:func:`detector`)}; describers:
-    {descriptor: :func:`frame_describer`}; descriptors: {descriptor: (N, D)}; start: the first
+    knobs: {method: knob record}; dets: {method: its streaming detector (``Entry.stream``)};
+    describers: {method: frame -> descriptor (``Entry.describer``)}; descriptors: {descriptor: (N, D)}; start: the first
     timed frame of the stream (described index): frames 0..start-1 are preloaded.
     dictionary: optional (name, speed.stream.Detector, (n0,) spot labels of the original frames
     before the window). Returns (methods, preload).
     """
     methods, preload = [], {}
     for name, k in knobs.items():
-        methods.append(timing.detector_method(name, dets[name], describers[k["descriptor"]]))
+        methods.append(timing.detector_method(name, dets[name], describers[name]))
         preload[name] = descriptors[k["descriptor"]][:start]
     if dictionary is not None:
         name, det, labels = dictionary
@@ -345,17 +237,6 @@ def statement(board: pd.DataFrame, seq_names=("greenloop-seq", "greenloop-seq-fa
     return "\n".join(out)
 
 
-def sequence_descriptors(dataset, names, feats: dict, infos: dict, step: int, weights="auto"):
-    """greenloop-seq's descriptors: those already in ``feats`` reused (the same frames, the same
-    values), the others from ``seqmatch.describe``. Returns ({name: (N, D)}, {name: ExtractInfo})."""
-    X, info = {}, {}
-    for d in names:
-        if d in feats:
-            X[d], info[d] = feats[d], infos[d]
-        else:
-            X[d], info[d] = seqmatch.describe(dataset, d, step=step, weights=weights, return_info=True)
-    return X, info
-
 
 def timing_window(evalq, n_frames: int):
     """(start, stop) described indices of the timed window: the first ``n_frames`` evaluation
@@ -400,27 +281,19 @@ def targets(board: pd.DataFrame, names) -> dict:
     return out
 
 
-def detectors(knobs: dict, thr: dict, exclude: int, velocities, proj: dict, weights="auto") -> dict:
-    """{method: :func:`detector`} of every knob record at its threshold."""
-    return {k: detector(kn, thr.get(k), exclude, velocities, proj, weights) for k, kn in knobs.items()}
 
 
-def describers(knobs: dict, weights="auto", input_size=None, vocabulary=None) -> dict:
-    """{descriptor: :func:`frame_describer`} of every descriptor the knob records use."""
-    return {kn["descriptor"]: frame_describer(kn["descriptor"], weights, input_size, vocabulary) for kn in knobs.values()}
-
-
-def meta(knobs: dict, dets: dict, infos: dict) -> dict:
+def meta(knobs: dict, dets: dict, infos: dict, texts: dict) -> dict:
     """{method: dict(weights, knobs, bytes_per_stored_frame)} for :func:`method_rows`. infos:
-    {descriptor: ExtractInfo} (SeqSLAM and the raw pixels: weights "none"). Read the bytes after
-    the detectors have stored a frame (after timing)."""
+    {descriptor: ExtractInfo} (SeqSLAM and the raw pixels: weights "none"); texts: {method: knob
+    text}. Read the bytes after the detectors have stored a frame (after timing)."""
     return {k: {"weights": weights_kind(infos[kn["descriptor"]].weights) if kn["descriptor"] in infos else "none",
-                "knobs": knob_text(kn), "bytes_per_stored_frame": dets[k].bytes_per_frame} for k, kn in knobs.items()}
+                "knobs": texts[k], "bytes_per_stored_frame": dets[k].bytes_per_frame} for k, kn in knobs.items()}
 
 
-def knob_table(knobs: dict, score: dict) -> pd.DataFrame:
-    """One row per method: its knobs and the tuning AUC-PR it was picked by (None: not tuned)."""
-    return pd.DataFrame([{"method": k, "knobs": knob_text(v), "AUC-PR_tune_%": score.get(k)} for k, v in knobs.items()])
+def knob_table(knobs: dict, score: dict, texts: dict) -> pd.DataFrame:
+    """One row per method: its knob text and the tuning AUC-PR it was picked by (None: not tuned)."""
+    return pd.DataFrame([{"method": k, "knobs": texts[k], "AUC-PR_tune_%": score.get(k)} for k in knobs])
 
 
 def dictionary_row(name: str, tau: int, n_train: int, closures: dict, op: dict, speed: dict, frame_step: int,
