@@ -9,7 +9,7 @@ Commands
     detect SEQUENCE_FOLDER --method greenloop-seq (--tuned SUMMARY_JSON | --threshold T)
           [--variant greenloop-seq|greenloop-seq-fast] [--descriptor NAME] [--seq-len L]
           [--exclude FRAMES] [--contrast-window R] [--step N]
-        greenloop's own sequence-matching detector (greenloop.seqmatch.Detector): no model, no
+        greenloop's own sequence-matching detector (greenloop.seqstream.Detector): no model, no
         poses; prints each closure (query frame, matched earlier frame, score).
         [--index scan|flat|ivf|hnsw|swp|qdp] [--candidates K]: verify sequences on the K frames a
         retrieval index returns (greenloop.retrieval); [--state FILE] [--save-every N]
@@ -46,7 +46,7 @@ from greenloop.datasets.sequence import (DESCRIPTION_NAME, GROUND_TRUTH_NAME, la
                                          read_description, traversals, write_loop_pairs)
 from greenloop.detectors import registry as detectors  # noqa: E402
 from greenloop.detectors.interface import Data  # noqa: E402
-from greenloop.speed import stream, timing  # noqa: E402
+from greenloop.speed import seqstream, stream, timing  # noqa: E402
 from greenloop.study import params as study_params  # noqa: E402
 from greenloop.study import sweep  # noqa: E402
 from greenloop.util.files import write_atomic  # noqa: E402
@@ -127,7 +127,7 @@ def _tuned_knobs(args) -> tuple[dict, list[str]]:
 
 
 def _detect_seq(args) -> int:
-    """``detect --method greenloop-seq``: greenloop.seqmatch.Detector over the frames in windows
+    """``detect --method greenloop-seq``: greenloop.seqstream.Detector over the frames in windows
     (every ``step``-th frame of the folder: 1 unless --step or sequence.yaml says otherwise); with
     ``--index`` on the retrieved candidates only, with ``--state`` resumable (:func:`_seq_stream`)."""
     kn, lines = _tuned_knobs(args)
@@ -157,7 +157,7 @@ def _detect_seq(args) -> int:
     return 0
 
 
-def _seq_detector(args, kn: dict, paths) -> seqmatch.Detector:
+def _seq_detector(args, kn: dict, paths) -> seqstream.Detector:
     """A new Detector, or the one saved in ``--state`` (the same recording and knobs only)."""
     key = dict(kn, folder=str(Path(args.folder).resolve()), frames=len(paths), index=args.index,
                candidates=args.candidates)
@@ -171,12 +171,12 @@ def _seq_detector(args, kn: dict, paths) -> seqmatch.Detector:
     if args.index is not None:
         retrieval.one_thread()
     extra = {k: kn[k] for k in ("velocities", "center_window", "calibrate", "repeat_cos") if k in kn}
-    return seqmatch.Detector(kn["threshold"], descriptor=kn["descriptor"], seq_len=kn["seq_len"],
+    return seqstream.Detector(kn["threshold"], descriptor=kn["descriptor"], seq_len=kn["seq_len"],
                              exclude=kn["exclude"], contrast_window=kn["contrast_window"],
                              index=args.index, k=args.candidates, **extra)
 
 
-def _seq_save(det: seqmatch.Detector, args, kn: dict, paths) -> None:
+def _seq_save(det: seqstream.Detector, args, kn: dict, paths) -> None:
     """Write the detector (stored frames, index, sequence buffers, events) to ``--state``, atomically."""
     key = dict(kn, folder=str(Path(args.folder).resolve()), frames=len(paths), index=args.index,
                candidates=args.candidates)
@@ -186,7 +186,7 @@ def _seq_save(det: seqmatch.Detector, args, kn: dict, paths) -> None:
     write_atomic(args.state, dump)
 
 
-def _seq_stream(det: seqmatch.Detector, paths, args, kn: dict) -> bool:
+def _seq_stream(det: seqstream.Detector, paths, args, kn: dict) -> bool:
     """Feed paths[det.frame_index:] to det in windows, printing closures, with a progress bar on
     stderr; with --state save every --save-every frames, on Ctrl-C and at the end; stop after
     --stop-after frames of this run. Returns whether the recording was finished."""
@@ -265,7 +265,7 @@ def _detect_registered(args) -> int:
 
 def _detect(args) -> int:
     """``detect``: frames decoded in colour (BGR) as a camera delivers them, fed to
-    greenloop.speed.stream.Detector (``--method dictionary``), greenloop.seqmatch.Detector
+    greenloop.speed.stream.Detector (``--method dictionary``), greenloop.seqstream.Detector
     (``--method greenloop-seq``, with --index / --state) or any other registered detector's
     stream (:func:`_detect_registered`) in windows; prints events as they are declared."""
     if args.method == "greenloop-seq":
@@ -447,7 +447,7 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--backend", default="auto", choices=("auto", "numpy", "tflite", "keras"),
                    help="inference backend (default auto)")
     d.add_argument("--window", type=int, default=70, help="frames per batch (default 70)")
-    g = d.add_argument_group("greenloop-seq (greenloop.seqmatch.Detector)")
+    g = d.add_argument_group("greenloop-seq (greenloop.seqstream.Detector)")
     g.add_argument("--tuned", default=None, metavar="SUMMARY_JSON",
                    help="knobs and threshold picked by notebook 13 on a tuning part "
                         "(<results>/13_leaderboard/summary.json); flags below override them")

@@ -12,6 +12,7 @@ from greenloop.detectors import dictionary, greenloop_seq, registry, single_fram
 from greenloop.detectors import seqslam as slam_entry
 from greenloop.detectors.interface import Data
 from greenloop.experiments import leaderboard as experiment
+from greenloop.speed import seqslam_stream, seqstream
 
 ROOT = Path(__file__).resolve().parents[1]
 N0, REPEAT, EX, DIM = 80, 40, 20, 16
@@ -87,11 +88,11 @@ def test_entries_score_and_stream_are_the_stage_functions(revisit):
     seq = {"descriptor": "cnn", "whitening": "none", "seq_len": 5, "contrast_window": 0}
     slam = {"descriptor": "seqslam", "whitening": "none", "seq_len": 4, "contrast_window": 6}
     S = single_frame.ENTRY.score(single, d)
-    assert np.array_equal(S, seqmatch.score_matrix(X, EX, 1, (1.0,), 4, d.cache["projections"]["cnn"]["pca 8"]))
-    assert np.array_equal(greenloop_seq.score(seq, d), seqmatch.score_matrix(X, EX, 5, (1.0,), 0))
-    assert np.array_equal(slam_entry.score(slam, d), seqslam.score_matrix(X, EX, 3, 6))
+    assert np.array_equal(S, seqstream.score_matrix(X, EX, 1, (1.0,), 4, d.cache["projections"]["cnn"]["pca 8"]))
+    assert np.array_equal(greenloop_seq.score(seq, d), seqstream.score_matrix(X, EX, 5, (1.0,), 0))
+    assert np.array_equal(slam_entry.score(slam, d), seqslam_stream.score_matrix(X, EX, 3, 6))
     det = slam_entry.stream(slam, float("nan"), d)
-    assert isinstance(det, seqslam.Detector) and det.seq_len == 4 and det.threshold is None
+    assert isinstance(det, seqslam_stream.Detector) and det.seq_len == 4 and det.threshold is None
     det = single_frame.ENTRY.stream(single, 0.5, d)
     assert det.threshold == 0.5 and det.projection is d.cache["projections"]["cnn"]["pca 8"]
     for x in X:
@@ -117,7 +118,7 @@ def test_the_named_default_is_untuned_and_keeps_its_fixed_threshold():
     X = np.random.default_rng(0).normal(size=(60, 16)).astype(np.float32)
     d = _data({k["descriptor"]: X}, np.zeros((60, 60), bool), np.ones(60, bool))
     assert greenloop_seq.tune_default(d) == ([], {seqmatch.DEFAULT_NAME: k}, {})
-    direct = seqmatch.score_matrix(X, EX, k["seq_len"], tuple(k["velocities"]), 0, None, center_window=k["center_window"],
+    direct = seqstream.score_matrix(X, EX, k["seq_len"], tuple(k["velocities"]), 0, None, center_window=k["center_window"],
                                    calibrate=True, repeat_cos=k["repeat_cos"])
     assert np.array_equal(greenloop_seq.DEFAULT_ENTRY.score(k, d), direct)      # the record's knobs reach the detector
     det = greenloop_seq.DEFAULT_ENTRY.stream(k, k["fixed_threshold"], d)
@@ -138,7 +139,7 @@ def _records(entry, X, GT):
 @pytest.mark.parametrize("entry", SCORED, ids=[e.name for e in SCORED])
 def test_every_registered_stream_declares_what_its_matrix_does(entry, revisit):
     """Stream the revisit through each record's streaming detector at a threshold that fires on
-    the revisit and compare its events with the thresholded score matrix (seqmatch.stream_check);
+    the revisit and compare its events with the thresholded score matrix (seqstream.stream_check);
     a matrix of another record fails the same check."""
     X, GT = revisit
     d, knobs = _records(entry, X, GT)
@@ -147,10 +148,10 @@ def test_every_registered_stream_declares_what_its_matrix_does(entry, revisit):
         S = entry.score(k, d)
         col = S[:, N0:].max(0)
         thr = float(np.quantile(col, 0.5))
-        c = seqmatch.stream_check(entry.stream(k, thr, d), d.descriptors[k["descriptor"]], S, GT)
+        c = seqstream.stream_check(entry.stream(k, thr, d), d.descriptors[k["descriptor"]], S, GT)
         assert c["equal"] and c["events"] > 0 and c["correct_events"] > 0, (name, c)
         shifted = np.roll(S, 7, axis=1)
-        assert not seqmatch.stream_check(entry.stream(k, thr, d), d.descriptors[k["descriptor"]], shifted, GT)["equal"]
+        assert not seqstream.stream_check(entry.stream(k, thr, d), d.descriptors[k["descriptor"]], shifted, GT)["equal"]
 
 
 def _example():
@@ -196,7 +197,7 @@ def test_the_documented_example_appears_on_the_leaderboard_and_in_detect(tmp_pat
     assert (tuned.rows.descriptor == "hue-histogram").sum() == 2                   # its contrast windows, tuned
     S = tuned.S["hue-histogram (single frame)"]
     X = np.stack([ns["hue_histogram"](cv2.imread(str(folder / "rgb" / f"{i}.png"))) for i in range(60)])
-    assert np.array_equal(S, seqmatch.score_matrix(X, data.exclude, 1, (1.0,), tuned.knobs[row.name]["contrast_window"]))
+    assert np.array_equal(S, seqstream.score_matrix(X, data.exclude, 1, (1.0,), tuned.knobs[row.name]["contrast_window"]))
 
     from greenloop.__main__ import main
     assert main(["detect", str(folder), "--method", "hue-histogram", "--threshold", "0.99", "--exclude", "10"]) == 0

@@ -7,6 +7,7 @@ import pandas as pd
 import pytest
 
 from greenloop import evaluate, seqmatch
+from greenloop.speed import seqstream
 from greenloop.study import leaderboard as lb
 
 N0, REPEAT, EX, DIM = 80, 40, 20, 16
@@ -37,7 +38,7 @@ def test_reference_mask():
 
 def test_metric_and_chance_rows_are_the_evaluate_functions(revisit):
     X, GT = revisit
-    S = seqmatch.score_matrix(X, EX, 5, contrast_window=0)
+    S = seqstream.score_matrix(X, EX, 5, contrast_window=0)
     q = np.zeros(len(X), bool)
     q[N0 - 10:] = True
     ref = np.arange(len(X)) < N0
@@ -59,7 +60,7 @@ def test_metric_and_chance_rows_are_the_evaluate_functions(revisit):
 
 def test_thresholds_and_closures(revisit):
     X, GT = revisit
-    S = {"seq": seqmatch.score_matrix(X, EX, 5, contrast_window=0)}
+    S = {"seq": seqstream.score_matrix(X, EX, 5, contrast_window=0)}
     tune, ev = evaluate.split_mask(len(X), 0.5, gt=GT, gap=5)
     t = lb.thresholds(S, GT, EX, tune, "f1")
     assert t["seq"] == seqmatch.choose_threshold(S["seq"], GT, EX, queries=tune)
@@ -79,7 +80,7 @@ def test_timing_window_and_methods(revisit):
     assert lb.timing_window(ev, 3) == (6, 9) and lb.timing_window(ev, 30) == (6, 10)
     assert lb.timing_window(np.ones(10, bool), 4) == (6, 10)             # no split: the last frames
     knobs = {"seq": {"descriptor": "cnn", "whitening": "none", "seq_len": 3, "contrast_window": 0}}
-    dets = {"seq": seqmatch.Detector(None, seq_len=3, exclude=EX, contrast_window=0)}
+    dets = {"seq": seqstream.Detector(None, seq_len=3, exclude=EX, contrast_window=0)}
     m, pre = lb.timing_methods(knobs, dets, {"seq": lambda f: f}, {"cnn": X}, 50)
     assert [x.name for x in m] == ["seq"] and len(pre["seq"]) == 50
     assert m[0].start(pre["seq"]).frame_index == 50
@@ -115,7 +116,7 @@ def test_table_targets_and_statement():
 
 def test_spread_brackets_the_metric_and_widens_with_fewer_queries(revisit):
     X, GT = revisit
-    S = seqmatch.score_matrix(X, EX, 5, contrast_window=0)
+    S = seqstream.score_matrix(X, EX, 5, contrast_window=0)
     q = np.zeros(len(X), bool)
     q[N0 - 10:] = True
     sp = lb.spread(S, GT, EX, q, block=5, n_boot=100)
@@ -149,7 +150,7 @@ def test_dictionary_row():
 
 def test_method_rows_one_per_mode_with_closures_in_loop_closure_only(revisit):
     X, GT = revisit
-    S = {"seq": seqmatch.score_matrix(X, EX, 5, contrast_window=0)}
+    S = {"seq": seqstream.score_matrix(X, EX, 5, contrast_window=0)}
     tune, ev = evaluate.split_mask(len(X), 0.5, gt=GT, gap=5)
     thr = lb.thresholds(S, GT, EX, tune, "f1")
     meta = {"seq": {"weights": "none", "knobs": "k", "bytes_per_stored_frame": 80}}

@@ -16,6 +16,7 @@ import numpy as np
 
 from greenloop import features, seqmatch
 from greenloop.detectors.interface import Data, Entry
+from greenloop.speed import seqstream
 
 NAME, FAST = "greenloop-seq", "greenloop-seq-fast"
 
@@ -46,17 +47,17 @@ def projection(k: dict, data: Data):
 
 
 def score(k: dict, data: Data) -> np.ndarray:
-    """(M, M) float32 ``seqmatch.score_matrix`` of a knob record on ``data.descriptors``."""
+    """(M, M) float32 ``seqstream.score_matrix`` of a knob record on ``data.descriptors``."""
     e = _extra(k, data.params["velocities"])
-    return seqmatch.score_matrix(data.descriptors[k["descriptor"]], data.exclude, k["seq_len"], e.pop("velocities"),
+    return seqstream.score_matrix(data.descriptors[k["descriptor"]], data.exclude, k["seq_len"], e.pop("velocities"),
                                  k["contrast_window"], projection(k, data), **e)
 
 
-def stream(k: dict, threshold, data: Data) -> seqmatch.Detector:
-    """The streaming ``seqmatch.Detector`` of a knob record (threshold None or NaN: scores only)."""
+def stream(k: dict, threshold, data: Data) -> seqstream.Detector:
+    """The streaming ``seqstream.Detector`` of a knob record (threshold None or NaN: scores only)."""
     t = None if threshold is None or not np.isfinite(threshold) else float(threshold)
     desc = k["descriptor"] if k["descriptor"] in seqmatch.DESCRIPTORS else "pixels"
-    return seqmatch.Detector(t, descriptor=desc, seq_len=k["seq_len"], exclude=data.exclude,
+    return seqstream.Detector(t, descriptor=desc, seq_len=k["seq_len"], exclude=data.exclude,
                              contrast_window=k["contrast_window"], projection=projection(k, data),
                              weights=data.params.get("weights", "auto"), **_extra(k, data.params["velocities"]))
 
@@ -108,7 +109,7 @@ def tune(data: Data) -> tuple[list, dict, dict]:
     if data.tune is None:
         return [], {}, {}
     X = {d: data.descriptors[d] for d in p["seq_descriptors"]}
-    rows = seqmatch.tune_knobs(X, data.GT, data.exclude, data.tune, p["seq_lens"], p["contrast_windows"], p["velocities"])
+    rows = seqstream.tune_knobs(X, data.GT, data.exclude, data.tune, p["seq_lens"], p["contrast_windows"], p["velocities"])
     fast = [d for d in p["fast_descriptors"] if d in p["seq_descriptors"]]
     knobs, best = seqmatch.pick_knobs(rows, {NAME: (list(p["seq_descriptors"]), list(p["seq_lens"])),
                                              FAST: (fast, list(p["seq_lens"]))})

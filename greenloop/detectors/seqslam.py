@@ -11,6 +11,7 @@ import numpy as np
 from greenloop import seqmatch
 from greenloop import seqslam as slam
 from greenloop.detectors.interface import Data, Entry
+from greenloop.speed import seqslam_stream
 
 PUBLISHED, TUNED = "SeqSLAM (published)", "SeqSLAM (tuned)"
 SEQSLAM_PUBLISHED = {"descriptor": "seqslam", "whitening": "none", "seq_len": slam.DS + 1,
@@ -28,7 +29,7 @@ def tune(data: Data) -> tuple[list, dict, dict]:
     if data.tune is None:
         return [], {PUBLISHED: dict(SEQSLAM_PUBLISHED)}, {}
     p = data.params
-    rows = slam.tune_knobs(data.descriptors["seqslam"], data.GT, data.exclude, data.tune, p["seq_lens"],
+    rows = seqslam_stream.tune_knobs(data.descriptors["seqslam"], data.GT, data.exclude, data.tune, p["seq_lens"],
                            p["contrast_windows"])
     knobs, best = seqmatch.pick_knobs(rows, {TUNED: (["seqslam"], list(p["seq_lens"]))})
     knobs[PUBLISHED] = dict(SEQSLAM_PUBLISHED)
@@ -36,14 +37,14 @@ def tune(data: Data) -> tuple[list, dict, dict]:
 
 
 def score(k: dict, data: Data) -> np.ndarray:
-    """(M, M) float32 ``seqslam.score_matrix`` of a knob record."""
-    return slam.score_matrix(data.descriptors["seqslam"], data.exclude, k["seq_len"] - 1, k["contrast_window"])
+    """(M, M) float32 ``speed.seqslam_stream.score_matrix`` of a knob record."""
+    return seqslam_stream.score_matrix(data.descriptors["seqslam"], data.exclude, k["seq_len"] - 1, k["contrast_window"])
 
 
-def stream(k: dict, threshold, data: Data) -> slam.Detector:
-    """The streaming ``seqslam.Detector`` of a knob record (threshold None or NaN: scores only)."""
+def stream(k: dict, threshold, data: Data) -> seqslam_stream.Detector:
+    """The streaming ``speed.seqslam_stream.Detector`` of a knob record (threshold None or NaN: scores only)."""
     t = None if threshold is None or not np.isfinite(threshold) else float(threshold)
-    return slam.Detector(t, data.exclude, k["seq_len"] - 1, k["contrast_window"])
+    return seqslam_stream.Detector(t, data.exclude, k["seq_len"] - 1, k["contrast_window"])
 
 
 def describer(k: dict, data: Data):

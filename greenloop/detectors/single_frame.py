@@ -1,6 +1,6 @@
 """Single-frame matchers: the cosine of one frame's L2-normalised descriptor to every stored frame.
 
-Each is greenloop-seq's search at seq_len 1 (a ``seqmatch.Detector``; ``greenloop_seq``'s score,
+Each is greenloop-seq's search at seq_len 1 (a ``seqstream.Detector``; ``greenloop_seq``'s score,
 stream and knob text). Knobs (one tuning budget): the local contrast normalisation window
 (``contrast_windows``) and, for the CNNs, PCA whitening fitted on the tuning frames (L2 -> whiten
 -> L2) at each of ``whiten_dims`` or none. Without a tuning part: no contrast normalisation, no
@@ -24,6 +24,7 @@ from greenloop import features, seqmatch
 from greenloop.datasets.sequence import list_frames
 from greenloop.detectors import greenloop_seq
 from greenloop.detectors.interface import Data, Entry
+from greenloop.speed import seqstream
 
 
 def row_name(descriptor: str) -> str:
@@ -65,7 +66,7 @@ def tune_names(data: Data, names, whitened=()) -> tuple[list, dict, dict]:
     p = data.params
     proj = data.cache.setdefault("projections", {})
     proj.update(projections(data.descriptors, list(whitened), data.tune, p.get("whiten_dims", ())))
-    rows = seqmatch.tune_knobs({s: data.descriptors[s] for s in names}, data.GT, data.exclude, data.tune, [1],
+    rows = seqstream.tune_knobs({s: data.descriptors[s] for s in names}, data.GT, data.exclude, data.tune, [1],
                                p["contrast_windows"], p["velocities"], {s: proj[s] for s in whitened})
     knobs, best = seqmatch.pick_knobs(rows, {row_name(s): ([s], [1]) for s in names})
     return rows, knobs, best

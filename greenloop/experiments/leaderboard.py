@@ -62,7 +62,7 @@ class Tuned(NamedTuple):
 
 class Timed(NamedTuple):
     """thresholds: {method: float (NaN: none)}; dets: {method: streaming detector};
-    stream_check: {method: ``seqmatch.stream_check``}; speed: timing rows indexed by method (with
+    stream_check: {method: ``speed.seqstream.stream_check``}; speed: timing rows indexed by method (with
     decode_ms); decode: ``timing.decode_ms``."""
     thresholds: dict
     dets: dict

@@ -15,7 +15,7 @@ import numpy as np
 import pandas as pd
 
 from greenloop import evaluate, seqmatch
-from greenloop.speed import timing
+from greenloop.speed import seqstream, timing
 from greenloop.study import targets as goals
 from greenloop.util.files import write_atomic
 
@@ -259,9 +259,9 @@ def decode_window(paths, frames, start: int, stop: int):
 
 
 def stream_checks(names, dets: dict, knobs: dict, descriptors: dict, S: dict, GT) -> dict:
-    """{method: ``seqmatch.stream_check``} over the whole stream (the revisit included) for the
+    """{method: ``seqstream.stream_check``} over the whole stream (the revisit included) for the
     named sequence methods (thresholded detectors only)."""
-    return {n: seqmatch.stream_check(dets[n], descriptors[knobs[n]["descriptor"]], S[n], GT)
+    return {n: seqstream.stream_check(dets[n], descriptors[knobs[n]["descriptor"]], S[n], GT)
             for n in names if n in dets and dets[n].threshold is not None}
 
 
