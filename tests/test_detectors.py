@@ -136,6 +136,16 @@ def _records(entry, X, GT):
     return d, entry.tune(d)[1]
 
 
+def _clear_threshold(S, exclude: int, first: int) -> float:
+    """A threshold between two query maxima of S (queries first..N-1) with the widest gap among
+    the middle half of them: no score lies near it, so float rounding (a matrix product against a
+    stream's matrix-vector products) cannot flip a decision, and some queries but not all fire."""
+    m = np.sort([S[:j - exclude, j].max() for j in range(max(first, exclude + 1), len(S))])
+    lo, hi = len(m) // 4, max(3 * len(m) // 4, len(m) // 4 + 1)
+    k = lo + int(np.argmax(np.diff(m)[lo:hi]))
+    return float((m[k] + m[k + 1]) / 2)
+
+
 @pytest.mark.parametrize("entry", SCORED, ids=[e.name for e in SCORED])
 def test_every_registered_stream_declares_what_its_matrix_does(entry, revisit):
     """Stream the revisit through each record's streaming detector at a threshold that fires on
@@ -146,8 +156,7 @@ def test_every_registered_stream_declares_what_its_matrix_does(entry, revisit):
     assert knobs
     for name, k in knobs.items():
         S = entry.score(k, d)
-        col = S[:, N0:].max(0)
-        thr = float(np.quantile(col, 0.5))
+        thr = _clear_threshold(S, EX, N0)
         c = seqstream.stream_check(entry.stream(k, thr, d), d.descriptors[k["descriptor"]], S, GT)
         assert c["equal"] and c["events"] > 0 and c["correct_events"] > 0, (name, c)
         shifted = np.roll(S, 7, axis=1)
@@ -213,3 +222,27 @@ def test_the_dictionary_decides_and_has_no_score():
     e = registry.REGISTRY["dictionary"]
     assert e.score is None and e.decide is dictionary.decide and e.tune(None) == ([], {}, {})
     assert dictionary.label(10, 70) == "main paper: CNN + dictionary, tau = L + 10 = 70"
+
+
+
+STREAMED = [e for e in registry.ENTRIES if e.stream is not None and e.cli_knobs is not None]
+
+
+@pytest.mark.parametrize("entry", STREAMED, ids=[e.name for e in STREAMED])
+def test_detect_method_streams_what_the_entrys_matrix_declares(entry, tmp_path, capsys):
+    """`detect --method NAME` on a folder: the closures it prints fall on exactly the queries where
+    the entry's score matrix of its CLI knobs (on the describer's descriptors of the same frames)
+    reaches the threshold."""
+    from greenloop.__main__ import main
+    folder = _walk_folder(tmp_path / "walk")
+    k = entry.cli_knobs
+    d = _data({}, np.zeros((60, 60), bool), velocities=seqmatch.DEFAULT_VELOCITIES, weights="auto")._replace(exclude=10)
+    describe = entry.describer(k, d)
+    X = np.stack([describe(cv2.imread(str(folder / "rgb" / f"{i}.png"))) for i in range(60)])
+    d.descriptors[k["descriptor"]] = X
+    S = entry.score(k, d)
+    thr = _clear_threshold(S, 10, 40)
+    expected = seqmatch.matrix_events(S, thr, 10, 60)
+    assert main(["detect", str(folder), "--method", entry.name, "--threshold", repr(thr), "--exclude", "10"]) == 0
+    out = capsys.readouterr().out
+    assert expected and [int(line.split("\t")[0]) for line in out.splitlines() if line[:1].isdigit()] == expected
