@@ -46,16 +46,28 @@ def test_metric_and_chance_rows_are_the_evaluate_functions(revisit):
     assert [r["mode"] for r in rows] == ["loop closure", "place recognition"]
     a = evaluate.per_query(S, GT, EX, queries=q, ks=(1, 5))
     b = evaluate.per_query(S, GT, EX, queries=q, reference=ref, ks=(1, 5))
-    assert rows[0]["R@1_%"] == round(100 * a["R@1"], 2) and rows[0]["AUC-PR_%"] == round(100 * a["AUC-PR"], 2)
+    assert rows[0]["R@1_%"] == 100 * a["R@1"] and rows[0]["AUC-PR_%"] == 100 * a["AUC-PR"]
     assert {k: rows[0][k] for k in lb.SPREADS} == lb.spread(S, GT, EX, q)
-    assert rows[1]["R@5_%"] == round(100 * b["R@5"], 2) and rows[1]["R@100P_%"] == round(100 * b["R@100P"], 2)
-    assert rows[0]["pair_AP_%"] == round(100 * evaluate.average_precision(S, GT, EX, queries=q), 2)
+    assert rows[1]["R@5_%"] == 100 * b["R@5"] and rows[1]["R@100P_%"] == 100 * b["R@100P"]
+    assert rows[0]["pair_AP_%"] == 100 * evaluate.average_precision(S, GT, EX, queries=q)
     assert math.isnan(rows[1]["pair_AP_%"]) and len(lb.metric_rows(S, GT, EX, q)) == 1
     c = lb.chance_rows(GT, EX, q, None, "evaluation queries")
     ch = evaluate.query_chance(GT, EX, queries=q, ks=(1, 5))
-    assert len(c) == 1 and c[0]["R@1_%"] == round(100 * ch["R@1"], 2) and c[0]["scored_on"] == "evaluation queries"
-    assert c[0]["pair_AP_%"] == round(100 * evaluate.chance_level(GT, EX, queries=q), 2)
+    assert len(c) == 1 and c[0]["R@1_%"] == 100 * ch["R@1"] and c[0]["scored_on"] == "evaluation queries"
+    assert c[0]["pair_AP_%"] == 100 * evaluate.chance_level(GT, EX, queries=q)
     assert rows[0]["R@1_%"] > c[0]["R@1_%"] + 30
+
+
+def test_rounded_is_the_written_form_and_write_writes_it(tmp_path):
+    board = lb.table([{"method": "m", "mode": "loop closure", "R@1_%": 100 / 3, "AUC-PR_lo_%": 2 / 3, "threshold": 1 / 7,
+                       "fps_median": 1234.56, "decode_ms": 0.1234},
+                      {"method": "d", "mode": "loop closure", "threshold": 70}])
+    r = lb.rounded(board)
+    assert r.loc[0, "R@1_%"] == 33.33 and r.loc[0, "AUC-PR_lo_%"] == 0.67 and r.loc[0, "threshold"] == 0.1429
+    assert r.loc[0, "fps_median"] == 1234.6 and r.loc[0, "decode_ms"] == 0.12 and r.loc[1, "threshold"] == 70
+    assert math.isnan(r.loc[1, "R@1_%"]) and board.loc[0, "R@1_%"] == 100 / 3          # the input stays unrounded
+    csv = lb.write(board, tmp_path / "13", tmp_path, "T", "n")[0]
+    assert pd.read_csv(csv).loc[0, "R@1_%"] == 33.33
 
 
 def test_thresholds_and_closures(revisit):

@@ -72,8 +72,9 @@ class Timed(NamedTuple):
 
 
 class Board(NamedTuple):
-    """board: the leaderboard (``study.leaderboard.COLUMNS``); target: ``leaderboard.targets``;
-    targets: the targets table; statement: the printed sentences."""
+    """board: the leaderboard (``study.leaderboard.COLUMNS``, unrounded; ``leaderboard.rounded`` is
+    its written form); target: ``leaderboard.targets``; targets: the targets table; statement:
+    the printed sentences (these three judge the written, rounded numbers)."""
     board: pd.DataFrame
     target: dict
     targets: pd.DataFrame
@@ -162,8 +163,9 @@ def board(data: Data, split: Split, tuned: Tuned, timed: Timed, decisions=()) ->
                                timed.speed.loc[d["name"]].to_dict(), data.frame_step, split.scored_on)
              for d in decisions]
     table = lb.table(rows)
-    return Board(table, lb.targets(table, list(SEQ_ROWS)), lb.targets_table(table, data.dataset, data.frame_step),
-                 lb.statement(table))
+    written = lb.rounded(table)
+    return Board(table, lb.targets(written, list(SEQ_ROWS)), lb.targets_table(written, data.dataset, data.frame_step),
+                 lb.statement(written))
 
 
 def figure_pr(data: Data, tuned: Tuned):
@@ -218,7 +220,7 @@ def note(data: Data, split: Split, target: dict, loop_threshold: float, referenc
 
 def summary(data: Data, split: Split, tuned: Tuned, timed: Timed, result: Board, decisions=()) -> dict:
     """summary.json's content (the keys the CLI's --tuned, the tests and the README read)."""
-    return {"leaderboard": result.board.to_dict("records"), "target": result.target,
+    return {"leaderboard": lb.rounded(result.board).to_dict("records"), "target": result.target,
             "detector_targets": result.targets.to_dict("records"), "knobs": tuned.knobs,
             "thresholds": {k: timed.thresholds[k] for k in tuned.knobs}, "stream_matches_matrix": timed.stream_check,
             "frames": len(data.frames), "frame_step": data.frame_step, "exclude_steps": data.exclude,

@@ -64,7 +64,7 @@ def thresholds(S: dict, GT, exclude: int, tune, rule: str, fixed: dict | None = 
 
 
 def metric_rows(S, GT, exclude: int, queries, reference=None, block: int = 10) -> list[dict]:
-    """The metric columns of one score matrix, in %: one row per database mode (loop closure;
+    """The metric columns of one score matrix, in % (unrounded): one row per database mode (loop closure;
     place recognition too when ``reference`` is given), with the :func:`spread` of R@1 and
     AUC-PR (bootstrap runs of ``block`` queries). pair_AP_% (pairs i < j, j - i > exclude) is a
     loop-closure quantity: NaN in the place-recognition row."""
@@ -74,8 +74,8 @@ def metric_rows(S, GT, exclude: int, queries, reference=None, block: int = 10) -
             continue
         q = evaluate.per_query(S, GT, exclude, queries=queries, reference=ref, ks=(1, 5))
         ap = evaluate.average_precision(S, GT, exclude, queries=queries) if ref is None else np.nan
-        rows.append({"mode": mode, **{f"{k}_%": round(100 * q[k], 2) for k in ("R@1", "R@5", "AUC-PR", "R@100P", "R@95P")},
-                     "pair_AP_%": round(100 * ap, 2), **spread(S, GT, exclude, queries, ref, block)})
+        rows.append({"mode": mode, **{f"{k}_%": 100 * q[k] for k in ("R@1", "R@5", "AUC-PR", "R@100P", "R@95P")},
+                     "pair_AP_%": 100 * ap, **spread(S, GT, exclude, queries, ref, block)})
     return rows
 
 
@@ -86,7 +86,7 @@ def spread(S, GT, exclude: int, queries, reference=None, block: int = 10, n_boot
     queries (neighbouring queries see nearly the same frames, so they are resampled together),
     ``n_boot`` resamples of as many runs drawn with replacement, each scored by
     ``evaluate.query_metrics``; a resample without a revisit query is drawn again. Returns
-    {"R@1_lo_%", "R@1_hi_%", "AUC-PR_lo_%", "AUC-PR_hi_%"} (2.5th and 97.5th percentiles).
+    {"R@1_lo_%", "R@1_hi_%", "AUC-PR_lo_%", "AUC-PR_hi_%"} (2.5th and 97.5th percentiles, in %, unrounded).
     """
     m = evaluate.best_matches(S, GT, exclude, queries, reference, k=1)
     runs = [np.arange(a, min(a + int(block), len(m.query))) for a in range(0, len(m.query), int(block))]
@@ -98,8 +98,7 @@ def spread(S, GT, exclude: int, queries, reference=None, block: int = 10, n_boot
         q = evaluate.query_metrics(evaluate.Matches(*(a[idx] for a in m[:6]), m.k), ks=(1,))
         r1.append(q["R@1"]), auc.append(q["AUC-PR"])
     lo, hi = np.percentile([r1, auc], [2.5, 97.5], axis=1)
-    return {"R@1_lo_%": round(100 * lo[0], 2), "R@1_hi_%": round(100 * hi[0], 2),
-            "AUC-PR_lo_%": round(100 * lo[1], 2), "AUC-PR_hi_%": round(100 * hi[1], 2)}
+    return {"R@1_lo_%": 100 * lo[0], "R@1_hi_%": 100 * hi[0], "AUC-PR_lo_%": 100 * lo[1], "AUC-PR_hi_%": 100 * hi[1]}
 
 
 def chance_rows(GT, exclude: int, queries, reference=None, scored_on: str = "") -> list[dict]:
@@ -112,8 +111,8 @@ def chance_rows(GT, exclude: int, queries, reference=None, scored_on: str = "") 
         q = evaluate.query_chance(GT, exclude, queries=queries, reference=ref, ks=(1, 5))
         ap = evaluate.chance_level(GT, exclude, queries=queries) if ref is None else np.nan
         rows.append({"method": "chance (random scores)", "mode": mode, "weights": "none", "knobs": "-",
-                     **{f"{k}_%": round(100 * q[k], 2) for k in ("R@1", "R@5", "AUC-PR", "R@100P", "R@95P")},
-                     "pair_AP_%": round(100 * ap, 2), "scored_on": scored_on})
+                     **{f"{k}_%": 100 * q[k] for k in ("R@1", "R@5", "AUC-PR", "R@100P", "R@95P")},
+                     "pair_AP_%": 100 * ap, "scored_on": scored_on})
     return rows
 
 
@@ -145,7 +144,7 @@ def closure_columns(S, GT, threshold, exclude: int, queries, frame_step: int) ->
         return {"threshold": np.nan, "closures_declared": None, "closures_false": None,
                 "first_revisit_delay_frames": None}
     c = seqmatch.closures(S, GT, threshold, exclude, queries=queries)
-    return {"threshold": round(float(threshold), 4), "closures_declared": c["declared"], "closures_false": c["false"],
+    return {"threshold": float(threshold), "closures_declared": c["declared"], "closures_false": c["false"],
             "first_revisit_delay_frames": None if c["first_delay"] is None else c["first_delay"] * int(frame_step)}
 
 
@@ -172,10 +171,20 @@ def method_rows(S: dict, meta: dict, GT, exclude: int, evalq, reference, thr: di
 
 
 def table(rows) -> pd.DataFrame:
-    """The leaderboard DataFrame in :data:`COLUMNS` order (frames/s rounded to 0.1, decode ms to
-    0.01); rows may lack columns (NaN/None)."""
-    board = pd.DataFrame(rows).reindex(columns=COLUMNS)
-    return board.round({"fps_median": 1, "fps_min": 1, "fps_max": 1, "decode_ms": 2})
+    """The leaderboard DataFrame in :data:`COLUMNS` order, unrounded (:func:`rounded` is the
+    written form); rows may lack columns (NaN/None)."""
+    return pd.DataFrame(rows).reindex(columns=COLUMNS)
+
+
+def rounded(board: pd.DataFrame) -> pd.DataFrame:
+    """The leaderboard as it is written and judged (csv, Markdown, summary.json, the statement, the
+    targets): the per-query metrics and pair AP to 0.01 and the threshold to 0.0001 (Python's
+    ``round`` of each value), the bootstrap intervals to 0.01, frames/s to 0.1 and decode ms to
+    0.01 (``DataFrame.round``)."""
+    out = board.copy()
+    for c, d in {**dict.fromkeys(METRICS + ["pair_AP_%"], 2), "threshold": 4}.items():
+        out[c] = [v if pd.isna(v) else round(float(v), d) for v in out[c]]
+    return out.round({**dict.fromkeys(SPREADS, 2), "fps_median": 1, "fps_min": 1, "fps_max": 1, "decode_ms": 2})
 
 
 def pr_curves(S: dict, GT, exclude: int, queries) -> dict:
@@ -186,8 +195,9 @@ def pr_curves(S: dict, GT, exclude: int, queries) -> dict:
 
 def write(board: pd.DataFrame, out_dir, results_dir, title: str, note: str):
     """Write ``out_dir/leaderboard.csv`` and ``.md`` and the copy ``results_dir/leaderboard.csv``
-    from ONE serialisation of the table (the same bytes, so the copy can never differ).
-    Returns (csv path, md path, copy path)."""
+    from ONE serialisation of the :func:`rounded` table (the same bytes, so the copy can never
+    differ). Returns (csv path, md path, copy path)."""
+    board = rounded(board)
     text = board.to_csv(index=False)
     out_dir, results_dir = Path(out_dir), Path(results_dir)
     paths = (out_dir / "leaderboard.csv", out_dir / "leaderboard.md", results_dir / "leaderboard.csv")
