@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 import scipy.sparse
 
-from greenloop import evaluate, lsh, retrieval, seqmatch
+from greenloop import evaluate, lsh, retrieval
+from greenloop.speed import seqstream
 
 
 def _route(n_place=300, dim=32, passes=3, noise=0.25, seed=0):
@@ -110,7 +111,7 @@ def _revisit(seed=1):
 
 
 def _run(X, **kw):
-    det = seqmatch.Detector(kw.pop("threshold", None), seq_len=10, exclude=50, **kw)
+    det = seqstream.Detector(kw.pop("threshold", None), seq_len=10, exclude=50, **kw)
     out = []
     for x in X:
         det.update_descriptor(x)

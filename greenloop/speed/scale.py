@@ -28,6 +28,7 @@ import scipy.sparse
 
 from greenloop import evaluate, retrieval, seqmatch
 from greenloop.datasets import augment
+from greenloop.speed import seqstream
 from greenloop.similarity import l2_normalise
 from greenloop.study import report
 from greenloop.util.kernels import one_blas_thread
@@ -178,7 +179,7 @@ def stream_decisions(X, n: int = 20_000, kind: str = "hnsw", k: int = K, seq_len
                      contrast_window: int = 10, exclude: int = 150) -> dict:
     """Per-frame decision time of greenloop-seq in candidate mode (index insert + search + the
     sequence verification of k candidates) over the first n descriptors: p50 / p99 in ms."""
-    det = seqmatch.Detector(0.0, seq_len=seq_len, exclude=exclude, contrast_window=contrast_window,
+    det = seqstream.Detector(0.0, seq_len=seq_len, exclude=exclude, contrast_window=contrast_window,
                             index=kind, k=k)
     secs = np.zeros(n)
     for t in range(n):

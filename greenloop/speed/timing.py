@@ -20,8 +20,8 @@ cosine matrix), the best of ``repeats`` calls (:func:`best_of`).
 
 A method is a :class:`Method`: ``start(preload)`` builds its database from the preloaded data
 (untimed) and returns a state, ``step(state, frame)`` is the timed path. :func:`detector_method`
-wraps a streaming detector that takes descriptors (``seqmatch.Detector``, ``seqslam.Detector``,
-and the single-frame methods as a ``seqmatch.Detector`` with seq_len 1), :func:`dictionary_method`
+wraps a streaming detector that takes descriptors (``seqstream.Detector``, ``seqslam_stream.Detector``,
+and the single-frame methods as a ``seqstream.Detector`` with seq_len 1), :func:`dictionary_method`
 the main paper's ``speed.stream.Detector`` (its database is its spot counters).
 """
 from __future__ import annotations
@@ -49,7 +49,7 @@ class Method(NamedTuple):
 def detector_method(name: str, detector, describe) -> Method:
     """A descriptor-fed streaming detector as a :class:`Method`.
 
-    detector: has ``reset()`` and ``update_descriptor(x)`` (seqmatch / seqslam Detector).
+    detector: has ``reset()`` and ``update_descriptor(x)`` (``speed.seqstream`` / ``speed.seqslam_stream`` Detector).
     describe: one decoded frame (H, W, 3) uint8 BGR -> its descriptor (D,), the detector's input.
     preload of ``start``: (n0, D) descriptors of the frames before the window, fed in order.
     """
