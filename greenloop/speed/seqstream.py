@@ -334,6 +334,51 @@ class Detector:
         vals[inside] = s.astype(np.float32)
         return (vals.sum(2, dtype=np.float64).max(1) / self.seq_len).astype(np.float32)
 
+    def preload(self, X) -> None:
+        """Candidate mode: start as if the raw descriptors X (N, D) of an already-recorded stream
+        had been fed to :meth:`update_descriptor` in order, without deciding on them (a long
+        recording's store in seconds, instead of N decisions).
+
+        Resets, then sets what later frames read: the N stored descriptors, the index holding the
+        first max(N - 1 - exclude, 0) of them (one ``add``), the running sum of those rows, the last
+        seq_len queries (descriptors, candidate counts, pads), the centring buffer; frame_index = N.
+        The frames streamed after it then get the uninterrupted stream's scores and events, bit for
+        bit, for "scan", "flat", "ivf" (its quantiser learns the first train_size frames either way),
+        "swp" and "qdp"; an HNSW graph depends on the order of insertion (faiss inserts a batch
+        level by level, shuffled), so its approximate neighbours may differ. ``events`` stays empty
+        and ``last_scores`` / ``last_candidates`` hold nothing: preloaded frames are stored, not
+        decided. Memory while it runs: about three float32 copies of X beyond what it keeps.
+        """
+        if self.index_kind is None:
+            raise ValueError("preload needs candidate mode (index=...): the reference detector keeps every "
+                             "stored frame's similarity columns; stream the frames through update_descriptor")
+        X = np.asarray(X, dtype=np.float32)
+        if X.ndim != 2 or 0 in X.shape or not np.all(np.isfinite(X)):
+            raise ValueError(f"X must be (N, D) finite descriptors with N, D >= 1, got shape {X.shape} "
+                             f"(NaN/inf: fix the descriptors first)")
+        self.reset()
+        n, d, L, W = len(X), X.shape[1], self.seq_len, self.center_window
+        Y = normalise(center(X, W), self.projection)
+        self._db = np.empty((256 * 2 ** max(math.ceil(math.log2(n / 256)), 0), Y.shape[1]), self.store_dtype)
+        self._db[:n] = Y
+        c = max(n - 1 - self.exclude, 0)                   # rows indexed before query n - 1
+        self._index = retrieval.make_index(self.index_kind, Y.shape[1], **self.index_options)
+        if c:
+            self._index.add(self._db[:c].astype(np.float32))
+        first = max(c - L, 0)
+        S = _running_sums(self._db[:c], first)             # S[i]: sum of rows 0..first + i - 1
+        self._sum, self._Q = S[-1].copy(), np.zeros((L, Y.shape[1]), np.float32)
+        for k, j in enumerate(range(n - 1, max(n - 1 - L, -1), -1)):     # query j, k frames back
+            cj = max(j - self.exclude, 0)
+            self._Q[k], self._qc[k] = Y[j], cj
+            self._qpad[k] = float(S[cj - first].copy() @ Y[j] / cj) if cj and self.contrast_window == 0 else 0.0
+        self._qpad[self._qc == 0] = self._qpad[0]          # pre-stream columns: the newest pad
+        if W:
+            m = min(n, W)
+            self._recent, self._n_recent = np.zeros((W, d), np.float32), m
+            self._recent[W - m:] = X[n - m:]
+        self.frame_index = n
+
     def _check_frame(self, frame, index: int) -> None:
         if not isinstance(frame, np.ndarray) or frame.dtype != np.uint8 or frame.ndim not in (2, 3) \
                 or (frame.ndim == 3 and frame.shape[2] not in (1, 3)) or 0 in frame.shape:
@@ -361,6 +406,15 @@ class Detector:
             self._check_frame(f, self.frame_index + k)
         X = describe_frames(frames, self.descriptor, self.color, self.weights)
         return [self.update_descriptor(x) for x in X]
+
+def _running_sums(R, first: int, chunk: int = 65536) -> np.ndarray:
+    """Running float64 sums of the rows R (c, D) added one at a time, as a candidate-mode stream
+    adds them (so bit for bit the same): (c - first + 1, D), row i = the sum of R[:first + i]."""
+    acc = np.zeros((1, R.shape[1]))
+    for a in range(0, first, chunk):
+        acc = np.add.accumulate(np.vstack([acc, R[a:min(a + chunk, first)]]), axis=0)[-1:]
+    return np.add.accumulate(np.vstack([acc, R[first:]]), axis=0)
+
 
 def score_matrix(X, exclude: int = 150, seq_len: int = 10, velocities=DEFAULT_VELOCITIES,
                  contrast_window: int = 10, projection=None, store_dtype: str = "float32",
