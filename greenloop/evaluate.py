@@ -717,6 +717,23 @@ def loss_per_time_saved(R_a, R_t) -> np.ndarray:
 
 
 # ------------------------------------------------------ the split's summary line
+def honest_split(n: int, fraction: float, gt, gap: int, frames=None,
+                 dropped: str = "the tuned rows",
+                 kept: str = "numbers that need no tuning are scored on every query instead"):
+    """:func:`split_mask` with its no-split case turned into the notebooks' note.
+
+    n, fraction, gt, gap: as :func:`split_mask` (gap in frames of the split). frames, dropped,
+    kept: as :meth:`NoHonestSplit.statement`. Returns (tune (n,) bool, evaluate (n,) bool, None)
+    when an honest cut exists, else (None, None, note): the Markdown paragraph saying what is not
+    reported and why; ``queries=None`` (every query) is then what untuned rows are scored on.
+    """
+    try:
+        tune, evaluate = split_mask(n, fraction, gt=gt, gap=gap)
+    except NoHonestSplit as e:
+        return None, None, e.statement(dropped, frames, kept=kept)
+    return tune, evaluate, None
+
+
 def split_summary(tune, evaluate, gt, gap: int) -> str:
     """One line naming the two query parts of :func:`split_mask`: their frames and revisit frames.
 

@@ -80,10 +80,10 @@ def test_figure7_curves_and_overlap():
 # ------------------------------------------------------------------ 08: post-processing
 def test_honest_split_is_split_mask_or_the_note():
     X, GT = revisiting()                               # revisit frames 20..39
-    tune, evq, note = dp.honest_split(40, 0.5, GT, 3)
+    tune, evq, note = evaluate.honest_split(40, 0.5, GT, 3)
     t0, e0 = evaluate.split_mask(40, 0.5, gt=GT, gap=3)
     assert note is None and np.array_equal(tune, t0) and np.array_equal(evq, e0)
-    tune, evq, note = dp.honest_split(40, 0.5, GT, 25, dropped="the tuned rows", kept="nothing else")
+    tune, evq, note = evaluate.honest_split(40, 0.5, GT, 25, dropped="the tuned rows", kept="nothing else")
     assert tune is None and evq is None
     assert note.startswith("**No honest tuning/evaluation split:**") and note.endswith("nothing else.")
 

@@ -3,7 +3,7 @@
 Four variants of each descriptor (raw, L2, PCA-whitened, ZCA; :func:`whitened_variants`), each with
 and without a median filter of its similarity matrix (:func:`median_scores`), every knob (the
 whitening dimension, the filter size, the MPCA threshold) picked on a tuning part of the query
-frames and scored on the evaluation part (:func:`honest_split`, :func:`tune_then_score`), and a
+frames and scored on the evaluation part (``evaluate.honest_split``, :func:`tune_then_score`), and a
 second split with the parts' roles swapped (:func:`swapped_split`). :func:`postprocessing`,
 :func:`second_split`, :func:`split_spread` and :func:`paper_rows` give the notebook's tables,
 unrounded (AP and recall in %, MPCA a fraction; :data:`DECIMALS` is how the notebook shows them).
@@ -18,12 +18,12 @@ import numpy as np
 import pandas as pd
 
 from greenloop import similarity
-from greenloop.evaluate import (NoHonestSplit, average_precision, mean_per_class_accuracy, mpca_threshold,
-                                pr_curve, recall_at_100_precision, split_mask)
+from greenloop.evaluate import (average_precision, mean_per_class_accuracy, mpca_threshold,
+                                pr_curve, recall_at_100_precision)
 from greenloop.study import report
 
 __all__ = [
-    "DECIMALS", "NOT_AVAILABLE", "tune_then_score", "honest_split", "whitened_variants", "median_scores",
+    "DECIMALS", "NOT_AVAILABLE", "tune_then_score", "whitened_variants", "median_scores",
     "swapped_split", "Scored", "postprocessing", "second_split", "split_spread", "paper_rows",
     "figure_tuning", "figure_ap_by_variant", "figure_pr_raw_vs_whitened", "figure_similarity",
 ]
@@ -56,23 +56,6 @@ def tune_then_score(candidates, GT, exclude: int, tune, evaluate) -> dict:
             "AP_eval": average_precision(S, GT, exclude, queries=evaluate),
             "R@100P_eval": recall_at_100_precision(S, GT, exclude, queries=evaluate),
             "AP_tune_all": tuned}
-
-
-def honest_split(n: int, fraction: float, gt, gap: int, frames=None,
-                 dropped: str = "the tuned rows",
-                 kept: str = "numbers that need no tuning are scored on every query instead"):
-    """``evaluate.split_mask`` with its no-split case turned into the notebooks' note.
-
-    n, fraction, gt, gap: as ``evaluate.split_mask`` (gap in frames of the split). frames, dropped,
-    kept: as ``evaluate.NoHonestSplit.statement``. Returns (tune (n,) bool, evaluate (n,) bool, None)
-    when an honest cut exists, else (None, None, note): the Markdown paragraph saying what is not
-    reported and why; ``queries=None`` (every query) is then what untuned rows are scored on.
-    """
-    try:
-        tune, evaluate = split_mask(n, fraction, gt=gt, gap=gap)
-    except NoHonestSplit as e:
-        return None, None, e.statement(dropped, frames, kept=kept)
-    return tune, evaluate, None
 
 
 def whitened_variants(X, GT, exclude: int, tune, evaluate, pca_dim: int = 500,
