@@ -1,9 +1,9 @@
 """The main paper's detector as a registered one: CNN spots + frequency dictionary at tau = L + Δ.
 
 It declares closures and gives no per-query score (``Entry.score`` is None): :func:`decide`
-trains the spot CNN on the original frames before the evaluation part only (every frame without a
-split), predicts every frame's spot, and scores the declared pairs on the evaluation queries
-(``dictionary.query_closures``, ``evaluate.operating_point``). Its stream is
+runs ``dictionary.operating_points`` (the one chain, notebook 07's too): the spot CNN trained on the
+original frames before the evaluation part only (every frame without a split), every frame's spot
+predicted, the declared pairs scored on the evaluation queries. Its stream is
 ``speed.stream.Detector`` (the CLI's ``detect --method dictionary``), timed by
 ``speed.timing.dictionary_method``.
 
@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from greenloop import cnn, evaluate, spots
 from greenloop import dictionary as counts
 from greenloop.datasets import sequence
 from greenloop.detectors.interface import Data, Entry, no_descriptors
@@ -37,20 +36,19 @@ def decide(data: Data) -> dict:
     p, frames = data.params, np.asarray(data.frames)
     start = int(p["timing_window"][0])
     Xg = sequence.load_frames(data.dataset)
-    y = spots.group(len(Xg), p["frames_per_spot"])
     n_train = int(frames[start]) if data.tune is not None else len(Xg)
-    run = cnn.run_seeds(Xg[:n_train], y[:n_train], list(p["seeds"])[:1], epochs=p["epochs"],
-                        batch_size=p["batch_size"], progress=False)[0]
-    pred = cnn.predict(run["model"], Xg)
     tau = int(p["frames_per_spot"] + p["margin"])
-    declared = counts.declared_pairs(pred, y, tau, p["exclude"])[np.ix_(frames, frames)]
+    spot, (point,) = counts.operating_points(Xg, p["frames_per_spot"], [tau], frames, data.GT, p["exclude"],
+                                             data.exclude, n_train=n_train, queries=data.evalq,
+                                             seed=list(p["seeds"])[0], progress=False, epochs=p["epochs"],
+                                             batch_size=p["batch_size"])
+    run, pred = spot.run, spot.pred
     name = label(p["margin"], tau)
     text = (f"CNN trained on original frames 0..{n_train - 1} "
             f"({'before the evaluation part' if data.tune is not None else 'every frame: no split'}), "
             f"seed {run['seed']}, held-out accuracy {run['test_accuracy']:.3f}; tau = {tau}")
     return {"name": name, "tau": tau, "n_train": n_train,
-            "closures": counts.query_closures(declared, data.GT, queries=data.evalq),
-            "op": evaluate.operating_point(declared, data.GT, data.exclude, queries=data.evalq),
+            "closures": point["closures"], "op": point["op"],
             "method": timing.dictionary_method(name, stream.Detector(run["model"], tau)),
             "preload": pred[:int(frames[start])], "text": text}
 
