@@ -9,7 +9,7 @@ Commands
     detect SEQUENCE_FOLDER --method greenloop-seq (--tuned SUMMARY_JSON | --threshold T)
           [--variant greenloop-seq|greenloop-seq-fast] [--descriptor NAME] [--seq-len L]
           [--exclude FRAMES] [--contrast-window R] [--step N]
-        greenloop's own sequence-matching detector (greenloop.seqmatch.Detector): no model, no
+        greenloop's own sequence-matching detector (greenloop.seqstream.Detector): no model, no
         poses; prints each closure (query frame, matched earlier frame, score).
         [--index scan|flat|ivf|hnsw|swp|qdp] [--candidates K]: verify sequences on the K frames a
         retrieval index returns (greenloop.retrieval); [--state FILE] [--save-every N]
@@ -38,12 +38,15 @@ os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
 import cv2  # noqa: E402
 import yaml  # noqa: E402
 
+import numpy as np  # noqa: E402
+
 from greenloop import retrieval, seqmatch  # noqa: E402
 from greenloop.datasets import groundtruth_formats as gt_formats  # noqa: E402
 from greenloop.datasets.sequence import (DESCRIPTION_NAME, GROUND_TRUTH_NAME, layout, list_frames,  # noqa: E402
                                          read_description, traversals, write_loop_pairs)
-from greenloop.util.files import write_atomic  # noqa: E402
-from greenloop.speed import stream  # noqa: E402
+from greenloop.detectors import registry as detectors  # noqa: E402
+from greenloop.detectors.interface import Data  # noqa: E402
+from greenloop.speed import seqstream, stream, timing  # noqa: E402
 from greenloop.study import params as study_params  # noqa: E402
 from greenloop.study import sweep  # noqa: E402
 from greenloop.util.files import write_atomic  # noqa: E402
@@ -62,6 +65,22 @@ def _read_window(paths):
     return frames
 
 
+def _read_tuned(path, variant: str) -> tuple[dict, float, int, int]:
+    """A notebook 13 summary.json's knob record of one method (``variant``): (knobs, threshold,
+    frame_step, exclude in ORIGINAL frames)."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"--tuned {path}: no such file; run notebook 13 on a recording of "
+                                f"your site (make all DATASET=...), then pass its "
+                                f"<results>/13_leaderboard/summary.json")
+    summary = json.loads(path.read_text())
+    if variant not in summary.get("knobs", {}):
+        raise ValueError(f"--tuned {path} has no variant {variant!r} (it has "
+                         f"{sorted(summary.get('knobs', {}))})")
+    step = int(summary["frame_step"])
+    return summary["knobs"][variant], summary["thresholds"][variant], step, int(summary["exclude_steps"]) * step
+
+
 def _tuned_knobs(args) -> tuple[dict, list[str]]:
     """greenloop-seq's knobs and one line per knob saying where it came from: ``--tuned`` (a
     notebook 13 summary.json, the variant named by ``--variant``), the folder's sequence.yaml
@@ -78,19 +97,10 @@ def _tuned_knobs(args) -> tuple[dict, list[str]]:
         origin = dict(dict.fromkeys(knobs, f"default {seqmatch.DEFAULT_NAME}"), step="default",
                       exclude="default")
     if args.tuned:
-        path = Path(args.tuned)
-        if not path.is_file():
-            raise FileNotFoundError(f"--tuned {path}: no such file; run notebook 13 on a recording of "
-                                    f"your site (make all DATASET=...), then pass its "
-                                    f"<results>/13_leaderboard/summary.json")
-        summary = json.loads(path.read_text())
-        if args.variant not in summary.get("knobs", {}):
-            raise ValueError(f"--tuned {path} has no variant {args.variant!r} (it has "
-                             f"{sorted(summary.get('knobs', {}))})")
-        knobs.update(summary["knobs"][args.variant], threshold=summary["thresholds"][args.variant])
-        origin.update({k: "--tuned" for k in summary["knobs"][args.variant]}, threshold="--tuned")
-        tuned_step = int(summary["frame_step"])
-        exclude_frames, origin["exclude"] = int(summary["exclude_steps"]) * tuned_step, "--tuned"
+        tuned, threshold, tuned_step, exclude_frames = _read_tuned(args.tuned, args.variant or "greenloop-seq-fast")
+        knobs.update(tuned, threshold=threshold)
+        origin.update({k: "--tuned" for k in tuned}, threshold="--tuned")
+        origin["exclude"] = "--tuned"
     if desc.get("exclude") is not None:
         exclude_frames, origin["exclude"] = desc["exclude"], f"{DESCRIPTION_NAME}"
     if desc.get("frame_step") is not None:
@@ -117,7 +127,7 @@ def _tuned_knobs(args) -> tuple[dict, list[str]]:
 
 
 def _detect_seq(args) -> int:
-    """``detect --method greenloop-seq``: greenloop.seqmatch.Detector over the frames in windows
+    """``detect --method greenloop-seq``: greenloop.seqstream.Detector over the frames in windows
     (every ``step``-th frame of the folder: 1 unless --step or sequence.yaml says otherwise); with
     ``--index`` on the retrieved candidates only, with ``--state`` resumable (:func:`_seq_stream`)."""
     kn, lines = _tuned_knobs(args)
@@ -147,7 +157,7 @@ def _detect_seq(args) -> int:
     return 0
 
 
-def _seq_detector(args, kn: dict, paths) -> seqmatch.Detector:
+def _seq_detector(args, kn: dict, paths) -> seqstream.Detector:
     """A new Detector, or the one saved in ``--state`` (the same recording and knobs only)."""
     key = dict(kn, folder=str(Path(args.folder).resolve()), frames=len(paths), index=args.index,
                candidates=args.candidates)
@@ -161,12 +171,12 @@ def _seq_detector(args, kn: dict, paths) -> seqmatch.Detector:
     if args.index is not None:
         retrieval.one_thread()
     extra = {k: kn[k] for k in ("velocities", "center_window", "calibrate", "repeat_cos") if k in kn}
-    return seqmatch.Detector(kn["threshold"], descriptor=kn["descriptor"], seq_len=kn["seq_len"],
+    return seqstream.Detector(kn["threshold"], descriptor=kn["descriptor"], seq_len=kn["seq_len"],
                              exclude=kn["exclude"], contrast_window=kn["contrast_window"],
                              index=args.index, k=args.candidates, **extra)
 
 
-def _seq_save(det: seqmatch.Detector, args, kn: dict, paths) -> None:
+def _seq_save(det: seqstream.Detector, args, kn: dict, paths) -> None:
     """Write the detector (stored frames, index, sequence buffers, events) to ``--state``, atomically."""
     key = dict(kn, folder=str(Path(args.folder).resolve()), frames=len(paths), index=args.index,
                candidates=args.candidates)
@@ -176,7 +186,7 @@ def _seq_save(det: seqmatch.Detector, args, kn: dict, paths) -> None:
     write_atomic(args.state, dump)
 
 
-def _seq_stream(det: seqmatch.Detector, paths, args, kn: dict) -> bool:
+def _seq_stream(det: seqstream.Detector, paths, args, kn: dict) -> bool:
     """Feed paths[det.frame_index:] to det in windows, printing closures, with a progress bar on
     stderr; with --state save every --save-every frames, on Ctrl-C and at the end; stop after
     --stop-after frames of this run. Returns whether the recording was finished."""
@@ -204,12 +214,64 @@ def _seq_stream(det: seqmatch.Detector, paths, args, kn: dict) -> bool:
     return det.frame_index == len(paths)
 
 
+def _registered_stream(args):
+    """The streaming detector and frame describer of a registered detector (``--method NAME``,
+    greenloop.detectors.registry): its ``cli_knobs``, or ``--tuned``'s record of ``--variant``;
+    the threshold from --threshold, --tuned or the record's fixed one. Returns (detector,
+    describe, knobs, step, paths)."""
+    entry = detectors.get(args.method)
+    if entry.stream is None or entry.cli_knobs is None:
+        raise ValueError(f"--method {args.method} has no streaming form for detect")
+    knobs, threshold = dict(entry.cli_knobs), entry.cli_knobs.get("fixed_threshold")
+    desc = read_description(args.folder) if Path(args.folder).is_dir() else {}
+    exclude_frames = desc.get("exclude") if desc.get("exclude") is not None else 150
+    if args.tuned:
+        if args.variant is None:
+            raise ValueError(f"--tuned needs --variant: the leaderboard row whose knobs --method {args.method} streams")
+        knobs, threshold, _, exclude_frames = _read_tuned(args.tuned, args.variant)
+    threshold = args.threshold if args.threshold is not None else threshold
+    if threshold is None:
+        raise ValueError(f"--method {args.method} needs a threshold chosen on your own data: pass --threshold T or "
+                         f"--tuned <results>/13_leaderboard/summary.json --variant ROW")
+    step = args.step or desc.get("frame_step") or 1
+    if step < 1:
+        raise ValueError(f"--step must be >= 1, got {step}")
+    exclude = args.exclude if args.exclude is not None else exclude_frames // step
+    paths = list_frames(args.folder)[::step]
+    data = Data(args.folder, step, np.arange(len(paths)) * step, None, exclude, None, None,
+                {"velocities": seqmatch.DEFAULT_VELOCITIES, "weights": "auto"}, {}, {}, {})
+    return entry.stream(knobs, float(threshold), data), entry.describer(knobs, data), knobs, step, paths
+
+
+def _detect_registered(args) -> int:
+    """``detect --method NAME`` for any other registered detector: frame -> its describer -> its
+    stream (``speed.timing.detector_method``'s step, the timed path); prints each closure."""
+    det, describe, knobs, step, paths = _registered_stream(args)
+    update = timing.detector_method(args.method, det, describe).step
+    print(f"# {len(paths)} frames from {args.folder} (every {step}); {args.method} ({knobs}); exclude "
+          f"{det.exclude}; threshold {det.threshold:g}", flush=True)
+    print("frame\tmatch\tscore\tfile\tmatch_file", flush=True)
+    t0 = time.perf_counter()
+    for start in range(0, len(paths), args.window):
+        chunk = paths[start:start + args.window]
+        for e in filter(None, (update(det, f) for f in _read_window(chunk))):
+            print(f"{e['frame']}\t{e['match']}\t{e['score']:.4f}\t{paths[e['frame']].name}\t"
+                  f"{paths[e['match']].name}", flush=True)
+    dt = time.perf_counter() - t0
+    print(f"# summary: {det.frame_index} frames, {len(det.events)} closures, {det.frame_index / max(dt, 1e-9):.1f} "
+          f"frames/s (decoding included, {dt:.2f} s); {det.bytes_per_frame} bytes per stored frame", flush=True)
+    return 0
+
+
 def _detect(args) -> int:
     """``detect``: frames decoded in colour (BGR) as a camera delivers them, fed to
-    greenloop.speed.stream.Detector (``--method dictionary``) or greenloop.seqmatch.Detector
-    (``--method greenloop-seq``) in windows; prints events as they are declared."""
+    greenloop.speed.stream.Detector (``--method dictionary``), greenloop.seqstream.Detector
+    (``--method greenloop-seq``, with --index / --state) or any other registered detector's
+    stream (:func:`_detect_registered`) in windows; prints events as they are declared."""
     if args.method == "greenloop-seq":
         return _detect_seq(args)
+    if args.method != "dictionary":
+        return _detect_registered(args)
 
     if args.model is None:
         raise ValueError("--method dictionary needs --model (a trained .keras or .tflite file)")
@@ -370,9 +432,10 @@ def build_parser() -> argparse.ArgumentParser:
                                    "declared loop closure (frame, spot, count) and a summary.")
     d.add_argument("folder", metavar="SEQUENCE_FOLDER",
                    help="sequence folder (its rgb/) or folder of .jpg/.png frames, any size")
-    d.add_argument("--method", default="dictionary", choices=("dictionary", "greenloop-seq"),
-                   help="dictionary: the main paper's CNN + frequency dictionary (needs --model; "
-                        "default); greenloop-seq: sequence matching (greenloop.seqmatch)")
+    d.add_argument("--method", default="dictionary", choices=list(detectors.REGISTRY),
+                   help="a registered detector (greenloop.detectors.registry): dictionary, the main paper's CNN + "
+                        "frequency dictionary (needs --model; default); greenloop-seq: sequence matching "
+                        "(greenloop.seqmatch); any other: its stream at its default knobs or --tuned's --variant")
     d.add_argument("--model", default=None, help="dictionary: trained model, .keras or .tflite file")
     d.add_argument("--threshold", "--tau", type=float, default=None,
                    help="dictionary: tau, declare a closure when a spot has been predicted this many "
@@ -384,12 +447,13 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--backend", default="auto", choices=("auto", "numpy", "tflite", "keras"),
                    help="inference backend (default auto)")
     d.add_argument("--window", type=int, default=70, help="frames per batch (default 70)")
-    g = d.add_argument_group("greenloop-seq (greenloop.seqmatch.Detector)")
+    g = d.add_argument_group("greenloop-seq (greenloop.seqstream.Detector)")
     g.add_argument("--tuned", default=None, metavar="SUMMARY_JSON",
                    help="knobs and threshold picked by notebook 13 on a tuning part "
                         "(<results>/13_leaderboard/summary.json); flags below override them")
-    g.add_argument("--variant", default="greenloop-seq-fast", choices=("greenloop-seq", "greenloop-seq-fast"),
-                   help="which of --tuned's variants (default greenloop-seq-fast: no CNN)")
+    g.add_argument("--variant", default=None, metavar="ROW",
+                   help="which of --tuned's rows (greenloop-seq: greenloop-seq or greenloop-seq-fast, the default: no "
+                        "CNN; another --method: the row to stream, e.g. 'SeqSLAM (tuned)')")
     g.add_argument("--descriptor", default=None, choices=("pixels", "pixels-patchnorm", "mobilenetv2"),
                    help="per-frame descriptor (default pixels-patchnorm)")
     g.add_argument("--seq-len", type=int, default=None, help="frames per matched sequence (default 10)")

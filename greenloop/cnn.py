@@ -491,33 +491,3 @@ def run_seeds(X: np.ndarray, y: np.ndarray, seeds, progress: bool = True, **trai
     return out
 
 
-def revisit_predictions(X_first: np.ndarray, y: np.ndarray, X_revisit: np.ndarray, acceptable,
-                        seeds, splits=("random", "blocked"), **train_kw):
-    """The places learnt on the first traversal, named on the revisit (notebook 12's protocol).
-
-    X_first: (n_ref, H, W, C) frames of the first traversal, y: (n_ref,) their spot labels (K
-    spots); the CNN is trained on them (``run_seeds``) once per split in ``splits`` and seed.
-    X_revisit: (Q, H, W, C) revisit frames, never trained on; acceptable: (Q, K) bool, True where
-    spot k holds a ground-truth partner of revisit frame q (``spots.revisit_targets``): a revisit
-    frame is named right when its predicted spot is acceptable. train_kw go to ``run_seeds``.
-    Returns (runs, rows, revisit): runs {split: run_seeds' list}; rows, one dict per (split, seed):
-    split, seed, n_train, final_train_acc_%, in_traversal_test_acc_% (the run's own test split),
-    revisit_acc_% (in %, 2 decimals), revisit_frames (Q); revisit {(split, seed): dict(pred (Q,)
-    int64 predicted spots, right (Q,) bool)}.
-    """
-    ok = np.asarray(acceptable, dtype=bool)
-    if ok.ndim != 2 or len(ok) != len(X_revisit):
-        raise ValueError(f"acceptable must be (Q, K) bool for the {len(X_revisit)} revisit frames, got {ok.shape}")
-    train_kw.setdefault("progress", False)
-    runs = {split: run_seeds(X_first, y, seeds, split=split, **train_kw) for split in splits}
-    rows, revisit = [], {}
-    for split, rs in runs.items():
-        for r in rs:
-            p = predict(r["model"], X_revisit)
-            right = ok[np.arange(len(ok)), p]
-            revisit[split, r["seed"]] = {"pred": p, "right": right}
-            rows.append({"split": split, "seed": r["seed"], "n_train": len(r["split"]["train"]),
-                         "final_train_acc_%": round(100 * r["history"]["accuracy"][-1], 2),
-                         "in_traversal_test_acc_%": round(100 * r["test_accuracy"], 2),
-                         "revisit_acc_%": round(100 * right.mean(), 2), "revisit_frames": len(ok)})
-    return runs, rows, revisit

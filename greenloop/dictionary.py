@@ -12,9 +12,12 @@ other on random label streams.
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
-from greenloop.evaluate import closure_counts
+from greenloop import cnn, spots
+from greenloop.evaluate import closure_counts, operating_point
 from greenloop.groundtruth import far_in_time, revisit_frames
 from greenloop.util.checks import positive_int
 
@@ -273,40 +276,46 @@ def choose_threshold(pred, reference_labels, gt, taus, tune, exclude: int = 150)
     return best["tau"], rows
 
 
-def tune_and_score(pred, reference_labels, gt, taus, tune, score, paper_tau: int,
-                   exclude: int = 150) -> tuple[list[dict], list[dict]]:
-    """The dictionary's τ chosen on a tuning part and scored on a scoring part, beside the paper's τ.
 
-    pred, reference_labels, gt, exclude: as in :func:`score_closures` ((T,) labels, (T, T) bool).
-    taus: candidate thresholds (detections); tune, score: (T,) bool masks of the tuning and the
-    scoring frames (``evaluate.split_mask``), or both None when no honest split exists: then
-    nothing is chosen and only the paper's τ (fixed in advance) is scored, on every frame.
-    paper_tau: the paper's τ = L + Δ (:func:`threshold`).
-    Returns (rules, curve). rules: one dict per τ rule ("chosen on the tuning part" by
-    :func:`choose_threshold`, then "paper: L + Δ"; only "paper: L + Δ, every frame (no honest
-    split)" without a split): tau_rule, tau, precision, recall (4 decimals), flagged_frames,
-    false_frames, events, false_events, first_delay_frames (the first run of revisit frames'
-    delay that is not None, else None). curve: one dict per candidate τ: tau, tune_f1 (NaN
-    without a split), score_precision, score_recall (frame level, on the scoring part).
+# --------------------------------------------- the detector trained, run and scored (07, 13)
+class SpotDetector(NamedTuple):
+    """The main paper's detector of :func:`operating_points`. run: ``cnn.run_seeds``' record of
+    the spot CNN (model, seed, history, split, test_accuracy, test_pred). labels: (T,) int64 spot
+    of every frame (``spots.group``). pred: (T,) int64 spot the CNN predicts for every frame.
+    n_train: frames 0..n_train-1 it was trained on (split at random 80/20 by ``cnn.train``)."""
+    run: dict
+    labels: np.ndarray
+    pred: np.ndarray
+    n_train: int
+
+
+def operating_points(X, frames_per_spot: int, taus, frames, gt, exclude: int = 150, exclude_steps: int | None = None,
+                     n_train: int | None = None, queries=None, seed: int = 0, progress: bool = True,
+                     **train_kw) -> tuple[SpotDetector, list[dict]]:
+    """Train the spot CNN on the first frames, predict every frame, score the dictionary at each tau.
+
+    X: (T, H, W, C) every frame of the sequence in capture order (``sequence.load_frames``).
+    frames_per_spot: L. taus: thresholds (ints >= 1). frames: (M,) original indices of the
+    described frames, gt: (M, M) bool their ground truth; exclude: band in original frames (the
+    declared pairs, :func:`declared_pairs`), exclude_steps: the same band in steps of ``frames``
+    (scoring; default exclude). n_train: train on frames 0..n_train-1 only (e.g. the frames
+    before an evaluation part; default every frame). queries: optional (M,) bool mask of the
+    scored queries. seed, progress, train_kw (epochs, batch_size, ...): ``cnn.run_seeds``.
+    Returns (detector, points): one dict per tau with tau, flagged_frames (frames flagged over the
+    whole stream), closures (:func:`query_closures`) and op (``evaluate.operating_point`` of the
+    declared pairs among the described frames).
     """
-    if (tune is None) != (score is None):
-        raise ValueError("tune and score must both be masks, or both None (no honest split)")
-    if tune is not None:
-        tau, tune_rows = choose_threshold(pred, reference_labels, gt, taus, tune, exclude)
-        f1 = {row["tau"]: row["f1"] for row in tune_rows}
-        rules = (("chosen on the tuning part", tau), ("paper: L + Δ", paper_tau))
-    else:
-        rules = (("paper: L + Δ, every frame (no honest split)", paper_tau),)
-    curve = []
-    for t in taus:
-        s = score_closures(pred, reference_labels, gt, t, exclude, queries=score)
-        curve.append({"tau": t, "tune_f1": f1[int(t)] if tune is not None else np.nan,
-                      "score_precision": s["precision"], "score_recall": s["recall"]})
-    out = []
-    for rule, t in rules:
-        s = score_closures(pred, reference_labels, gt, t, exclude, queries=score)
-        out.append({"tau_rule": rule, "tau": t, "precision": round(s["precision"], 4),
-                    "recall": round(s["recall"], 4), "flagged_frames": s["flagged"], "false_frames": s["false_frames"],
-                    "events": s["events"], "false_events": s["false_events"],
-                    "first_delay_frames": next((d for d in s["delays"] if d is not None), None)})
-    return out, curve
+    X = np.asarray(X)
+    n_train = len(X) if n_train is None else positive_int("n_train", n_train, 1, len(X), unit="frames")
+    y = spots.group(len(X), frames_per_spot)
+    run_ = cnn.run_seeds(X[:n_train], y[:n_train], [seed], progress=progress, **train_kw)[0]
+    pred = cnn.predict(run_["model"], X)
+    f = np.asarray(frames)
+    ex = exclude if exclude_steps is None else exclude_steps
+    points = []
+    for tau in taus:
+        D = declared_pairs(pred, y, tau, exclude)[np.ix_(f, f)]
+        points.append({"tau": tau, "flagged_frames": int(run(pred, int(max(y.max(), pred.max()) + 1), tau).sum()),
+                       "closures": query_closures(D, gt, queries=queries), "op": operating_point(D, gt, ex, queries=queries)})
+    return SpotDetector(run_, y, pred, n_train), points
+

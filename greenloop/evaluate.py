@@ -50,7 +50,6 @@ import numpy as np
 from sklearn.metrics import (average_precision_score, classification_report, precision_recall_curve,
                              roc_curve)
 
-from greenloop import similarity
 from greenloop.groundtruth import far_in_time, revisit_frames
 from greenloop.util.checks import positive_int
 
@@ -59,11 +58,10 @@ __all__ = [
     "recall_at_100_precision",
     "recall_at_k", "Matches", "candidate_mask", "matches", "best_matches", "query_pr_curve",
     "query_metrics", "per_query", "query_chance", "operating_point", "split_mask", "NoHonestSplit", "mean_per_class_accuracy",
-    "mpca_threshold", "tune_then_score", "closure_counts", "loop_scores", "chance_level",
+    "mpca_threshold", "closure_counts", "loop_scores", "chance_level",
     "revisit_queries",
     "precision_at_recall", "interpolated_precision", "overlap_recall", "relative_rates",
-    "loss_per_time_saved", "honest_split", "split_summary", "whitened_variants", "median_scores",
-    "swapped_split", "per_spot", "spot_errors", "same_place_errors",
+    "loss_per_time_saved", "split_summary", "per_spot", "spot_errors", "same_place_errors",
 ]
 
 _NO_LOOPS = ("the ground truth has no loops among the counted pairs (|i - j| > exclude={exclude}"
@@ -626,37 +624,15 @@ def _revisit_cut(n: int, fraction: float, gt, gap: int) -> int:
     return min(int(rev[m]), last - gap)     # rev[:m] tune when the requested cut is honest
 
 
-def tune_then_score(candidates, GT, exclude: int, tune, evaluate) -> dict:
-    """Pick a knob's value by AP on the tuning queries and score the pick on the evaluation queries.
-
-    candidates: {value: S}, one (N, N) similarity matrix per candidate value of the knob (a
-        whitening dimension, a median-filter size, ...). GT, exclude: as in :func:`pair_scores`.
-    tune, evaluate: (N,) bool query masks from :func:`split_mask` (swap them for the second split).
-    Returns dict(value, AP_tune, AP_eval, R@100P_eval, AP_tune_all): the picked value (the first
-    of equal tuning APs), its AP on the tuning queries and its AP and recall at 100 % precision on
-    the evaluation queries, in [0, 1], and {value: AP on the tuning queries} of every candidate
-    (the tuning curve). The evaluation ground truth never influences the pick.
-    """
-    if not candidates:
-        raise ValueError("candidates is empty: give at least one {value: S}")
-    tuned = {v: average_precision(S, GT, exclude, queries=tune) for v, S in candidates.items()}
-    best = max(tuned, key=tuned.get)
-    S = candidates[best]
-    return {"value": best, "AP_tune": tuned[best],
-            "AP_eval": average_precision(S, GT, exclude, queries=evaluate),
-            "R@100P_eval": recall_at_100_precision(S, GT, exclude, queries=evaluate),
-            "AP_tune_all": tuned}
-
-
 # ------------------------------------------------- the notebooks' scoring protocol (07-11)
 def loop_scores(S, GT, exclude: int = 150, queries=None, tag: str = "") -> dict:
-    """AP and recall at 100 % precision of one similarity matrix, in %, rounded to 2 decimals.
+    """AP and recall at 100 % precision of one similarity matrix, in % (unrounded).
 
     S, GT, exclude, queries: as in :func:`pair_scores`. tag: inserted in the keys, e.g. "_RGB".
     Returns {f"AP{tag}_%": float, f"R@100P{tag}_%": float}, the columns of the notebooks' tables.
     """
-    return {f"AP{tag}_%": round(100 * average_precision(S, GT, exclude, queries=queries), 2),
-            f"R@100P{tag}_%": round(100 * recall_at_100_precision(S, GT, exclude, queries=queries), 2)}
+    return {f"AP{tag}_%": 100 * average_precision(S, GT, exclude, queries=queries),
+            f"R@100P{tag}_%": 100 * recall_at_100_precision(S, GT, exclude, queries=queries)}
 
 
 def chance_level(GT, exclude: int = 150, queries=None) -> float:
@@ -740,7 +716,7 @@ def loss_per_time_saved(R_a, R_t) -> np.ndarray:
         return np.where(R_t > 0, -R_a / R_t, np.nan)
 
 
-# ---------------------------------------- tuning on one part, scoring on the other (08)
+# ------------------------------------------------------ the split's summary line
 def honest_split(n: int, fraction: float, gt, gap: int, frames=None,
                  dropped: str = "the tuned rows",
                  kept: str = "numbers that need no tuning are scored on every query instead"):
@@ -768,98 +744,6 @@ def split_summary(tune, evaluate, gt, gap: int) -> str:
     return (f"tuning queries: frames 0..{cut - 1} ({int(rev[tune].sum())} revisit frames); "
             f"evaluation queries: frames {cut + gap}..{len(tune) - 1} ({int(rev[evaluate].sum())} "
             f"revisit frames); gap {gap}")
-
-
-def whitened_variants(X, GT, exclude: int, tune, evaluate, pca_dim: int = 500,
-                      dims=(8, 16, 32, 64, 128, 256, 500), eps: float = 1e-5):
-    """Zhang 2017's post-processing variants of one descriptor, whitening fitted on the tuning part.
-
-    X: (N, D) raw descriptors. GT, exclude: as :func:`pair_scores`. tune, evaluate: (N,) bool
-    query masks of :func:`split_mask`, or both None where no honest split exists. pca_dim: the
-    paper's PCA dimension; dims: the candidate dimensions of the tuned variants; eps: whitening ε.
-    Returns (variants, curves). variants: {name: (S (N, N) float, whitening note)} with "raw"
-    (1 - D / max D of X), "L2" (of the L2-normalised X), "PCA-whitened, paper dim" (fitted on the
-    tuning frames, on every frame without a split) and, with a split, "PCA-whitened, tuned dim"
-    and "ZCA, tuned dim" (dimension picked by :func:`tune_then_score`). curves: {"pca dim" |
-    "zca dim": {kept dim: AP on the tuning queries in [0, 1]}}, empty without a split.
-    """
-    Xn = similarity.l2_normalise(X)
-    variants = {"raw": (similarity.distance_similarity(X, normalise=False), "-"),
-                "L2": (similarity.distance_similarity(Xn), "-")}
-    (k, Y), = similarity.whitening_candidates(Xn, [pca_dim], "pca", eps, fit=tune).items()
-    variants["PCA-whitened, paper dim"] = (similarity.distance_similarity(Y), f"dim {k} (paper {pca_dim})"
-                                           + ("" if tune is not None else ", fitted on every frame"))
-    curves = {}
-    if tune is None:
-        return variants, curves                       # a tuned dimension needs a tuning part
-    for kind, name in (("pca", "PCA-whitened, tuned dim"), ("zca", "ZCA, tuned dim")):
-        cands = similarity.whitened_similarities(Xn, dims, kind, eps, fit=tune)
-        r = tune_then_score(cands, GT, exclude, tune, evaluate)
-        curves[f"{kind} dim"] = r["AP_tune_all"]
-        variants[name] = (cands[r["value"]], f"dim {r['value']} (picked on tuning part)")
-    return variants, curves
-
-
-def _mpca(S, GT, exclude, tune, evaluate) -> dict:
-    """MPCA threshold picked on the tuning queries, MPCA on the evaluation queries (rounded)."""
-    thr = mpca_threshold(S, GT, exclude, queries=tune)
-    return {"MPCA_threshold": round(thr, 4),
-            "MPCA_eval": round(mean_per_class_accuracy(S, GT, thr, exclude, queries=evaluate), 3)}
-
-
-def median_scores(S, GT, exclude: int, tune, evaluate, sizes=(1, 3, 5, 9, 15)):
-    """One variant's rows of notebook 08's table: unfiltered and with the median size tuned.
-
-    S: (N, N) similarity of the variant. GT, exclude: as :func:`pair_scores`. tune, evaluate: (N,)
-    bool query masks of :func:`split_mask`, or both None where no honest split exists. sizes:
-    candidate median-filter sizes in frames (1: no filter, :func:`similarity.median_candidates`).
-    Returns (rows, curve). With a split: two rows (median_filter "none" at size 1, then
-    "median (tuned)" at the picked size) with AP_tune_%, AP_eval_%, R@100P_eval_% (in %, 2
-    decimals) and the MPCA threshold (tuned) and MPCA on the evaluation part; curve = {size: AP on
-    the tuning queries}. Without: one unfiltered row scored on every query (AP_all_%,
-    R@100P_all_%, NaN where a tuning part is needed) and curve None.
-    """
-    if tune is None:
-        return [{"median_filter": "none", "size": 1, "AP_tune_%": np.nan,
-                 "AP_all_%": round(100 * average_precision(S, GT, exclude), 2),
-                 "R@100P_all_%": round(100 * recall_at_100_precision(S, GT, exclude), 2),
-                 "MPCA_threshold": np.nan, "MPCA_eval": np.nan}], None
-    fs = similarity.median_candidates(S, sizes)
-    r = tune_then_score(fs, GT, exclude, tune, evaluate)
-    rows = []
-    for filt, s in (("none", 1), ("median (tuned)", r["value"])):
-        Sf = fs[s]
-        rows.append({"median_filter": filt, "size": s, "AP_tune_%": round(100 * r["AP_tune_all"][s], 2),
-                     "AP_eval_%": round(100 * average_precision(Sf, GT, exclude, queries=evaluate), 2),
-                     "R@100P_eval_%": round(100 * recall_at_100_precision(Sf, GT, exclude, queries=evaluate), 2),
-                     **_mpca(Sf, GT, exclude, tune, evaluate)})
-    return rows, r["AP_tune_all"]
-
-
-def swapped_split(X, S_l2, GT, exclude: int, tune, evaluate, dims=(8, 16, 32, 64, 128, 256, 500),
-                  sizes=(1, 3, 5, 9, 15), eps: float = 1e-5) -> list:
-    """Notebook 08's second split: each knob tuned on either part and scored on the other.
-
-    X: (N, D) raw descriptors (L2-normalised here; the PCA whitening is refitted on each tuning
-    part). S_l2: (N, N) similarity of the L2 variant, whose median-filter size is the second knob.
-    GT, exclude: as :func:`pair_scores`; tune, evaluate: (N,) bool masks of :func:`split_mask`.
-    dims, sizes, eps: as :func:`whitened_variants` and :func:`median_scores`.
-    Returns a list of 4 dicts (split A = tune early/score late, then B = swapped; per split the
-    PCA-whitening dimension, then the median size): knob, split, picked, AP_tune_%, AP_eval_%,
-    R@100P_eval_% (in %, 2 decimals).
-    """
-    Xn = similarity.l2_normalise(X)
-    medians = similarity.median_candidates(S_l2, sizes)
-    rows = []
-    for split, (tq, eq) in {"A: tune early, score late": (tune, evaluate),
-                            "B: tune late, score early": (evaluate, tune)}.items():
-        for knob, cands in (("PCA-whitening dim", similarity.whitened_similarities(Xn, dims, "pca", eps, fit=tq)),
-                            ("median size, L2", medians)):
-            r = tune_then_score(cands, GT, exclude, tq, eq)
-            rows.append({"knob": knob, "split": split, "picked": r["value"],
-                         "AP_tune_%": round(100 * r["AP_tune"], 2), "AP_eval_%": round(100 * r["AP_eval"], 2),
-                         "R@100P_eval_%": round(100 * r["R@100P_eval"], 2)})
-    return rows
 
 
 # ------------------------------------------------------- the spot classifier (main paper)

@@ -47,7 +47,6 @@ from functools import lru_cache
 
 import numpy as np
 
-from greenloop import evaluate
 from greenloop.similarity import l2_normalise
 from greenloop.util import kernels
 from greenloop.util.checks import positive_int
@@ -57,8 +56,7 @@ __all__ = [
     "MAX_BITS", "METHODS", "hyperplanes", "codes", "hamming_masks", "probe_order_swp", "qdp_costs",
     "perturbation_sets", "probe_order_qdp", "qdp_n_probes", "BucketIndex", "build_index", "insert",
     "append", "options", "probe_candidates",
-    "MatchResult", "incremental_match", "query_index", "static_match", "scanned_matrix",
-    "best_match_matrix", "table6_variants", "query_matches", "run_scores", "compare_variants", "scanned_pr_curve",
+    "MatchResult", "incremental_match", "query_index", "static_match",
 ]
 
 MAX_BITS = 32                       # codes are uint32
@@ -572,7 +570,7 @@ def incremental_match(X, method: str = "swp", exclude: int = 0, n_bits: int = 16
         paper: non-negative descriptors (ReLU + pooling, pixels) all lie in one orthant, where
         planes through the origin cut few of them apart. Causal: those k frames are all seen
         before the first frame is stored (just before query exclude + 1).
-    keep_candidates: record every query's scanned rows (for :func:`scanned_matrix`).
+    keep_candidates: record every query's scanned rows (``experiments.lsh_matching.scanned_matrix``).
     Returns a :class:`MatchResult` with one entry per frame (query t = frame t).
     """
     o = options(method, radius, qdp_probes, qdp_score, theta)
@@ -625,142 +623,3 @@ def static_match(X_db, Q, method: str = "swp", n_bits: int = 16, seed: int = 0, 
         raise ValueError(f"X_db must be (N, D) descriptors, got shape {X_db.shape}")
     index = build_index(X_db, hyperplanes(X_db.shape[1], n_bits, seed), offset=offset)
     return query_index(index, Q, method, radius, qdp_probes, qdp_score, theta, max_seconds)
-
-
-# ------------------------------------------------------------------- score matrices for AP
-def _incremental(result: MatchResult, need_candidates: bool = False) -> int:
-    if not isinstance(result, MatchResult) or result.params.get("mode") != "incremental":
-        raise ValueError("expected a MatchResult of lsh.incremental_match (query t = frame t)")
-    if need_candidates and result.candidates is None:
-        raise ValueError("this result kept no candidates: run incremental_match(..., "
-                         "keep_candidates=True)")
-    return len(result.best)
-
-
-def scanned_matrix(S, result: MatchResult, floor: float = -2.0) -> np.ndarray:
-    """The similarity matrix restricted to the pairs a method actually scanned.
-
-    S: (N, N) cosine similarities of the same frames (``similarity.cosine_matrix(X)``), read at
-    [i, j] with i the stored frame and j the query. result: from ``incremental_match(X, ...,
-    keep_candidates=True)``. Returns (N, N) float32: S[i, j] where query j scanned frame i,
-    ``floor`` (below every cosine) elsewhere, so pairs a method never looked at rank last, tied.
-    For brute force this equals S on every pair i < j - exclude.
-    """
-    n = _incremental(result, need_candidates=True)
-    S = np.asarray(S)
-    if S.shape != (n, n):
-        raise ValueError(f"S must be ({n}, {n}) for {n} queries, got shape {S.shape}")
-    out = np.full((n, n), floor, np.float32)
-    for j, cand in enumerate(result.candidates):
-        rows = np.arange(result.n_stored[j]) if cand is None else cand
-        out[rows, j] = S[rows, j]
-    return out
-
-
-def best_match_matrix(result: MatchResult, floor: float = -2.0) -> np.ndarray:
-    """Only each query's best match: (N, N) float32 with [best_j, j] = score_j, ``floor``
-    elsewhere (queries without a match add nothing). result: from :func:`incremental_match`."""
-    n = _incremental(result)
-    out = np.full((n, n), floor, np.float32)
-    ok = result.best >= 0
-    out[result.best[ok], np.flatnonzero(ok)] = result.score[ok]
-    return out
-
-
-# -------------------------------------------- Qi 2024 Table 6, Figure 7, scaling (notebook 11)
-def table6_variants(centre: bool = True, centre_frames: int = 1) -> list:
-    """The matchers of Table 6: [(name, method, centre_frames)] for :func:`incremental_match`.
-
-    Brute force, scikit-learn, SWP and QDP with hyperplanes through the origin (the paper); with
-    centre, SWP and QDP again with hyperplanes through the mean of the first ``centre_frames``
-    frames (beyond the paper; notebook 11 uses exclude + 1, in frames of the sequence).
-    """
-    out = [("brute force", "brute", 0), ("NearestNeighbors (sklearn)", "sklearn", 0),
-           ("SWP-RHLSH", "swp", 0), ("QDP-RHLSH", "qdp", 0)]
-    if centre:
-        out += [("SWP-RHLSH, centred", "swp", centre_frames), ("QDP-RHLSH, centred", "qdp", centre_frames)]
-    return out
-
-
-def query_matches(result: MatchResult, GT, exclude: int, floor: float = -2.0):
-    """The per-query :class:`greenloop.evaluate.Matches` of one incremental run (loop-closure mode).
-
-    result: from :func:`incremental_match`. GT: (N, N) bool ground truth; exclude: band in
-    frames (the run's). Queries: every frame with a stored candidate (j - i > exclude for some
-    i). match/score: the method's best scanned frame and its cosine; a query that scanned nothing
-    has no match and gets score ``floor`` (below every cosine: it fires only at the lowest
-    threshold) and correct False. has_partner: a GT partner among ALL its candidates (the same
-    denominator for every method). Only the best match is known, so k = 1 (R@1 only).
-    """
-    n = _incremental(result)
-    G = np.asarray(GT, dtype=bool)
-    if G.shape != (n, n):
-        raise ValueError(f"GT must be ({n}, {n}) for {n} queries, got shape {G.shape}")
-    js = np.flatnonzero(result.n_stored > 0)
-    has = (G & evaluate.candidate_mask(n, exclude))[:, js].any(0)
-    found = result.best[js] >= 0
-    match = np.where(found, result.best[js], 0)
-    score = np.where(found, result.score[js], floor)
-    correct = found & G[match, js]
-    return evaluate.matches(js, match, score, correct, has, np.where(correct, 0, 1), 1)
-
-
-def run_scores(r: MatchResult, S, brute: MatchResult, GT, exclude: int) -> dict:
-    """The scores of one incremental run (notebook 11's Table 6 columns).
-
-    r, brute: :func:`incremental_match` results (keep_candidates=True) of the method and of brute
-    force on the same N frames. S: (N, N) cosine matrix of the frames. GT: (N, N) bool ground
-    truth; exclude: band in frames. Returns the per-query metrics of :func:`query_matches`
-    (``evaluate.query_metrics``, loop-closure mode): R@1_%, AUC-PR_%, R@100P_%, R@95P_%; then
-    AP_pairs_% (pair AP of :func:`scanned_matrix`, secondary), NN_agree_% (same best match as
-    brute force), scanned_% (candidates / stored), probes_per_query, N1_at_end (NaN for
-    brute/sklearn), ms_per_query, probe_ms_per_query (ms) and total_s (s); unrounded.
-    """
-    t, hashed = r.timed, r.method in ("swp", "qdp")
-    q = evaluate.query_metrics(query_matches(r, GT, exclude), ks=(1,))
-    return {"R@1_%": 100 * q["R@1"], "AUC-PR_%": 100 * q["AUC-PR"], "R@100P_%": 100 * q["R@100P"],
-            "R@95P_%": 100 * q["R@95P"],
-            "AP_pairs_%": 100 * evaluate.average_precision(scanned_matrix(S, r), GT, exclude),
-            "NN_agree_%": 100 * np.mean(r.best[t] == brute.best[t]),
-            "scanned_%": 100 * np.mean(r.n_candidates[t] / r.n_stored[t]),
-            "probes_per_query": float(r.n_probes[t].mean()) if hashed else np.nan,
-            "N1_at_end": int(r.n_buckets[-1]) if hashed else np.nan,
-            "ms_per_query": r.ms_per_query, "probe_ms_per_query": 1e3 * float(r.probe_seconds[t].mean()),
-            "total_s": float(r.seconds.sum())}
-
-
-def compare_variants(per_seed, reference: str = "brute force"):
-    """Table 6: every matcher's scores averaged over hyperplane seeds, against the reference's.
-
-    per_seed: a pandas DataFrame, one row per run: backbone, weights, label, variant, seed and the
-    columns of :func:`run_scores`. reference: the variant each backbone's rates are taken against.
-    Returns a DataFrame, one row per (backbone, weights, label, variant) in first-seen order: the
-    means, AP_pairs_sd (population sd over seeds, after AP_pairs_%) and ms_sd, then R_a_% and
-    R_t_% (:func:`greenloop.evaluate.relative_rates` of AP_pairs_% and ms_per_query against the
-    reference row of the same backbone) and loss_per_1%_time (-R_a / R_t, NaN unless R_t > 0).
-    """
-    keys = ["backbone", "weights", "label", "variant"]
-    metrics = [c for c in per_seed.columns if c not in keys + ["seed"]]
-    table = per_seed.groupby(keys, sort=False)[metrics].mean().reset_index()
-    spread = per_seed.groupby(keys, sort=False)[["AP_pairs_%", "ms_per_query"]].std(ddof=0).reset_index()
-    table.insert(table.columns.get_loc("AP_pairs_%") + 1, "AP_pairs_sd", spread["AP_pairs_%"].values)
-    table["ms_sd"] = spread["ms_per_query"].values
-    ref = table[table.variant == reference].set_index("backbone")
-    table["R_a_%"], table["R_t_%"] = evaluate.relative_rates(
-        table["AP_pairs_%"], table["ms_per_query"],
-        table.backbone.map(ref["AP_pairs_%"]), table.backbone.map(ref["ms_per_query"]))
-    table["loss_per_1%_time"] = evaluate.loss_per_time_saved(table["R_a_%"], table["R_t_%"])
-    return table
-
-
-def scanned_pr_curve(S, result: MatchResult, GT, exclude: int, floor: float = -2.0):
-    """Figure 7's PR curve of one incremental run, over the pairs the method scanned.
-
-    S, result, floor: as :func:`scanned_matrix`; GT, exclude: as ``evaluate.pr_curve``.
-    Returns (precision, recall), each (T,): ``evaluate.pr_curve`` of the scanned matrix without
-    the point where the never-scanned pairs (scored ``floor``) are declared loops, so the curve
-    ends at the largest recall the method reaches.
-    """
-    p, r, th = evaluate.pr_curve(scanned_matrix(S, result, floor), GT, exclude)
-    keep = np.append(th > floor, True)
-    return p[keep], r[keep]

@@ -7,7 +7,8 @@ One interface, six implementations (``make_index(kind, dim, ...)``):
 * ``"ivf"``: faiss ``IndexIVFFlat`` (inverted lists over ``nlist`` k-means cells, ``nprobe`` of
   them searched). A stream has no training set: the first ``train_size`` frames are scanned
   exactly (a flat index) until there are that many, then the coarse quantiser is trained on them
-  and every frame moves into the IVF index.
+  and every frame moves into the IVF index. The same happens however the frames arrive: one
+  ``add`` of N > train_size frames trains on the first train_size of them, as N single adds do.
 * ``"hnsw"``: faiss ``IndexHNSWFlat`` (graph with ``M`` links per node, ``ef_search``,
   ``ef_construction``).
 * ``"swp"`` / ``"qdp"``: the paper's random-hyperplane LSH with step-wise or query-directed
@@ -23,7 +24,7 @@ table).
 
 The exclusion window (query t never sees frames t - exclude .. t) is handled by the caller
 delaying insertion: frame i is added just before query i + exclude + 1 (:func:`stream_search`,
-and ``greenloop.seqmatch.Detector`` with ``index=``).
+and ``greenloop.seqstream.Detector`` with ``index=``).
 
 Rows are L2-normalised in float32 on the way in (queries too), so every score is a cosine.
 Searches run one query at a time on one thread in the streaming callers; call
@@ -149,17 +150,27 @@ class _Faiss:
                 rng.rand_float()
 
     def add(self, X) -> None:
-        self.index.add(_rows(X, self.dim))
-        if not self.trained and self.index.ntotal >= self.train_size:
-            flat = self.index
-            Y = flat.reconstruct_n(0, flat.ntotal)
-            quantiser = faiss.IndexFlatIP(self.dim)
-            ivf = faiss.IndexIVFFlat(quantiser, self.dim, self.nlist, faiss.METRIC_INNER_PRODUCT)
-            ivf.cp.seed = 0
-            ivf.train(Y)
-            ivf.add(Y)
-            ivf.nprobe = self.nprobe
-            self._quantiser, self.index, self.trained = quantiser, ivf, True
+        Y = _rows(X, self.dim)
+        if not self.trained:       # the quantiser learns the first train_size frames, however added
+            head = self.train_size - self.index.ntotal
+            self.index.add(Y[:head])
+            Y = Y[head:]
+            if self.index.ntotal >= self.train_size:
+                self._train()
+        if len(Y):
+            self.index.add(Y)
+
+    def _train(self) -> None:
+        """IVF: train the coarse quantiser on the train_size frames stored flat, move them in."""
+        flat = self.index
+        Y = flat.reconstruct_n(0, flat.ntotal)
+        quantiser = faiss.IndexFlatIP(self.dim)
+        ivf = faiss.IndexIVFFlat(quantiser, self.dim, self.nlist, faiss.METRIC_INNER_PRODUCT)
+        ivf.cp.seed = 0
+        ivf.train(Y)
+        ivf.add(Y)
+        ivf.nprobe = self.nprobe
+        self._quantiser, self.index, self.trained = quantiser, ivf, True
 
     def search(self, Q, k: int):
         Q, k = _rows(Q, self.dim, "Q"), positive_int("k", k, 1)

@@ -83,7 +83,7 @@ import time
 
 import numpy as np
 
-from greenloop import evaluate, features, groundtruth, similarity, spots
+from greenloop import evaluate, features, groundtruth, spots
 from greenloop.datasets import sequence
 from greenloop.util.cache import cache_key, cached_model, is_cached
 from greenloop.util.checks import positive_int
@@ -592,72 +592,3 @@ def train(X, labels, seed: int = 0, supervision: str = "multitask", fusion: str 
         was_cached.append(is_cached(key, cache))
     return cached_model(key, cache, lambda: _fit(X, labels, progress, **params), params, "pairs.npz",
                         compile=False)
-
-
-# ---------------------------------------------------- scoring descriptors (notebook 10)
-def score_descriptors(F, GT, exclude: int, queries=None):
-    """Xu 2022's matching of descriptors F (N, D): similarity by L2 distance, scored on queries.
-
-    F: (N, D) descriptors; GT: (N, N) bool ground truth; exclude: band in frames of F; queries:
-    (N,) bool mask (the held-out part) or None. The similarity is ``similarity.distance_similarity(F,
-    normalise=False)`` = 1 - D / max D, monotone in -L2 distance (Eq. 5).
-    Returns (S (N, N) float32, AP in %, recall at 100 % precision in %), unrounded.
-    """
-    S = similarity.distance_similarity(F, normalise=False)
-    return (S, 100 * evaluate.average_precision(S, GT, exclude, queries=queries),
-            100 * evaluate.recall_at_100_precision(S, GT, exclude, queries=queries))
-
-
-def _row(descriptor, label, inf, ap, r100, supervision="none", fusion="none", layer="", train_pairs=0,
-         epochs=0, train_s=0.0, train_cpu_s=0.0, loaded_from_cache=False) -> dict:
-    """One row of notebook 10's tables (AP, R@100P in %, rounded to 2 decimals; ms per image)."""
-    return {"descriptor": descriptor, "weights": inf.weights, "label": label, "dim": inf.dim,
-            "supervision": supervision, "fusion": fusion, "layer": layer, "train_pairs": train_pairs,
-            "epochs": epochs, "train_s": train_s, "train_cpu_s": train_cpu_s,
-            "loaded_from_cache": loaded_from_cache, "AP_%": round(ap, 2), "R@100P_%": round(r100, 2),
-            "extract_ms_per_image": round(1e3 * inf.seconds_per_image, 3)}
-
-
-def fit_and_score(name: str, X, labels, heldout, gap: int, GT, exclude: int, train_kw: dict, **kw):
-    """Train one network (or load it from the cache), check its pairs, describe every frame, score.
-
-    name: the row's descriptor name. X: (N, H, W, C) float32 inputs in [0, 1]; labels: (N,) place
-    labels of the training part (-1 elsewhere, :func:`place_labels`). heldout: (N,) bool queries
-    scored; gap: frames around them no training pair may touch (:func:`check_pairs` raises
-    otherwise). GT, exclude: as :func:`score_descriptors`. train_kw: :func:`train`'s shared
-    arguments (seed, epochs, ...); kw: this network's (supervision, fusion, fusion_layer, merge).
-    Returns (row, S, model, history): row = one dict of notebook 10's tables (AP and R@100P on
-    the held-out queries, in %; training seconds; loaded_from_cache = the model came from the
-    cache, ``util.cache.cached_model``), S (N, N) its similarity matrix, the descriptor model, history.
-    """
-    loaded = []
-    model, hist, pairs = train(X, labels, **train_kw, **kw, was_cached=loaded)
-    check_pairs(pairs["pairs"], heldout, gap)          # no held-out frame nor a neighbour within gap
-    F, inf = describe(model, X, return_info=True)
-    S, ap, r100 = score_descriptors(F, GT, exclude, heldout)
-    row = _row(name, f"{name} ({inf.weights})", inf, ap, r100, kw.get("supervision", "multitask"),
-               kw.get("fusion", "none"), kw.get("fusion_layer") or "", len(pairs["pairs"]), train_kw["epochs"],
-               round(hist["seconds"], 1), round(hist.get("cpu_seconds", float("nan")), 1),
-               loaded[0])
-    return row, S, model, hist
-
-
-def reference_scores(X_rgb, GT, exclude: int, heldout, seed: int = 0, width: float = 1.0):
-    """The untrained network and raw pixels on the same held-out queries (Figure 8's references).
-
-    X_rgb: (N, H, W, 3) float32 in [0, 1]; GT, exclude, heldout: as :func:`score_descriptors`.
-    seed, width: the untrained :func:`embedding`'s initial weights and width (as the trained ones).
-    Returns (rows, sims): two rows of notebook 10's supervision table ("scnn untrained, RGB",
-    "pixels (32x32 gray)") and {"untrained": S, "pixels": S}, (N, N) similarity matrices.
-    """
-    import keras
-
-    keras.utils.set_random_seed(seed)
-    untrained, _ = embedding(X_rgb.shape[1:], width=width)
-    F, inf = describe(untrained, X_rgb, return_info=True, weights="random init")
-    S_u, ap, r100 = score_descriptors(F, GT, exclude, heldout)
-    rows = [_row("scnn untrained, RGB", f"scnn untrained, RGB ({inf.weights})", inf, ap, r100)]
-    F, inf = features.extract(np.rint(X_rgb * 255).astype(np.uint8), "pixels", progress=False, return_info=True)
-    S_p, ap, r100 = score_descriptors(F, GT, exclude, heldout)
-    rows.append(_row("pixels (32x32 gray)", inf.label, inf, ap, r100))
-    return rows, {"untrained": S_u, "pixels": S_p}

@@ -164,35 +164,6 @@ def test_concurrent_runs_share_one_cache_entry(tmp_path):
     assert len(entries) == 1 and not list(tmp_path.glob(".tmp-*"))
 
 
-def test_revisit_predictions_scores_the_same_models_on_the_revisit(monkeypatch):
-    """Two spots learnt on the first traversal; four revisit frames, each acceptable in one spot."""
-    from greenloop import cnn
-    trained = []
-
-    def fake_run_seeds(X, y_, seeds, progress=True, **kw):
-        trained.append((len(X), kw["split"], kw["gap"], progress))
-        return [{"seed": s, "model": (kw["split"], s), "split": {"train": np.arange(8)}, "test_accuracy": 0.755,
-                 "history": {"accuracy": [0.5, 0.9876]}} for s in seeds]
-
-    # the "random" models name revisit frames by their value, the "blocked" ones all as spot 0
-    monkeypatch.setattr(cnn, "run_seeds", fake_run_seeds)
-    monkeypatch.setattr(cnn, "predict", lambda model, X: (X[:, 0, 0, 0].astype(np.int64) if model[0] == "random"
-                                                          else np.zeros(len(X), np.int64)))
-    X_first = np.zeros((10, 1, 1, 1), np.float32)
-    X_rev = np.array([0, 1, 1, 0], np.float32).reshape(4, 1, 1, 1)
-    acceptable = np.array([[True, False], [False, True], [True, False], [False, True]])
-    runs, rows, rev = cnn.revisit_predictions(X_first, np.repeat([0, 1], 5), X_rev, acceptable, [3, 4], gap=2)
-    assert trained == [(10, "random", 2, False), (10, "blocked", 2, False)] and list(runs) == ["random", "blocked"]
-    assert [(r["split"], r["seed"], r["revisit_acc_%"]) for r in rows] == \
-        [("random", 3, 50.0), ("random", 4, 50.0), ("blocked", 3, 50.0), ("blocked", 4, 50.0)]
-    assert rows[0] == {"split": "random", "seed": 3, "n_train": 8, "final_train_acc_%": 98.76,
-                       "in_traversal_test_acc_%": 75.5, "revisit_acc_%": 50.0, "revisit_frames": 4}
-    assert rev["random", 3]["pred"].tolist() == [0, 1, 1, 0] and rev["random", 3]["right"].tolist() == [True, True, False, False]
-    assert rev["blocked", 4]["right"].tolist() == [True, False, True, False]
-    with pytest.raises(ValueError, match="acceptable"):
-        cnn.revisit_predictions(X_first, np.repeat([0, 1], 5), X_rev, acceptable[:3], [0])
-
-
 def test_forward_is_the_keras_model_and_one_conv_with_or_without_numba():
     """cnn.forward (the fused trainer's and the stream's NumPy pass) gives Keras's logits; the
     im2col conv used without numba equals the numba kernel; other architectures get no weights."""

@@ -181,30 +181,3 @@ def test_declared_pairs_and_query_closures():
         dictionary.declared_pairs(pred, ref[:-1], tau, ex)
 
 
-def test_tune_and_score_chooses_tau_on_one_part_and_scores_it_on_the_other():
-    # the stream of test_score_closures_on_a_query_mask_and_choose_threshold: frames 6..11 revisit 0..5
-    n = 12
-    gt = np.zeros((n, n), bool)
-    for k in range(6):
-        gt[k, 6 + k] = gt[6 + k, k] = True
-    ref = np.r_[np.repeat([0, 1], 3), -np.ones(6, int)]
-    pred = np.r_[np.repeat([0, 1], 3), np.repeat([0, 1], 3)]
-    tune, score = np.arange(n) < 9, np.arange(n) >= 9
-    rules, curve = dictionary.tune_and_score(pred, ref, gt, [2, 3, 4, 7], tune, score, 5, exclude=2)
-    chosen, paper = rules
-    # tau 4 is the best F1 on frames < 9; on frames 9..11 it flags all three revisit frames, rightly
-    assert chosen == {"tau_rule": "chosen on the tuning part", "tau": 4, "precision": 1.0, "recall": 1.0,
-                      "flagged_frames": 3, "false_frames": 0, "events": 1, "false_events": 0, "first_delay_frames": 0}
-    # the paper's tau 5: spot 1 reaches 5 detections at frame 10, one frame into the scored revisit
-    assert paper == {"tau_rule": "paper: L + Δ", "tau": 5, "precision": 1.0, "recall": 0.6667,
-                     "flagged_frames": 2, "false_frames": 0, "events": 1, "false_events": 0, "first_delay_frames": 1}
-    assert [c["tau"] for c in curve] == [2, 3, 4, 7]
-    assert [c["tune_f1"] for c in curve] == pytest.approx([0.6, 0.75, 1.0, 0.0])   # F1 on frames < 9
-    assert [c["score_recall"] for c in curve] == [1.0, 1.0, 1.0, 0.0] and np.isnan(curve[-1]["score_precision"])
-    # no honest split: nothing chosen, the paper's tau on every frame (flags 7, 8, 10, 11)
-    rules, curve = dictionary.tune_and_score(pred, ref, gt, [2, 3, 4, 7], None, None, 5, exclude=2)
-    assert [(r["tau_rule"], r["tau"], r["flagged_frames"], r["recall"], r["events"], r["first_delay_frames"])
-            for r in rules] == [("paper: L + Δ, every frame (no honest split)", 5, 4, 0.6667, 2, 1)]
-    assert all(np.isnan(c["tune_f1"]) for c in curve)
-    with pytest.raises(ValueError, match="both"):
-        dictionary.tune_and_score(pred, ref, gt, [2], tune, None, 5, exclude=2)

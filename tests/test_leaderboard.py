@@ -1,11 +1,13 @@
-"""greenloop.study.leaderboard: notebook 13's logic on small hand-made data."""
+"""greenloop.study.leaderboard: notebook 13's rows and tables on small hand-made data (the detectors' own
+knobs, scores and streams: tests/test_detectors.py)."""
 import math
 
 import numpy as np
 import pandas as pd
 import pytest
 
-from greenloop import evaluate, seqmatch, seqslam
+from greenloop import evaluate, seqmatch
+from greenloop.speed import seqstream
 from greenloop.study import leaderboard as lb
 
 N0, REPEAT, EX, DIM = 80, 40, 20, 16
@@ -30,56 +32,13 @@ def test_reference_mask():
         lb.reference_mask([0, 4], 100)
 
 
-def test_projections_fit_the_given_frames_and_label_the_kept_dim(revisit):
-    X, _ = revisit
-    fit = np.zeros(len(X), bool)
-    fit[:10] = True
-    p = lb.projections({"cnn": X}, ["cnn"], fit, [4, 64])
-    assert list(p["cnn"]) == ["none", "pca 4", "pca 9"]             # 64 clipped to the rank of 10 centred frames
-    assert np.allclose(p["cnn"]["pca 4"].mean, seqmatch.fit_projection(X[:10], 4).mean)
 
 
-def test_variants_and_default_knobs():
-    v = lb.variants(["a", "pixels"], ["pixels", "cnn"], ["pixels"], [5, 10])
-    assert v["a (single frame)"] == (["a"], [1]) and v["greenloop-seq"] == (["pixels", "cnn"], [5, 10])
-    assert v["greenloop-seq-fast"] == (["pixels"], [5, 10]) and v["SeqSLAM (tuned)"] == (["seqslam"], [5, 10])
-    d = lb.default_knobs(["a"])
-    assert d["a (single frame)"] == {"descriptor": "a", "whitening": "none", "seq_len": 1, "contrast_window": 0}
-    assert d["SeqSLAM (published)"] == {"descriptor": "seqslam", "whitening": "none", "seq_len": 11, "contrast_window": 10}
-    assert lb.knob_text(d["SeqSLAM (published)"]).startswith("64x32 patch-normalised, SAD, ds 10, R_window 10")
-
-
-def test_score_matrices_are_the_detectors_matrices(revisit):
-    X, GT = revisit
-    proj = lb.projections({"cnn": X}, ["cnn"], None, [8])
-    knobs = {"single": {"descriptor": "cnn", "whitening": "pca 8", "seq_len": 1, "contrast_window": 4},
-             "seq": {"descriptor": "cnn", "whitening": "none", "seq_len": 5, "contrast_window": 0},
-             "slam": {"descriptor": "seqslam", "whitening": "none", "seq_len": 4, "contrast_window": 6}}
-    S = lb.score_matrices(knobs, {"cnn": X, "seqslam": X}, proj, EX, (1.0,))
-    assert np.array_equal(S["single"], seqmatch.score_matrix(X, EX, 1, (1.0,), 4, proj["cnn"]["pca 8"]))
-    assert np.array_equal(S["seq"], seqmatch.score_matrix(X, EX, 5, (1.0,), 0))
-    assert np.array_equal(S["slam"], seqslam.score_matrix(X, EX, 3, 6))
-    dets = lb.detectors(knobs, {"single": 0.5, "seq": float("nan")}, EX, (1.0,), proj)
-    assert isinstance(dets["slam"], seqslam.Detector) and dets["slam"].seq_len == 4 and dets["slam"].threshold is None
-    assert dets["single"].threshold == 0.5 and dets["single"].projection is proj["cnn"]["pca 8"] and dets["seq"].threshold is None
-    for x in X:
-        dets["single"].update_descriptor(x)
-    assert dets["single"].bytes_per_frame == 8 * 4 + 4
-    assert np.allclose(dets["single"].last_scores, S["single"][:len(X) - 1 - EX, -1], atol=1e-5)
-
-
-def test_frame_describers_are_the_streams_descriptors():
-    rng = np.random.default_rng(1)
-    f = rng.integers(0, 256, (48, 64, 3), dtype=np.uint8)
-    assert np.array_equal(lb.frame_describer("seqslam")(f), seqslam.describe_frames([f])[0])
-    assert np.array_equal(lb.frame_describer("pixels-patchnorm")(f), seqmatch.describe_frames([f], "pixels-patchnorm")[0])
-    d = lb.describers({"a": {"descriptor": "pixels"}, "b": {"descriptor": "seqslam"}})
-    assert set(d) == {"pixels", "seqslam"} and d["pixels"](f).shape == (1024,)
 
 
 def test_metric_and_chance_rows_are_the_evaluate_functions(revisit):
     X, GT = revisit
-    S = seqmatch.score_matrix(X, EX, 5, contrast_window=0)
+    S = seqstream.score_matrix(X, EX, 5, contrast_window=0)
     q = np.zeros(len(X), bool)
     q[N0 - 10:] = True
     ref = np.arange(len(X)) < N0
@@ -87,25 +46,39 @@ def test_metric_and_chance_rows_are_the_evaluate_functions(revisit):
     assert [r["mode"] for r in rows] == ["loop closure", "place recognition"]
     a = evaluate.per_query(S, GT, EX, queries=q, ks=(1, 5))
     b = evaluate.per_query(S, GT, EX, queries=q, reference=ref, ks=(1, 5))
-    assert rows[0]["R@1_%"] == round(100 * a["R@1"], 2) and rows[0]["AUC-PR_%"] == round(100 * a["AUC-PR"], 2)
+    assert rows[0]["R@1_%"] == 100 * a["R@1"] and rows[0]["AUC-PR_%"] == 100 * a["AUC-PR"]
     assert {k: rows[0][k] for k in lb.SPREADS} == lb.spread(S, GT, EX, q)
-    assert rows[1]["R@5_%"] == round(100 * b["R@5"], 2) and rows[1]["R@100P_%"] == round(100 * b["R@100P"], 2)
-    assert rows[0]["pair_AP_%"] == round(100 * evaluate.average_precision(S, GT, EX, queries=q), 2)
+    assert rows[1]["R@5_%"] == 100 * b["R@5"] and rows[1]["R@100P_%"] == 100 * b["R@100P"]
+    assert rows[0]["pair_AP_%"] == 100 * evaluate.average_precision(S, GT, EX, queries=q)
     assert math.isnan(rows[1]["pair_AP_%"]) and len(lb.metric_rows(S, GT, EX, q)) == 1
     c = lb.chance_rows(GT, EX, q, None, "evaluation queries")
     ch = evaluate.query_chance(GT, EX, queries=q, ks=(1, 5))
-    assert len(c) == 1 and c[0]["R@1_%"] == round(100 * ch["R@1"], 2) and c[0]["scored_on"] == "evaluation queries"
-    assert c[0]["pair_AP_%"] == round(100 * evaluate.chance_level(GT, EX, queries=q), 2)
+    assert len(c) == 1 and c[0]["R@1_%"] == 100 * ch["R@1"] and c[0]["scored_on"] == "evaluation queries"
+    assert c[0]["pair_AP_%"] == 100 * evaluate.chance_level(GT, EX, queries=q)
     assert rows[0]["R@1_%"] > c[0]["R@1_%"] + 30
+
+
+def test_rounded_is_the_written_form_and_write_writes_it(tmp_path):
+    board = lb.table([{"method": "m", "mode": "loop closure", "R@1_%": 100 / 3, "AUC-PR_lo_%": 2 / 3, "threshold": 1 / 7,
+                       "fps_median": 1234.56, "decode_ms": 0.1234},
+                      {"method": "d", "mode": "loop closure", "threshold": 70}])
+    r = lb.rounded(board)
+    assert r.loc[0, "R@1_%"] == 33.33 and r.loc[0, "AUC-PR_lo_%"] == 0.67 and r.loc[0, "threshold"] == 0.1429
+    assert r.loc[0, "fps_median"] == 1234.6 and r.loc[0, "decode_ms"] == 0.12 and r.loc[1, "threshold"] == 70
+    assert math.isnan(r.loc[1, "R@1_%"]) and board.loc[0, "R@1_%"] == 100 / 3          # the input stays unrounded
+    csv = lb.write(board, tmp_path / "13", tmp_path, "T", "n")[0]
+    assert pd.read_csv(csv).loc[0, "R@1_%"] == 33.33
 
 
 def test_thresholds_and_closures(revisit):
     X, GT = revisit
-    S = {"seq": seqmatch.score_matrix(X, EX, 5, contrast_window=0)}
+    S = {"seq": seqstream.score_matrix(X, EX, 5, contrast_window=0)}
     tune, ev = evaluate.split_mask(len(X), 0.5, gt=GT, gap=5)
     t = lb.thresholds(S, GT, EX, tune, "f1")
     assert t["seq"] == seqmatch.choose_threshold(S["seq"], GT, EX, queries=tune)
     assert math.isnan(lb.thresholds(S, GT, EX, None, "f1")["seq"])
+    assert lb.thresholds(S, GT, EX, tune, "f1", fixed={"seq": 1.8}) == {"seq": 1.8}      # a fixed threshold is kept
+    assert lb.thresholds(S, GT, EX, None, "f1", fixed={"seq": 1.8}) == {"seq": 1.8}
     c = lb.closure_columns(S["seq"], GT, t["seq"], EX, ev, 4)
     ref = seqmatch.closures(S["seq"], GT, t["seq"], EX, queries=ev)
     assert c["closures_declared"] == ref["declared"] and c["first_revisit_delay_frames"] == 4 * ref["first_delay"]
@@ -119,8 +92,8 @@ def test_timing_window_and_methods(revisit):
     assert lb.timing_window(ev, 3) == (6, 9) and lb.timing_window(ev, 30) == (6, 10)
     assert lb.timing_window(np.ones(10, bool), 4) == (6, 10)             # no split: the last frames
     knobs = {"seq": {"descriptor": "cnn", "whitening": "none", "seq_len": 3, "contrast_window": 0}}
-    dets = lb.detectors(knobs, {}, EX, (1.0,), {})
-    m, pre = lb.timing_methods(knobs, dets, {"cnn": lambda f: f}, {"cnn": X}, 50)
+    dets = {"seq": seqstream.Detector(None, seq_len=3, exclude=EX, contrast_window=0)}
+    m, pre = lb.timing_methods(knobs, dets, {"seq": lambda f: f}, {"cnn": X}, 50)
     assert [x.name for x in m] == ["seq"] and len(pre["seq"]) == 50
     assert m[0].start(pre["seq"]).frame_index == 50
 
@@ -155,7 +128,7 @@ def test_table_targets_and_statement():
 
 def test_spread_brackets_the_metric_and_widens_with_fewer_queries(revisit):
     X, GT = revisit
-    S = seqmatch.score_matrix(X, EX, 5, contrast_window=0)
+    S = seqstream.score_matrix(X, EX, 5, contrast_window=0)
     q = np.zeros(len(X), bool)
     q[N0 - 10:] = True
     sp = lb.spread(S, GT, EX, q, block=5, n_boot=100)
@@ -189,7 +162,7 @@ def test_dictionary_row():
 
 def test_method_rows_one_per_mode_with_closures_in_loop_closure_only(revisit):
     X, GT = revisit
-    S = {"seq": seqmatch.score_matrix(X, EX, 5, contrast_window=0)}
+    S = {"seq": seqstream.score_matrix(X, EX, 5, contrast_window=0)}
     tune, ev = evaluate.split_mask(len(X), 0.5, gt=GT, gap=5)
     thr = lb.thresholds(S, GT, EX, tune, "f1")
     meta = {"seq": {"weights": "none", "knobs": "k", "bytes_per_stored_frame": 80}}
@@ -202,24 +175,6 @@ def test_method_rows_one_per_mode_with_closures_in_loop_closure_only(revisit):
     assert rows[0]["fps_min"] == rows[1]["fps_min"] == 9.0 and rows[0]["bytes_per_stored_frame"] == 80
     assert rows[1]["R@1_%"] == lb.metric_rows(S["seq"], GT, EX, ev, ref)[1]["R@1_%"]
 
-
-def test_the_named_default_is_untuned_and_keeps_its_fixed_threshold():
-    from greenloop import seqmatch
-    k = lb.named_default()
-    assert k["descriptor"] == seqmatch.DEFAULT_KNOBS["descriptor"] and k["calibrate"] is True
-    rng = np.random.default_rng(0)
-    n = 60
-    X = rng.normal(size=(n, 16)).astype(np.float32)
-    G = np.zeros((n, n), bool)
-    S = lb.score_matrices({seqmatch.DEFAULT_NAME: k}, {k["descriptor"]: X}, {}, 5, (1.0,))
-    direct = seqmatch.score_matrix(X, 5, k["seq_len"], tuple(k["velocities"]), 0, None, center_window=k["center_window"],
-                                   calibrate=True, repeat_cos=k["repeat_cos"])
-    assert np.array_equal(S[seqmatch.DEFAULT_NAME], direct)      # the record's knobs reach the detector
-    thr = lb.thresholds(S, G, 5, np.ones(n, bool), "f1")
-    assert thr[seqmatch.DEFAULT_NAME] == seqmatch.DEFAULT_THRESHOLD
-    det = lb.detector(k, thr[seqmatch.DEFAULT_NAME], 5, (1.0,), {})
-    assert det.calibrate and det.velocities == tuple(float(v) for v in k["velocities"])
-    assert "fixed threshold" in lb.knob_text(k)
 
 
 def test_targets_table_says_when_a_dataset_is_not_one_of_its_own():

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from greenloop import evaluate, lsh
+from greenloop.experiments import lsh_matching
 from greenloop.similarity import cosine_matrix, l2_normalise
 
 D, BITS = 48, 16
@@ -199,11 +200,11 @@ def test_scanned_matrix_of_brute_force_is_the_cosine_matrix_on_counted_pairs():
     S = cosine_matrix(X)
     brute = lsh.incremental_match(X, "brute", exclude=ex, keep_candidates=True)
     m = evaluate.pair_mask(len(X), ex)
-    assert np.array_equal(lsh.scanned_matrix(S, brute)[m], S[m])
+    assert np.array_equal(lsh_matching.scanned_matrix(S, brute)[m], S[m])
     swp = lsh.incremental_match(X, "swp", exclude=ex, radius=1, keep_candidates=True)
-    Ss = lsh.scanned_matrix(S, swp)
+    Ss = lsh_matching.scanned_matrix(S, swp)
     assert (Ss[m] == -2).sum() > 0 and np.all((Ss[m] == S[m]) | (Ss[m] == -2))
-    B = lsh.best_match_matrix(swp)
+    B = lsh_matching.best_match_matrix(swp)
     assert (B > -2).sum() == (swp.best >= 0).sum()
 
 
@@ -235,7 +236,7 @@ def test_centre_frames_move_only_the_buckets():
     (lambda: lsh.probe_order_swp(1 << 16, 16, 2), "code"),
     (lambda: lsh.perturbation_sets(np.array([0.1, -1.0]), 3), "costs"),
     (lambda: lsh.qdp_costs(np.ones(D), lsh.hyperplanes(D), "log_odds", theta=2.0), "theta"),
-    (lambda: lsh.scanned_matrix(np.zeros((20, 20)), lsh.incremental_match(walk(20), "swp")),
+    (lambda: lsh_matching.scanned_matrix(np.zeros((20, 20)), lsh.incremental_match(walk(20), "swp")),
      "keep_candidates"),
 ])
 def test_bad_input_raises_value_error(call, match):
@@ -275,9 +276,9 @@ def _revisit_sequence(noise=0.05, seed=0):
 
 
 def test_table6_variants():
-    assert [v[:2] for v in lsh.table6_variants(False)] == [("brute force", "brute"), ("NearestNeighbors (sklearn)", "sklearn"),
+    assert [v[:2] for v in lsh_matching.table6_variants(False)] == [("brute force", "brute"), ("NearestNeighbors (sklearn)", "sklearn"),
                                                           ("SWP-RHLSH", "swp"), ("QDP-RHLSH", "qdp")]
-    v = lsh.table6_variants(True, 7)
+    v = lsh_matching.table6_variants(True, 7)
     assert len(v) == 6 and v[4] == ("SWP-RHLSH, centred", "swp", 7) and v[5] == ("QDP-RHLSH, centred", "qdp", 7)
     assert all(k == 0 for _, _, k in v[:4])
 
@@ -289,13 +290,13 @@ def test_run_scores_of_brute_force_on_a_hand_made_revisit():
     assert brute.best[4:].tolist() == [0, 1, 2, 3]            # every revisit finds its place
     revisit = (gt & evaluate.pair_mask(8, 2)).any(0)
     assert np.flatnonzero(revisit).tolist() == [4, 5, 6, 7]
-    sc = lsh.run_scores(brute, S, brute, gt, 2)
+    sc = lsh_matching.run_scores(brute, S, brute, gt, 2)
     assert sc["R@1_%"] == 100.0 and sc["NN_agree_%"] == 100.0 and sc["scanned_%"] == 100.0
     assert sc["AUC-PR_%"] == 100.0 and sc["R@100P_%"] == 100.0 and sc["R@95P_%"] == 100.0
     assert sc["AP_pairs_%"] == pytest.approx(100 * evaluate.average_precision(S, gt, 2))
     assert np.isnan(sc["probes_per_query"]) and np.isnan(sc["N1_at_end"])
     swp = lsh.incremental_match(X, "swp", exclude=2, n_bits=8, radius=1, keep_candidates=True)
-    sw = lsh.run_scores(swp, S, brute, gt, 2)
+    sw = lsh_matching.run_scores(swp, S, brute, gt, 2)
     assert sw["N1_at_end"] == swp.n_buckets[-1] and sw["probes_per_query"] == pytest.approx(swp.n_probes[swp.timed].mean())
     assert sw["NN_agree_%"] == pytest.approx(100 * np.mean(swp.best[swp.timed] == brute.best[swp.timed]))
 
@@ -304,14 +305,14 @@ def test_query_matches_by_hand():
     import dataclasses
     X, gt = _revisit_sequence()
     brute = lsh.incremental_match(X, "brute", exclude=2, keep_candidates=True)
-    m = lsh.query_matches(brute, gt, 2)
+    m = lsh_matching.query_matches(brute, gt, 2)
     assert m.query.tolist() == [3, 4, 5, 6, 7] and m.has_partner.tolist() == [False, True, True, True, True]
     assert m.correct.tolist() == [False, True, True, True, True] and m.k == 1
     # query 5 scanned nothing: no match, score -2, below query 3's wrong match (cosine 0)
     best, score = brute.best.copy(), brute.score.copy()
     best[5], score[5] = lsh.NO_MATCH, -np.inf
     miss = dataclasses.replace(brute, best=best, score=score)
-    q = evaluate.query_metrics(lsh.query_matches(miss, gt, 2), ks=(1,))
+    q = evaluate.query_metrics(lsh_matching.query_matches(miss, gt, 2), ks=(1,))
     assert q["R@1"] == 0.75 and q["R@100P"] == 0.75 and q["AUC-PR"] == pytest.approx(0.75)
     assert q["queries"] == 5 and q["revisits"] == 4
 
@@ -320,14 +321,14 @@ def test_scanned_pr_curve_ends_at_the_recall_reached():
     X, gt = _revisit_sequence()
     S = cosine_matrix(X)
     brute = lsh.incremental_match(X, "brute", exclude=2, keep_candidates=True)
-    p, r = lsh.scanned_pr_curve(S, brute, gt, 2)
+    p, r = lsh_matching.scanned_pr_curve(S, brute, gt, 2)
     p0, r0, _ = evaluate.pr_curve(S, gt, 2)
     assert np.array_equal(p, p0) and np.array_equal(r, r0)     # brute force scans every counted pair
     swp = lsh.incremental_match(X, "swp", exclude=2, n_bits=16, radius=0, keep_candidates=True)
-    sm = lsh.scanned_matrix(S, swp)
+    sm = lsh_matching.scanned_matrix(S, swp)
     m = evaluate.pair_mask(8, 2)
     loops_scanned = (gt & m & (sm > -2)).sum() / (gt & m).sum()
-    p, r = lsh.scanned_pr_curve(S, swp, gt, 2)
+    p, r = lsh_matching.scanned_pr_curve(S, swp, gt, 2)
     assert r.max() == pytest.approx(loops_scanned) and len(p) == len(r) and r[-1] == 0.0
 
 
@@ -338,14 +339,14 @@ def test_compare_variants_averages_seeds_and_rates_against_brute_force():
                              dict(base, variant="SWP-RHLSH", seed=0, **{"AP_pairs_%": 30.0, "ms_per_query": 1.0}),
                              dict(base, variant="brute force", seed=1, **{"AP_pairs_%": 40.0, "ms_per_query": 2.0}),
                              dict(base, variant="SWP-RHLSH", seed=1, **{"AP_pairs_%": 34.0, "ms_per_query": 3.0})])
-    t = lsh.compare_variants(per_seed)
+    t = lsh_matching.compare_variants(per_seed)
     assert list(t.columns) == ["backbone", "weights", "label", "variant", "AP_pairs_%", "AP_pairs_sd", "ms_per_query",
                                "ms_sd", "R_a_%", "R_t_%", "loss_per_1%_time"]
     swp = t.set_index("variant").loc["SWP-RHLSH"]
     assert (swp["AP_pairs_%"], swp["AP_pairs_sd"], swp["ms_per_query"], swp["ms_sd"]) == (32.0, 2.0, 2.0, 1.0)
     assert swp["R_a_%"] == -20.0 and swp["R_t_%"] == 0.0 and np.isnan(swp["loss_per_1%_time"])
     per_seed.loc[3, "ms_per_query"] = 1.0                      # now half the time: R_t 50 %, loss 20 / 50
-    swp = lsh.compare_variants(per_seed).set_index("variant").loc["SWP-RHLSH"]
+    swp = lsh_matching.compare_variants(per_seed).set_index("variant").loc["SWP-RHLSH"]
     assert swp["R_t_%"] == 50.0 and swp["loss_per_1%_time"] == pytest.approx(0.4)
     per_seed.insert(5, "R@1_%", 50.0)                           # per-query columns first: the sd stays beside AP_pairs
-    assert list(lsh.compare_variants(per_seed).columns[4:7]) == ["R@1_%", "AP_pairs_%", "AP_pairs_sd"]
+    assert list(lsh_matching.compare_variants(per_seed).columns[4:7]) == ["R@1_%", "AP_pairs_%", "AP_pairs_sd"]

@@ -272,6 +272,28 @@ def _check_10(folder):
     s = json.loads((folder / "summary.json").read_text())
     assert s["labelled_frames_near_heldout"] == 0 and s["last_train_frame"] < s["first_heldout_frame"]
     assert s["networks_trained"] == 3 + 2 + len(TINY["mid_layers"])
+    best = pd.read_csv(folder / "paper_vs_run.csv").set_index("quantity")["this run"]
+    for q in ("best supervision", "best mid-level layer (Table 2)", "best fusion"):     # one seed ranks nothing
+        assert best[q] == "not resolved with one seed", q
+    assert (sup["AP_%"] == sup["AP_%"].round(2)).all()                  # rounded where the table is written
+
+
+def _check_12(folder):
+    per_seed = pd.read_csv(folder / "per_seed.csv")
+    assert list(per_seed.columns) == ["split", "seed", "n_train", "final_train_acc_%", "in_traversal_test_acc_%",
+                                      "revisit_acc_%", "revisit_frames"]
+    assert sorted(map(tuple, per_seed[["split", "seed"]].values)) == sorted((s, k) for s in ("random", "blocked") for k in TINY["seeds"])
+    acc = per_seed.filter(like="acc_%")
+    assert acc.stack().between(0, 100).all() and (acc == acc.round(2)).all().all()
+    summary = pd.read_csv(folder / "summary_table.csv")
+    assert list(summary.columns) == ["split", "scored_on", "seeds", "mean", "std", "median", "min", "max"]
+    assert (summary.seeds == len(TINY["seeds"])).all() and len(summary) == 4
+    d = pd.read_csv(folder / "dictionary_tuned.csv")
+    assert d.tau_rule.tolist() == ["chosen on the tuning part", "paper: L + Δ"] * len(TINY["seeds"])
+    assert d.tau[d.tau_rule.str.startswith("chosen")].isin(TINY["tau_list"]).all()
+    assert (d[["precision", "recall"]].dropna() == d[["precision", "recall"]].dropna().round(4)).all().all()
+    s = json.loads((folder / "summary.json").read_text())
+    assert s["split"]["honest"] and s["revisit_frames"] == per_seed.revisit_frames.iloc[0] > 0
 
 
 def _check_13(folder):
@@ -330,6 +352,7 @@ CHECKS = {"01_spot_grouping": _check_01, "02_training_over_seeds": _check_02,
           "07_feature_baselines": _check_07, "08_descriptor_postprocessing": _check_08,
           "09_rgbd_features": _check_09, "10_siamese_rgbd": _check_10, "11_lsh_matching": _check_11,
           "13_leaderboard": _check_13}
+CHECKS["12_revisit_protocol"] = _check_12
 
 
 def _check_00_pairs(folder):

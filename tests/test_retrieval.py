@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 import scipy.sparse
 
-from greenloop import evaluate, lsh, retrieval, seqmatch
+from greenloop import evaluate, lsh, retrieval
+from greenloop.speed import seqstream
 
 
 def _route(n_place=300, dim=32, passes=3, noise=0.25, seed=0):
@@ -110,7 +111,7 @@ def _revisit(seed=1):
 
 
 def _run(X, **kw):
-    det = seqmatch.Detector(kw.pop("threshold", None), seq_len=10, exclude=50, **kw)
+    det = seqstream.Detector(kw.pop("threshold", None), seq_len=10, exclude=50, **kw)
     out = []
     for x in X:
         det.update_descriptor(x)
@@ -234,3 +235,17 @@ def test_a_pickled_index_continues_as_if_never_stopped(kind):
     if kind == "hnsw":
         import faiss
         assert np.array_equal(faiss.serialize_index(a.index), faiss.serialize_index(b.index))
+
+
+def test_ivf_trains_on_the_first_frames_however_they_are_added():
+    """One add of N > train_size frames leaves the index N single adds leave (a stream's): the
+    quantiser learns the first train_size frames, not all N; the same searches follow."""
+    X, _ = _route(n_place=200, dim=16, passes=2)
+    one, singles = (retrieval.make_index("ivf", 16, nlist=4, nprobe=1, train_size=160) for _ in range(2))
+    one.add(X)
+    for x in X:
+        singles.add(x)
+    assert one.n_stored == singles.n_stored == len(X)
+    assert np.array_equal(one.search(X[::7], 5)[1], singles.search(X[::7], 5)[1])
+    C1, C2 = (np.stack([ix._quantiser.reconstruct(i) for i in range(4)]) for ix in (one, singles))
+    assert np.array_equal(C1, C2)

@@ -12,7 +12,8 @@ import pytest
 
 from greenloop import evaluate, seqmatch
 from greenloop.datasets import sequence
-from greenloop.seqmatch import Detector
+from greenloop.speed import seqstream
+from greenloop.speed.seqstream import Detector
 
 from conftest import write_frames
 
@@ -66,7 +67,7 @@ def test_silent_without_revisit():
 
 def test_sequence_beats_single_frames(revisit):
     X, GT = revisit
-    ap = {L: evaluate.average_precision(seqmatch.score_matrix(X, EXCLUDE, L, contrast_window=0), GT, EXCLUDE)
+    ap = {L: evaluate.average_precision(seqstream.score_matrix(X, EXCLUDE, L, contrast_window=0), GT, EXCLUDE)
           for L in (1, 10)}
     assert ap[10] > ap[1]
 
@@ -77,7 +78,7 @@ def test_stream_equals_score_matrix(revisit, kw):
     X, _ = revisit
     X = X[::2]
     opts = {"seq_len": 5, "exclude": 20, **kw}
-    S = seqmatch.score_matrix(X, **opts)
+    S = seqstream.score_matrix(X, **opts)
     det = Detector(None, **opts)
     for j, x in enumerate(X):
         assert det.update_descriptor(x) is None                   # threshold None: scores only
@@ -92,7 +93,7 @@ def test_stream_equals_score_matrix(revisit, kw):
 def test_projection_and_metrics(revisit):
     X, GT = revisit
     proj = seqmatch.fit_projection(X[:N0], dim=16)
-    S = seqmatch.score_matrix(X, EXCLUDE, 10, contrast_window=0, projection=proj)
+    S = seqstream.score_matrix(X, EXCLUDE, 10, contrast_window=0, projection=proj)
     det = Detector(None, seq_len=10, exclude=EXCLUDE, contrast_window=0, projection=proj)
     for x in X:
         det.update_descriptor(x)
@@ -132,7 +133,7 @@ def test_frames_give_the_descriptors_of_the_folder(tmp_path, descriptor):
 def test_bad_inputs():
     det = Detector(0.5, exclude=2, contrast_window=0)
     assert det.update_many([]) == [] and det.frame_index == 0 and det.bytes_per_frame == 0
-    assert seqmatch.score_matrix(np.zeros((0, 8))).shape == (0, 0)
+    assert seqstream.score_matrix(np.zeros((0, 8))).shape == (0, 0)
     det.update(np.zeros((30, 40, 3), np.uint8))
     with pytest.raises(ValueError, match="started with"):
         det.update(np.zeros((31, 40, 3), np.uint8))
@@ -209,15 +210,15 @@ def test_tune_knobs_scores_every_combination_on_the_tuning_queries(revisit):
     X, GT = revisit
     tune, _ = evaluate.split_mask(len(X), 0.5, gt=GT, gap=10)
     proj = seqmatch.fit_projection(X[:N0], dim=8)
-    rows = seqmatch.tune_knobs({"rev": X, "noise": _walk(len(X), 7)}, GT, EXCLUDE, tune, [1, 10], [0, 6],
+    rows = seqstream.tune_knobs({"rev": X, "noise": _walk(len(X), 7)}, GT, EXCLUDE, tune, [1, 10], [0, 6],
                                projections={"rev": {"none": None, "pca 8": proj}})
     assert [(r["descriptor"], r["whitening"], r["seq_len"], r["contrast_window"]) for r in rows] == \
         [(d, w, L, c) for d, ws in (("rev", ("none", "pca 8")), ("noise", ("none",)))
          for w in ws for L in (1, 10) for c in (0, 6)]
-    S = seqmatch.score_matrix(X, EXCLUDE, 10, seqmatch.DEFAULT_VELOCITIES, 0)
+    S = seqstream.score_matrix(X, EXCLUDE, 10, seqmatch.DEFAULT_VELOCITIES, 0)
     q = evaluate.per_query(S, GT, EXCLUDE, queries=tune, ks=(1,))
     assert rows[2]["AUC-PR_tune_%"] == round(100 * q["AUC-PR"], 2) and rows[2]["R@1_tune_%"] == round(100 * q["R@1"], 2)
-    Sp = seqmatch.score_matrix(X, EXCLUDE, 1, seqmatch.DEFAULT_VELOCITIES, 6, proj)
+    Sp = seqstream.score_matrix(X, EXCLUDE, 1, seqmatch.DEFAULT_VELOCITIES, 6, proj)
     assert rows[5]["AUC-PR_tune_%"] == round(100 * evaluate.per_query(Sp, GT, EXCLUDE, queries=tune, ks=(1,))["AUC-PR"], 2)
     # not the pair AP: on this revisit the two differ
     assert rows[2]["AUC-PR_tune_%"] != round(100 * evaluate.average_precision(S, GT, EXCLUDE, queries=tune), 2)
@@ -254,10 +255,10 @@ def test_matrix_events_thresholds_each_querys_candidates():
 
 def test_stream_matches_matrix(revisit):
     X, _ = revisit
-    S = seqmatch.score_matrix(X, EXCLUDE, 10, contrast_window=0)
+    S = seqstream.score_matrix(X, EXCLUDE, 10, contrast_window=0)
     det, events = _run(X, threshold=0.55)
-    assert events and seqmatch.stream_matches_matrix(det, S)
+    assert events and seqstream.stream_matches_matrix(det, S)
     det.events.pop()
-    assert not seqmatch.stream_matches_matrix(det, S)
+    assert not seqstream.stream_matches_matrix(det, S)
     with pytest.raises(ValueError, match="no threshold"):
-        seqmatch.stream_matches_matrix(Detector(None), S)
+        seqstream.stream_matches_matrix(Detector(None), S)

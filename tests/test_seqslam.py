@@ -7,6 +7,7 @@ import pytest
 
 from greenloop import evaluate, seqmatch, seqslam
 from greenloop.datasets import sequence
+from greenloop.speed import seqslam_stream, seqstream
 
 from conftest import write_frames
 
@@ -41,7 +42,7 @@ def test_published_parameters():
     assert off.shape == (5, 11)
     assert off[0].tolist() == [0, 0, 1, 2, 3, 4, 4, 5, 6, 7, 8]          # floor(0.8 k)
     assert off[-1].tolist() == [0, 1, 2, 3, 4, 6, 7, 8, 9, 10, 12]       # floor(1.2 k)
-    assert seqslam.Detector(None).seq_len == 11
+    assert seqslam_stream.Detector(None).seq_len == 11
 
 
 def test_difference_similarity_by_hand():
@@ -80,7 +81,7 @@ def _reference(X, exclude, ds, window):
 
 def test_score_matrix_is_the_definition_written_out():
     X = _walk(40, 3)
-    S = seqslam.score_matrix(X, exclude=8, ds=4, contrast_window=4)
+    S = seqslam_stream.score_matrix(X, exclude=8, ds=4, contrast_window=4)
     R = _reference(X, 8, 4, 4)
     m = np.isfinite(R)
     assert m.sum() > 300 and np.allclose(S[m], R[m], atol=1e-4)
@@ -91,17 +92,17 @@ def test_causal_future_frames_change_nothing(revisit):
     j = N0 + 20
     Y = X.copy()
     Y[j + 1:] = np.random.default_rng(9).normal(size=Y[j + 1:].shape)
-    S, T = (seqslam.score_matrix(Z, EXCLUDE) for Z in (X, Y))
+    S, T = (seqslam_stream.score_matrix(Z, EXCLUDE) for Z in (X, Y))
     assert np.array_equal(S[:j - EXCLUDE, :j + 1], T[:j - EXCLUDE, :j + 1])
     assert not np.array_equal(S[:, j + 1:], T[:, j + 1:])
 
 
 def test_stream_equals_matrix_over_the_revisit(revisit):
     X, GT = revisit
-    S = seqslam.score_matrix(X, EXCLUDE)
+    S = seqslam_stream.score_matrix(X, EXCLUDE)
     rev = evaluate.best_matches(S, GT, EXCLUDE)
     thr = float(np.quantile(rev.score[rev.correct], 0.3))          # fires on most of the revisit
-    det = seqslam.Detector(thr, exclude=EXCLUDE)
+    det = seqslam_stream.Detector(thr, exclude=EXCLUDE)
     for j, x in enumerate(X):
         det.update_descriptor(x)
         c = max(j - EXCLUDE, 0)
@@ -109,15 +110,15 @@ def test_stream_equals_matrix_over_the_revisit(revisit):
     ev = det.events
     right = [e for e in ev if GT[e["match"], e["frame"]]]
     assert len(right) >= REPEAT // 2 and all(e["frame"] >= N0 for e in ev)   # closures in the revisit
-    assert seqmatch.stream_matches_matrix(det, S)
+    assert seqstream.stream_matches_matrix(det, S)
     det.events.pop(0)
-    assert not seqmatch.stream_matches_matrix(det, S)
+    assert not seqstream.stream_matches_matrix(det, S)
     assert det.bytes_per_frame == DIM * 4 + 4 * 11
 
 
 def test_sequence_beats_one_frame_on_the_revisit(revisit):
     X, GT = revisit
-    r1 = {ds: evaluate.per_query(seqslam.score_matrix(X, EXCLUDE, ds=ds), GT, EXCLUDE, ks=(1,))["R@1"]
+    r1 = {ds: evaluate.per_query(seqslam_stream.score_matrix(X, EXCLUDE, ds=ds), GT, EXCLUDE, ks=(1,))["R@1"]
           for ds in (0, 10)}
     assert r1[10] > r1[0] and r1[10] >= 0.8
 
@@ -127,9 +128,9 @@ def test_frames_give_the_descriptors_of_the_folder(tmp_path):
     X = seqslam.describe(folder)
     raw = [cv2.imread(str(p), cv2.IMREAD_COLOR) for p in sequence.list_frames(folder)]
     assert X.shape == (6, 2048) and np.allclose(X, seqslam.describe_frames(raw), atol=1e-5)
-    det = seqslam.Detector(None, exclude=2)
+    det = seqslam_stream.Detector(None, exclude=2)
     det.update_many(raw)
-    assert det.frame_index == 6 and np.allclose(det.last_scores, seqslam.score_matrix(X, 2)[:3, 5], atol=1e-5)
+    assert det.frame_index == 6 and np.allclose(det.last_scores, seqslam_stream.score_matrix(X, 2)[:3, 5], atol=1e-5)
     # patch normalised: every 8x8 block of every frame has mean 0, std 1
     b = X.reshape(6, 4, 8, 8, 8).mean(axis=(2, 4))
     assert np.allclose(b, 0, atol=1e-5)
@@ -137,10 +138,10 @@ def test_frames_give_the_descriptors_of_the_folder(tmp_path):
 
 def test_bad_inputs():
     with pytest.raises(ValueError, match="finite"):
-        seqslam.Detector(float("nan"))
+        seqslam_stream.Detector(float("nan"))
     with pytest.raises(ValueError, match="integer move"):
         seqslam.velocities(10, 1.21, 1.29)
-    det = seqslam.Detector(None, exclude=0)
+    det = seqslam_stream.Detector(None, exclude=0)
     det.update_descriptor(np.ones(8))
     with pytest.raises(ValueError, match="dims"):
         det.update_descriptor(np.ones(9))
@@ -151,9 +152,9 @@ def test_bad_inputs():
 def test_tune_knobs_rows_are_the_score_matrices_scored(revisit):
     X, GT = revisit
     tune, _ = evaluate.split_mask(len(X), 0.5, gt=GT, gap=12)
-    rows = seqslam.tune_knobs(X, GT, EXCLUDE, tune, [1, 11], [0, 10])
+    rows = seqslam_stream.tune_knobs(X, GT, EXCLUDE, tune, [1, 11], [0, 10])
     assert [(r["seq_len"], r["contrast_window"]) for r in rows] == [(1, 0), (1, 10), (11, 0), (11, 10)]
-    q = evaluate.per_query(seqslam.score_matrix(X, EXCLUDE, ds=10, contrast_window=10), GT, EXCLUDE, queries=tune, ks=(1,))
+    q = evaluate.per_query(seqslam_stream.score_matrix(X, EXCLUDE, ds=10, contrast_window=10), GT, EXCLUDE, queries=tune, ks=(1,))
     assert rows[3]["AUC-PR_tune_%"] == round(100 * q["AUC-PR"], 2) and rows[3]["descriptor"] == "seqslam"
     knobs, _ = seqmatch.pick_knobs(rows, {"SeqSLAM": (["seqslam"], [1, 11])})
     assert knobs["SeqSLAM"]["seq_len"] in (1, 11)
@@ -161,12 +162,12 @@ def test_tune_knobs_rows_are_the_score_matrices_scored(revisit):
 
 def test_stream_check_reports_the_revisit_events(revisit):
     X, GT = revisit
-    S = seqslam.score_matrix(X, EXCLUDE)
+    S = seqslam_stream.score_matrix(X, EXCLUDE)
     m = evaluate.best_matches(S, GT, EXCLUDE)
-    det = seqslam.Detector(float(np.median(m.score[m.correct])), exclude=EXCLUDE)
-    c = seqmatch.stream_check(det, X, S, GT)
+    det = seqslam_stream.Detector(float(np.median(m.score[m.correct])), exclude=EXCLUDE)
+    c = seqstream.stream_check(det, X, S, GT)
     assert c["equal"] and c["correct_events"] >= REPEAT // 3 and c["events"] >= c["correct_events"]
     assert c["revisit_queries"] == REPEAT
     S2 = S.copy()
     S2[:, det.events[0]["frame"]] = S.min()                     # a matrix the stream did not make
-    assert not seqmatch.stream_check(det, X, S2, GT)["equal"]
+    assert not seqstream.stream_check(det, X, S2, GT)["equal"]

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from greenloop import evaluate, seqmatch
+from greenloop.speed import seqstream
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -54,7 +55,7 @@ def recall_at_1(route, kind, **knobs):
     GT = np.zeros((n, n), bool)
     for k, q in enumerate(p):
         GT[max(q - TOL, 0):q + TOL + 1, N0 + k] = True
-    S = seqmatch.score_matrix(X, EXCLUDE, **knobs)
+    S = seqstream.score_matrix(X, EXCLUDE, **knobs)
     return evaluate.per_query(S, GT | GT.T, EXCLUDE, queries=np.arange(n) >= N0)["R@1"]
 
 
@@ -83,12 +84,12 @@ def test_stream_equals_matrix_with_reverse_and_repeats(route):
     stream holding a reversed revisit and a stop (repeat gate and negative offsets exercised)."""
     w, r = route
     X = np.concatenate([w, r[replay("reverse")], r[replay("stop")]])
-    S = seqmatch.score_matrix(X, EXCLUDE, **DEFAULT)
-    det = seqmatch.Detector(seqmatch.DEFAULT_THRESHOLD, exclude=EXCLUDE, **DEFAULT)
+    S = seqstream.score_matrix(X, EXCLUDE, **DEFAULT)
+    det = seqstream.Detector(seqmatch.DEFAULT_THRESHOLD, exclude=EXCLUDE, **DEFAULT)
     for x in X:
         det.update_descriptor(x)
     assert len(det.events) > 50
-    assert seqmatch.stream_matches_matrix(det, S)
+    assert seqstream.stream_matches_matrix(det, S)
     for j in (N0 + 5, N0 + REVISIT + 70, len(X) - 1):     # the columns themselves, up to the
         det.reset()                                         # rounding of gemv against gemm
         for x in X[:j + 1]:

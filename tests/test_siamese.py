@@ -238,35 +238,3 @@ def test_near_heldout_marks_the_heldout_frames_and_their_neighbours():
     held = np.zeros(10, bool); held[4] = True
     assert np.flatnonzero(sm.near_heldout(held, 2)).tolist() == [2, 3, 4, 5, 6]
     assert np.flatnonzero(sm.near_heldout(held, 0)).tolist() == [4]
-
-
-def test_score_descriptors_ranks_by_l2_distance():
-    F = np.array([[0.0], [10.0], [20.0], [0.1], [10.1], [25.0]])
-    gt = np.zeros((6, 6), bool)
-    gt[0, 3] = gt[3, 0] = gt[1, 4] = gt[4, 1] = True        # the two closest far pairs are the loops
-    S, ap, r100 = sm.score_descriptors(F, gt, 1)
-    assert S[0, 3] == pytest.approx(1 - 0.1 / 25) and (ap, r100) == (100.0, 100.0)
-    F[5] = 0.05                                # (0, 5) and (3, 5) now rank first, tied, and are no loops
-    _, ap, r100 = sm.score_descriptors(F, gt, 1)
-    assert ap == pytest.approx(100 * 2 / 4) and r100 == 0.0    # both loops come in at precision 2 / 4
-
-
-def test_fit_and_score_row_and_the_references(tmp_path):
-    gt, gap = _loop_gt(), 5
-    train, held = evaluate.split_mask(120, 0.5, gt=gt, gap=gap)
-    labels = sm.place_labels(train, gt, 20)
-    X = _frames(120, 3)
-    kw = dict(seed=0, epochs=1, n_pairs=20, batch_size=10, width=W, cache=tmp_path)
-    row, S, model, hist = sm.fit_and_score("scnn softmax, RGB", X, labels, held, gap, gt, 0, kw, supervision="softmax")
-    assert row["descriptor"] == "scnn softmax, RGB" and row["label"] == "scnn softmax, RGB (trained here)"
-    assert (row["supervision"], row["fusion"], row["layer"], row["train_pairs"], row["epochs"]) == ("softmax", "none", "", 20, 1)
-    _, ap, r100 = sm.score_descriptors(sm.describe(model, X), gt, 0, held)
-    assert S.shape == (120, 120) and row["AP_%"] == round(ap, 2) and row["R@100P_%"] == round(r100, 2)
-    assert not row["loaded_from_cache"]
-    again, *_ = sm.fit_and_score("scnn softmax, RGB", X, labels, held, gap, gt, 0, kw, supervision="softmax")
-    assert again["loaded_from_cache"] and again["AP_%"] == row["AP_%"]
-    rows, sims = sm.reference_scores(X, gt, 0, held, seed=0, width=W)
-    assert [r["descriptor"] for r in rows] == ["scnn untrained, RGB", "pixels (32x32 gray)"] and list(sims) == ["untrained", "pixels"]
-    assert list(rows[0]) == list(row) and rows[0]["weights"] == "random init" and rows[0]["train_pairs"] == 0
-    _, ap, _ = sm.score_descriptors(sm.features.extract(np.rint(X * 255).astype(np.uint8), "pixels", progress=False), gt, 0, held)
-    assert rows[1]["AP_%"] == round(ap, 2)

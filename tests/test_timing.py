@@ -5,9 +5,8 @@ import cv2
 import numpy as np
 import pytest
 
-from greenloop import seqmatch
 from greenloop.dictionary import LoopDetector
-from greenloop.speed import timing
+from greenloop.speed import seqstream, timing
 
 
 def _sleeper(name, log, ms=2.0, start_ms=150.0):
@@ -55,14 +54,14 @@ def test_detector_method_preloads_the_database_then_matches_each_frame():
     rng = np.random.default_rng(0)
     X = rng.normal(size=(30, 8)).astype(np.float32)
     frames = [X[25 + k] for k in range(5)]                 # "frames" that describe to themselves
-    det = seqmatch.Detector(None, seq_len=3, exclude=5, contrast_window=0)
+    det = seqstream.Detector(None, seq_len=3, exclude=5, contrast_window=0)
     m = timing.detector_method("seq", det, describe=lambda f: f)
     state = m.start(X[:25])
     assert state.frame_index == 25
     for f in frames:
         m.step(state, f)
     assert state.frame_index == 30
-    S = seqmatch.score_matrix(X, 5, 3, contrast_window=0)
+    S = seqstream.score_matrix(X, 5, 3, contrast_window=0)
     assert np.allclose(state.last_scores, S[:24, 29], atol=1e-5)   # query 29 saw the 24 older frames
 
 

@@ -34,8 +34,7 @@ from pathlib import Path
 
 import cv2
 
-from greenloop.datasets import sequence
-from greenloop.datasets.nordland import shallow_clone
+from greenloop.datasets import sequence, sources
 from greenloop.util.files import publish_folder
 from greenloop.util.progress import bar as tqdm  # in the terminal, never in a notebook
 
@@ -53,12 +52,7 @@ FIX = ("set GARDENSPOINT_SRC=path (make) or pass --src path to a local copy of t
 def source_folder(src) -> Path:
     """The folder holding the three traversals: ``src`` itself or ``src/PR_bench/GardensPointWalking``
     (a clone of the source repository). Raises FileNotFoundError naming the fix."""
-    src = Path(src)
-    for cand in (src, src / SOURCE_SUBDIR):
-        if all((cand / t).is_dir() for t in TRAVERSALS):
-            return cand
-    raise FileNotFoundError(f"Gardens Point source {src} not found or incomplete (it needs "
-                            f"{', '.join(t + '/' for t in TRAVERSALS)} with Image000.jpg ...): {FIX}")
+    return sources.source_folder(src, SOURCE_SUBDIR, TRAVERSALS, "Gardens Point", FIX)
 
 
 def check_source(src) -> dict:
@@ -185,7 +179,7 @@ def main(argv=None) -> int:
         else:
             with tempfile.TemporaryDirectory(prefix="gardenspoint-src-") as tmp:
                 print(f"cloning {a.url} (no --src given) ...", file=sys.stderr, flush=True)
-                src = source_folder(shallow_clone(Path(tmp) / "loop-detection", a.url, FIX, "Gardens Point"))
+                src = source_folder(sources.shallow_clone(Path(tmp) / "loop-detection", a.url, FIX, "Gardens Point"))
                 out = build(a.out, src, source_name=f"{a.url} ({SOURCE_SUBDIR})", **kw)
     except (RuntimeError, ValueError, FileNotFoundError, FileExistsError, OSError) as e:
         print(f"error: {e}", file=sys.stderr)

@@ -33,7 +33,6 @@ import argparse
 import json
 import os
 import shutil
-import subprocess
 import sys
 import tempfile
 import time
@@ -43,7 +42,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from greenloop.datasets import sequence
+from greenloop.datasets import sequence, sources
 from greenloop.util.files import publish_folder
 from greenloop.util.progress import bar as tqdm  # in the terminal, never in a notebook
 
@@ -60,12 +59,7 @@ FIX = ("set NORDLAND_SRC=path (make) or pass --src path to a local copy of the s
 def source_folder(src) -> Path:
     """The folder holding summer/ and winter/: ``src`` itself or ``src/datasets/nordland_trimmed``
     (a clone of the source repository). Raises FileNotFoundError naming the fix."""
-    src = Path(src)
-    for cand in (src, src / SOURCE_SUBDIR):
-        if all((cand / s).is_dir() for s in SEASONS):
-            return cand
-    raise FileNotFoundError(f"Nordland source {src} not found or incomplete (it needs summer/ and "
-                            f"winter/ with images-00010.png ...): {FIX}")
+    return sources.source_folder(src, SOURCE_SUBDIR, SEASONS, "Nordland", FIX)
 
 
 def _size(path: Path) -> tuple[int, int]:
@@ -175,41 +169,11 @@ def build(out, src, tolerance: int = TOLERANCE, overwrite: bool = False, progres
     return out
 
 
-def _git(args: list[str], timeout: float) -> subprocess.CompletedProcess:
-    """Run git without prompts, aborting a transfer that stalls below 1 kB/s for 20 s."""
-    env = dict(os.environ, GIT_TERMINAL_PROMPT="0", GIT_HTTP_LOW_SPEED_LIMIT="1000",
-               GIT_HTTP_LOW_SPEED_TIME="20")
-    return subprocess.run(["git", *args], env=env, capture_output=True, text=True,
-                          timeout=timeout, check=True)
-
-
-def shallow_clone(dest, url: str, fix: str, what: str, timeout: float = 20.0,
-                  clone_timeout: float = 1800.0) -> Path:
-    """``git clone --depth 1 url dest`` (any dataset builder's source); returns ``dest``.
-
-    The remote is probed first (``git ls-remote``, ``timeout`` seconds), so an offline machine
-    fails at once. Raises RuntimeError naming ``what`` and ending with ``fix`` when git is
-    missing or the clone fails or times out.
-    """
-    if shutil.which("git") is None:
-        raise RuntimeError(f"git is not installed, so the {what} source cannot be cloned: {fix}")
-    try:
-        _git(["ls-remote", url, "HEAD"], timeout)
-        _git(["clone", "--depth", "1", "--quiet", url, str(dest)], clone_timeout)
-    except subprocess.TimeoutExpired as e:
-        raise RuntimeError(f"could not reach {url} (no answer in {e.timeout:.0f} s): {fix}") from None
-    except subprocess.CalledProcessError as e:
-        why = (e.stderr or "").strip().splitlines()
-        raise RuntimeError(f"could not clone {url} ({why[-1] if why else f'git exit {e.returncode}'}): "
-                           f"{fix}") from None
-    return Path(dest)
-
-
 def clone_source(dest, url: str = SOURCE_URL, timeout: float = 20.0,
                  clone_timeout: float = 1800.0) -> Path:
-    """``git clone --depth 1 url dest`` (:func:`shallow_clone`); returns the source folder inside
+    """``git clone --depth 1 url dest`` (:func:`greenloop.datasets.sources.shallow_clone`); returns the source folder inside
     it. Raises RuntimeError with the fix (NORDLAND_SRC=path) when the clone fails."""
-    return source_folder(shallow_clone(dest, url, FIX, "Nordland", timeout, clone_timeout))
+    return source_folder(sources.shallow_clone(dest, url, FIX, "Nordland", timeout, clone_timeout))
 
 
 def main(argv=None) -> int:

@@ -15,6 +15,12 @@ one thread) p50 / p99, recall@1 = share of queries whose best candidate is the e
 (same score within 1e-6 counts), candidates scanned (LSH), and memory per stored frame.
 Nearest-neighbour similarity quantiles of the real and the augmented descriptors are written
 beside (``neighbourhood``).
+
+The whole decision (:func:`decisions`, scale_decisions.csv): greenloop-seq in candidate mode with
+N frames already stored (``seqstream.Detector.preload``), then the recording's next frames streamed
+one at a time (they revisit the route): insert + search + sequence verification + store per frame,
+p50 / p99, recall@1 of its best match against the exact scan detector's, memory per stored frame;
+the descriptor's own cost per frame (:func:`describe_ms`) in a column of its own.
 """
 from __future__ import annotations
 
@@ -28,6 +34,7 @@ import scipy.sparse
 
 from greenloop import evaluate, retrieval, seqmatch
 from greenloop.datasets import augment
+from greenloop.speed import seqstream
 from greenloop.similarity import l2_normalise
 from greenloop.study import report
 from greenloop.util.kernels import one_blas_thread
@@ -41,6 +48,10 @@ METHODS = (("NumPy scan", "scan", [{}]), ("faiss flat", "flat", [{}]),
            ("HNSW", "hnsw", [{"ef_search": 32}, {"ef_search": 128}]),
            ("SWP-RHLSH", "swp", [{}]), ("QDP-RHLSH", "qdp", [{}]))
 QUANTILES = (0.01, 0.1, 0.5, 0.9, 0.99)
+# the whole decision: (label, Detector index kind, index options beyond nlist / train_size); the
+# scan first, the reference of recall@1
+DECISIONS = (("NumPy scan", "scan", {}), ("IVF nprobe 8", "ivf", {"nprobe": 8}),
+             ("IVF nprobe 16", "ivf", {"nprobe": 16}), ("HNSW ef 128", "hnsw", {"ef_search": 128}))
 
 
 def fit_pca(real: np.ndarray, dim: int):
@@ -54,17 +65,37 @@ def fit_pca(real: np.ndarray, dim: int):
 def descriptors(real, pca, start: int, stop: int, seed: int = 0, chunk: int = 20_000,
                 progress: bool = True) -> np.ndarray:
     """Frames start..stop-1 of the augmented recording as (n, dim) float32 unit descriptors."""
-    mean, V = pca
-    out = np.empty((stop - start, V.shape[1]), np.float32)
+    out = np.empty((stop - start, pca[1].shape[1]), np.float32)
     frames, t0 = [], start
     it = augment.recording(real, start, stop, seed)
     for t, _, f in bar(it, total=stop - start, desc="descriptors", unit="frame", disable=not progress):
         frames.append(f)
         if len(frames) == chunk or t == stop - 1:
-            X = seqmatch.describe_frames(frames, "pixels-patchnorm")
-            out[t0 - start:t + 1 - start] = (X - mean) @ V
+            out[t0 - start:t + 1 - start] = project(frames, pca)
             frames, t0 = [], t + 1
-    return l2_normalise(out).astype(np.float32)
+    return out
+
+
+def project(frames, pca) -> np.ndarray:
+    """Decoded frames (list of (H, W) uint8) -> (n, dim) float32 unit descriptors: pixels-patchnorm,
+    minus the PCA mean, onto its components, L2 (a batch's rows equal single frames' to float32
+    rounding: the product's summation order depends on the batch)."""
+    mean, V = pca
+    return l2_normalise(((seqmatch.describe_frames(frames, "pixels-patchnorm") - mean) @ V)
+                        .astype(np.float32)).astype(np.float32)
+
+
+def describe_ms(real, pca, start: int, n: int, seed: int = 0) -> dict:
+    """The descriptor's own cost: frames start..start+n-1 of the recording described one per call
+    (:func:`project` of one decoded frame, one BLAS thread): p50 / p99 / mean ms per frame."""
+    secs = np.zeros(n)
+    with one_blas_thread():
+        for r, (_, _, f) in enumerate(augment.recording(real, start, start + n, seed)):
+            t0 = time.perf_counter()
+            project([f], pca)
+            secs[r] = time.perf_counter() - t0
+    return {"describe_p50_ms": 1e3 * np.median(secs), "describe_p99_ms": 1e3 * np.quantile(secs, 0.99),
+            "describe_mean_ms": 1e3 * secs.mean()}
 
 
 def nn_similarity(X, Q=None, block: int = 4096) -> np.ndarray:
@@ -139,19 +170,18 @@ def bench_one(kind: str, settings, X, Q, exact_best, exact_score, n_insert: int,
 
 
 def run(src, out, sizes=SIZES, dim: int = 64, queries=(2000, 1000, 300), n_insert: int = 1000,
-        seed: int = 0, methods=METHODS, note: str = "") -> pd.DataFrame:
-    """The whole benchmark (module doc); writes out/scale.{csv,md,png}, neighbourhood.{csv,md}."""
+        seed: int = 0, methods=METHODS, note: str = "", decision_queries: int = 2000) -> pd.DataFrame:
+    """The whole benchmark (module doc); writes out/scale.{csv,md,png}, scale_decisions.{csv,png},
+    neighbourhood.{csv,md}."""
     retrieval.one_thread()
     out = Path(out)
     real = augment.nordland_route(src)
     pca = fit_pca(real, dim)
-    top = max(sizes) + n_insert
+    top = max(sizes) + max(n_insert, decision_queries)
     X = descriptors(real, pca, 0, top, seed)
     qstart = (top // len(real) + 1) * len(real)          # a later pass than any stored frame
     Qall = descriptors(real, pca, qstart, qstart + max(queries), seed, progress=False)
-    mean, V = pca
-    realX = l2_normalise(((seqmatch.describe_frames(list(real), "pixels-patchnorm") - mean) @ V)
-                                   .astype(np.float32)).astype(np.float32)
+    realX = project(list(real), pca)
     nb = neighbourhood(realX, X[:max(sizes)], Qall[:min(queries)], sizes)
     report.write_table(nb, out / "neighbourhood", "Nearest-neighbour cosine similarity quantiles")
     rows = []
@@ -166,35 +196,82 @@ def run(src, out, sizes=SIZES, dim: int = 64, queries=(2000, 1000, 300), n_inser
                 rows.append({"stored": n, "method": name, "kind": kind, "queries": nq, "dim": dim, **r})
                 print(f"N={n} {name}: " + ", ".join(f"{k} {v:.4g}" for k, v in r.items()), flush=True)
     table = pd.DataFrame(rows)
-    stream = stream_decisions(X, min(20_000, len(X)))
-    print(f"stream: {stream}", flush=True)
+    decide = decisions(X, len(real), sizes, decision_queries)
+    decide = decide.assign(**describe_ms(real, pca, max(sizes), decision_queries, seed))
     metrics = long_run_metrics(X, len(real), min(100_000, len(X)))
     print(metrics.to_string(), flush=True)
-    _write(out, table, nb, dim, len(real), seed, stream, note, metrics)
+    _write(out, table, nb, dim, len(real), seed, decide, note, metrics)
     return table
 
 
-def stream_decisions(X, n: int = 20_000, kind: str = "hnsw", k: int = K, seq_len: int = 10,
-                     contrast_window: int = 10, exclude: int = 150) -> dict:
-    """Per-frame decision time of greenloop-seq in candidate mode (index insert + search + the
-    sequence verification of k candidates) over the first n descriptors: p50 / p99 in ms."""
-    det = seqmatch.Detector(0.0, seq_len=seq_len, exclude=exclude, contrast_window=contrast_window,
-                            index=kind, k=k)
-    secs = np.zeros(n)
-    for t in range(n):
-        t0 = time.perf_counter()
-        det.update_descriptor(X[t])
-        secs[t] = time.perf_counter() - t0
-    tail = secs[exclude + seq_len:]
-    return {"frames": n, "index": kind, "k": k, "p50_ms": 1e3 * np.median(tail),
-            "p99_ms": 1e3 * np.quantile(tail, 0.99), "bytes_per_frame": det.bytes_per_frame}
+def decisions(X, m: int, sizes=SIZES, n_queries: int = 2000, methods=DECISIONS, k: int = K,
+              seq_len: int = 10, contrast_window: int = 10, exclude: int = 150, tolerance: int = 2) -> pd.DataFrame:
+    """greenloop-seq's whole per-frame decision (candidate mode) with N frames already stored.
+
+    X: (>= max(sizes) + n_queries, D) unit descriptors of the recording in capture order; m: the
+    route's length in frames (:func:`route_places`). Per size N and method (label, kind, options):
+    a ``seqstream.Detector(0.0, seq_len, exclude, contrast_window, index=kind, k)`` (IVF: nlist and
+    train size as the search table's) preloaded with X[:N] (``Detector.preload``, timed:
+    preload_s), then frames N..N+n_queries-1 streamed one per ``update_descriptor`` call (insert
+    the frame exclude + 1 back, search k, verify the candidates' sequences, store, decide), each
+    timed. Returns one row per (N, method): p50 / p99 / mean ms per frame, frames/s (n_queries
+    over their total time), recall@1_% (share of the frames whose best match, the highest sequence
+    score, is the scan detector's: same frame or score within 1e-6; NaN without a "scan" method,
+    which must come first), correct_% (best match at the query's place +- tolerance route frames),
+    bytes_per_frame (``Detector.bytes_per_frame``: stored descriptor + index).
+    """
+    X = np.asarray(X)
+    places, rows = route_places(len(X), m), []
+    for n in sorted(sizes):
+        if n + n_queries > len(X):
+            raise ValueError(f"decisions at {n:,} stored frames need {n + n_queries:,} descriptors, got {len(X):,}")
+        nlist, ref = max(16, int(round(np.sqrt(n)))), None
+        for label, kind, opts in methods:
+            det = seqstream.Detector(0.0, seq_len=seq_len, exclude=exclude, contrast_window=contrast_window,
+                                    index=kind, k=k, index_options={"nlist": nlist, "train_size": min(n, 40 * nlist), **opts})
+            t0 = time.perf_counter()
+            det.preload(X[:n])
+            preload = time.perf_counter() - t0
+            secs, best, score = _stream(det, X[n:n + n_queries])
+            if kind == "scan":
+                ref = (best, score)
+            hit = np.full(n_queries, np.nan) if ref is None else (best == ref[0]) | (np.abs(score - ref[1]) <= 1e-6)
+            rows.append({"stored": n, "method": label, "kind": kind, "queries": n_queries, "dim": X.shape[1],
+                         "p50_ms": 1e3 * np.median(secs), "p99_ms": 1e3 * np.quantile(secs, 0.99),
+                         "mean_ms": 1e3 * secs.mean(), "frames_per_s": n_queries / secs.sum(),
+                         "recall@1_%": 100 * np.mean(hit),
+                         "correct_%": 100 * np.mean(np.abs(places[best] - places[n:n + n_queries]) <= tolerance),
+                         "bytes_per_frame": det.bytes_per_frame, "preload_s": preload})
+            print(f"decision N={n} {label}: " + ", ".join(f"{c} {v:.4g}" for c, v in rows[-1].items()
+                                                          if isinstance(v, float)), flush=True)
+            del det
+    return pd.DataFrame(rows)
+
+
+def _stream(det, Q):
+    """Feed Q (M, D) to det one frame per call: (seconds (M,), best match (M,) int64, its score (M,))."""
+    secs, best, score = np.zeros(len(Q)), np.zeros(len(Q), np.int64), np.zeros(len(Q))
+    with one_blas_thread():
+        for q, x in enumerate(Q):
+            t0 = time.perf_counter()
+            det.update_descriptor(x)
+            secs[q] = time.perf_counter() - t0
+            i = int(np.argmax(det.last_scores))
+            best[q], score[q] = det.last_candidates[i], det.last_scores[i]
+    return secs, best, score
+
+
+def route_places(n: int, m: int) -> np.ndarray:
+    """(n,) int64 place of each frame of a recording of passes over a route of m frames whose two
+    halves are the same places (Nordland: summer, then winter): (t mod m) mod m/2."""
+    return (np.arange(n) % m) % (m // 2)
 
 
 def route_ground_truth(n: int, m: int, tolerance: int = 2) -> scipy.sparse.csr_array:
     """Sparse (n, n) bool ground truth of the first n frames of a recording of passes over a
     route of m frames whose two halves are the same places (Nordland: summer, then winter): frames
     t and u are a loop when their places ((t mod m) mod m/2) differ by at most ``tolerance``."""
-    place = (np.arange(n) % m) % (m // 2)
+    place = route_places(n, m)
     order = np.argsort(place, kind="stable")
     rows, cols = [], []
     bounds = np.searchsorted(place[order], np.arange(m // 2 + 1))
@@ -320,7 +397,7 @@ def _plot(table: pd.DataFrame, path: Path) -> None:
     plt.close(fig)
 
 
-def _write(out: Path, table, nb, dim: int, n_real: int, seed: int, stream: dict | None = None,
+def _write(out: Path, table, nb, dim: int, n_real: int, seed: int, decide: pd.DataFrame | None = None,
            note: str = "", metrics: pd.DataFrame | None = None) -> None:
     report.write_atomic(out / "scale.csv", lambda p: table.to_csv(p, index=False))
     _plot(table, out / "scale.png")
@@ -354,12 +431,8 @@ def _write(out: Path, table, nb, dim: int, n_real: int, seed: int, stream: dict 
           "neighbour grows more similar with N): the large stores are denser than one real traversal, which "
           "makes retrieval easier for every index alike. The real set's upper tail (q90 ~ 1) is exact "
           "duplicates, frames where the train stood still.", ""]
-    if stream:
-        md += ["## greenloop-seq decision per frame (candidate mode)", "",
-               f"Detector(index={stream['index']!r}, k={stream['k']}, seq_len 10, contrast window 10, exclude "
-               f"150) over the first {stream['frames']:,} descriptors: index insert + search + sequence "
-               f"verification, p50 {stream['p50_ms']:.3g} ms, p99 {stream['p99_ms']:.3g} ms per frame; "
-               f"{stream['bytes_per_frame']} B per stored frame (descriptor + index).", ""]
+    if decide is not None:
+        md += _decision_section(out, decide)
     if metrics is not None:
         report.write_atomic(out / "long_run_metrics.csv", lambda p: metrics.to_csv(p, index=False))
         md += ["## Per-query metrics of a long stream without an N x N matrix", "",
@@ -371,6 +444,59 @@ def _write(out: Path, table, nb, dim: int, n_real: int, seed: int, stream: dict 
                metrics.to_markdown(index=False, floatfmt=".4g"), ""]
     md += _stream_section(out / "stream100k.json")
     report.write_atomic(out / "scale.md", "\n".join(md))
+
+
+def _decision_section(out: Path, decide: pd.DataFrame) -> list[str]:
+    """Write scale_decisions.{csv,png}; scale.md's lines on the whole decision (:func:`decisions`)."""
+    report.write_atomic(out / "scale_decisions.csv", lambda p: decide.to_csv(p, index=False))
+    _plot_decisions(decide, out / "scale_decisions.png")
+    cols = ["stored", "method", "queries", "p50_ms", "p99_ms", "frames_per_s", "recall@1_%", "correct_%",
+            "bytes_per_frame", "preload_s", "describe_p50_ms", "describe_p99_ms"]
+    cols, r = [c for c in cols if c in decide.columns], decide.iloc[0]
+    return ["## greenloop-seq's whole decision per frame with N frames stored (candidate mode)", "",
+            f"seqstream.Detector(threshold 0, seq_len 10, contrast window 10, exclude 150, k = {K}, index = each "
+            f"row's; IVF's nlist and training frames as in the search table) preloaded with the recording's "
+            f"first N descriptors (Detector.preload: the state streaming them leaves; preload_s), then its next "
+            f"{int(r.queries):,} frames (a later pass: every one revisits the route) streamed one per call: "
+            f"p50 / p99 of the whole per-frame decision with the descriptor given (index insert of the frame 151 "
+            f"back + search + sequence verification of the candidates + store + threshold), frames_per_s = "
+            f"frames / their total time. recall@1: share of those frames whose best match (highest sequence score) "
+            f"is the NumPy-scan detector's (same frame, or score within 1e-6); correct_%: best match at the query's "
+            f"place +-2 route frames (route_ground_truth's rule); bytes_per_frame: Detector.bytes_per_frame, the "
+            f"stored descriptor plus the index (the descriptor store grows by doubling, so up to twice its part is "
+            f"allocated; the fixed seq_len-row buffers do not grow). describe_*: the descriptor's own cost per "
+            f"frame, measured apart (speed.scale.describe_ms: pixels-patchnorm + PCA of one decoded 64x32 frame "
+            f"per call), the same for every row.", "",
+            decide[cols].to_markdown(index=False, floatfmt=".4g"), "", "![decisions](scale_decisions.png)", "",
+            "Targets at the largest size, the whole decision (recall@1 read both ways: the scan detector's very "
+            "frame, and the share of correct matches, correct_%, against the scan detector's):", "",
+            decision_targets(decide).to_markdown(index=False), ""]
+
+
+def decision_targets(decide: pd.DataFrame) -> pd.DataFrame:
+    """:func:`targets` of the :func:`decisions` rows, plus correct_% within 1 point of the scan's."""
+    big = decide[decide.stored == decide.stored.max()]
+    exact = big[big.kind == "scan"]["correct_%"].iloc[0]
+    ok = [f"{'met' if c >= exact - 1 else 'not met'} ({c:.1f} % vs {exact:.1f} %)" for c in big["correct_%"]]
+    return targets(decide).assign(**{"correct_% within 1 pt of exact": ok})
+
+
+def _plot_decisions(decide: pd.DataFrame, path: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(6, 4.2))
+    for m, g in decide.groupby("method", sort=False):
+        line, = ax.loglog(g.stored, g.p99_ms, "o-", label=m)
+        ax.loglog(g.stored, g.p50_ms, "x--", color=line.get_color(), lw=0.8)
+    ax.axhline(1.0, color="k", ls=":", lw=1)
+    ax.set_xlabel("stored frames")
+    ax.set_title("greenloop-seq decision per frame (ms): p99 solid, p50 dashed", fontsize=9)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    report.save_figure(fig, path)
+    plt.close(fig)
 
 
 def _stream_section(path: Path) -> list[str]:
@@ -398,11 +524,13 @@ def main(argv=None) -> int:
     ap.add_argument("--queries", type=int, nargs="+", default=[2000, 1000, 300],
                     help="queries per size (same order as --sizes)")
     ap.add_argument("--dim", type=int, default=64)
+    ap.add_argument("--decision-queries", type=int, default=2000,
+                    help="frames streamed through the whole decision at each size")
     ap.add_argument("--note", default="", help="a sentence for the header (e.g. what shared the cores)")
     a = ap.parse_args(argv)
     if len(a.queries) != len(a.sizes):
         raise SystemExit("--queries needs one count per --sizes entry")
-    run(a.src, a.out, a.sizes, a.dim, a.queries, note=a.note)
+    run(a.src, a.out, a.sizes, a.dim, a.queries, note=a.note, decision_queries=a.decision_queries)
     return 0
 
 

@@ -15,10 +15,13 @@ What is timed, for every method alike (:func:`time_methods`)
     Decoding (``cv2.imread`` of the same files) is timed apart (:func:`decode_ms`): it is a column of
     its own, the same for every method that reads the same files.
 
+One more quantity, not per frame: the wall time of one whole computation (notebook 07's M x M
+cosine matrix), the best of ``repeats`` calls (:func:`best_of`).
+
 A method is a :class:`Method`: ``start(preload)`` builds its database from the preloaded data
 (untimed) and returns a state, ``step(state, frame)`` is the timed path. :func:`detector_method`
-wraps a streaming detector that takes descriptors (``seqmatch.Detector``, ``seqslam.Detector``,
-and the single-frame methods as a ``seqmatch.Detector`` with seq_len 1), :func:`dictionary_method`
+wraps a streaming detector that takes descriptors (``seqstream.Detector``, ``seqslam_stream.Detector``,
+and the single-frame methods as a ``seqstream.Detector`` with seq_len 1), :func:`dictionary_method`
 the main paper's ``speed.stream.Detector`` (its database is its spot counters).
 """
 from __future__ import annotations
@@ -32,7 +35,7 @@ import numpy as np
 from greenloop.study import report
 from greenloop.util.checks import positive_int
 
-__all__ = ["Method", "detector_method", "dictionary_method", "time_methods", "decode_ms"]
+__all__ = ["Method", "detector_method", "dictionary_method", "time_methods", "decode_ms", "best_of"]
 
 
 class Method(NamedTuple):
@@ -46,7 +49,7 @@ class Method(NamedTuple):
 def detector_method(name: str, detector, describe) -> Method:
     """A descriptor-fed streaming detector as a :class:`Method`.
 
-    detector: has ``reset()`` and ``update_descriptor(x)`` (seqmatch / seqslam Detector).
+    detector: has ``reset()`` and ``update_descriptor(x)`` (``speed.seqstream`` / ``speed.seqslam_stream`` Detector).
     describe: one decoded frame (H, W, 3) uint8 BGR -> its descriptor (D,), the detector's input.
     preload of ``start``: (n0, D) descriptors of the frames before the window, fed in order.
     """
@@ -136,3 +139,19 @@ def decode_ms(paths, repeats: int = 3) -> dict:
         ts.append(1e3 * (time.perf_counter() - t0) / len(paths))
     return {"decode_ms_median": float(np.median(ts)), "decode_ms_min": float(min(ts)),
             "decode_ms_max": float(max(ts))}
+
+
+def best_of(fn, *args, repeats: int = 3):
+    """The wall time of one call ``fn(*args)``, the best (shortest) of ``repeats`` >= 1 calls.
+
+    Returns (result, seconds): the last call's result and the shortest wall time in seconds
+    (``time.perf_counter``; the minimum is the least disturbed by other load on the machine).
+    """
+    repeats = positive_int("repeats", repeats, 1)
+    best, out = float("inf"), None
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        out = fn(*args)
+        best = min(best, time.perf_counter() - t0)
+    return out, best
+

@@ -1,23 +1,10 @@
-"""Notebook 13's leaderboard: every method on the same frames, metrics, tuning budget and timing.
+"""Notebook 13's leaderboard rows: metrics, spreads, chance, closures, tables, the statement, the writes.
 
-The notebook holds parameters, calls, tables and figures; the logic is here.
-
-Methods and their knobs (one tuning budget, ``seqmatch.tune_knobs`` / ``pick_knobs``: per-query
-AUC-PR on the tuning queries for every method)
-    * single-frame descriptors (CNNs, SIFT-BoVW, raw pixels): cosine of the L2-normalised
-      descriptor to every stored frame, as a ``seqmatch.Detector`` with seq_len 1; knobs: local
-      contrast normalisation window (the grid of greenloop-seq) and, for the CNNs, PCA whitening
-      fitted on the tuning frames (L2 -> whiten -> L2, cosine) at each dimension of the grid or none.
-      Notebook 08's median filter is not a knob here: its window is centred on the query (square:
-      the block of queries j - s//2 .. j + s//2; diagonal: S[i + t, j + t], |t| <= s//2), so it
-      reads future frames; its causal (look-back) form along the diagonal is a trajectory mean,
-      i.e. greenloop-seq with seq_len = the window, which is the sequence row, not a single-frame one.
-    * greenloop-seq / greenloop-seq-fast (``seqmatch``): descriptor, seq_len, contrast window.
-    * SeqSLAM (``seqslam``): the published parameters, and the same grid tuned as a second row.
-    * the main paper's CNN + dictionary: its tau = L + margin is fixed in advance (no knob).
-
-Knob records are dicts (``pick_knobs``): descriptor ("seqslam" for SeqSLAM), whitening (label,
-"none"), seq_len, contrast_window.
+The detectors, their knobs and their tuning are registered in ``greenloop.detectors`` (one entry
+per family); ``greenloop.experiments.leaderboard`` runs them on one dataset under one tuning
+budget (per-query AUC-PR on the tuning queries) and builds the tables with the functions here,
+which know nothing of any one detector: a row is a method's (M, M) score matrix, its threshold,
+its timing row and its meta (weights, knob text, bytes per stored frame).
 """
 from __future__ import annotations
 
@@ -27,8 +14,8 @@ import cv2
 import numpy as np
 import pandas as pd
 
-from greenloop import evaluate, features, seqmatch, seqslam
-from greenloop.speed import timing
+from greenloop import evaluate, seqmatch
+from greenloop.speed import seqstream, timing
 from greenloop.study import targets as goals
 from greenloop.util.files import write_atomic
 
@@ -38,8 +25,6 @@ SPREADS = ["R@1_lo_%", "R@1_hi_%", "AUC-PR_lo_%", "AUC-PR_hi_%"]
 COLUMNS = (["method", "mode", "weights", "knobs"] + METRICS + SPREADS +
            ["pair_AP_%", "fps_median", "fps_min", "fps_max", "decode_ms", "bytes_per_stored_frame", "threshold",
             "closures_declared", "closures_false", "first_revisit_delay_frames", "scored_on"])
-SEQSLAM_PUBLISHED = {"descriptor": "seqslam", "whitening": "none", "seq_len": seqslam.DS + 1,
-                     "contrast_window": seqslam.R_WINDOW}
 
 
 def weights_kind(label) -> str:
@@ -60,119 +45,26 @@ def reference_mask(frames, reference_frames) -> np.ndarray | None:
     return ref
 
 
-def projections(feats: dict, specs, fit, dims) -> dict:
-    """Whitening candidates of each CNN descriptor: {spec: {"none": None, "pca k": Projection}}.
-    feats: {spec: (N, D)}; specs: the entries that get whitening; fit: (N,) bool frames to fit
-    on (the tuning part; None: every frame, no labels used); dims: requested dimensions (clipped
-    to the rank, the label says the kept one)."""
-    out = {}
-    for s in specs:
-        X = feats[s] if fit is None else feats[s][np.asarray(fit, dtype=bool)]
-        cands = {"none": None}
-        for k in dims:
-            p = seqmatch.fit_projection(X, int(k))
-            cands.setdefault(f"pca {p.output_dim}", p)
-        out[s] = cands
-    return out
 
 
-def variants(single_specs, seq_descriptors, fast_descriptors, seq_lens) -> dict:
-    """{method: (descriptors, seq_lens)} for ``seqmatch.pick_knobs``: each single-frame method on
-    its own descriptor at seq_len 1, greenloop-seq (-fast) on the sequence grid, SeqSLAM tuned."""
-    out = {f"{s} (single frame)": ([s], [1]) for s in single_specs}
-    out["greenloop-seq"] = (list(seq_descriptors), list(seq_lens))
-    out["greenloop-seq-fast"] = ([d for d in fast_descriptors if d in seq_descriptors], list(seq_lens))
-    out["SeqSLAM (tuned)"] = (["seqslam"], list(seq_lens))
-    return out
 
 
-def default_knobs(single_specs) -> dict:
-    """Knobs without a tuning part (no honest split): single-frame methods untuned (no contrast
-    normalisation, no whitening), SeqSLAM at its published parameters."""
-    knobs = {f"{s} (single frame)": {"descriptor": s, "whitening": "none", "seq_len": 1, "contrast_window": 0}
-             for s in single_specs}
-    knobs["SeqSLAM (published)"] = dict(SEQSLAM_PUBLISHED)
-    return knobs
 
 
-def named_default() -> dict:
-    """greenloop-seq's named default (``seqmatch.DEFAULT_NAME``) as a knob record: the CLI's
-    configuration, never tuned here, scored at the fixed ``seqmatch.DEFAULT_THRESHOLD``."""
-    k = dict(seqmatch.DEFAULT_KNOBS)
-    return dict(k, whitening="none", velocities=list(k["velocities"]), fixed_threshold=seqmatch.DEFAULT_THRESHOLD)
 
 
-def _extra(k: dict, velocities) -> dict:
-    """The seqmatch keyword arguments of a knob record beyond descriptor/seq_len/contrast window."""
-    return dict(velocities=tuple(k.get("velocities", velocities)), center_window=k.get("center_window", 0),
-                calibrate=k.get("calibrate", False), repeat_cos=k.get("repeat_cos"))
 
-
-def knob_text(k: dict) -> str:
-    """One line of a method's knobs for the table."""
-    if k["descriptor"] == "seqslam":
-        return f"64x32 patch-normalised, SAD, ds {k['seq_len'] - 1}, R_window {k['contrast_window']}, v 0.8..1.2"
-    seq = "" if k["seq_len"] == 1 else f", seq_len {k['seq_len']}"
-    text = f"{k['descriptor']}, whitening {k['whitening']}, contrast window {k['contrast_window']}{seq}"
-    if "fixed_threshold" in k:
-        text += (f", centring {k['center_window']}, velocities {k['velocities']}, repeat gate {k['repeat_cos']}, "
-                 f"calibrated, fixed threshold {k['fixed_threshold']} (the CLI default, untuned)")
-    return text
-
-
-def detector(k: dict, threshold, exclude: int, velocities, proj: dict, weights="auto"):
-    """The streaming detector of a knob record: ``seqslam.Detector`` or ``seqmatch.Detector``
-    (single-frame methods: seq_len 1). threshold: float or None. proj: :func:`projections`."""
-    t = None if threshold is None or not np.isfinite(threshold) else float(threshold)
-    if k["descriptor"] == "seqslam":
-        return seqslam.Detector(t, exclude, k["seq_len"] - 1, k["contrast_window"])
-    p = proj.get(k["descriptor"], {}).get(k["whitening"])
-    desc = k["descriptor"] if k["descriptor"] in seqmatch.DESCRIPTORS else "pixels"
-    return seqmatch.Detector(t, descriptor=desc, seq_len=k["seq_len"], exclude=exclude,
-                             contrast_window=k["contrast_window"], projection=p, weights=weights,
-                             **_extra(k, velocities))
-
-
-def score_matrices(knobs: dict, descriptors: dict, proj: dict, exclude: int, velocities) -> dict:
-    """{method: (N, N) score matrix} of every knob record: the detector's own score matrix.
-    descriptors: {descriptor name: (N, D)} ("seqslam": the SeqSLAM descriptors)."""
-    out = {}
-    for name, k in knobs.items():
-        X = descriptors[k["descriptor"]]
-        if k["descriptor"] == "seqslam":
-            out[name] = seqslam.score_matrix(X, exclude, k["seq_len"] - 1, k["contrast_window"])
-        else:
-            p = proj.get(k["descriptor"], {}).get(k["whitening"])
-            e = _extra(k, velocities)
-            out[name] = seqmatch.score_matrix(X, exclude, k["seq_len"], e.pop("velocities"), k["contrast_window"], p, **e)
-    return out
-
-
-def frame_describer(descriptor: str, weights="auto", input_size=None, vocabulary=None):
-    """One decoded BGR frame (H, W, 3) uint8 -> the raw descriptor (D,) a method stores: the
-    timed describe step. descriptor: a knob record's descriptor (a backbone entry, a seqmatch
-    descriptor or "seqslam"). SIFT-BoVW quantises against ``vocabulary`` (one frame's tf-idf)."""
-    if descriptor == "seqslam":
-        return lambda f: seqslam.describe_frames([f])[0]
-    if descriptor in seqmatch.DESCRIPTORS and descriptor != "mobilenetv2":
-        return lambda f: seqmatch.describe_frames([f], descriptor)[0]
-    kw = {"vocabulary": vocabulary} if descriptor == "sift_bovw" else {}
-    return lambda f: features.extract_spec(cv2.cvtColor(f, cv2.COLOR_BGR2RGB)[None], descriptor, weights,
-                                           input_size, progress=False, **kw)[0]
-
-
-def thresholds(S: dict, GT, exclude: int, tune, rule: str) -> dict:
+def thresholds(S: dict, GT, exclude: int, tune, rule: str, fixed: dict | None = None) -> dict:
     """{method: threshold picked on the tuning queries (``seqmatch.choose_threshold``)}; NaN for
-    every method when tune is None (no tuning part); the named default keeps its fixed threshold."""
-    out = {k: (seqmatch.choose_threshold(s, GT, exclude, queries=tune, rule=rule) if tune is not None else np.nan)
-           for k, s in S.items() if k != seqmatch.DEFAULT_NAME}
-    if seqmatch.DEFAULT_NAME in S:
-        out[seqmatch.DEFAULT_NAME] = seqmatch.DEFAULT_THRESHOLD
-    return out
+    every method when tune is None (no tuning part); a method in ``fixed`` ({method: threshold},
+    e.g. the named default's ``fixed_threshold``) keeps that one."""
+    fixed = fixed or {}
+    return {k: (fixed[k] if k in fixed else seqmatch.choose_threshold(s, GT, exclude, queries=tune, rule=rule)
+                if tune is not None else np.nan) for k, s in S.items()}
 
 
 def metric_rows(S, GT, exclude: int, queries, reference=None, block: int = 10) -> list[dict]:
-    """The metric columns of one score matrix, in %: one row per database mode (loop closure;
+    """The metric columns of one score matrix, in % (unrounded): one row per database mode (loop closure;
     place recognition too when ``reference`` is given), with the :func:`spread` of R@1 and
     AUC-PR (bootstrap runs of ``block`` queries). pair_AP_% (pairs i < j, j - i > exclude) is a
     loop-closure quantity: NaN in the place-recognition row."""
@@ -182,8 +74,8 @@ def metric_rows(S, GT, exclude: int, queries, reference=None, block: int = 10) -
             continue
         q = evaluate.per_query(S, GT, exclude, queries=queries, reference=ref, ks=(1, 5))
         ap = evaluate.average_precision(S, GT, exclude, queries=queries) if ref is None else np.nan
-        rows.append({"mode": mode, **{f"{k}_%": round(100 * q[k], 2) for k in ("R@1", "R@5", "AUC-PR", "R@100P", "R@95P")},
-                     "pair_AP_%": round(100 * ap, 2), **spread(S, GT, exclude, queries, ref, block)})
+        rows.append({"mode": mode, **{f"{k}_%": 100 * q[k] for k in ("R@1", "R@5", "AUC-PR", "R@100P", "R@95P")},
+                     "pair_AP_%": 100 * ap, **spread(S, GT, exclude, queries, ref, block)})
     return rows
 
 
@@ -194,7 +86,7 @@ def spread(S, GT, exclude: int, queries, reference=None, block: int = 10, n_boot
     queries (neighbouring queries see nearly the same frames, so they are resampled together),
     ``n_boot`` resamples of as many runs drawn with replacement, each scored by
     ``evaluate.query_metrics``; a resample without a revisit query is drawn again. Returns
-    {"R@1_lo_%", "R@1_hi_%", "AUC-PR_lo_%", "AUC-PR_hi_%"} (2.5th and 97.5th percentiles).
+    {"R@1_lo_%", "R@1_hi_%", "AUC-PR_lo_%", "AUC-PR_hi_%"} (2.5th and 97.5th percentiles, in %, unrounded).
     """
     m = evaluate.best_matches(S, GT, exclude, queries, reference, k=1)
     runs = [np.arange(a, min(a + int(block), len(m.query))) for a in range(0, len(m.query), int(block))]
@@ -206,8 +98,7 @@ def spread(S, GT, exclude: int, queries, reference=None, block: int = 10, n_boot
         q = evaluate.query_metrics(evaluate.Matches(*(a[idx] for a in m[:6]), m.k), ks=(1,))
         r1.append(q["R@1"]), auc.append(q["AUC-PR"])
     lo, hi = np.percentile([r1, auc], [2.5, 97.5], axis=1)
-    return {"R@1_lo_%": round(100 * lo[0], 2), "R@1_hi_%": round(100 * hi[0], 2),
-            "AUC-PR_lo_%": round(100 * lo[1], 2), "AUC-PR_hi_%": round(100 * hi[1], 2)}
+    return {"R@1_lo_%": 100 * lo[0], "R@1_hi_%": 100 * hi[0], "AUC-PR_lo_%": 100 * lo[1], "AUC-PR_hi_%": 100 * hi[1]}
 
 
 def chance_rows(GT, exclude: int, queries, reference=None, scored_on: str = "") -> list[dict]:
@@ -220,23 +111,23 @@ def chance_rows(GT, exclude: int, queries, reference=None, scored_on: str = "") 
         q = evaluate.query_chance(GT, exclude, queries=queries, reference=ref, ks=(1, 5))
         ap = evaluate.chance_level(GT, exclude, queries=queries) if ref is None else np.nan
         rows.append({"method": "chance (random scores)", "mode": mode, "weights": "none", "knobs": "-",
-                     **{f"{k}_%": round(100 * q[k], 2) for k in ("R@1", "R@5", "AUC-PR", "R@100P", "R@95P")},
-                     "pair_AP_%": round(100 * ap, 2), "scored_on": scored_on})
+                     **{f"{k}_%": 100 * q[k] for k in ("R@1", "R@5", "AUC-PR", "R@100P", "R@95P")},
+                     "pair_AP_%": 100 * ap, "scored_on": scored_on})
     return rows
 
 
 def timing_methods(knobs: dict, dets: dict, describers: dict, descriptors: dict, start: int, dictionary=None):
     """The :class:`greenloop.speed.timing.Method` list and preloads of every method.
 
-    knobs: {method: knob record}; dets: {method: its detector (:func:`detector`)}; describers:
-    {descriptor: :func:`frame_describer`}; descriptors: {descriptor: (N, D)}; start: the first
+    knobs: {method: knob record}; dets: {method: its streaming detector (``Entry.stream``)};
+    describers: {method: frame -> descriptor (``Entry.describer``)}; descriptors: {descriptor: (N, D)}; start: the first
     timed frame of the stream (described index): frames 0..start-1 are preloaded.
     dictionary: optional (name, speed.stream.Detector, (n0,) spot labels of the original frames
     before the window). Returns (methods, preload).
     """
     methods, preload = [], {}
     for name, k in knobs.items():
-        methods.append(timing.detector_method(name, dets[name], describers[k["descriptor"]]))
+        methods.append(timing.detector_method(name, dets[name], describers[name]))
         preload[name] = descriptors[k["descriptor"]][:start]
     if dictionary is not None:
         name, det, labels = dictionary
@@ -253,7 +144,7 @@ def closure_columns(S, GT, threshold, exclude: int, queries, frame_step: int) ->
         return {"threshold": np.nan, "closures_declared": None, "closures_false": None,
                 "first_revisit_delay_frames": None}
     c = seqmatch.closures(S, GT, threshold, exclude, queries=queries)
-    return {"threshold": round(float(threshold), 4), "closures_declared": c["declared"], "closures_false": c["false"],
+    return {"threshold": float(threshold), "closures_declared": c["declared"], "closures_false": c["false"],
             "first_revisit_delay_frames": None if c["first_delay"] is None else c["first_delay"] * int(frame_step)}
 
 
@@ -280,10 +171,20 @@ def method_rows(S: dict, meta: dict, GT, exclude: int, evalq, reference, thr: di
 
 
 def table(rows) -> pd.DataFrame:
-    """The leaderboard DataFrame in :data:`COLUMNS` order (frames/s rounded to 0.1, decode ms to
-    0.01); rows may lack columns (NaN/None)."""
-    board = pd.DataFrame(rows).reindex(columns=COLUMNS)
-    return board.round({"fps_median": 1, "fps_min": 1, "fps_max": 1, "decode_ms": 2})
+    """The leaderboard DataFrame in :data:`COLUMNS` order, unrounded (:func:`rounded` is the
+    written form); rows may lack columns (NaN/None)."""
+    return pd.DataFrame(rows).reindex(columns=COLUMNS)
+
+
+def rounded(board: pd.DataFrame) -> pd.DataFrame:
+    """The leaderboard as it is written and judged (csv, Markdown, summary.json, the statement, the
+    targets): the per-query metrics and pair AP to 0.01 and the threshold to 0.0001 (Python's
+    ``round`` of each value), the bootstrap intervals to 0.01, frames/s to 0.1 and decode ms to
+    0.01 (``DataFrame.round``)."""
+    out = board.copy()
+    for c, d in {**dict.fromkeys(METRICS + ["pair_AP_%"], 2), "threshold": 4}.items():
+        out[c] = [v if pd.isna(v) else round(float(v), d) for v in out[c]]
+    return out.round({**dict.fromkeys(SPREADS, 2), "fps_median": 1, "fps_min": 1, "fps_max": 1, "decode_ms": 2})
 
 
 def pr_curves(S: dict, GT, exclude: int, queries) -> dict:
@@ -294,8 +195,9 @@ def pr_curves(S: dict, GT, exclude: int, queries) -> dict:
 
 def write(board: pd.DataFrame, out_dir, results_dir, title: str, note: str):
     """Write ``out_dir/leaderboard.csv`` and ``.md`` and the copy ``results_dir/leaderboard.csv``
-    from ONE serialisation of the table (the same bytes, so the copy can never differ).
-    Returns (csv path, md path, copy path)."""
+    from ONE serialisation of the :func:`rounded` table (the same bytes, so the copy can never
+    differ). Returns (csv path, md path, copy path)."""
+    board = rounded(board)
     text = board.to_csv(index=False)
     out_dir, results_dir = Path(out_dir), Path(results_dir)
     paths = (out_dir / "leaderboard.csv", out_dir / "leaderboard.md", results_dir / "leaderboard.csv")
@@ -345,17 +247,6 @@ def statement(board: pd.DataFrame, seq_names=("greenloop-seq", "greenloop-seq-fa
     return "\n".join(out)
 
 
-def sequence_descriptors(dataset, names, feats: dict, infos: dict, step: int, weights="auto"):
-    """greenloop-seq's descriptors: those already in ``feats`` reused (the same frames, the same
-    values), the others from ``seqmatch.describe``. Returns ({name: (N, D)}, {name: ExtractInfo})."""
-    X, info = {}, {}
-    for d in names:
-        if d in feats:
-            X[d], info[d] = feats[d], infos[d]
-        else:
-            X[d], info[d] = seqmatch.describe(dataset, d, step=step, weights=weights, return_info=True)
-    return X, info
-
 
 def timing_window(evalq, n_frames: int):
     """(start, stop) described indices of the timed window: the first ``n_frames`` evaluation
@@ -378,9 +269,9 @@ def decode_window(paths, frames, start: int, stop: int):
 
 
 def stream_checks(names, dets: dict, knobs: dict, descriptors: dict, S: dict, GT) -> dict:
-    """{method: ``seqmatch.stream_check``} over the whole stream (the revisit included) for the
+    """{method: ``seqstream.stream_check``} over the whole stream (the revisit included) for the
     named sequence methods (thresholded detectors only)."""
-    return {n: seqmatch.stream_check(dets[n], descriptors[knobs[n]["descriptor"]], S[n], GT)
+    return {n: seqstream.stream_check(dets[n], descriptors[knobs[n]["descriptor"]], S[n], GT)
             for n in names if n in dets and dets[n].threshold is not None}
 
 
@@ -400,27 +291,19 @@ def targets(board: pd.DataFrame, names) -> dict:
     return out
 
 
-def detectors(knobs: dict, thr: dict, exclude: int, velocities, proj: dict, weights="auto") -> dict:
-    """{method: :func:`detector`} of every knob record at its threshold."""
-    return {k: detector(kn, thr.get(k), exclude, velocities, proj, weights) for k, kn in knobs.items()}
 
 
-def describers(knobs: dict, weights="auto", input_size=None, vocabulary=None) -> dict:
-    """{descriptor: :func:`frame_describer`} of every descriptor the knob records use."""
-    return {kn["descriptor"]: frame_describer(kn["descriptor"], weights, input_size, vocabulary) for kn in knobs.values()}
-
-
-def meta(knobs: dict, dets: dict, infos: dict) -> dict:
+def meta(knobs: dict, dets: dict, infos: dict, texts: dict) -> dict:
     """{method: dict(weights, knobs, bytes_per_stored_frame)} for :func:`method_rows`. infos:
-    {descriptor: ExtractInfo} (SeqSLAM and the raw pixels: weights "none"). Read the bytes after
-    the detectors have stored a frame (after timing)."""
+    {descriptor: ExtractInfo} (SeqSLAM and the raw pixels: weights "none"); texts: {method: knob
+    text}. Read the bytes after the detectors have stored a frame (after timing)."""
     return {k: {"weights": weights_kind(infos[kn["descriptor"]].weights) if kn["descriptor"] in infos else "none",
-                "knobs": knob_text(kn), "bytes_per_stored_frame": dets[k].bytes_per_frame} for k, kn in knobs.items()}
+                "knobs": texts[k], "bytes_per_stored_frame": dets[k].bytes_per_frame} for k, kn in knobs.items()}
 
 
-def knob_table(knobs: dict, score: dict) -> pd.DataFrame:
-    """One row per method: its knobs and the tuning AUC-PR it was picked by (None: not tuned)."""
-    return pd.DataFrame([{"method": k, "knobs": knob_text(v), "AUC-PR_tune_%": score.get(k)} for k, v in knobs.items()])
+def knob_table(knobs: dict, score: dict, texts: dict) -> pd.DataFrame:
+    """One row per method: its knob text and the tuning AUC-PR it was picked by (None: not tuned)."""
+    return pd.DataFrame([{"method": k, "knobs": texts[k], "AUC-PR_tune_%": score.get(k)} for k in knobs])
 
 
 def dictionary_row(name: str, tau: int, n_train: int, closures: dict, op: dict, speed: dict, frame_step: int,

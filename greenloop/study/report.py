@@ -81,12 +81,15 @@ def write_table(df, path, title: str | None = None, note: str | None = None, dec
 def paper_vs_run(rows):
     """A table with the paper's value only as a reference column beside the measured one.
 
-    rows: iterable of (quantity, paper value or None, measured value[, note]).
+    rows: iterable of (quantity, paper value or None, measured value[, note[, decimals]]): a
+    numeric measured value is shown rounded to ``decimals`` (``round``) where that is given.
     Returns a DataFrame with columns: quantity | paper | this run | note.
     """
     out = []
     for r in rows:
-        q, paper, run, note = (list(r) + [""])[:4]
+        q, paper, run, note, decimals = (list(r) + ["", None][len(r) - 3:])[:5]
+        if decimals is not None and isinstance(run, (int, float, np.number)) and not isinstance(run, bool):
+            run = round(run, decimals)
         out.append({"quantity": q, PAPER: "" if paper is None else paper, RUN: run, "note": note})
     return pd.DataFrame(out, columns=["quantity", PAPER, RUN, "note"])
 

@@ -1,0 +1,61 @@
+"""The main paper's detector as a registered one: CNN spots + frequency dictionary at tau = L + Δ.
+
+It declares closures and gives no per-query score (``Entry.score`` is None): :func:`decide`
+runs ``dictionary.operating_points`` (the one chain, notebook 07's too): the spot CNN trained on the
+original frames before the evaluation part only (every frame without a split), every frame's spot
+predicted, the declared pairs scored on the evaluation queries. Its stream is
+``speed.stream.Detector`` (the CLI's ``detect --method dictionary``), timed by
+``speed.timing.dictionary_method``.
+
+params read: frames_per_spot, seeds, epochs, batch_size, margin, exclude (ORIGINAL frames) and
+timing_window ((start, stop) described indices: training stops at the window's first frame).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from greenloop import dictionary as counts
+from greenloop.datasets import sequence
+from greenloop.detectors.interface import Data, Entry, no_descriptors
+from greenloop.speed import stream, timing
+
+NAME = "dictionary"
+
+
+def label(margin: int, tau: int) -> str:
+    """The dictionary's leaderboard row name."""
+    return f"main paper: CNN + dictionary, tau = L + {margin} = {tau}"
+
+
+def decide(data: Data) -> dict:
+    """Train, predict, declare and score (the chain of notebook 13; module doc).
+
+    Returns dict(name, tau, n_train (original frames trained on), closures (``query_closures`` on
+    the evaluation queries), op (``operating_point``), method (``speed.timing.Method``), preload
+    (spot labels of the frames before the timed window), text (one line for the notebook))."""
+    p, frames = data.params, np.asarray(data.frames)
+    start = int(p["timing_window"][0])
+    Xg = sequence.load_frames(data.dataset)
+    n_train = int(frames[start]) if data.tune is not None else len(Xg)
+    tau = int(p["frames_per_spot"] + p["margin"])
+    spot, (point,) = counts.operating_points(Xg, p["frames_per_spot"], [tau], frames, data.GT, p["exclude"],
+                                             data.exclude, n_train=n_train, queries=data.evalq,
+                                             seed=list(p["seeds"])[0], progress=False, epochs=p["epochs"],
+                                             batch_size=p["batch_size"])
+    run, pred = spot.run, spot.pred
+    name = label(p["margin"], tau)
+    text = (f"CNN trained on original frames 0..{n_train - 1} "
+            f"({'before the evaluation part' if data.tune is not None else 'every frame: no split'}), "
+            f"seed {run['seed']}, held-out accuracy {run['test_accuracy']:.3f}; tau = {tau}")
+    return {"name": name, "tau": tau, "n_train": n_train,
+            "closures": point["closures"], "op": point["op"],
+            "method": timing.dictionary_method(name, stream.Detector(run["model"], tau)),
+            "preload": pred[:int(frames[start])], "text": text}
+
+
+def tune(data: Data) -> tuple[list, dict, dict]:
+    """No knob: tau = L + margin is fixed in advance."""
+    return [], {}, {}
+
+
+ENTRY = Entry(NAME, no_descriptors, tune, None, None, None, lambda k: "tau = L + margin", decide=decide)

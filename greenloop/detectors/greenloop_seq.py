@@ -1,0 +1,134 @@
+"""greenloop-seq as a registered detector: the tuned greenloop-seq and greenloop-seq-fast rows and
+the named default (``seqmatch.DEFAULT_NAME``, the CLI's configuration, never tuned).
+
+Also the seqmatch-based pieces the single-frame matchers share (a single-frame matcher is
+greenloop-seq's search at seq_len 1): :func:`score`, :func:`stream`, :func:`frame_describer`,
+:func:`knob_text`. Knob records: descriptor, whitening (label, "none"), seq_len, contrast_window
+and optionally velocities, center_window, calibrate, repeat_cos, fixed_threshold.
+
+params read (``Data.params``): seq_descriptors, fast_descriptors, seq_lens, contrast_windows,
+velocities, weights, input_size.
+"""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from greenloop import features, seqmatch
+from greenloop.detectors.interface import Data, Entry
+from greenloop.speed import seqstream
+
+NAME, FAST = "greenloop-seq", "greenloop-seq-fast"
+
+
+def named_default() -> dict:
+    """greenloop-seq's named default (``seqmatch.DEFAULT_NAME``) as a knob record: the CLI's
+    configuration, never tuned here, scored at the fixed ``seqmatch.DEFAULT_THRESHOLD``."""
+    k = dict(seqmatch.DEFAULT_KNOBS)
+    return dict(k, whitening="none", velocities=list(k["velocities"]), fixed_threshold=seqmatch.DEFAULT_THRESHOLD)
+
+
+def _extra(k: dict, velocities) -> dict:
+    """The seqmatch keyword arguments of a knob record beyond descriptor/seq_len/contrast window."""
+    return dict(velocities=tuple(k.get("velocities", velocities)), center_window=k.get("center_window", 0),
+                calibrate=k.get("calibrate", False), repeat_cos=k.get("repeat_cos"))
+
+
+def projection(k: dict, data: Data):
+    """The ``similarity.Projection`` of a knob record's whitening label (``data.cache["projections"]``:
+    {descriptor: {label: Projection | None}}), None for "none"."""
+    if k.get("whitening", "none") == "none":
+        return None
+    proj = data.cache.get("projections", {}).get(k["descriptor"], {})
+    if k["whitening"] not in proj:
+        raise ValueError(f"no whitening {k['whitening']!r} fitted for descriptor {k['descriptor']!r} in this run: a "
+                         f"projection is fitted on the tuning frames of a leaderboard run (detectors.single_frame."
+                         f"projections) and is not saved in summary.json; stream a row whose whitening is 'none'")
+    return proj[k["whitening"]]
+
+
+def score(k: dict, data: Data) -> np.ndarray:
+    """(M, M) float32 ``seqstream.score_matrix`` of a knob record on ``data.descriptors``."""
+    e = _extra(k, data.params["velocities"])
+    return seqstream.score_matrix(data.descriptors[k["descriptor"]], data.exclude, k["seq_len"], e.pop("velocities"),
+                                 k["contrast_window"], projection(k, data), **e)
+
+
+def stream(k: dict, threshold, data: Data) -> seqstream.Detector:
+    """The streaming ``seqstream.Detector`` of a knob record (threshold None or NaN: scores only)."""
+    t = None if threshold is None or not np.isfinite(threshold) else float(threshold)
+    desc = k["descriptor"] if k["descriptor"] in seqmatch.DESCRIPTORS else "pixels"
+    return seqstream.Detector(t, descriptor=desc, seq_len=k["seq_len"], exclude=data.exclude,
+                             contrast_window=k["contrast_window"], projection=projection(k, data),
+                             weights=data.params.get("weights", "auto"), **_extra(k, data.params["velocities"]))
+
+
+def frame_describer(descriptor: str, weights="auto", input_size=None, vocabulary=None):
+    """One decoded BGR frame (H, W, 3) uint8 -> the raw descriptor (D,) a method stores: the
+    timed describe step. descriptor: a seqmatch descriptor or a backbone entry. SIFT-BoVW
+    quantises against ``vocabulary`` (one frame's tf-idf)."""
+    if descriptor in seqmatch.DESCRIPTORS and descriptor != "mobilenetv2":
+        return lambda f: seqmatch.describe_frames([f], descriptor)[0]
+    kw = {"vocabulary": vocabulary} if descriptor == "sift_bovw" else {}
+    return lambda f: features.extract_spec(cv2.cvtColor(f, cv2.COLOR_BGR2RGB)[None], descriptor, weights,
+                                           input_size, progress=False, **kw)[0]
+
+
+def describer(k: dict, data: Data):
+    """:func:`frame_describer` of a knob record's descriptor (SIFT-BoVW: the run's vocabulary)."""
+    info = data.infos.get("sift_bovw")
+    vocab = info.extra.get("vocabulary") if k["descriptor"] == "sift_bovw" and info is not None else None
+    return frame_describer(k["descriptor"], data.params.get("weights", "auto"), data.params.get("input_size"), vocab)
+
+
+def knob_text(k: dict) -> str:
+    """One line of a seqmatch knob record for the table."""
+    seq = "" if k["seq_len"] == 1 else f", seq_len {k['seq_len']}"
+    text = f"{k['descriptor']}, whitening {k['whitening']}, contrast window {k['contrast_window']}{seq}"
+    if "fixed_threshold" in k:
+        text += (f", centring {k['center_window']}, velocities {k['velocities']}, repeat gate {k['repeat_cos']}, "
+                 f"calibrated, fixed threshold {k['fixed_threshold']} (the CLI default, untuned)")
+    return text
+
+
+def describe(data: Data) -> tuple[dict, dict]:
+    """The sequence descriptors ``data.descriptors`` lacks (``seqmatch.describe``); those already
+    there are reused (the same frames, the same values)."""
+    X, info = {}, {}
+    for d in data.params["seq_descriptors"]:
+        if d not in data.descriptors:
+            X[d], info[d] = seqmatch.describe(data.dataset, d, step=data.frame_step,
+                                              weights=data.params.get("weights", "auto"), return_info=True)
+    return X, info
+
+
+def tune(data: Data) -> tuple[list, dict, dict]:
+    """greenloop-seq (every sequence descriptor) and greenloop-seq-fast (the CNN-free ones) on the
+    grid seq_lens x contrast_windows, picked by per-query AUC-PR on the tuning queries; nothing
+    without a tuning part."""
+    p = data.params
+    if data.tune is None:
+        return [], {}, {}
+    X = {d: data.descriptors[d] for d in p["seq_descriptors"]}
+    rows = seqstream.tune_knobs(X, data.GT, data.exclude, data.tune, p["seq_lens"], p["contrast_windows"], p["velocities"])
+    fast = [d for d in p["fast_descriptors"] if d in p["seq_descriptors"]]
+    knobs, best = seqmatch.pick_knobs(rows, {NAME: (list(p["seq_descriptors"]), list(p["seq_lens"])),
+                                             FAST: (fast, list(p["seq_lens"]))})
+    return rows, knobs, best
+
+
+def describe_default(data: Data) -> tuple[dict, dict]:
+    """The named default's descriptor (``seqmatch.DEFAULT_KNOBS``) where ``data`` lacks it."""
+    d = seqmatch.DEFAULT_KNOBS["descriptor"]
+    return ({} if d in data.descriptors else {d: seqmatch.describe(data.dataset, d, step=data.frame_step)}), {}
+
+
+def tune_default(data: Data) -> tuple[list, dict, dict]:
+    """The named default is never tuned: its record, no tuning rows."""
+    return [], {seqmatch.DEFAULT_NAME: named_default()}, {}
+
+
+ENTRY = Entry(NAME, describe, tune, score, stream, describer, knob_text, checked=True,
+              cli_knobs=dict(descriptor="pixels-patchnorm", whitening="none", seq_len=10, contrast_window=10))
+DEFAULT_ENTRY = Entry(seqmatch.DEFAULT_NAME, describe_default, tune_default, score, stream, describer, knob_text,
+                      checked=True, cli_knobs=named_default())

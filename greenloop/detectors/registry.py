@@ -1,0 +1,28 @@
+"""The one registry of detectors: {name: ``interface.Entry``}, in leaderboard order.
+
+Notebook 13's leaderboard (``greenloop.experiments.leaderboard``) describes, tunes, scores, streams
+and times every entry in this order; ``python -m greenloop detect --method NAME`` offers every
+name; tests/test_detectors.py checks each entry's stream against its score matrix. A new
+detector: its module in ``greenloop/detectors/`` and one line in ``ENTRIES``.
+"""
+from __future__ import annotations
+
+from greenloop.detectors import dictionary, greenloop_seq, seqslam, single_frame
+
+ENTRIES = (
+    single_frame.ENTRY,            # "single-frame": CNNs, SIFT-BoVW, pixels
+    greenloop_seq.ENTRY,           # "greenloop-seq": greenloop-seq, greenloop-seq-fast
+    seqslam.ENTRY,                 # "seqslam": SeqSLAM (tuned), SeqSLAM (published)
+    greenloop_seq.DEFAULT_ENTRY,   # "greenloop-seq-grad": the named default, untuned
+    dictionary.ENTRY,              # "dictionary": the main paper's CNN + dictionary
+)
+REGISTRY = {e.name: e for e in ENTRIES}
+
+
+def get(name: str, registry=None):
+    """The entry called ``name`` (of ``registry``, default :data:`REGISTRY`); ValueError naming
+    the registered ones otherwise."""
+    reg = REGISTRY if registry is None else registry
+    if name not in reg:
+        raise ValueError(f"no detector {name!r}: registered are {list(reg)} (greenloop/detectors/registry.py)")
+    return reg[name]

@@ -1,0 +1,108 @@
+"""Single-frame matchers: the cosine of one frame's L2-normalised descriptor to every stored frame.
+
+Each is greenloop-seq's search at seq_len 1 (a ``seqstream.Detector``; ``greenloop_seq``'s score,
+stream and knob text). Knobs (one tuning budget): the local contrast normalisation window
+(``contrast_windows``) and, for the CNNs, PCA whitening fitted on the tuning frames (L2 -> whiten
+-> L2) at each of ``whiten_dims`` or none. Without a tuning part: no contrast normalisation, no
+whitening. Rows are named "<descriptor> (single frame)".
+
+Notebook 08's median filter is not a knob here: its window is centred on the query (square: the
+block of queries j - s//2 .. j + s//2; diagonal: S[i + t, j + t], |t| <= s//2), so it reads future
+frames; its causal (look-back) form along the diagonal is a trajectory mean, i.e. greenloop-seq
+with seq_len = the window, which is the sequence row, not a single-frame one.
+
+:data:`ENTRY` ("single-frame") describes the study's descriptors (params: cnn_backbones,
+random_control, weights, input_size, vocab_size, whiten_dims, contrast_windows, velocities);
+:func:`entry` makes one on a new descriptor from a frame -> vector function (docs/ARCHITECTURE.md).
+"""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from greenloop import features, seqmatch
+from greenloop.datasets.sequence import list_frames
+from greenloop.detectors import greenloop_seq
+from greenloop.detectors.interface import Data, Entry
+from greenloop.speed import seqstream
+
+
+def row_name(descriptor: str) -> str:
+    """The leaderboard row of a descriptor's single-frame matcher."""
+    return f"{descriptor} (single frame)"
+
+
+def specs(params: dict) -> list:
+    """The study's single-frame descriptors: the CNNs, the random-init control, SIFT-BoVW, pixels."""
+    return list(params["cnn_backbones"]) + [params["random_control"], "sift_bovw", "pixels"]
+
+
+def projections(feats: dict, names, fit, dims) -> dict:
+    """Whitening candidates of each CNN descriptor: {name: {"none": None, "pca k": Projection}}.
+    feats: {name: (N, D)}; names: the entries that get whitening; fit: (N,) bool frames to fit
+    on (the tuning part; None: every frame, no labels used); dims: requested dimensions (clipped
+    to the rank, the label says the kept one)."""
+    out = {}
+    for s in names:
+        X = feats[s] if fit is None else feats[s][np.asarray(fit, dtype=bool)]
+        cands = {"none": None}
+        for k in dims:
+            p = seqmatch.fit_projection(X, int(k))
+            cands.setdefault(f"pca {p.output_dim}", p)
+        out[s] = cands
+    return out
+
+
+def untuned(names) -> dict:
+    """Knob records without a tuning part: no contrast normalisation, no whitening."""
+    return {row_name(s): {"descriptor": s, "whitening": "none", "seq_len": 1, "contrast_window": 0} for s in names}
+
+
+def tune_names(data: Data, names, whitened=()) -> tuple[list, dict, dict]:
+    """Tune the single-frame matchers of the given descriptors (``whitened``: those offered PCA
+    whitening, fitted on the tuning frames and kept in ``data.cache["projections"]``)."""
+    if data.tune is None:
+        return [], untuned(names), {}
+    p = data.params
+    proj = data.cache.setdefault("projections", {})
+    proj.update(projections(data.descriptors, list(whitened), data.tune, p.get("whiten_dims", ())))
+    rows = seqstream.tune_knobs({s: data.descriptors[s] for s in names}, data.GT, data.exclude, data.tune, [1],
+                               p["contrast_windows"], p["velocities"], {s: proj[s] for s in whitened})
+    knobs, best = seqmatch.pick_knobs(rows, {row_name(s): ([s], [1]) for s in names})
+    return rows, knobs, best
+
+
+def describe(data: Data) -> tuple[dict, dict]:
+    """The study's single-frame descriptors (``features.extract_all``, the descriptor cache)."""
+    p = data.params
+    return features.extract_all(data.dataset, specs(p), p.get("weights", "auto"), p.get("input_size"),
+                                step=data.frame_step, vocab_size=p.get("vocab_size", features.DEFAULT_VOCAB_SIZE))
+
+
+def tune(data: Data) -> tuple[list, dict, dict]:
+    """Every study descriptor's matcher; the CNNs (and the random control) offered whitening."""
+    p = data.params
+    return tune_names(data, specs(p), list(p["cnn_backbones"]) + [p["random_control"]])
+
+
+ENTRY = Entry("single-frame", describe, tune, greenloop_seq.score, greenloop_seq.stream, greenloop_seq.describer,
+              greenloop_seq.knob_text, cli_knobs=untuned(["pixels"])[row_name("pixels")])
+
+
+def entry(name: str, describe_frame) -> Entry:
+    """A single-frame matcher on a new descriptor, as a registry entry.
+
+    name: the descriptor's (and the registry's) name; its row is "<name> (single frame)".
+    describe_frame: one decoded BGR frame (H, W, 3) uint8 -> (D,) float descriptor; the same
+    function describes the dataset's frames (``cv2.imread``) and the stream's, so the score matrix
+    and the stream see the same values. Knobs: the contrast window, as every single-frame matcher.
+    """
+    def describe_new(data: Data) -> tuple[dict, dict]:
+        paths = list_frames(data.dataset)
+        X = np.stack([np.asarray(describe_frame(cv2.imread(str(paths[int(i)]), cv2.IMREAD_COLOR)), np.float32)
+                      for i in data.frames])
+        return {name: X}, {}
+
+    return Entry(name, describe_new, lambda data: tune_names(data, [name]), greenloop_seq.score,
+                 greenloop_seq.stream, lambda k, data: describe_frame, greenloop_seq.knob_text,
+                 cli_knobs=untuned([name])[row_name(name)])

@@ -1,0 +1,160 @@
+"""Notebook 07's study: every whole-image descriptor on one sequence (Qi 2024 Table 2).
+
+Each backbone's descriptors (``features.extract_all``) become a cosine similarity matrix, timed
+as the best of three (:func:`similarity_matrices`, ``speed.timing.best_of``); :func:`table2`
+scores them (AP, R@100P, R@1, R_a / R_t against SIFT-BoVW), :func:`ground_truth_sensitivity`
+recomputes every AP under other ground-truth definitions, :func:`operating_points_table` lists
+the main paper's dictionary detector (``dictionary.operating_points``) at each τ, and
+:func:`paper_rows` sets this run beside Table 2. Tables come back unrounded (%, seconds);
+:data:`DECIMALS` is how the notebook shows them.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from greenloop import evaluate, groundtruth, similarity
+from greenloop.speed import timing
+from greenloop.study import report
+
+__all__ = ["DECIMALS", "REFERENCE", "similarity_matrices", "table2", "ground_truth_sensitivity",
+           "operating_points_table", "paper_rows", "figure_sensitivity", "figure_pr_curves",
+           "figure_similarity_matrices"]
+
+# decimals the notebook shows and writes each column with (pandas DataFrame.round); the ground-truth
+# sensitivity table (one column per descriptor label) shows 2, the operating points 4
+DECIMALS = {"AP_%": 2, "R@100P_%": 2, "R@1_%": 2, "extract_s_per_image": 4, "match_s_MxM": 4, "R_a_%": 1, "R_t_%": 1}
+REFERENCE = "sift_bovw"         # Table 2 takes its rates R_a, R_t relative to SIFT-BoVW
+
+
+def similarity_matrices(feats: dict, repeats: int = 3) -> tuple[dict, dict]:
+    """(S, seconds): {backbone: (M, M) ``similarity.cosine_matrix`` of its (M, D) descriptors}
+    and {backbone: wall time of that whole matrix, best of ``repeats``, in s}."""
+    S, secs = {}, {}
+    for b, X in feats.items():
+        S[b], secs[b] = timing.best_of(similarity.cosine_matrix, X, repeats=repeats)
+    return S, secs
+
+
+def table2(S: dict, infos: dict, match_s: dict, GT, exclude: int) -> pd.DataFrame:
+    """Table 2: one row per backbone of S (backbone, weights, label, dim, input, AP_%, R@100P_%,
+    R@1_% in %, extract_s_per_image and match_s_MxM in s, R_a_% and R_t_% against
+    :data:`REFERENCE`, NaN without it), unrounded. infos: {backbone: extraction info};
+    match_s: :func:`similarity_matrices`' seconds; GT: (M, M) bool; exclude: band in steps."""
+    table = pd.DataFrame([{"backbone": b, "weights": infos[b].weights, "label": infos[b].label, "dim": infos[b].dim,
+                           "input": "native" if infos[b].input_size is None else "x".join(map(str, infos[b].input_size)),
+                           **evaluate.loop_scores(S[b], GT, exclude),
+                           "R@1_%": 100 * evaluate.recall_at_k(S[b], GT, 1, exclude),
+                           "extract_s_per_image": infos[b].seconds_per_image, "match_s_MxM": match_s[b]} for b in S])
+    table["R_a_%"] = table["R_t_%"] = np.nan
+    if REFERENCE in S:
+        ref = table.set_index("backbone").loc[REFERENCE]
+        table["R_a_%"], table["R_t_%"] = evaluate.relative_rates(
+            table["AP_%"], table["extract_s_per_image"], ref["AP_%"], ref["extract_s_per_image"])
+    return table
+
+
+def ground_truth_sensitivity(dataset, frames, S: dict, infos: dict, exclude: int, exclude_steps: int,
+                             thresholds=(0.3, 0.4, 0.5, 0.6, 0.7, 0.8), max_distance: float = 1.0,
+                             max_angle: float = 30.0) -> pd.DataFrame:
+    """Every AP (in %) under each ground truth of ``groundtruth.variants`` (Eq. 5 thresholds and
+    the metric one; exclude in original frames, exclude_steps the band of ``frames``): one row per
+    definition with ground_truth, loop_pairs, revisit_frames and one column per descriptor label
+    (NaN where that ground truth has no loop). Empty where the folder's ground truth is loop pairs."""
+    GTV = groundtruth.variants(dataset, frames, thresholds, exclude, max_distance, max_angle)
+    return pd.DataFrame([{"ground_truth": name, "loop_pairs": len(groundtruth.loop_pairs(G)),
+                          "revisit_frames": int(groundtruth.revisit_frames(G).sum()),
+                          **{infos[b].label: 100 * evaluate.average_precision(S[b], G, exclude_steps) if G.any() else np.nan
+                             for b in S}} for name, G in GTV.items()])
+
+
+def operating_points_table(points: list, infos: dict) -> pd.DataFrame:
+    """The dictionary's operating points (``dictionary.operating_points``' points): one row per
+    tau with detector, tau, flagged_frames and ``evaluate.operating_point``'s columns, unrounded."""
+    name = f"dictionary, spot_cnn ({infos['spot_cnn'].weights if 'spot_cnn' in infos else 'model'})"
+    return pd.DataFrame([{"detector": name, "tau": p["tau"], "flagged_frames": p["flagged_frames"], **p["op"]}
+                         for p in points])
+
+
+def paper_rows(table: pd.DataFrame, ops: pd.DataFrame, paper: dict, frames_per_spot: int) -> pd.DataFrame:
+    """Paper vs run (``report.paper_vs_run``): per backbone of paper = {backbone: (AP %, s, R_a %,
+    R_t %)} (Table 2, TUM) this run's AP, extraction time, R_a and R_t, the best pretrained CNN, and
+    the dictionary at the τ nearest L + 10. table, ops: :func:`table2` and
+    :func:`operating_points_table` as shown (their cells are copied)."""
+    note = "Qi 2024 Table 2 is on TUM RGB frames with ImageNet weights: a different dataset"
+    t, rows = table.set_index("backbone"), []
+    for b, (a, s, ra, rt) in paper.items():
+        if b not in t.index:
+            continue
+        lab = t.loc[b, "label"]
+        rows += [(f"AP / average accuracy rate, {b} (%)", a, t.loc[b, "AP_%"], f"{lab}; {note}"),
+                 (f"extraction time per image, {b} (s)", s, t.loc[b, "extract_s_per_image"], f"{lab}; input {t.loc[b, 'input']}, {report.cpu_model()}"),
+                 (f"R_a vs SIFT-BoVW, {b} (%)", ra, t.loc[b, "R_a_%"] if REFERENCE in t.index else "no sift_bovw row", lab),
+                 (f"R_t vs SIFT-BoVW, {b} (%)", rt, t.loc[b, "R_t_%"] if REFERENCE in t.index else "no sift_bovw row", lab)]
+    pre = table[table.weights.str.startswith("imagenet")].sort_values("AP_%", ascending=False)
+    rows.append(("best pretrained CNN descriptor by AP", "GhostNet (TUM)",
+                 f"{pre.iloc[0].label}: {pre.iloc[0]['AP_%']} %" if len(pre) else "no pretrained CNN in this run",
+                 "among the networks with ImageNet weights here (no GhostNet weights on these machines)"))
+    tp = ops.iloc[(ops.tau - (frames_per_spot + 10)).abs().argmin()]
+    rows.append((f"dictionary detector at τ = {int(tp.tau)}: precision / recall", None,
+                 f"{tp.precision:.3f} / {tp.recall:.3f}", "beyond the papers: the main paper never scores it against ground truth"))
+    return report.paper_vs_run(rows)
+
+
+# -------------------------------------------------------------------------------- figures
+def figure_sensitivity(sensitivity: pd.DataFrame, labels):
+    """AP of every descriptor label against the Eq. 5 threshold, the metric ground truth as ★ at
+    the right. sensitivity: :func:`ground_truth_sensitivity`'s table. Returns the figure."""
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(9, 4.8))
+    eq5 = sensitivity[sensitivity.ground_truth.str.startswith("Eq. 5")]
+    thr = [float(t.split("<")[1]) for t in eq5.ground_truth]
+    metric = sensitivity[~sensitivity.ground_truth.str.startswith("Eq. 5")]
+    for lab in labels:
+        line, = ax.plot(thr, eq5[lab], marker="o", ms=3, lw=1, label=lab)
+        ax.scatter([max(thr) + 0.12] * len(metric), metric[lab], marker="*", s=60, color=line.get_color())
+    ax.set_xticks(thr + [max(thr) + 0.12], [f"{t:g}" for t in thr] + ["metric"])
+    ax.set_xlabel("ground truth: Eq. 5 threshold (mixed units), and the metric variant (★)"); ax.set_ylabel("AP (%)")
+    ax.grid(alpha=0.3); ax.legend(fontsize=6, loc="center left", bbox_to_anchor=(1.01, 0.5))
+    ax.set_title("AP of every descriptor under each ground-truth definition", fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def figure_pr_curves(S: dict, table: pd.DataFrame, ops: pd.DataFrame, GT, exclude: int, title: str):
+    """Every descriptor's PR curve (legend: its AP from ``table``) and the dictionary's operating
+    points (``ops``, ★ per τ with a precision). Returns the figure."""
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(8, 6))
+    cmap = plt.get_cmap("tab10")
+    for k, b in enumerate(S):
+        p, r, _ = evaluate.pr_curve(S[b], GT, exclude)
+        ax.plot(r, p, color=cmap(k % 10), lw=1.4, label=f"{table.loc[k, 'label']}: AP {table.loc[k, 'AP_%']:.1f} %")
+    ok = ops.dropna(subset=["precision"])
+    ax.plot(ok.recall, ok.precision, "k*", ms=11, label=f"main paper's dictionary detector, τ ∈ {list(ok.tau)}")
+    for _, o in ok.iterrows():
+        ax.annotate(f"τ={o.tau}", (o.recall, o.precision), textcoords="offset points", xytext=(5, 4), fontsize=8)
+    ax.set_xlabel("recall"); ax.set_ylabel("precision"); ax.set_xlim(0, 1); ax.set_ylim(0, 1.02)
+    ax.set_title(title); ax.legend(fontsize=7, loc="upper right")
+    return fig
+
+
+def figure_similarity_matrices(S: dict, infos: dict, GT, gt_name: str):
+    """The ground truth beside every descriptor's cosine similarity matrix, four panels a row.
+    Returns the figure."""
+    import matplotlib.pyplot as plt
+    n = len(S) + 1
+    cols = min(4, n)
+    rows = -(-n // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols, 3.2 * rows), squeeze=False)
+    axes = axes.ravel()
+    axes[0].imshow(GT, cmap="gray_r", interpolation="nearest"); axes[0].set_title(f"ground truth ({gt_name})", fontsize=9)
+    for ax, b in zip(axes[1:], S):
+        ax.imshow(S[b], cmap="viridis", interpolation="nearest"); ax.set_title(infos[b].label, fontsize=8)
+    for ax in axes:
+        ax.set_xticks([]); ax.set_yticks([])
+    for ax in axes[n:]:
+        ax.axis("off")
+    fig.suptitle("cosine similarity matrices beside the ground truth (row = earlier frame, column = query)", fontsize=10)
+    fig.tight_layout()
+    return fig

@@ -1,0 +1,134 @@
+"""Notebook 09's study: RGB against RGB-D descriptors (Qi 2024 Sec. 3.1.2, Tables 3 and 4).
+
+Each CNN backbone describes every described frame's RGB image and its depth image (replicated to
+three channels) and the two vectors are concatenated (``features.extract_rgbd``); the RGB half,
+the depth half and the whole are scored with cosine similarity (``similarity.rgbd_matrices``,
+``evaluate.loop_scores``). :func:`rgbd_table` gives the table (unrounded; :data:`DECIMALS` is how
+the notebook shows it), :func:`paper_rows` the paper-vs-run rows, the ``figure_*`` functions the
+figures.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from greenloop import evaluate, features, similarity
+from greenloop.study import report
+
+__all__ = ["DECIMALS", "REFERENCE", "split_backbones", "rgbd_table", "skipped_table", "paper_rows",
+           "figure_pr_rgb_vs_rgbd", "figure_similarity", "figure_skipped"]
+
+# decimals the notebook shows and writes each column with (pandas DataFrame.round)
+DECIMALS = {"AP_RGB_%": 2, "R@100P_RGB_%": 2, "AP_depth_%": 2, "R@100P_depth_%": 2, "AP_RGB-D_%": 2,
+            "R@100P_RGB-D_%": 2, "extract_s_per_image_rgbd": 4, "R_a_%": 1, "R_t_%": 1}
+REFERENCE = "ghostnet"          # Tables 3/4 take their rates R_a, R_t relative to GhostNet (RGB-D)
+
+
+def split_backbones(backbones) -> tuple[list, list]:
+    """(cnn, skipped): the backbone specs ("name" or "name:random") that name a CNN of
+    ``features.CNN_BACKBONES``, and the others (Tables 3/4 compare CNNs only)."""
+    cnn = [b for b in backbones if features.split_spec(b)[0] in features.CNN_BACKBONES]
+    return cnn, [b for b in backbones if b not in cnn]
+
+
+def rgbd_table(dataset, backbones, GT, exclude: int, weights="auto", input_size=128, frame_step: int = 1,
+               max_depth: float = features.DEPTH_MAX_M):
+    """Tables 3/4: every CNN backbone's RGB, depth and RGB-D descriptor scored on one sequence.
+
+    dataset: a sequence folder with depth/. backbones: CNN specs (:func:`split_backbones`).
+    GT: (M, M) bool ground truth of the described frames; exclude: band in steps of frame_step.
+    weights, input_size (square side; ignored by fixed-input networks), frame_step, max_depth
+    (metres mapped to 255): as ``features.extract_rgbd``.
+    Returns (table, S, infos): table one row per backbone (backbone, weights, label, dim_rgbd,
+    input, AP_/R@100P_ of RGB, depth, RGB-D in %, extract_s_per_image_rgbd in s per RGB-D frame,
+    R_a_% and R_t_% against :data:`REFERENCE`'s RGB-D row, NaN without it), unrounded;
+    S {backbone: ``similarity.rgbd_matrices``}; infos {backbone: extraction info}.
+    """
+    rows, S, infos = [], {}, {}
+    for b in backbones:
+        name, w = features.split_spec(b, weights)
+        with features.random_init_reported(name, w):
+            X, inf = features.extract_rgbd(dataset, name, w, progress=False, step=frame_step,
+                                           input_size=None if features.BACKBONES[name].fixed_input else input_size,
+                                           max_depth=max_depth, return_info=True)
+        infos[b], S[b] = inf, similarity.rgbd_matrices(X)
+        row = {"backbone": b, "weights": inf.weights, "label": inf.label, "dim_rgbd": X.shape[1],
+               "input": "x".join(map(str, inf.input_size))}
+        for k, Sk in S[b].items():
+            row.update(evaluate.loop_scores(Sk, GT, exclude, tag=f"_{k}"))
+        rows.append({**row, "extract_s_per_image_rgbd": inf.seconds_per_image})
+    features.clear_cache()
+    table = pd.DataFrame(rows)
+    table["R_a_%"] = table["R_t_%"] = np.nan
+    if REFERENCE in S:
+        ref = table.set_index("backbone").loc[REFERENCE]
+        table["R_a_%"], table["R_t_%"] = evaluate.relative_rates(
+            table["AP_RGB-D_%"], table["extract_s_per_image_rgbd"], ref["AP_RGB-D_%"], ref["extract_s_per_image_rgbd"])
+    return table, S, infos
+
+
+def skipped_table(backbones, weights="auto") -> pd.DataFrame:
+    """The table of a sequence without depth/: per CNN backbone its weights, label and the status
+    "skipped: the dataset has no depth/ folder"."""
+    used = {b: features.weights_used(*features.split_spec(b, weights)) for b in backbones}
+    return pd.DataFrame([{"backbone": b, "weights": used[b], "label": f"{b} ({used[b]})",
+                          "status": "skipped: the dataset has no depth/ folder"} for b in backbones])
+
+
+def paper_rows(table: pd.DataFrame, paper: dict, kind: str, dataset, has_depth: bool) -> pd.DataFrame:
+    """Paper vs run (``report.paper_vs_run``). paper: {backbone: dict(t3=(AP %, s), t4=(AP %, s))},
+    Tables 3 (TUM) and 4 (GreenHouse). table: :func:`rgbd_table`'s table as shown (its cells are
+    copied). kind: the dataset's kind (``sequence.describe``). Without depth one "skipped" row."""
+    if not has_depth:
+        return report.paper_vs_run([("RGB-D experiment", "Tables 3 and 4", "skipped", f"{dataset} has no depth/ folder")])
+    t, rows = table.set_index("backbone"), []
+    for b, p in paper.items():
+        if b not in t.index:
+            continue
+        lab = t.loc[b, "label"]
+        rows += [(f"RGB-D AP, {b}: Table 4 GreenHouse (%)", p["t4"][0], t.loc[b, "AP_RGB-D_%"], f"{lab}; real GreenHouse vs {kind} data"),
+                 (f"RGB-D AP, {b}: Table 3 TUM (%)", p["t3"][0], t.loc[b, "AP_RGB-D_%"], f"{lab}; TUM: a different dataset"),
+                 (f"RGB-D extraction time per frame, {b} (s)", p["t4"][1], t.loc[b, "extract_s_per_image_rgbd"],
+                  f"{lab}; input {t.loc[b, 'input']}, {report.cpu_model()}"),
+                 (f"depth adds to RGB, {b}: AP RGB -> RGB-D (%)", "GhostNet TUM: 53.1 -> 59.4" if b == "ghostnet" else None,
+                  f"{t.loc[b, 'AP_RGB_%']:.2f} -> {t.loc[b, 'AP_RGB-D_%']:.2f}", lab)]
+    pre = table[table.weights.str.startswith("imagenet")].sort_values("AP_RGB-D_%", ascending=False)
+    rows.append(("best pretrained RGB-D descriptor", "GhostNet (Tables 3 and 4)",
+                 f"{pre.iloc[0].label}: {pre.iloc[0]['AP_RGB-D_%']} %" if len(pre) else "no pretrained network in this run",
+                 "only networks with ImageNet weights count; random-init rows rank nothing"))
+    return report.paper_vs_run(rows)
+
+
+def figure_pr_rgb_vs_rgbd(S: dict, table: pd.DataFrame, infos: dict, GT, exclude: int, title: str):
+    """PR curves of every backbone's RGB (dotted) and RGB-D (solid) descriptor. Returns the figure."""
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(8, 6))
+    cmap = plt.get_cmap("tab10")
+    for k, b in enumerate(S):
+        for kind, ls in (("RGB", ":"), ("RGB-D", "-")):
+            p, r, _ = evaluate.pr_curve(S[b][kind], GT, exclude)
+            ax.plot(r, p, ls, color=cmap(k), lw=1.4, label=f"{infos[b].label}, {kind}: AP {table.loc[k, f'AP_{kind}_%']:.1f} %")
+    ax.set_xlabel("recall"); ax.set_ylabel("precision"); ax.set_xlim(0, 1); ax.set_ylim(0, 1.02)
+    ax.legend(fontsize=7, loc="upper right"); ax.set_title(title)
+    return fig
+
+
+def figure_similarity(S: dict, infos: dict, GT):
+    """The ground truth beside every backbone's RGB-D cosine similarity matrix. Returns the figure."""
+    import matplotlib.pyplot as plt
+    fig, axes = plt.subplots(1, len(S) + 1, figsize=(3.2 * (len(S) + 1), 3.4))
+    axes[0].imshow(GT, cmap="gray_r", interpolation="nearest"); axes[0].set_title("ground truth", fontsize=9)
+    for ax, b in zip(axes[1:], S):
+        ax.imshow(S[b]["RGB-D"], interpolation="nearest"); ax.set_title(f"{infos[b].label}, RGB-D", fontsize=8)
+    for ax in axes:
+        ax.set_xticks([]); ax.set_yticks([])
+    fig.tight_layout()
+    return fig
+
+
+def figure_skipped(dataset):
+    """A figure that says the RGB-D experiment was skipped (the sequence has no depth/)."""
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(6, 1.5)); ax.axis("off")
+    ax.text(0.5, 0.5, f"RGB-D experiment skipped:\n{dataset} has no depth/ folder", ha="center", va="center")
+    return fig

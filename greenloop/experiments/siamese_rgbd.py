@@ -1,0 +1,439 @@
+"""Notebook 10's study: Xu 2022's Siamese CNN, three supervisions on RGB, three RGB-D fusions.
+
+One function per table of ``notebooks/10_siamese_rgbd.ipynb``; each returns unrounded values
+(AP and R@100P in %, seconds per image), and the notebook rounds them by ``DECIMALS`` where it
+writes the tables. The model, its losses, pairs and training stay in :mod:`greenloop.siamese`.
+
+Every table is scored on the same held-out part of the sequence (:func:`setup`): scikit-learn's
+step-wise AP over pairs more than ``exclude`` steps apart whose later frame is held out, with
+similarity = 1 - L2 distance / its maximum (a monotone map of Xu 2022's Eq. 5).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+import pandas as pd
+
+from greenloop import evaluate, features, groundtruth, siamese, similarity
+from greenloop.datasets import sequence
+from greenloop.study import report
+
+# decimals of the written tables' columns (rounded only where the notebook writes them)
+DECIMALS = {"AP_%": 2, "R@100P_%": 2, "extract_ms_per_image": 3, "train_s": 1, "train_cpu_s": 1,
+            "s_per_image_batched": 5, "s_per_image_one_at_a_time": 5}
+UNRESOLVED = "not resolved with one seed"
+# the paper's numbers, a reference column only: Table 2 (NYU, AP of mid-level fusion per layer)
+# and Table 3 (seconds per image: SCNN CPU and GPU, CNN CPU and GPU, GIST, BoVW)
+PAPER_T2 = dict(zip(siamese.LAYERS, [0.7444, 0.7644, 0.8111, 0.7778, 0.7222, 0.7444, 0.6667, 0.6333]))
+PAPER_T3 = {"scnn": (0.208, 0.029), "cnn": (0.142, 0.021), "gist": 0.524, "bovw": 1.517}
+
+
+class Setup(NamedTuple):
+    """What every table of notebook 10 is computed on (frame counts in steps of frame_step).
+
+    info: ``sequence.describe``; frames (M,) original frame numbers; ex: the exclusion band in
+    steps; GT (M, M) bool; gap, L: held-out gap and spot length in steps; train, held (M,) bool
+    (``siamese.training_split``); split_note: its Markdown note or None; labels (M,) int place
+    labels (-1 outside train); X (M, S, S, 3 or 4) float32 inputs in [0, 1]; has_depth;
+    chance: the chance AP on the held-out part (a fraction); text: the lines the notebook prints.
+    """
+    info: dict
+    frames: np.ndarray
+    ex: int
+    GT: np.ndarray
+    gap: int
+    L: int
+    train: np.ndarray
+    held: np.ndarray
+    split_note: str | None
+    labels: np.ndarray
+    X: np.ndarray
+    has_depth: bool
+    chance: float
+    text: str
+
+
+class Runs(NamedTuple):
+    """One table's networks: table (DataFrame, one row per descriptor), sims {key: (M, M) S},
+    models {key: descriptor model}, hists {key: training history}, trained [(descriptor name,
+    training seconds, CPU seconds)] in training order."""
+    table: pd.DataFrame
+    sims: dict
+    models: dict
+    hists: dict
+    trained: list
+
+
+def setup(dataset, frame_step: int, frames_per_spot: int, loop_threshold: float, exclude: int,
+          train_fraction: float, heldout_gap: int, input_size: int, max_depth: float) -> Setup:
+    """Frames, ground truth, the training / held-out split, place labels and network inputs.
+
+    dataset: a sequence folder. frame_step: every frame_step-th frame is used. frames_per_spot,
+    exclude, heldout_gap: in ORIGINAL frames (converted to steps here, at least 1 for L and the
+    gap). loop_threshold: Qi 2024 Eq. 5. train_fraction: share of the revisit frames before the
+    cut. input_size: square network input (pixels). max_depth: metres mapped to 1.
+    """
+    info = sequence.describe(dataset)
+    frames, ex, GT, summary = groundtruth.described_frames(dataset, frame_step, loop_threshold, exclude)
+    gap = max(1, int(heldout_gap) // int(frame_step))
+    L = max(1, int(frames_per_spot) // int(frame_step))
+    train, held, note = siamese.training_split(len(frames), train_fraction, GT, gap, L, frames)
+    labels = siamese.place_labels(train, GT, L)
+    has_depth = bool(info["depth"])
+    X = siamese.load_inputs(dataset, (input_size, input_size), step=frame_step, depth=has_depth, max_depth=max_depth)
+    chance = evaluate.chance_level(GT, ex, queries=held)
+    rev = groundtruth.revisit_frames(GT)
+    text = "\n".join([
+        f"Dataset: {info['path']} ({info['kind']}), {info['n_frames']} frames of {info['width']}x{info['height']}, "
+        f"depth/: {'yes' if has_depth else 'no'}, trajectory: {'yes' if info['trajectory'] else 'no'}", summary,
+        f"training part: frames {frames[train][0]}..{frames[train][-1]} ({int(train.sum())} frames, {labels.max() + 1} "
+        f"places of {L} steps, {int((rev & train).sum())} revisit frames); held-out part: frames {frames[held][0]}.."
+        f"{frames[held][-1]} ({int(held.sum())} frames, {int((rev & held).sum())} revisit frames); {gap} steps in "
+        f"between belong to neither",
+        f"inputs {X.shape[1:]} ({'RGB + depth' if has_depth else 'RGB'}); chance AP on the held-out part: "
+        f"{100 * chance:.2f} %"])
+    return Setup(info, frames, ex, GT, gap, L, train, held, note, labels, X, has_depth, chance, text)
+
+
+# ------------------------------------------------------------------------ scoring one network
+def score_descriptors(F, GT, exclude: int, queries=None):
+    """Xu 2022's matching of descriptors F (N, D): similarity by L2 distance, scored on queries.
+
+    F: (N, D) descriptors; GT: (N, N) bool ground truth; exclude: band in frames of F; queries:
+    (N,) bool mask (the held-out part) or None. The similarity is ``similarity.distance_similarity(F,
+    normalise=False)`` = 1 - D / max D, monotone in -L2 distance (Eq. 5).
+    Returns (S (N, N) float32, AP in %, recall at 100 % precision in %), unrounded.
+    """
+    S = similarity.distance_similarity(F, normalise=False)
+    return (S, 100 * evaluate.average_precision(S, GT, exclude, queries=queries),
+            100 * evaluate.recall_at_100_precision(S, GT, exclude, queries=queries))
+
+
+def _row(descriptor, label, inf, ap, r100, supervision="none", fusion="none", layer="", train_pairs=0,
+         epochs=0, train_s=0.0, train_cpu_s=0.0, loaded_from_cache=False) -> dict:
+    """One row of notebook 10's tables (AP, R@100P in %; ms per image), unrounded."""
+    return {"descriptor": descriptor, "weights": inf.weights, "label": label, "dim": inf.dim,
+            "supervision": supervision, "fusion": fusion, "layer": layer, "train_pairs": train_pairs,
+            "epochs": epochs, "train_s": train_s, "train_cpu_s": train_cpu_s,
+            "loaded_from_cache": loaded_from_cache, "AP_%": ap, "R@100P_%": r100,
+            "extract_ms_per_image": 1e3 * inf.seconds_per_image}
+
+
+def fit_and_score(name: str, X, labels, heldout, gap: int, GT, exclude: int, train_kw: dict, **kw):
+    """Train one network (or load it from the cache), check its pairs, describe every frame, score.
+
+    name: the row's descriptor name. X: (N, H, W, C) float32 inputs in [0, 1]; labels: (N,) place
+    labels of the training part (-1 elsewhere, ``siamese.place_labels``). heldout: (N,) bool
+    queries scored; gap: frames around them no training pair may touch (``siamese.check_pairs``
+    raises otherwise). GT, exclude: as :func:`score_descriptors`. train_kw: ``siamese.train``'s
+    shared arguments (seed, epochs, ...); kw: this network's (supervision, fusion, fusion_layer, merge).
+    Returns (row, S, model, history): row = one dict of notebook 10's tables (AP and R@100P on
+    the held-out queries, in %; training seconds; loaded_from_cache = the model came from the
+    cache, ``util.cache.cached_model``), S (N, N) its similarity matrix, the descriptor model, history.
+    """
+    loaded = []
+    model, hist, pairs = siamese.train(X, labels, **train_kw, **kw, was_cached=loaded)
+    siamese.check_pairs(pairs["pairs"], heldout, gap)   # no held-out frame nor a neighbour within gap
+    F, inf = siamese.describe(model, X, return_info=True)
+    S, ap, r100 = score_descriptors(F, GT, exclude, heldout)
+    row = _row(name, f"{name} ({inf.weights})", inf, ap, r100, kw.get("supervision", "multitask"),
+               kw.get("fusion", "none"), kw.get("fusion_layer") or "", len(pairs["pairs"]), train_kw["epochs"],
+               hist["seconds"], hist.get("cpu_seconds", float("nan")), loaded[0])
+    return row, S, model, hist
+
+
+def reference_scores(X_rgb, GT, exclude: int, heldout, seed: int = 0, width: float = 1.0):
+    """The untrained network and raw pixels on the same held-out queries (Figure 8's references).
+
+    X_rgb: (N, H, W, 3) float32 in [0, 1]; GT, exclude, heldout: as :func:`score_descriptors`.
+    seed, width: the untrained ``siamese.embedding``'s initial weights and width (as the trained ones).
+    Returns (rows, sims): two rows of notebook 10's supervision table ("scnn untrained, RGB",
+    "pixels (32x32 gray)") and {"untrained": S, "pixels": S}, (N, N) similarity matrices.
+    """
+    import keras
+
+    keras.utils.set_random_seed(seed)
+    untrained, _ = siamese.embedding(X_rgb.shape[1:], width=width)
+    F, inf = siamese.describe(untrained, X_rgb, return_info=True, weights="random init")
+    S_u, ap, r100 = score_descriptors(F, GT, exclude, heldout)
+    rows = [_row("scnn untrained, RGB", f"scnn untrained, RGB ({inf.weights})", inf, ap, r100)]
+    F, inf = features.extract(np.rint(X_rgb * 255).astype(np.uint8), "pixels", progress=False, return_info=True)
+    S_p, ap, r100 = score_descriptors(F, GT, exclude, heldout)
+    rows.append(_row("pixels (32x32 gray)", inf.label, inf, ap, r100))
+    return rows, {"untrained": S_u, "pixels": S_p}
+
+
+def _fit_all(s: Setup, specs, train_kw: dict, X) -> Runs:
+    """fit_and_score for each (key, name, kw) of specs on inputs X; the table of their rows."""
+    rows, runs = [], Runs(None, {}, {}, {}, [])
+    for key, name, kw in specs:
+        row, runs.sims[key], runs.models[key], hist = fit_and_score(name, X, s.labels, s.held, s.gap, s.GT, s.ex,
+                                                                    train_kw, **kw)
+        runs.hists[key] = hist
+        runs.trained.append((name, hist["seconds"], hist.get("cpu_seconds", float("nan"))))
+        rows.append(row)
+    return runs._replace(table=pd.DataFrame(rows))
+
+
+# ------------------------------------------------------------------------------------ tables
+def supervisions(s: Setup, supervisions, train_kw: dict) -> Runs:
+    """Figure 8's table: one network per supervision on RGB, then the untrained network and pixels.
+
+    s: :func:`setup`. supervisions: names of ``siamese.SUPERVISIONS``. train_kw: ``siamese.train``'s
+    shared arguments (seed and width also seed and size the untrained reference).
+    Returns Runs keyed by supervision, "untrained" and "pixels" (those two are not trained).
+    """
+    X_rgb = s.X[..., :3]
+    runs = _fit_all(s, [(sup, f"scnn {sup}, RGB", {"supervision": sup}) for sup in supervisions], train_kw, X_rgb)
+    rows, sims = reference_scores(X_rgb, s.GT, s.ex, s.held, train_kw.get("seed", 0), train_kw.get("width", 1.0))
+    runs.sims.update(sims)
+    return runs._replace(table=pd.concat([runs.table, pd.DataFrame(rows)], ignore_index=True))
+
+
+def _paper_layer(mid_layers) -> str:
+    """The paper's best mid-level layer (conv2), or the first of mid_layers without it: fixed in
+    advance, never chosen on this data."""
+    return "conv2" if "conv2" in mid_layers else mid_layers[0]
+
+
+def fusions(s: Setup, sup: Runs, fusion_supervision: str, mid_layers, merge: str, train_kw: dict) -> Runs:
+    """Figure 9's and Table 2's table: RGB only, early, mid-level at each layer, late, and each
+    stream of the late network alone; all with ``fusion_supervision``.
+
+    s: :func:`setup`; sup: :func:`supervisions` (its row of the same supervision is "RGB only").
+    mid_layers: layers of ``siamese.LAYERS``; merge: "sum" or "concat"; train_kw: as supervisions.
+    Without depth the table is three "skipped" rows and nothing is trained.
+    """
+    if not s.has_depth:
+        rows = [{"descriptor": f, "weights": "trained here", "label": f"scnn {f} fusion (trained here)",
+                 "status": "skipped: the dataset has no depth/ folder"} for f in ("early", "mid-level", "late")]
+        return Runs(pd.DataFrame(rows), {}, {}, {}, [])
+    kw = {"supervision": fusion_supervision}
+    mids = [(f"mid {layer}", f"scnn mid-level fusion at {layer}",
+             dict(kw, fusion="mid", fusion_layer=layer, merge=merge)) for layer in mid_layers]
+    specs = ([("early", "scnn early fusion", dict(kw, fusion="early"))] + mids
+             + [("late", "scnn late fusion", dict(kw, fusion="late"))])
+    runs = _fit_all(s, specs, train_kw, s.X)
+    rows = runs.table.to_dict("records")
+    ref = sup.table[sup.table.supervision == fusion_supervision]
+    if len(ref):                             # the RGB network of the same supervision, for reference
+        rows.insert(0, dict(ref.iloc[0], descriptor=f"RGB only ({fusion_supervision})", fusion="RGB only"))
+        runs.sims["RGB only"] = sup.sims[fusion_supervision]
+    late = rows[-1]
+    for stream in ("rgb", "depth"):          # each stream of the late-fusion network alone
+        key = f"late ({stream} stream)"
+        runs.sims[key], ap, r100 = score_descriptors(siamese.describe(runs.models["late"], s.X, stream=stream),
+                                                     s.GT, s.ex, s.held)
+        name = f"scnn late fusion, {stream} stream alone"
+        rows.append(dict(late, descriptor=name, label=f"{name} ({late['weights']})", fusion=key,
+                         **{"AP_%": ap, "R@100P_%": r100}))
+    return runs._replace(table=pd.DataFrame(rows))
+
+
+def timing(s: Setup, sup: Runs, fus: Runs, dataset, fusion_supervision: str, mid_layers,
+           timing_frames: int) -> tuple[pd.DataFrame, int]:
+    """Table 3's measurements on this CPU: seconds per image of the networks (batched, and one at
+    a time on timing_frames frames) and of SIFT-BoVW on up to 64 native frames spread over the
+    sequence. Returns (table, number of native frames SIFT was timed on)."""
+    import warnings
+
+    timed = [(f"scnn {fusion_supervision}, RGB", sup.models.get(fusion_supervision, list(sup.models.values())[-1]),
+              s.X[..., :3])]
+    if s.has_depth:
+        layer = _paper_layer(mid_layers)
+        timed += [("scnn early fusion", fus.models["early"], s.X),
+                  (f"scnn mid-level fusion at {layer}", fus.models[f"mid {layer}"], s.X),
+                  ("scnn late fusion", fus.models["late"], s.X)]
+    rows = []
+    for name, model, Xin in timed:
+        _, batched = siamese.describe(model, Xin, batch_size=256, return_info=True)
+        _, single = siamese.describe(model, Xin[:timing_frames], batch_size=1, return_info=True)
+        rows.append({"descriptor": name, "weights": batched.weights, "label": f"{name} ({batched.weights})",
+                     "input": "x".join(map(str, batched.input_size)), "s_per_image_batched": batched.seconds_per_image,
+                     "s_per_image_one_at_a_time": single.seconds_per_image})
+    # the first frames of a small real set may hold no keypoint: frames spread over the sequence
+    native = sequence.load_frames(dataset, size=None, gray=False, step=max(1, s.info["n_frames"] // 64), limit=64,
+                                  dtype=np.uint8, progress=False)
+    with warnings.catch_warnings():    # tiny frames may hold fewer SIFT descriptors than words: timing only
+        warnings.simplefilter("ignore", UserWarning)
+        t_sift = features.extract(native, "sift_bovw", progress=False, return_info=True)[1].seconds_per_image
+    rows.append({"descriptor": "sift_bovw (SIFT + 500-word quantisation)", "weights": "none",
+                 "label": "sift_bovw (none)", "input": f"{s.info['width']}x{s.info['height']}",
+                 "s_per_image_batched": t_sift,
+                 "s_per_image_one_at_a_time": t_sift})
+    return pd.DataFrame(rows), len(native)
+
+
+def _supervision_rows(s: Setup, sup: Runs, supervisions) -> list:
+    ap = sup.table.set_index("descriptor")["AP_%"]
+    rows = [("best supervision", "multi-task (New College)", UNRESOLVED,
+             "three supervisions on RGB, same budget, one seed each (no spread over seeds); held-out part"),
+            ("AP of each supervision, RGB (%)", "single-task similar to a standard CNN, multi-task best",
+             "; ".join(f"{x} {ap[f'scnn {x}, RGB']:.2f}" for x in supervisions),
+             f"no pretrained CNN here; untrained network {ap['scnn untrained, RGB']:.2f} %, "
+             f"pixels {ap['pixels (32x32 gray)']:.2f} %, chance {100 * s.chance:.2f} %")]
+    if "multitask" in sup.sims:
+        rows.append(("precision at 83 % recall, multi-task", "> 0.90",
+                     f"{evaluate.precision_at_recall(sup.sims['multitask'], s.GT, 0.83, s.ex, queries=s.held):.3f}",
+                     "New College vs the held-out part here"))
+    return rows
+
+
+def _fusion_rows(s: Setup, fus: Runs, mid_layers, merge: str, dataset) -> tuple[list, list]:
+    if not s.has_depth:
+        why = f"{dataset} has no depth/ folder"
+        return ([("RGB-D fusion (Figure 9, Table 2)", "late fusion best", "skipped", why)],
+                [(f"AP, mid-level fusion at {layer}", PAPER_T2.get(layer), "skipped", why) for layer in mid_layers])
+    t = fus.table
+    mid = t[t.fusion == "mid"].set_index("layer")
+    t2 = [(f"AP, mid-level fusion at {layer}", PAPER_T2.get(layer), round(mid.loc[layer, "AP_%"] / 100, 4),
+           f"{mid.loc[layer, 'label']}; {merge}; paper: NYU, Places-pretrained") for layer in mid_layers]
+    top = mid["AP_%"].idxmax()
+    fz = t.set_index("fusion")
+    rgb = f"{fz.loc['RGB only', 'AP_%']:.2f}" if "RGB only" in fz.index else "n/a"
+    cmp = [("best mid-level layer (Table 2)", "conv2 (AP 0.8111)", UNRESOLVED,
+            f"highest AP of this one run at {top} ({mid.loc[top, 'AP_%'] / 100:.4f}); no spread over seeds; not tuned"),
+           ("best fusion", "late", UNRESOLVED,
+            f"early {fz.loc['early', 'AP_%']:.2f} %, highest mid {mid.loc[top, 'AP_%']:.2f} %, "
+            f"late {fz.loc['late', 'AP_%']:.2f} %; one seed each"),
+           ("precision at 82 % recall, late fusion", 0.92,
+            f"{evaluate.precision_at_recall(fus.sims['late'], s.GT, 0.82, s.ex, queries=s.held):.3f}",
+            "NYU vs the held-out part here"),
+           ("late fusion vs RGB only: AP (%)", None, f"{rgb} -> {fz.loc['late', 'AP_%']:.2f}",
+            f"depth stream alone {fz.loc['late (depth stream)', 'AP_%']:.2f} %")]
+    return cmp, t2
+
+
+def _timing_rows(tim: pd.DataFrame) -> list:
+    tt = tim.set_index("descriptor")
+    cpu = report.cpu_model()
+    rows = [(f"extraction time per image, CPU (s): {d}",
+             PAPER_T3["scnn"][0] if d.startswith("scnn") else PAPER_T3["bovw"],
+             f"{tt.loc[d, 's_per_image_one_at_a_time']:.5f} one at a time; "
+             f"{tt.loc[d, 's_per_image_batched']:.5f} batched",
+             f"{tt.loc[d, 'label']}; input {tt.loc[d, 'input']}; {cpu}"
+             + ("; paper: 227x227 AlexNet-size SCNN, Caffe" if d.startswith("scnn") else "; paper: BoVW, Matlab"))
+            for d in tt.index]
+    return rows + [("extraction time per image, GPU (s): SCNN", PAPER_T3["scnn"][1], "not measured",
+                    "no GPU on this machine"),
+                   ("extraction time per image, CPU (s): CNN (AlexNet)", PAPER_T3["cnn"][0], "not run",
+                    "no AlexNet with Places weights here"),
+                   ("extraction time per image, CPU (s): GIST", PAPER_T3["gist"], "not run",
+                    "GIST is not in greenloop.features")]
+
+
+def paper_vs_run(s: Setup, sup: Runs, fus: Runs, tim: pd.DataFrame, supervisions, mid_layers, merge: str,
+                 dataset) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame]:
+    """The paper's numbers beside this run's: (paper_vs_run, Table 2, Table 3) as
+    ``report.paper_vs_run`` tables. With one seed per network no supervision, layer or fusion is
+    named best ("not resolved with one seed"); the measured APs stand beside it."""
+    cmp, t2 = _fusion_rows(s, fus, mid_layers, merge, dataset)
+    return (report.paper_vs_run(_supervision_rows(s, sup, supervisions) + cmp), report.paper_vs_run(t2),
+            report.paper_vs_run(_timing_rows(tim)))
+
+
+def note(s: Setup, frame_step: int, dataset) -> str:
+    """The tables' note: how AP is scored, on which frames, what the weights mean."""
+    f, held, train = s.frames, s.held, s.train
+    return (f"AP = sklearn step-wise average precision over pairs > {s.ex} steps ({s.ex * frame_step} original frames) "
+            f"apart whose later frame is in the held-out part ({int(held.sum())} frames from frame {f[held][0]}); "
+            f"similarity = -L2 distance of the fc7 descriptors; {len(f)} frames (frame_step {frame_step}) of "
+            f"{dataset}; weights: 'trained here' = trained in this run on the training part (frames "
+            f"{f[train][0]}..{f[train][-1]}), 'random init' = untrained; chance AP {100 * s.chance:.2f} %.")
+
+
+def summary(s: Setup, sup_table, fusion_table, timing_table, frame_step: int, trained) -> dict:
+    """summary.json's content but notebook_seconds: the tables' records (as given), the split's
+    frame counts, and the training seconds of every network (trained: Runs.trained lists)."""
+    near = siamese.near_heldout(s.held, s.gap)          # held-out frames and their neighbours within gap
+    return {"supervisions": sup_table.to_dict("records"), "fusions": fusion_table.to_dict("records"),
+            "timing": timing_table.to_dict("records"), "frames": len(s.frames), "frame_step": frame_step,
+            "exclude_steps": s.ex, "gap_steps": s.gap, "spot_steps": s.L, "places": int(s.labels.max() + 1),
+            "train_frames": int(s.train.sum()), "heldout_frames": int(s.held.sum()),
+            "first_heldout_frame": int(s.frames[s.held][0]), "last_train_frame": int(s.frames[s.train][-1]),
+            "labelled_frames_near_heldout": int(((s.labels >= 0) & near).sum()), "chance_ap": s.chance,
+            "has_depth": s.has_depth, "networks_trained": len(trained),
+            "training_seconds": {t[0]: t[1] for t in trained}, "training_cpu_seconds": {t[0]: t[2] for t in trained},
+            "training_cpu_seconds_total": float(sum(t[2] for t in trained)),
+            "training_seconds_total": float(sum(t[1] for t in trained))}
+
+
+# ----------------------------------------------------------------------------------- figures
+def _pr_axes(ax, chance, label=None):
+    ax.axhline(chance, color="k", lw=0.6, ls=":", label=label)
+    ax.set_xlabel("recall"); ax.set_ylabel("precision"); ax.set_xlim(0, 1); ax.set_ylim(0, 1.02); ax.grid(alpha=0.3)
+
+
+def figure_supervisions(s: Setup, sup: Runs, supervisions, dataset):
+    """Figure 8's layout: PR curves of each supervision, the untrained network and pixels."""
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(9, 5.5))
+    t = sup.table
+    styles = {"softmax": ":", "contrastive": "--", "multitask": "-"}
+    curves = [(x, styles.get(x, "-"), "C3", 1.8 - 0.3 * k) for k, x in enumerate(supervisions)]
+    curves += [("untrained", "-", "0.5", 1), ("pixels", "-", "C2", 1)]
+    for k, (key, ls, colour, lw) in enumerate(curves):
+        p, r, _ = evaluate.pr_curve(sup.sims[key], s.GT, s.ex, queries=s.held)
+        ax.plot(r, p, ls, color=colour, lw=lw, label=f"{t.loc[k, 'label']}: AP {t.loc[k, 'AP_%']:.1f} %")
+    _pr_axes(ax, s.chance, f"chance ({100 * s.chance:.1f} %)")
+    ax.set_title(f"Figure 8 layout: supervisions, RGB, held-out part of {Path(dataset).name} "
+                 f"({int(s.held.sum())} query frames)", fontsize=10)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0)
+    return fig
+
+
+def figure_fusions(s: Setup, fus: Runs, mid_layers, merge: str, fusion_supervision: str, dataset):
+    """Figure 9's layout (left) and mid-level fusion at each layer (right); a note without depth.
+    Returns (figure, file stem): "figure9_fusions" or "figure9_skipped"."""
+    import matplotlib.pyplot as plt
+
+    if not s.has_depth:
+        fig, ax = plt.subplots(figsize=(6, 1.5)); ax.axis("off")
+        ax.text(0.5, 0.5, f"RGB-D fusion skipped:\n{dataset} has no depth/ folder", ha="center", va="center")
+        return fig, "figure9_skipped"
+    fig, axes = plt.subplots(1, 2, figsize=(14, 5.2))
+    t = fus.table
+    mid, by_fusion = t[t.fusion == "mid"].set_index("layer"), t.set_index("fusion")
+    row = {k: mid.loc[k[4:]] if k.startswith("mid ") else by_fusion.loc[k] for k in fus.sims}
+    show = [("RGB only", "C0", ":"), ("late (depth stream)", "C2", ":"), ("early", "C1", "--"),
+            (f"mid {_paper_layer(mid_layers)}", "C4", "-."), ("late", "C3", "-")]
+    for key, colour, ls in [x for x in show if x[0] in fus.sims]:
+        p, r, _ = evaluate.pr_curve(fus.sims[key], s.GT, s.ex, queries=s.held)
+        axes[0].plot(r, p, ls, color=colour, lw=1.6, label=f"{row[key]['label']}: AP {row[key]['AP_%']:.1f} %")
+    axes[0].set_title(f"Figure 9 layout: fusions ({fusion_supervision}), held-out part", fontsize=10)
+    axes[0].legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=1, borderaxespad=0)
+    cmap = plt.get_cmap("viridis")
+    for k, layer in enumerate(mid_layers):
+        p, r, _ = evaluate.pr_curve(fus.sims[f"mid {layer}"], s.GT, s.ex, queries=s.held)
+        axes[1].plot(r, p, color=cmap(k / max(1, len(mid_layers) - 1)), lw=1.2,
+                     label=f"at {layer}: AP {row[f'mid {layer}']['AP_%']:.1f} %")
+    axes[1].set_title(f"mid-level fusion at each layer ({merge}), held-out part", fontsize=10)
+    axes[1].legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=4, borderaxespad=0)
+    for ax in axes:
+        _pr_axes(ax, s.chance)
+    fig.tight_layout()
+    return fig, "figure9_fusions"
+
+
+def figure_training_loss(sup: Runs, fus: Runs, fusion_supervision: str, has_depth: bool):
+    """Training loss per epoch of every network: RGB (left), RGB-D (right)."""
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(12, 3.6))
+    for key, h in sup.hists.items():
+        axes[0].plot(np.arange(1, len(h["loss"]) + 1), h["loss"], "-o", ms=3, label=key)
+    axes[0].set_title("RGB networks: training loss per epoch", fontsize=10)
+    for key, h in fus.hists.items():
+        axes[1].plot(np.arange(1, len(h["loss"]) + 1), h["loss"], "-", lw=1, label=key)
+    axes[1].set_title(f"RGB-D networks ({fusion_supervision}): training loss per epoch" if has_depth
+                      else "RGB-D networks: skipped (no depth/)", fontsize=10)
+    for ax in axes:
+        ax.set_xlabel("epoch"); ax.set_ylabel("loss (its own supervision's units)")
+        ax.set_yscale("log"); ax.grid(alpha=0.3)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0)
+    fig.tight_layout()
+    return fig

@@ -1,0 +1,503 @@
+"""greenloop-seq's streaming detector, and what is computed by streaming it (the speed path).
+
+``Detector`` (moved here from ``greenloop.seqmatch``: streaming code lives in ``speed/``) takes one
+frame or descriptor at a time and declares closures; :func:`score_matrix` is the (N, N) matrix
+the stream thresholds, computed by feeding a Detector column by column, so S[:, j] is exactly what
+the stream sees at query j; :func:`tune_knobs` scores a knob grid by it, and
+:func:`stream_check` compares a stream's events with a matrix. The stages the detector is built
+of (descriptors, normalisation, contrast normalisation, calibration) and the scoring of its
+matrices stay in ``greenloop.seqmatch`` (its module doc describes the method, its units and the
+memory per stored frame); ``greenloop.detectors.greenloop_seq`` registers it.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from greenloop import evaluate, retrieval
+from greenloop.seqmatch import (_EPS, COLORS, DEFAULT_VELOCITIES, STORE_DTYPES, _check_descriptor,
+                                calibrate_scores, center, columns_to_scores, contrast_normalise,
+                                describe_frames, matrix_events, normalise, threshold_range)
+from greenloop.util.checks import positive_int
+from greenloop.util.kernels import one_blas_thread
+
+__all__ = ["Detector", "score_matrix", "tune_knobs", "stream_matches_matrix", "stream_check"]
+
+
+def _offsets(seq_len: int, velocities) -> np.ndarray:
+    """Distinct row offsets round(v k), k = 0..seq_len-1: (V, seq_len) int, one row per velocity."""
+    rows = sorted({tuple(int(round(v * k)) for k in range(seq_len)) for v in velocities})
+    return np.asarray(rows, dtype=np.int64).reshape(len(rows), seq_len)
+
+
+def _ring_scores(R, rows, c: int, base, dtype=np.float64) -> np.ndarray:
+    """Best-trajectory score of each candidate row i < c of the newest query.
+
+    R: (L, W) float32 ring of padded normalised columns: the column of the query k frames back is
+    ring row rows[k], its value for database row r at R[rows[k], margin + r], its mean (a point
+    outside the stored frames) everywhere else. base: (V, L) margin - offsets.
+    Returns (c,) float32: max over velocities of the mean along the trajectory ending at (i, j).
+    The sum runs over k = 0..L-1 in order in ``dtype`` (float64: the scores before the calibrated
+    option existed, bit for bit; float32: 4x faster, for calibrated scores), one slice per point.
+    """
+    Rd = R[rows, :int(base.max()) + c].astype(dtype)             # one cast; the same values
+    acc = np.zeros((base.shape[0], c), dtype)
+    for v in range(base.shape[0]):
+        a = acc[v]
+        for k in range(base.shape[1]):
+            b = base[v, k]
+            np.add(a, Rd[k, b:b + c], out=a)
+    return (acc.max(0) / R.shape[0]).astype(np.float32)
+
+def _check_threshold(threshold, contrast_window: int, calibrated: bool = False):
+    if threshold is None:
+        return None
+    if calibrated:
+        if not math.isfinite(float(threshold)):
+            raise ValueError(f"threshold must be a finite z-score for calibrated scores, got {threshold!r}")
+        return float(threshold)
+    lo, hi = threshold_range(contrast_window)
+    t = float(threshold)
+    if not (math.isfinite(t) and lo <= t <= hi):
+        kind = "cosine" if contrast_window == 0 else f"z-score (contrast_window {contrast_window})"
+        raise ValueError(f"threshold must lie in [{lo:.3g}, {hi:.3g}] for {kind} scores, got {threshold!r}")
+    return t
+
+class Detector:
+    """Streaming greenloop-seq: one frame (or descriptor) in, a closure event or None out.
+
+    threshold: declare a closure at query j when its best sequence score >= threshold (range:
+        :func:`threshold_range`); None only scores (``last_scores``) and declares nothing.
+    descriptor: one of DESCRIPTORS (raw frames) -- ignored by ``update_descriptor``.
+    seq_len: L, frames per trajectory (1 = single-frame matching). velocities: database frames
+        per query frame along a trajectory (SeqSLAM's V_min..V_max). exclude: only stored frames
+        i with j - i > exclude are candidates. contrast_window: SeqSLAM R_window (0 = off).
+    projection: optional ``similarity.Projection`` (see :func:`fit_projection`).
+    store_dtype: "float32" or "float16" for the stored descriptors. color: "bgr" or "rgb".
+    index: None (the reference: every stored frame is scored) or a ``greenloop.retrieval`` kind
+        ("scan", "flat", "ivf", "hnsw", "swp", "qdp"): candidate mode, the sequence score is
+        computed only for the ``k`` stored frames the index retrieves for the newest query
+        (``index_options``: keyword arguments of ``retrieval.make_index``). See
+        :meth:`_match_candidates` for what it computes and where it may differ from the reference.
+    Options (off by default, the behaviour before them):
+    center_window: W > 0 subtracts from each raw descriptor the mean of the last W raw descriptors
+        (itself included, :func:`center`) before normalising: a buffer of W x D float32, fixed.
+    calibrate: score each candidate as a z-score against the query's own candidates
+        (:func:`calibrate_scores`); the threshold is then a z-score (any finite float).
+    repeat_cos: a query whose normalised descriptor has cosine >= repeat_cos with the previous
+        frame's is a repeat (the camera stopped, or a frame duplicated by a slower replay): it is
+        matched and stored, but its column does not enter the trajectory ring, so a stop or a
+        half-speed replay keeps the trajectories' velocities. None: off.
+    Negative velocities search revisits driven the opposite way (database rows increasing while
+    the query goes back in time); a trajectory point on a row not yet a candidate counts as the
+    column's mean, as one before the first stored frame.
+    Attributes: ``events`` (list of {'frame', 'match', 'score'}), ``frame_index``, ``last_scores``
+    ((C,) float32 scores of the newest query's candidates: every stored row 0..C-1, or in candidate
+    mode the rows ``last_candidates`` (C,) int64, ascending), ``bytes_per_frame``.
+    """
+
+    def __init__(self, threshold=None, descriptor: str = "pixels", seq_len: int = 10,
+                 velocities=DEFAULT_VELOCITIES, exclude: int = 150, contrast_window: int = 10,
+                 projection=None, store_dtype: str = "float32", color: str = "bgr", weights="auto",
+                 index: str | None = None, k: int = 20, index_options: dict | None = None,
+                 center_window: int = 0, calibrate: bool = False, repeat_cos=None):
+        if index is not None and index not in retrieval.KINDS:
+            raise ValueError(f"index must be None (score every stored frame) or one of "
+                             f"{retrieval.KINDS}, got {index!r}")
+        self.index_kind, self.k = index, positive_int("k", k, 1, whole_floats=True)
+        self.index_options = dict(index_options or {})
+        self.descriptor = _check_descriptor(descriptor)
+        self.seq_len = positive_int("seq_len", seq_len, 1, whole_floats=True)
+        self.exclude = positive_int("exclude", exclude, 0, whole_floats=True)
+        self.contrast_window = positive_int("contrast_window", contrast_window, 0, whole_floats=True)
+        self.center_window = positive_int("center_window", center_window, 0, whole_floats=True)
+        self.calibrate = bool(calibrate)
+        self.threshold = _check_threshold(threshold, self.contrast_window, self.calibrate)
+        if repeat_cos is not None and not (math.isfinite(float(repeat_cos)) and -1 <= float(repeat_cos) <= 1):
+            raise ValueError(f"repeat_cos must be a cosine in [-1, 1] or None, got {repeat_cos!r}")
+        self.repeat_cos = None if repeat_cos is None else float(repeat_cos)
+        v = [float(x) for x in np.atleast_1d(velocities)]
+        if not v or not all(math.isfinite(x) and x != 0 for x in v):
+            raise ValueError(f"velocities must be non-zero numbers (negative: reverse revisits), got {velocities!r}")
+        if store_dtype not in STORE_DTYPES:
+            raise ValueError(f"store_dtype must be one of {STORE_DTYPES}, got {store_dtype!r}")
+        if color not in COLORS:
+            raise ValueError(f"color must be one of {COLORS}, got {color!r}")
+        if index is not None and (calibrate or repeat_cos is not None or min(v) < 0):
+            raise ValueError("candidate mode (index=...) scores the retrieved frames only and does not yet "
+                             "support calibrate, repeat_cos or negative (reverse) velocities: pass index=None, "
+                             "or knobs without them (e.g. the CLI's --threshold with --index)")
+        self.velocities, self.projection, self.color, self.weights = tuple(v), projection, color, weights
+        self.store_dtype = np.dtype(store_dtype)
+        off = _offsets(self.seq_len, self.velocities)
+        self._margin = int(off.max())
+        self._base = self._margin - off
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget every stored frame and event."""
+        self._db = None                       # (capacity, D) stored descriptors
+        L = self.seq_len
+        self._right = max(int(self._base.max()) - self._margin, 0)    # room for negative offsets
+        self._ring = np.zeros((L, self._margin + self._right + 256), np.float32)   # see _ring_scores
+        self._pads = np.zeros(L, np.float32)
+        self._empty = np.ones(L, bool)        # ring rows holding no column yet, or an empty one
+        self._newest = 0
+        self.frame_index = 0
+        self.events: list[dict] = []
+        self.last_scores = np.zeros(0, np.float32)
+        self.last_candidates = np.zeros(0, np.int64)
+        self._frame_shape = None
+        self._index = None                    # candidate mode: the retrieval index, made at frame 0
+        self._Q = None                        # (L, D) the last L query descriptors, newest first
+        self._qc = np.zeros(L, np.int64)      # their candidate counts c = j - exclude (0: none yet)
+        self._qpad = np.zeros(L, np.float32)  # their columns' pads (points outside stored frames)
+        self._sum = None                      # (D,) float64 sum of the indexed rows (cosine pads)
+        self._recent = None                   # (center_window, D) raw descriptors, oldest first
+        self._n_recent = 0
+        self._previous = None                 # the previous frame's normalised descriptor
+
+    @property
+    def bytes_per_frame(self) -> int:
+        """Bytes held per stored frame: D * itemsize (descriptor) + 4 * seq_len (column buffer);
+        in candidate mode D * itemsize + the index's ``bytes_per_frame()`` (no column buffer);
+        0 before the first frame (D unknown)."""
+        if self._db is None:
+            return 0
+        if self._index is not None:
+            return int(self._db.shape[1] * self.store_dtype.itemsize + self._index.bytes_per_frame())
+        return int(self._db.shape[1] * self.store_dtype.itemsize + 4 * self.seq_len)
+
+    def _store(self, y: np.ndarray) -> None:
+        j = self.frame_index
+        if self._db is None:
+            self._db = np.empty((256, y.size), self.store_dtype)
+        elif y.size != self._db.shape[1]:
+            raise ValueError(f"descriptor {j} has {y.size} dims, the stream's first had {self._db.shape[1]}")
+        if j == len(self._db):
+            self._db = np.concatenate([self._db, np.empty_like(self._db)])
+        self._db[j] = y
+
+    def _ensure_width(self, c: int) -> None:
+        """Grow the ring (doubling, new room filled with each column's mean) to hold c rows."""
+        R = self._ring
+        if self._margin + c + self._right > R.shape[1]:
+            grown = np.empty((R.shape[0], max(2 * R.shape[1], self._margin + c + self._right)), np.float32)
+            grown[:, :R.shape[1]] = R
+            grown[:, R.shape[1]:] = self._pads[:, None]
+            self._ring = grown
+
+    def _push_column(self, s: np.ndarray) -> None:
+        """Write the newest normalised column into the ring (dropping the one seq_len back)."""
+        self._ensure_width(s.size)
+        R, m = self._ring, self._margin
+        r = self._newest = (self._newest - 1) % self.seq_len
+        pad = float(s.mean()) if s.size else 0.0
+        R[r, :] = pad
+        R[r, m:m + s.size] = s
+        self._pads[r], self._empty[r] = pad, s.size == 0
+        if s.size and self._empty.any():   # before the stream began: no evidence, the newest mean
+            R[self._empty] = pad
+            self._pads[self._empty] = pad
+
+    def update_descriptor(self, x) -> dict | None:
+        """Match one raw descriptor x (D,) (L2-normalised and projected here), then store it.
+        Returns the closure event {'frame': j, 'match': i, 'score': s} or None."""
+        x = np.asarray(x, dtype=np.float32).reshape(1, -1)
+        if x.shape[1] == 0 or not np.all(np.isfinite(x)):
+            raise ValueError(f"descriptor {self.frame_index} is empty or has NaN/inf values")
+        y = normalise(self._centered(x), self.projection)[0]
+        j, c = self.frame_index, max(self.frame_index - self.exclude, 0)
+        if self._db is not None and y.size != self._db.shape[1]:
+            raise ValueError(f"descriptor {j} has {y.size} dims, the stream's first had {self._db.shape[1]}")
+        if self.index_kind is not None:
+            return self._match_candidates(y)
+        if not c:
+            return self._match(y, np.zeros(0, np.float32))
+        with one_blas_thread():   # a 2-thread gemv stalls on a loaded 2-core machine
+            s = self._db[:c].astype(np.float32, copy=False) @ y
+        return self._match(y, s)
+
+    def _centered(self, x: np.ndarray) -> np.ndarray:
+        """x (1, D) minus the mean of the last center_window raw descriptors, x included (:func:`center`)."""
+        W = self.center_window
+        if not W:
+            return x
+        if self._recent is None or self._recent.shape[1] != x.shape[1]:
+            if self._recent is not None:
+                raise ValueError(f"descriptor {self.frame_index} has {x.shape[1]} dims, the stream's "
+                                 f"first had {self._recent.shape[1]}")
+            self._recent = np.zeros((W, x.shape[1]), np.float32)
+        self._recent[:-1] = self._recent[1:].copy()
+        self._recent[-1] = x[0]
+        self._n_recent = min(self._n_recent + 1, W)
+        return x - self._recent[W - self._n_recent:].mean(axis=0)
+
+    def _is_repeat(self, y: np.ndarray) -> bool:
+        prev, self._previous = self._previous, y.copy()
+        return self.repeat_cos is not None and prev is not None and float(prev @ y) >= self.repeat_cos
+
+    def _match(self, y: np.ndarray, s: np.ndarray) -> dict | None:
+        """The stages after the similarity: s (C,) cosine to the C candidates of query j = frame_index."""
+        j, c = self.frame_index, s.size
+        s = contrast_normalise(s, self.contrast_window)
+        if not self._is_repeat(y):
+            self._push_column(s)
+        if c:
+            self._ensure_width(c)
+            rows = (self._newest + np.arange(self.seq_len)) % self.seq_len
+            self.last_scores = _ring_scores(self._ring, rows, c, self._base,
+                                            np.float32 if self.calibrate else np.float64)
+            if self.calibrate:
+                self.last_scores = calibrate_scores(self.last_scores)
+        else:
+            self.last_scores = s
+        self._store(y)
+        self.frame_index += 1
+        if c and self.threshold is not None:
+            i = int(np.argmax(self.last_scores))
+            if self.last_scores[i] >= self.threshold:
+                event = {"frame": j, "match": i, "score": float(self.last_scores[i])}
+                self.events.append(event)
+                return event
+        return None
+
+    def _match_candidates(self, y: np.ndarray) -> dict | None:
+        """Candidate mode: the sequence score of the k frames the index retrieves for query j.
+
+        Frames 0..c-1 (c = j - exclude) are added to the index before query j (delayed insertion
+        keeps the exclusion window). For each candidate i the trajectory points (i - round(v k),
+        column j - k) are scored as in the reference: the cosine of query j - k with that stored
+        row, contrast-normalised over rows within contrast_window // 2 clipped to the c_k rows that
+        query had (:func:`contrast_normalise`), computed for the rows the points need only (one
+        (rows, L) product). Where the index returns every stored row the scores equal the
+        reference's except at points outside the stored frames: those count as the column's pad,
+        the exact column mean for cosine scores (contrast_window 0, from a running sum of the
+        stored rows) but 0 (a z-score's expected value) instead of the column's mean z-score
+        otherwise, since that mean needs the whole column. Cost per frame: k x L x (window + 1)
+        dot products, independent of the number stored (plus the index's search).
+        """
+        j, c, L = self.frame_index, max(self.frame_index - self.exclude, 0), self.seq_len
+        if self._index is None:
+            self._index = retrieval.make_index(self.index_kind, y.size, **self.index_options)
+            self._Q, self._sum = np.zeros((L, y.size), np.float32), np.zeros(y.size)
+        n_in = self._index.n_stored
+        if c > n_in:
+            new = self._db[n_in:c].astype(np.float32)
+            self._index.add(new)
+            self._sum += new.sum(0, dtype=np.float64)
+        pad = float(self._sum @ y / c) if c and self.contrast_window == 0 else 0.0
+        self._Q[1:], self._qc[1:], self._qpad[1:] = self._Q[:-1], self._qc[:-1], self._qpad[:-1]
+        self._Q[0], self._qc[0], self._qpad[0] = y, c, pad
+        self._qpad[self._qc == 0] = pad            # empty / pre-stream columns: the newest pad
+        self.last_candidates, self.last_scores = np.zeros(0, np.int64), np.zeros(0, np.float32)
+        if c:
+            ids = self._index.search(y, self.k)[1][0]
+            cand = np.unique(ids[ids >= 0])
+            self.last_candidates, self.last_scores = cand, self._candidate_scores(cand)
+        self._store(y)
+        self.frame_index += 1
+        if c and self.threshold is not None and self.last_scores.size:
+            i = int(np.argmax(self.last_scores))
+            if self.last_scores[i] >= self.threshold:
+                event = {"frame": j, "match": int(self.last_candidates[i]),
+                         "score": float(self.last_scores[i])}
+                self.events.append(event)
+                return event
+        return None
+
+    def _candidate_scores(self, cand: np.ndarray) -> np.ndarray:
+        """Best-trajectory scores (m,) float32 of the candidate rows cand (m,) (ascending)."""
+        off = self._margin - self._base                               # (V, L) row offsets
+        P = cand[:, None, None] - off[None]                           # (m, V, L) trajectory rows
+        ck = self._qc[None, None, :]
+        inside = (P >= 0) & (P < ck)
+        h = self.contrast_window // 2
+        W = P[..., None] + np.arange(-h, h + 1)                       # (m, V, L, 2h + 1) window rows
+        need = inside[..., None] & (W >= 0) & (W < ck[..., None])
+        R = np.unique(W[need])                                        # every row a point needs
+        with one_blas_thread():
+            G = (self._db[R].astype(np.float32) @ self._Q.T).astype(np.float64)   # (|R|, L)
+        col = np.broadcast_to(np.arange(self.seq_len), P.shape)
+        pi, pk = P[inside], col[inside]
+        s = G[np.searchsorted(R, pi), pk]
+        if self.contrast_window:
+            lo, hi = np.maximum(pi - h, 0), np.minimum(pi + h + 1, self._qc[pk])
+            C1 = np.vstack([np.zeros(self.seq_len), np.cumsum(G, 0)])
+            C2 = np.vstack([np.zeros(self.seq_len), np.cumsum(G * G, 0)])
+            a, b, n = np.searchsorted(R, lo), np.searchsorted(R, hi), hi - lo
+            mu = (C1[b, pk] - C1[a, pk]) / n
+            sd = np.sqrt(np.maximum((C2[b, pk] - C2[a, pk]) / n - mu * mu, 0.0))
+            s = np.where(sd > _EPS, (s - mu) / np.maximum(sd, _EPS), 0.0)
+        vals = np.broadcast_to(self._qpad, P.shape).astype(np.float32)
+        vals[inside] = s.astype(np.float32)
+        return (vals.sum(2, dtype=np.float64).max(1) / self.seq_len).astype(np.float32)
+
+    def preload(self, X) -> None:
+        """Candidate mode: start as if the raw descriptors X (N, D) of an already-recorded stream
+        had been fed to :meth:`update_descriptor` in order, without deciding on them (a long
+        recording's store in seconds, instead of N decisions).
+
+        Resets, then sets what later frames read: the N stored descriptors, the index holding the
+        first max(N - 1 - exclude, 0) of them (one ``add``), the running sum of those rows, the last
+        seq_len queries (descriptors, candidate counts, pads), the centring buffer; frame_index = N.
+        The frames streamed after it then get the uninterrupted stream's scores and events, bit for
+        bit, for "scan", "flat", "ivf" (its quantiser learns the first train_size frames either way),
+        "swp" and "qdp"; an HNSW graph depends on the order of insertion (faiss inserts a batch
+        level by level, shuffled), so its approximate neighbours may differ. ``events`` stays empty
+        and ``last_scores`` / ``last_candidates`` hold nothing: preloaded frames are stored, not
+        decided. Memory while it runs: about three float32 copies of X beyond what it keeps.
+        """
+        if self.index_kind is None:
+            raise ValueError("preload needs candidate mode (index=...): the reference detector keeps every "
+                             "stored frame's similarity columns; stream the frames through update_descriptor")
+        X = np.asarray(X, dtype=np.float32)
+        if X.ndim != 2 or 0 in X.shape or not np.all(np.isfinite(X)):
+            raise ValueError(f"X must be (N, D) finite descriptors with N, D >= 1, got shape {X.shape} "
+                             f"(NaN/inf: fix the descriptors first)")
+        self.reset()
+        n, d, L, W = len(X), X.shape[1], self.seq_len, self.center_window
+        Y = normalise(center(X, W), self.projection)
+        self._db = np.empty((256 * 2 ** max(math.ceil(math.log2(n / 256)), 0), Y.shape[1]), self.store_dtype)
+        self._db[:n] = Y
+        c = max(n - 1 - self.exclude, 0)                   # rows indexed before query n - 1
+        self._index = retrieval.make_index(self.index_kind, Y.shape[1], **self.index_options)
+        if c:
+            self._index.add(self._db[:c].astype(np.float32))
+        first = max(c - L, 0)
+        S = _running_sums(self._db[:c], first)             # S[i]: sum of rows 0..first + i - 1
+        self._sum, self._Q = S[-1].copy(), np.zeros((L, Y.shape[1]), np.float32)
+        for k, j in enumerate(range(n - 1, max(n - 1 - L, -1), -1)):     # query j, k frames back
+            cj = max(j - self.exclude, 0)
+            self._Q[k], self._qc[k] = Y[j], cj
+            self._qpad[k] = float(S[cj - first].copy() @ Y[j] / cj) if cj and self.contrast_window == 0 else 0.0
+        self._qpad[self._qc == 0] = self._qpad[0]          # pre-stream columns: the newest pad
+        if W:
+            m = min(n, W)
+            self._recent, self._n_recent = np.zeros((W, d), np.float32), m
+            self._recent[W - m:] = X[n - m:]
+        self.frame_index = n
+
+    def _check_frame(self, frame, index: int) -> None:
+        if not isinstance(frame, np.ndarray) or frame.dtype != np.uint8 or frame.ndim not in (2, 3) \
+                or (frame.ndim == 3 and frame.shape[2] not in (1, 3)) or 0 in frame.shape:
+            got = f"{frame.dtype} {frame.shape}" if isinstance(frame, np.ndarray) else type(frame).__name__
+            raise ValueError(f"frame {index} must be a non-empty (H, W, 3) or (H, W) uint8 array, "
+                             f"got {got}")
+        if self._frame_shape is None:
+            self._frame_shape = frame.shape
+        elif frame.shape != self._frame_shape:
+            raise ValueError(f"frame {index} has shape {frame.shape}, but the stream started with "
+                             f"{self._frame_shape}: one camera, one frame size")
+
+    def update(self, frame) -> dict | None:
+        """One raw frame (H, W, 3) uint8 BGR (RGB with color="rgb") or (H, W) gray -> event or None."""
+        return self._update_frames([frame])[0]
+
+    def update_many(self, frames) -> list[dict]:
+        """A window of raw frames (one batched descriptor pass) -> the events declared in it."""
+        return [e for e in self._update_frames(list(frames)) if e is not None]
+
+    def _update_frames(self, frames) -> list:
+        if not frames:
+            return []
+        for k, f in enumerate(frames):
+            self._check_frame(f, self.frame_index + k)
+        X = describe_frames(frames, self.descriptor, self.color, self.weights)
+        return [self.update_descriptor(x) for x in X]
+
+def _running_sums(R, first: int, chunk: int = 65536) -> np.ndarray:
+    """Running float64 sums of the rows R (c, D) added one at a time, as a candidate-mode stream
+    adds them (so bit for bit the same): (c - first + 1, D), row i = the sum of R[:first + i]."""
+    acc = np.zeros((1, R.shape[1]))
+    for a in range(0, first, chunk):
+        acc = np.add.accumulate(np.vstack([acc, R[a:min(a + chunk, first)]]), axis=0)[-1:]
+    return np.add.accumulate(np.vstack([acc, R[first:]]), axis=0)
+
+
+def score_matrix(X, exclude: int = 150, seq_len: int = 10, velocities=DEFAULT_VELOCITIES,
+                 contrast_window: int = 10, projection=None, store_dtype: str = "float32",
+                 center_window: int = 0, calibrate: bool = False, repeat_cos=None) -> np.ndarray:
+    """The (N, N) score matrix the streaming detector thresholds, for ``greenloop.evaluate``.
+
+    X: (N, D) raw descriptors in stream order (:func:`describe`). The other arguments are those
+    of :class:`Detector`. The columns are computed by feeding X to a Detector one row at a time,
+    so S[:, j] is exactly what the stream sees at query j.
+    Returns S (N, N) float32: S[i, j] = sequence score of database frame i for query j where
+    j - i > exclude; every other entry holds the smallest filled score (0 if none), so it never
+    ranks above a candidate. N = 0 gives a (0, 0) matrix.
+    """
+    X = np.asarray(X, dtype=np.float32)
+    if X.ndim != 2:
+        raise ValueError(f"X must be (N, D) descriptors, got shape {X.shape}")
+    n = len(X)
+    det = Detector(None, seq_len=seq_len, velocities=velocities, exclude=exclude,
+                   contrast_window=contrast_window, projection=projection, store_dtype=store_dtype,
+                   center_window=center_window, calibrate=calibrate, repeat_cos=repeat_cos)
+    if n == 0:
+        return np.zeros((0, 0), np.float32)
+    if not np.all(np.isfinite(X)):
+        raise ValueError("X has NaN or inf values")
+    Y = normalise(center(X, det.center_window), projection)
+    G = Y.astype(det.store_dtype).astype(np.float32) @ Y.T    # stored rows x queries, one product
+    return columns_to_scores(det, Y, G)
+
+def tune_knobs(descriptors: dict, GT, exclude: int, tune, seq_lens, contrast_windows,
+               velocities=DEFAULT_VELOCITIES, projections=None) -> list[dict]:
+    """Per-query AUC-PR on the tuning queries of every knob combination (the one tuning criterion).
+
+    descriptors: {name: (N, D) descriptors of the described frames} (:func:`describe`), in the
+    order to try them. GT: (N, N) bool ground truth; exclude: in frames of that stream.
+    tune: (N,) bool tuning queries (``evaluate.split_mask``); only their labels are read.
+    seq_lens, contrast_windows: candidate knobs, in frames (seq_len 1 = a single-frame method with
+    local contrast normalisation as its knob); velocities as in :func:`score_matrix`.
+    projections: optional {descriptor name: {label: ``similarity.Projection`` or None}}, the
+    whitening candidates of that descriptor (fitted on tuning frames, :func:`fit_projection`);
+    a descriptor not listed gets {"none": None}.
+    Returns one dict per combination (descriptor-major, then whitening, seq_len, contrast_window):
+    descriptor, whitening (label), seq_len, contrast_window, AUC-PR_tune_% and R@1_tune_%
+    (``evaluate.per_query`` on the tuning queries, loop-closure mode, in %, 2 decimals).
+    """
+    rows = []
+    projections = projections or {}
+    for d, X in descriptors.items():
+        for w, proj in projections.get(d, {"none": None}).items():
+            for L in seq_lens:
+                for cw in contrast_windows:
+                    q = evaluate.per_query(score_matrix(X, exclude, L, velocities, cw, proj), GT, exclude,
+                                           queries=tune, ks=(1,))
+                    rows.append({"descriptor": d, "whitening": w, "seq_len": L, "contrast_window": cw,
+                                 "AUC-PR_tune_%": round(100 * q["AUC-PR"], 2), "R@1_tune_%": round(100 * q["R@1"], 2)})
+    return rows
+
+def stream_matches_matrix(detector: Detector, S) -> bool:
+    """Whether a streaming :class:`Detector`'s events fall on exactly the query frames where the
+    score matrix S (N, N), computed on the same descriptors, reaches its threshold
+    (:func:`matrix_events` over the ``detector.frame_index`` frames it has seen)."""
+    if detector.threshold is None:
+        raise ValueError("the detector has no threshold, so it declares nothing to compare")
+    batch = matrix_events(S, detector.threshold, detector.exclude, detector.frame_index)
+    return [e["frame"] for e in detector.events] == batch
+
+
+def stream_check(detector: Detector, X, S, GT) -> dict:
+    """Stream every descriptor of X through ``detector`` (reset first) and compare its events with
+    the thresholded score matrix S: the check that can fail, on a stream that holds the revisit.
+
+    detector: a thresholded :class:`Detector` (or ``seqslam_stream.Detector``) with the knobs S was made
+    with. X: (N, D) descriptors in stream order; S: (N, N) its score matrix; GT: (N, N) bool.
+    Returns dict(equal (:func:`stream_matches_matrix`), events (declared), correct_events (events
+    whose match is a ground-truth partner), revisit_queries (frames with a partner among their
+    candidates)). ``equal`` with correct_events 0 says little: report both.
+    """
+    X = np.asarray(X)
+    if len(X) != len(S):
+        raise ValueError(f"X has {len(X)} frames but S is {np.shape(S)}: the same stream, please")
+    G = np.asarray(GT, dtype=bool)
+    detector.reset()
+    for x in X:
+        detector.update_descriptor(x)
+    ok = [e for e in detector.events if G[e["match"], e["frame"]]]
+    return {"equal": stream_matches_matrix(detector, S), "events": len(detector.events),
+            "correct_events": len(ok), "revisit_queries": int(evaluate.revisit_queries(G, detector.exclude).sum())}

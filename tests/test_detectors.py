@@ -1,0 +1,248 @@
+"""greenloop.detectors: the interface, each registered entry, the registry's readers (the
+leaderboard experiment, `detect --method`) and the example of docs/ARCHITECTURE.md."""
+import re
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from greenloop import seqmatch, seqslam
+from greenloop.detectors import dictionary, greenloop_seq, registry, single_frame
+from greenloop.detectors import seqslam as slam_entry
+from greenloop.detectors.interface import Data
+from greenloop.experiments import leaderboard as experiment
+from greenloop.speed import seqslam_stream, seqstream
+
+ROOT = Path(__file__).resolve().parents[1]
+N0, REPEAT, EX, DIM = 80, 40, 20, 16
+SCORED = [e for e in registry.ENTRIES if e.score is not None]
+
+
+@pytest.fixture(scope="module")
+def revisit():
+    """80 frames of a random walk, then frames 0..39 again with noise; GT +-2 frames."""
+    rng = np.random.default_rng(0)
+    w = np.cumsum(rng.normal(size=(N0, DIM)), 0).astype(np.float32) * 0.3
+    X = np.concatenate([w, w[:REPEAT] + rng.normal(scale=0.3, size=(REPEAT, DIM)).astype(np.float32)])
+    n = len(X)
+    GT = np.zeros((n, n), bool)
+    for k in range(REPEAT):
+        GT[max(k - 2, 0):k + 3, N0 + k] = True
+    return X, GT | GT.T
+
+
+def _data(descriptors: dict, GT, tune=None, **params) -> Data:
+    p = dict(velocities=(1.0,), seq_lens=[3, 5], contrast_windows=[0, 4], weights=None, whiten_dims=[4])
+    n = len(GT)
+    return Data("unused", 1, np.arange(n), GT, EX, tune, np.ones(n, bool) if tune is None else ~tune,
+                dict(p, **params), dict(descriptors), {}, {})
+
+
+def test_the_registry_holds_every_family_once_in_leaderboard_order():
+    assert list(registry.REGISTRY) == ["single-frame", "greenloop-seq", "seqslam", seqmatch.DEFAULT_NAME, "dictionary"]
+    assert registry.get("seqslam") is slam_entry.ENTRY and registry.REGISTRY["dictionary"].score is None
+    with pytest.raises(ValueError, match="registered are"):
+        registry.get("nope")
+
+
+def test_projections_fit_the_given_frames_and_label_the_kept_dim(revisit):
+    X, _ = revisit
+    fit = np.zeros(len(X), bool)
+    fit[:10] = True
+    p = single_frame.projections({"cnn": X}, ["cnn"], fit, [4, 64])
+    assert list(p["cnn"]) == ["none", "pca 4", "pca 9"]             # 64 clipped to the rank of 10 centred frames
+    assert np.allclose(p["cnn"]["pca 4"].mean, seqmatch.fit_projection(X[:10], 4).mean)
+
+
+def test_untuned_records_and_knob_texts(revisit):
+    X, GT = revisit
+    assert single_frame.untuned(["a"]) == {"a (single frame)": {"descriptor": "a", "whitening": "none", "seq_len": 1,
+                                                                "contrast_window": 0}}
+    rows, knobs, _ = slam_entry.tune(_data({"seqslam": X}, GT))           # no tuning part: the published row only
+    assert rows == [] and knobs == {"SeqSLAM (published)": {"descriptor": "seqslam", "whitening": "none",
+                                                            "seq_len": 11, "contrast_window": 10}}
+    assert slam_entry.knob_text(knobs["SeqSLAM (published)"]).startswith("64x32 patch-normalised, SAD, ds 10, R_window 10")
+    assert greenloop_seq.tune(_data({}, GT, seq_descriptors=["x"])) == ([], {}, {})
+    assert "fixed threshold" in greenloop_seq.knob_text(greenloop_seq.named_default())
+
+
+def test_tuning_picks_each_methods_best_row_on_the_tuning_queries(revisit):
+    X, GT = revisit
+    tune = np.arange(len(X)) < N0 + 20
+    d = _data({"rev": X, "pixels": X[::-1].copy()}, GT, tune, seq_descriptors=["rev", "pixels"], fast_descriptors=["pixels"])
+    rows, knobs, best = greenloop_seq.tune(d)
+    assert len(rows) == 2 * 2 * 2 and set(knobs) == {"greenloop-seq", "greenloop-seq-fast"}
+    top = max(rows, key=lambda r: r["AUC-PR_tune_%"])
+    assert best["greenloop-seq"] == top["AUC-PR_tune_%"] and knobs["greenloop-seq"]["descriptor"] == top["descriptor"]
+    assert knobs["greenloop-seq-fast"]["descriptor"] == "pixels"
+    rows, knobs, best = single_frame.tune_names(d, ["rev"], ["rev"])      # whitening offered, fitted on the tuning frames
+    assert {r["whitening"] for r in rows} == {"none", "pca 4"} and list(d.cache["projections"]["rev"]) == ["none", "pca 4"]
+
+
+def test_entries_score_and_stream_are_the_stage_functions(revisit):
+    X, GT = revisit
+    d = _data({"cnn": X, "seqslam": X}, GT)
+    d.cache["projections"] = single_frame.projections({"cnn": X}, ["cnn"], None, [8])
+    single = {"descriptor": "cnn", "whitening": "pca 8", "seq_len": 1, "contrast_window": 4}
+    seq = {"descriptor": "cnn", "whitening": "none", "seq_len": 5, "contrast_window": 0}
+    slam = {"descriptor": "seqslam", "whitening": "none", "seq_len": 4, "contrast_window": 6}
+    S = single_frame.ENTRY.score(single, d)
+    assert np.array_equal(S, seqstream.score_matrix(X, EX, 1, (1.0,), 4, d.cache["projections"]["cnn"]["pca 8"]))
+    assert np.array_equal(greenloop_seq.score(seq, d), seqstream.score_matrix(X, EX, 5, (1.0,), 0))
+    assert np.array_equal(slam_entry.score(slam, d), seqslam_stream.score_matrix(X, EX, 3, 6))
+    det = slam_entry.stream(slam, float("nan"), d)
+    assert isinstance(det, seqslam_stream.Detector) and det.seq_len == 4 and det.threshold is None
+    det = single_frame.ENTRY.stream(single, 0.5, d)
+    assert det.threshold == 0.5 and det.projection is d.cache["projections"]["cnn"]["pca 8"]
+    for x in X:
+        det.update_descriptor(x)
+    assert det.bytes_per_frame == 8 * 4 + 4
+    assert np.allclose(det.last_scores, S[:len(X) - 1 - EX, -1], atol=1e-5)
+    with pytest.raises(ValueError, match="no whitening 'pca 3'"):
+        greenloop_seq.score(dict(single, whitening="pca 3"), d)
+
+
+def test_frame_describers_are_the_streams_descriptors():
+    f = np.random.default_rng(1).integers(0, 256, (48, 64, 3), dtype=np.uint8)
+    d = _data({}, np.zeros((2, 2), bool))
+    assert np.array_equal(slam_entry.describer({}, d)(f), seqslam.describe_frames([f])[0])
+    k = {"descriptor": "pixels-patchnorm"}
+    assert np.array_equal(greenloop_seq.describer(k, d)(f), seqmatch.describe_frames([f], "pixels-patchnorm")[0])
+    assert greenloop_seq.describer({"descriptor": "pixels"}, d)(f).shape == (1024,)
+
+
+def test_the_named_default_is_untuned_and_keeps_its_fixed_threshold():
+    k = greenloop_seq.named_default()
+    assert k["descriptor"] == seqmatch.DEFAULT_KNOBS["descriptor"] and k["calibrate"] is True
+    X = np.random.default_rng(0).normal(size=(60, 16)).astype(np.float32)
+    d = _data({k["descriptor"]: X}, np.zeros((60, 60), bool), np.ones(60, bool))
+    assert greenloop_seq.tune_default(d) == ([], {seqmatch.DEFAULT_NAME: k}, {})
+    direct = seqstream.score_matrix(X, EX, k["seq_len"], tuple(k["velocities"]), 0, None, center_window=k["center_window"],
+                                   calibrate=True, repeat_cos=k["repeat_cos"])
+    assert np.array_equal(greenloop_seq.DEFAULT_ENTRY.score(k, d), direct)      # the record's knobs reach the detector
+    det = greenloop_seq.DEFAULT_ENTRY.stream(k, k["fixed_threshold"], d)
+    assert det.calibrate and det.velocities == tuple(float(v) for v in k["velocities"])
+    assert det.threshold == seqmatch.DEFAULT_THRESHOLD
+
+
+def _records(entry, X, GT):
+    """Every knob record an entry gives (tuned on the first half, and untuned), on X as its descriptor."""
+    d = _data({}, GT, np.arange(len(X)) < N0 + 20, seq_descriptors=["pixels"], fast_descriptors=["pixels"],
+              cnn_backbones=[], random_control="pixels")
+    names = {single_frame.ENTRY.name: "pixels", slam_entry.ENTRY.name: "seqslam",
+             seqmatch.DEFAULT_NAME: seqmatch.DEFAULT_KNOBS["descriptor"]}
+    d.descriptors.update({names.get(entry.name, "pixels"): X, "sift_bovw": X})
+    return d, entry.tune(d)[1]
+
+
+def _clear_threshold(S, exclude: int, first: int) -> float:
+    """A threshold between two query maxima of S (queries first..N-1) with the widest gap among
+    the middle half of them: no score lies near it, so float rounding (a matrix product against a
+    stream's matrix-vector products) cannot flip a decision, and some queries but not all fire."""
+    m = np.sort([S[:j - exclude, j].max() for j in range(max(first, exclude + 1), len(S))])
+    lo, hi = len(m) // 4, max(3 * len(m) // 4, len(m) // 4 + 1)
+    k = lo + int(np.argmax(np.diff(m)[lo:hi]))
+    return float((m[k] + m[k + 1]) / 2)
+
+
+@pytest.mark.parametrize("entry", SCORED, ids=[e.name for e in SCORED])
+def test_every_registered_stream_declares_what_its_matrix_does(entry, revisit):
+    """Stream the revisit through each record's streaming detector at a threshold that fires on
+    the revisit and compare its events with the thresholded score matrix (seqstream.stream_check);
+    a matrix of another record fails the same check."""
+    X, GT = revisit
+    d, knobs = _records(entry, X, GT)
+    assert knobs
+    for name, k in knobs.items():
+        S = entry.score(k, d)
+        thr = _clear_threshold(S, EX, N0)
+        c = seqstream.stream_check(entry.stream(k, thr, d), d.descriptors[k["descriptor"]], S, GT)
+        assert c["equal"] and c["events"] > 0 and c["correct_events"] > 0, (name, c)
+        shifted = np.roll(S, 7, axis=1)
+        assert not seqstream.stream_check(entry.stream(k, thr, d), d.descriptors[k["descriptor"]], shifted, GT)["equal"]
+
+
+def _example():
+    """The 'Adding a detector' code block of docs/ARCHITECTURE.md, run: its module namespace."""
+    text = (ROOT / "docs" / "ARCHITECTURE.md").read_text()
+    section = text[text.index("## Adding a detector"):]
+    code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
+    assert len([line for line in code.splitlines() if line.strip()]) <= 10
+    namespace = {}
+    exec(compile(code, "ARCHITECTURE.md", "exec"), namespace)
+    return namespace
+
+
+def _walk_folder(folder: Path) -> Path:
+    """40 smooth random colour frames, then frames 0..19 again with noise (rgb/, 60 .png) and
+    their loops as ground_truth.csv (i, 40 + i, tolerance 1)."""
+    rng = np.random.default_rng(0)
+    base = [cv2.GaussianBlur(rng.integers(0, 256, (48, 64, 3), dtype=np.uint8), (9, 9), 3) for _ in range(40)]
+    frames = base + [np.clip(f.astype(int) + rng.integers(-4, 5, f.shape), 0, 255).astype(np.uint8) for f in base[:20]]
+    (folder / "rgb").mkdir(parents=True)
+    for i, f in enumerate(frames):
+        cv2.imwrite(str(folder / "rgb" / f"{i}.png"), f)
+    (folder / "ground_truth.csv").write_text("i,j,tolerance\n" + "".join(f"{i},{40 + i},1\n" for i in range(20)))
+    return folder
+
+
+def test_the_documented_example_appears_on_the_leaderboard_and_in_detect(tmp_path, monkeypatch, capsys):
+    ns = _example()
+    entry = ns["ENTRY"]
+    for name in [n for n in registry.REGISTRY if n != "seqslam"]:              # keep the run to seconds
+        monkeypatch.delitem(registry.REGISTRY, name)
+    monkeypatch.setitem(registry.REGISTRY, entry.name, entry)
+    folder = _walk_folder(tmp_path / "walk")
+    params = dict(seq_lens=[3], contrast_windows=[0, 4], velocities=[1.0], threshold_rule="f1", fps_frames=5,
+                  timing_repeats=3)
+    data, split = experiment.prepare(folder, 1, 0.5, 10, 0.5, None, params)
+    tuned = experiment.tune(data)
+    timed = experiment.stream_and_time(data, tuned, experiment.decide(data))
+    board = experiment.board(data, split, tuned, timed).board.set_index("method")
+    row = board.loc["hue-histogram (single frame)"]
+    assert np.isfinite(row[["R@1_%", "R@5_%", "AUC-PR_%", "R@100P_%", "R@95P_%"]].astype(float)).all()
+    assert row["bytes_per_stored_frame"] == 32 * 4 + 4 and row["fps_min"] > 0
+    assert (tuned.rows.descriptor == "hue-histogram").sum() == 2                   # its contrast windows, tuned
+    S = tuned.S["hue-histogram (single frame)"]
+    X = np.stack([ns["hue_histogram"](cv2.imread(str(folder / "rgb" / f"{i}.png"))) for i in range(60)])
+    assert np.array_equal(S, seqstream.score_matrix(X, data.exclude, 1, (1.0,), tuned.knobs[row.name]["contrast_window"]))
+
+    from greenloop.__main__ import main
+    assert main(["detect", str(folder), "--method", "hue-histogram", "--threshold", "0.99", "--exclude", "10"]) == 0
+    out = capsys.readouterr().out
+    events = [line.split("\t") for line in out.splitlines() if line[:1].isdigit()]
+    det = entry.stream(entry.cli_knobs, 0.99, data)
+    expected = [e for e in (det.update_descriptor(x) for x in X) if e]
+    assert events and [(int(e[0]), int(e[1])) for e in events] == [(e["frame"], e["match"]) for e in expected]
+    assert "60 frames" in out and main(["detect", str(folder), "--method", "hue-histogram"]) == 2   # no threshold
+
+
+def test_the_dictionary_decides_and_has_no_score():
+    e = registry.REGISTRY["dictionary"]
+    assert e.score is None and e.decide is dictionary.decide and e.tune(None) == ([], {}, {})
+    assert dictionary.label(10, 70) == "main paper: CNN + dictionary, tau = L + 10 = 70"
+
+
+
+STREAMED = [e for e in registry.ENTRIES if e.stream is not None and e.cli_knobs is not None]
+
+
+@pytest.mark.parametrize("entry", STREAMED, ids=[e.name for e in STREAMED])
+def test_detect_method_streams_what_the_entrys_matrix_declares(entry, tmp_path, capsys):
+    """`detect --method NAME` on a folder: the closures it prints fall on exactly the queries where
+    the entry's score matrix of its CLI knobs (on the describer's descriptors of the same frames)
+    reaches the threshold."""
+    from greenloop.__main__ import main
+    folder = _walk_folder(tmp_path / "walk")
+    k = entry.cli_knobs
+    d = _data({}, np.zeros((60, 60), bool), velocities=seqmatch.DEFAULT_VELOCITIES, weights="auto")._replace(exclude=10)
+    describe = entry.describer(k, d)
+    X = np.stack([describe(cv2.imread(str(folder / "rgb" / f"{i}.png"))) for i in range(60)])
+    d.descriptors[k["descriptor"]] = X
+    S = entry.score(k, d)
+    thr = _clear_threshold(S, 10, 40)
+    expected = seqmatch.matrix_events(S, thr, 10, 60)
+    assert main(["detect", str(folder), "--method", entry.name, "--threshold", repr(thr), "--exclude", "10"]) == 0
+    out = capsys.readouterr().out
+    assert expected and [int(line.split("\t")[0]) for line in out.splitlines() if line[:1].isdigit()] == expected

@@ -1,0 +1,142 @@
+"""Notebook 10's protocol (greenloop.experiments.siamese_rgbd): every table equals the stage
+functions it composes, scored on the held-out part only; nothing is named best with one seed."""
+import matplotlib
+import numpy as np
+import pytest
+
+from greenloop import evaluate, features, groundtruth, siamese as sm
+from greenloop.experiments import siamese_rgbd as sr
+
+matplotlib.use("Agg")
+W = 0.25            # small networks: the tests check structure and numbers, not accuracy
+STEP = 2            # every 2nd frame of the tests' 200-frame sequence: 100 frames
+
+
+def _loop_gt(n=120, shift=90, length=30):
+    """Frames shift .. shift+length-1 revisit frames 0 .. length-1 (i <-> i + shift)."""
+    gt = np.zeros((n, n), bool)
+    i = np.arange(length)
+    gt[i, i + shift] = gt[i + shift, i] = True
+    return gt
+
+
+def test_score_descriptors_ranks_by_l2_distance():
+    F = np.array([[0.0], [10.0], [20.0], [0.1], [10.1], [25.0]])
+    gt = np.zeros((6, 6), bool)
+    gt[0, 3] = gt[3, 0] = gt[1, 4] = gt[4, 1] = True        # the two closest far pairs are the loops
+    S, ap, r100 = sr.score_descriptors(F, gt, 1)
+    assert S[0, 3] == pytest.approx(1 - 0.1 / 25) and (ap, r100) == (100.0, 100.0)
+    F[5] = 0.05                                # (0, 5) and (3, 5) now rank first, tied, and are no loops
+    _, ap, r100 = sr.score_descriptors(F, gt, 1)
+    assert ap == pytest.approx(100 * 2 / 4) and r100 == 0.0    # both loops come in at precision 2 / 4
+
+
+def test_fit_and_score_row_and_the_references(tmp_path):
+    gt, gap = _loop_gt(), 5
+    train, held = evaluate.split_mask(120, 0.5, gt=gt, gap=gap)
+    labels = sm.place_labels(train, gt, 20)
+    X = np.random.default_rng(0).random((120, 32, 32, 3)).astype(np.float32)
+    kw = dict(seed=0, epochs=1, n_pairs=20, batch_size=10, width=W, cache=tmp_path)
+    row, S, model, hist = sr.fit_and_score("scnn softmax, RGB", X, labels, held, gap, gt, 0, kw, supervision="softmax")
+    assert row["descriptor"] == "scnn softmax, RGB" and row["label"] == "scnn softmax, RGB (trained here)"
+    assert (row["supervision"], row["fusion"], row["layer"], row["train_pairs"], row["epochs"]) == ("softmax", "none", "", 20, 1)
+    _, ap, r100 = sr.score_descriptors(sm.describe(model, X), gt, 0, held)
+    # unrounded: the row holds the scores themselves
+    assert S.shape == (120, 120) and row["AP_%"] == ap and row["R@100P_%"] == r100 and row["train_s"] == hist["seconds"]
+    assert not row["loaded_from_cache"]
+    again, *_ = sr.fit_and_score("scnn softmax, RGB", X, labels, held, gap, gt, 0, kw, supervision="softmax")
+    assert again["loaded_from_cache"] and again["AP_%"] == row["AP_%"]
+    rows, sims = sr.reference_scores(X, gt, 0, held, seed=0, width=W)
+    assert [r["descriptor"] for r in rows] == ["scnn untrained, RGB", "pixels (32x32 gray)"] and list(sims) == ["untrained", "pixels"]
+    assert list(rows[0]) == list(row) and rows[0]["weights"] == "random init" and rows[0]["train_pairs"] == 0
+    _, ap, _ = sr.score_descriptors(features.extract(np.rint(X * 255).astype(np.uint8), "pixels", progress=False), gt, 0, held)
+    assert rows[1]["AP_%"] == ap
+
+
+@pytest.fixture(scope="module")
+def setup(tiny_sequence):
+    return sr.setup(tiny_sequence, STEP, 20, 0.5, 20, 0.5, 5, 32, 10.0)
+
+
+def test_setup_composes_the_stage_functions(setup, tiny_sequence):
+    s = setup
+    frames, ex, GT, summary = groundtruth.described_frames(tiny_sequence, STEP, 0.5, 20)
+    assert np.array_equal(s.frames, frames) and s.ex == ex == 10 and np.array_equal(s.GT, GT)
+    assert (s.gap, s.L) == (5 // STEP, 20 // STEP)                      # ORIGINAL frames in steps
+    train, held, note = sm.training_split(len(frames), 0.5, GT, s.gap, s.L, frames)
+    assert np.array_equal(s.train, train) and np.array_equal(s.held, held) and s.split_note == note
+    assert np.array_equal(s.labels, sm.place_labels(train, GT, s.L)) and (s.labels[~train] == -1).all()
+    assert s.has_depth and s.X.shape == (100, 32, 32, 4)
+    assert np.array_equal(s.X, sm.load_inputs(tiny_sequence, (32, 32), step=STEP, depth=True, max_depth=10.0))
+    assert s.chance == evaluate.chance_level(GT, ex, queries=held)
+    assert summary in s.text and f"chance AP on the held-out part: {100 * s.chance:.2f} %" in s.text
+
+
+@pytest.fixture(scope="module")
+def trained(setup, tmp_path_factory):
+    """One supervision and the four fusions (one mid-level layer), one epoch of 20 pairs each."""
+    kw = dict(seed=0, epochs=1, n_pairs=20, batch_size=10, width=W, cache=tmp_path_factory.mktemp("models"))
+    sup = sr.supervisions(setup, ["softmax"], kw)
+    fus = sr.fusions(setup, sup, "softmax", ["conv2"], "sum", kw)
+    return sup, fus
+
+
+def test_supervisions_table_is_each_network_scored_on_the_heldout_part(setup, trained):
+    s, (sup, _) = setup, trained
+    t = sup.table
+    assert t.descriptor.tolist() == ["scnn softmax, RGB", "scnn untrained, RGB", "pixels (32x32 gray)"]
+    assert t.weights.tolist() == ["trained here", "random init", "none"] and list(sup.sims) == ["softmax", "untrained", "pixels"]
+    _, ap, r100 = sr.score_descriptors(sm.describe(sup.models["softmax"], s.X[..., :3]), s.GT, s.ex, s.held)
+    assert t.loc[0, "AP_%"] == ap and t.loc[0, "R@100P_%"] == r100 and t.loc[0, "train_pairs"] == 20
+    assert [name for name, *_ in sup.trained] == ["scnn softmax, RGB"] and list(sup.hists) == ["softmax"]
+
+
+def test_fusions_table_rgb_only_each_fusion_and_each_late_stream(setup, trained):
+    s, (sup, fus) = setup, trained
+    t = fus.table
+    assert t.fusion.tolist() == ["RGB only", "early", "mid", "late", "late (rgb stream)", "late (depth stream)"]
+    assert t.layer.tolist()[2] == "conv2" and t.descriptor.tolist()[0] == "RGB only (softmax)"
+    rgb = t.iloc[0].drop(["descriptor", "fusion"])
+    assert rgb.equals(sup.table.iloc[0].drop(["descriptor", "fusion"]))          # the softmax RGB row, unchanged
+    for stream in ("rgb", "depth"):
+        _, ap, r100 = sr.score_descriptors(sm.describe(fus.models["late"], s.X, stream=stream), s.GT, s.ex, s.held)
+        row = t[t.fusion == f"late ({stream} stream)"].iloc[0]
+        assert row["AP_%"] == ap and row["R@100P_%"] == r100 and row.label == f"scnn late fusion, {stream} stream alone (trained here)"
+    _, ap, _ = sr.score_descriptors(sm.describe(fus.models["mid conv2"], s.X), s.GT, s.ex, s.held)
+    assert t.loc[2, "AP_%"] == ap
+    assert [n for n, *_ in fus.trained] == ["scnn early fusion", "scnn mid-level fusion at conv2", "scnn late fusion"]
+    skipped = sr.fusions(s._replace(has_depth=False), sup, "softmax", ["conv2"], "sum", {})
+    assert skipped.table.status.str.startswith("skipped").all() and len(skipped.table) == 3 and not skipped.trained
+
+
+def test_timing_paper_vs_run_and_summary(setup, trained, tiny_sequence):
+    s, (sup, fus) = setup, trained
+    tim, n_native = sr.timing(s, sup, fus, tiny_sequence, "softmax", ["conv2"], 4)
+    assert tim.descriptor.tolist() == ["scnn softmax, RGB", "scnn early fusion", "scnn mid-level fusion at conv2",
+                                       "scnn late fusion", "sift_bovw (SIFT + 500-word quantisation)"]
+    assert (tim.s_per_image_batched > 0).all() and (tim.s_per_image_one_at_a_time > 0).all() and n_native == 64
+    cmp, t2, t3 = sr.paper_vs_run(s, sup, fus, tim, ["softmax"], ["conv2"], "sum", tiny_sequence)
+    run = cmp.set_index("quantity")["this run"]
+    for q in ("best supervision", "best mid-level layer (Table 2)", "best fusion"):
+        assert run[q] == sr.UNRESOLVED
+    ap = sup.table.set_index("descriptor")["AP_%"]
+    assert run["AP of each supervision, RGB (%)"] == f"softmax {ap['scnn softmax, RGB']:.2f}"
+    p = evaluate.precision_at_recall(fus.sims["late"], s.GT, 0.82, s.ex, queries=s.held)
+    assert run["precision at 82 % recall, late fusion"] == f"{p:.3f}"
+    assert t2["this run"].tolist() == [round(fus.table.loc[2, "AP_%"] / 100, 4)] and t2.paper.tolist() == [0.8111]
+    assert len(t3) == len(tim) + 3
+    summary = sr.summary(s, sup.table, fus.table, tim, STEP, sup.trained + fus.trained)
+    assert summary["networks_trained"] == 4 and summary["labelled_frames_near_heldout"] == 0
+    assert summary["last_train_frame"] < summary["first_heldout_frame"] and summary["frames"] == 100
+    assert summary["training_seconds_total"] == pytest.approx(sum(t[1] for t in sup.trained + fus.trained))
+
+
+def test_figures_draw_every_curve(setup, trained, tiny_sequence):
+    s, (sup, fus) = setup, trained
+    fig = sr.figure_supervisions(s, sup, ["softmax"], tiny_sequence)
+    assert len(fig.axes[0].lines) == 1 + 2 + 1                      # softmax, untrained, pixels, chance
+    fig, name = sr.figure_fusions(s, fus, ["conv2"], "sum", "softmax", tiny_sequence)
+    assert name == "figure9_fusions" and len(fig.axes[0].lines) == 5 + 1 and len(fig.axes[1].lines) == 1 + 1
+    assert sr.figure_fusions(s._replace(has_depth=False), fus, ["conv2"], "sum", "softmax", tiny_sequence)[1] == "figure9_skipped"
+    fig = sr.figure_training_loss(sup, fus, "softmax", True)
+    assert [len(ax.lines) for ax in fig.axes] == [1, 3]
