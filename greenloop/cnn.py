@@ -11,7 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from greenloop.util import kernels
+from greenloop.util import numba_kernels as kernels
+from greenloop.util.threads import run_slices
 from greenloop.util.cache import cache_key, cached_model
 from greenloop.util.checks import positive_int
 from greenloop.util.progress import bar as tqdm   # in the terminal, never in a notebook
@@ -147,7 +148,7 @@ def train(X: np.ndarray, y: np.ndarray, seed: int, epochs: int = 200, batch_size
         "xla": ``model.fit`` with the train step compiled by XLA and one call per epoch
         (steps_per_execution), the fast path on an accelerator or without numba;
         "fused": gradients written out (``_fit_fused``: numba kernels and single-threaded BLAS
-        split over the cores by ``greenloop.util.kernels``), the fastest on a CPU;
+        split over the cores by ``greenloop.util.numba_kernels``), the fastest on a CPU;
         "auto": "fused" when numba is installed and Keras sees no GPU, else "xla".
         Every trainer visits the frames in ``model.fit``'s order (``fit_orders``). The trainer is
         part of the cache key.
@@ -253,7 +254,7 @@ def fit_orders(n: int, batch_size: int):
     the epoch's dataset is iterated, so a seeded ``model.fit`` (Keras 3.15, TF 2.21) visits the
     frames in the same order in every epoch (unseeded, a new one each epoch); on the JAX backend
     it draws a new ``np.random.permutation`` each epoch (followed from Keras's source; only the
-    TensorFlow backend is tested here). tests/test_kernels.py checks the orders against
+    TensorFlow backend is tested here). tests/test_numba_kernels.py checks the orders against
     ``model.fit`` itself."""
     import keras
 
@@ -363,7 +364,7 @@ def _fit_fused(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size
     The weights start from the seeded ``build`` model (Keras's own initialisers) and are written
     back into it at the end, so the model returned and cached is the ordinary Keras model.
     The batches are those ``model.fit`` would draw (``fit_orders``), so each seed takes the same
-    steps as under ``model.fit``, up to float rounding; tests/test_kernels.py checks the weights
+    steps as under ``model.fit``, up to float rounding; tests/test_numba_kernels.py checks the weights
     against ``model.fit``'s. Same history keys as ``model.fit``."""
     import keras
     from threadpoolctl import threadpool_limits
@@ -384,7 +385,7 @@ def _fit_fused(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size
     epoch_seconds = []
     t0 = time.perf_counter()
     bar = tqdm(total=epochs, desc=f"train seed {seed} ({split})", unit="epoch", leave=False, disable=not progress)
-    # one BLAS thread per call: kernels.run_slices spreads the work over the cores itself
+    # one BLAS thread per call: run_slices spreads the work over the cores itself
     with threadpool_limits(limits=1, user_api="blas"):
         for _ in range(epochs):
             t_epoch = time.perf_counter()

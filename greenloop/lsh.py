@@ -48,9 +48,9 @@ from functools import lru_cache
 import numpy as np
 
 from greenloop.similarity import l2_normalise
-from greenloop.util import kernels
+from greenloop.util import numba_kernels
 from greenloop.util.checks import positive_int
-from greenloop.util.kernels import one_blas_thread
+from greenloop.util.threads import one_blas_thread
 
 __all__ = [
     "MAX_BITS", "METHODS", "hyperplanes", "codes", "hamming_masks", "probe_order_swp", "qdp_costs",
@@ -196,7 +196,7 @@ def _heap_compiled():
     """The same heap compiled with numba (arrays instead of tuples; the pop order is that of
     the tuples (score, largest position, set), a strict total order, so it is identical), or
     None without numba. Compiled and run once here, so no timed query pays the compilation."""
-    if not kernels.available():
+    if not numba_kernels.available():
         return None
     from numba import njit
 

@@ -51,7 +51,7 @@ __all__ = ["KINDS", "EXACT", "make_index", "stream_search", "one_thread", "topk"
 
 def one_thread() -> None:
     """faiss on one OpenMP thread (per-query latency on a shared machine; BLAS callers use
-    ``greenloop.util.kernels.one_blas_thread``)."""
+    ``greenloop.util.threads.one_blas_thread``)."""
     faiss.omp_set_num_threads(1)
 
 

@@ -169,7 +169,7 @@ def test_forward_is_the_keras_model_and_one_conv_with_or_without_numba():
     im2col conv used without numba equals the numba kernel; other architectures get no weights."""
     import keras
 
-    from greenloop.util import kernels
+    from greenloop.util import numba_kernels as kernels
     keras.utils.set_random_seed(3)
     model = cnn.build(5, (10, 12, 1), jit_compile=False)
     X = np.random.default_rng(0).random((7, 10, 12, 1), dtype=np.float32)

@@ -1,4 +1,4 @@
-"""greenloop.util.kernels against the libraries they replace, and the fused trainer against model.fit."""
+"""greenloop.util.numba_kernels and threads against the libraries they replace, and the fused trainer against model.fit."""
 import cv2
 import numpy as np
 import pytest
@@ -8,7 +8,8 @@ keras = pytest.importorskip("keras")
 
 from greenloop import cnn  # noqa: E402
 from greenloop.datasets import sequence  # noqa: E402
-from greenloop.util import kernels  # noqa: E402
+from greenloop.util import numba_kernels as kernels  # noqa: E402
+from greenloop.util import threads  # noqa: E402
 from test_cnn import _toy  # noqa: E402  (the toy frames of the CNN tests)
 
 
@@ -109,7 +110,7 @@ def test_run_chunked_covers_the_range_and_raises():
     def work(idx):
         seen[idx] += 1
 
-    kernels.run_chunked(work, 50)
+    threads.run_chunked(work, 50)
     assert (seen == 1).all()
 
     def boom(idx):
@@ -117,7 +118,7 @@ def test_run_chunked_covers_the_range_and_raises():
             raise RuntimeError("chunk failed")
 
     with pytest.raises(RuntimeError, match="chunk failed"):
-        kernels.run_chunked(boom, 50)
+        threads.run_chunked(boom, 50)
 
 
 def test_fused_trainer_follows_model_fit():
@@ -194,12 +195,10 @@ def test_fused_trainer_matches_model_fit(n, L, epochs):
 def test_one_blas_thread_limits_numpys_blas_inside_only():
     from threadpoolctl import threadpool_info
 
-    from greenloop.util import kernels
-
     def blas_threads():
         return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
 
     before = blas_threads()
-    with kernels.one_blas_thread():
+    with threads.one_blas_thread():
         assert blas_threads() and set(blas_threads()) == {1}
     assert blas_threads() == before

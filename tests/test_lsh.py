@@ -130,7 +130,7 @@ def test_perturbation_sets_are_exactly_the_cheapest_subsets():
 
 
 def test_compiled_heap_gives_the_python_heaps_sets_in_the_same_order():
-    from greenloop.util import kernels
+    from greenloop.util import numba_kernels as kernels
     if not kernels.available():
         pytest.skip("numba is not installed: only the Python heap runs")
     rng = np.random.default_rng(6)

@@ -62,7 +62,7 @@ from scipy.spatial.transform import Rotation
 import yaml
 
 from greenloop.datasets import groundtruth_formats as gt_formats
-from greenloop.util import kernels
+from greenloop.util import numba_kernels
 from greenloop.util.checks import positive_int
 from greenloop.util.progress import bar as tqdm  # in the terminal, never in a notebook
 
@@ -145,8 +145,8 @@ def preprocess_image(img: np.ndarray, size=(32, 32), gray: bool = True, color: s
         h, w = img.shape[:2]
         if (w, h) != (int(size[0]), int(size[1])):
             # integer shrink factors of a gray frame (640x480 -> 32x32): the same bytes as
-            # cv2.resize(INTER_AREA), without OpenCV's scalar loop (greenloop.util.kernels.area_shrink)
-            small = kernels.area_shrink(img, size) if w > size[0] else None
+            # cv2.resize(INTER_AREA), without OpenCV's scalar loop (greenloop.util.numba_kernels.area_shrink)
+            small = numba_kernels.area_shrink(img, size) if w > size[0] else None
             if small is not None:
                 return small
             interp = cv2.INTER_AREA if w > size[0] else cv2.INTER_LINEAR

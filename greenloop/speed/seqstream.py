@@ -20,7 +20,7 @@ from greenloop.seqmatch import (_EPS, COLORS, DEFAULT_VELOCITIES, STORE_DTYPES, 
                                 calibrate_scores, center, columns_to_scores, contrast_normalise,
                                 describe_frames, matrix_events, normalise, threshold_range)
 from greenloop.util.checks import positive_int
-from greenloop.util.kernels import one_blas_thread
+from greenloop.util.threads import one_blas_thread
 
 __all__ = ["Detector", "score_matrix", "tune_knobs", "stream_matches_matrix", "stream_check"]
 

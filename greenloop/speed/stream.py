@@ -33,11 +33,11 @@ and by ``python -m greenloop.speed.bench`` on every frame of the dataset)
 Why "auto" picks TFLite: in ``python -m greenloop.speed.bench`` (reference and candidates interleaved in
 one process; the figures are in results/bench/bench.md) TFLite has the lowest window and
 single-frame times of the backends that give Keras's labels on every frame; NumPy is the
-dependency-free fallback. A numba forward pass (the training kernels of ``greenloop.util.kernels``, with
+dependency-free fallback. A numba forward pass (the training kernels of ``greenloop.util.numba_kernels``, with
 the dense layer skipping the ReLU's zero rows) was no faster than TFLite and is not offered. Costs no
 backend removes: the 28800 x 68 dense layer means reading a 7.8 MB weight matrix per forward pass
 (2.2 MFLOP/frame), and the exact preprocessing of a 640x480 BGR frame must read its 921,600 bytes
-(cvtColor). The 20x15 area shrink after it runs in ``greenloop.util.kernels.area_shrink`` (the same bytes
+(cvtColor). The 20x15 area shrink after it runs in ``greenloop.util.numba_kernels.area_shrink`` (the same bytes
 as OpenCV, whose loop for this factor is scalar). The bench's floor row (one cvtColor pass over the window's frames on
 all cores) bounds the window speed-up of any pipeline that converts colour with OpenCV. NumPy's
 BLAS runs on one thread inside these calls (``kernels.one_blas_thread``): on a loaded 2-core machine a
@@ -58,7 +58,7 @@ from greenloop.datasets.sequence import preprocess_image
 from greenloop.dictionary import LoopDetector
 from greenloop.util.checks import positive_int
 from greenloop.util.files import write_atomic
-from greenloop.util.kernels import one_blas_thread, run_chunked
+from greenloop.util.threads import one_blas_thread, run_chunked
 
 BACKENDS = ("auto", "numpy", "tflite", "keras")
 COLORS = ("bgr", "rgb")

@@ -1,13 +1,11 @@
-"""The CPU speed paths' building blocks: a thread helper and small numba kernels.
+"""numba kernels: the fused CNN trainer's arithmetic, and the area shrink of the paper's preprocessing.
 
-* ``run_chunked``: split a range over a few threads (BLAS calls, OpenCV and the numba kernels
-  here release the GIL). One mechanism for every parallel loop of greenloop's speed paths, so no
-  second thread pool (OpenBLAS's, numba's) spins on a core that another one needs (a
-  multi-threaded OpenBLAS call next to a numba ``prange`` slows both down).
 * ``conv_relu`` / ``conv_grad``: the paper CNN's 3x3 convolution (valid, stride 1, one input
   channel) forward with its ReLU, and its kernel and bias gradients.
 * ``adam``: Keras's Adam update of one float32 array, in place, in one pass over memory, with
   its moments flushed to zero below float32's smallest normal number, as TensorFlow's FTZ does.
+* ``dense_backward_adam`` / ``matmul``: the dense layer's backward pass with its Adam update, and
+  A @ W split over the worker threads (``greenloop.util.threads``).
 * ``area_shrink``: OpenCV's INTER_AREA shrink of a gray uint8 image by integer factors (the
   main paper's 640x480 -> 32x32 is 20 x 15), bit-identical to ``cv2.resize`` and faster than
   it (OpenCV runs a scalar loop for factors other than 2); ``greenloop.datasets.sequence.preprocess_image``
@@ -20,14 +18,11 @@ on disk next to this file (numba's ``cache=True``).
 """
 from __future__ import annotations
 
-import contextlib
 import functools
-import os
 
 import numpy as np
 
-WORKERS = max(1, min(4, os.cpu_count() or 1))
-
+from greenloop.util.threads import run_slices, split_rows
 
 @functools.lru_cache(maxsize=1)
 def available() -> bool:
@@ -37,41 +32,6 @@ def available() -> bool:
     except Exception:  # pragma: no cover - depends on the install
         return False
     return True
-
-
-# ---------------------------------------------------------------------------------------------
-# threads
-# ---------------------------------------------------------------------------------------------
-@functools.lru_cache(maxsize=1)
-def _pool():
-    """Helper threads, made once per process (the calling thread takes a chunk too)."""
-    from concurrent.futures import ThreadPoolExecutor
-    return ThreadPoolExecutor(max(1, WORKERS - 1), thread_name_prefix="greenloop")
-
-
-def split_rows(n: int) -> list[slice]:
-    """range(n) cut into ``WORKERS`` (at most n) contiguous slices of nearly equal size."""
-    edges = np.linspace(0, n, max(1, min(WORKERS, n)) + 1).round().astype(int)
-    return [slice(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
-
-
-def run_slices(work, slices) -> None:
-    """Call ``work(k, s)`` for the k-th slice s of ``slices``, in parallel threads (the caller
-    takes the last). Exceptions propagate."""
-    slices = list(slices)
-    futures = [_pool().submit(work, k, s) for k, s in enumerate(slices[:-1])]
-    if slices:
-        work(len(slices) - 1, slices[-1])
-    for f in futures:
-        f.result()
-
-
-def run_chunked(work, n: int, min_parallel: int = 8) -> None:
-    """Call ``work(indices)`` on contiguous chunks of range(n) (numpy int arrays), one chunk per
-    thread (``run_slices``); inline when n < min_parallel. Exceptions raised by ``work``
-    propagate."""
-    idx = np.arange(n)
-    run_slices(lambda k, s: work(idx[s]), split_rows(n) if n >= min_parallel else [slice(None)])
 
 
 # ---------------------------------------------------------------------------------------------
@@ -328,29 +288,9 @@ def _checked_area(shape):
     img = np.random.default_rng(0).integers(0, 256, (h, w), dtype=np.uint8)
     ours = fn(img, h // oh, w // ow, np.empty((oh, ow), np.uint8))
     if not np.array_equal(ours, cv2.resize(img, (ow, oh), interpolation=cv2.INTER_AREA)):
-        warnings.warn(f"greenloop.util.kernels.area_shrink differs from cv2.resize on {w}x{h} -> {ow}x{oh}; "
+        warnings.warn(f"greenloop.util.numba_kernels.area_shrink differs from cv2.resize on {w}x{h} -> {ow}x{oh}; "
                       f"using OpenCV", RuntimeWarning, stacklevel=3)
         return None
     return fn
 
 
-@functools.lru_cache(maxsize=1)
-def _blas_controller():
-    try:
-        from threadpoolctl import ThreadpoolController
-        return ThreadpoolController().select(user_api="blas")
-    except Exception:  # threadpoolctl absent or broken: keep BLAS as it is
-        return None
-
-
-def one_blas_thread():
-    """A context manager that runs NumPy's BLAS on one thread (threadpoolctl), or a no-op when
-    threadpoolctl is missing: the one BLAS limit of the streaming detectors and the LSH timings.
-
-    On a shared 2-core machine a 2-thread OpenBLAS matmul waits at its barrier whenever one thread
-    is preempted, which makes per-frame latencies long-tailed; one thread is also what one robot
-    core would give. The BLAS libraries are looked up once per process.
-    (cnn._fit_fused keeps its own ``threadpool_limits(limits=1)`` around training.)
-    """
-    blas = _blas_controller()
-    return contextlib.nullcontext() if blas is None else blas.limit(limits=1)
