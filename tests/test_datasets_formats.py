@@ -47,7 +47,7 @@ def test_traversal_folders_read_as_one_stream_in_the_stated_order(tmp_path):
     assert sequence.traversals(f) == [("night", 0, 4), ("day", 4, 8)]
     assert sequence.traversal_index(f).tolist() == [0, 0, 0, 0, 1, 1, 1, 1]
     assert sequence.reference_frames(f).tolist() == [True] * 4 + [False] * 4
-    info = sequence.describe(f)
+    info = sequence.folder_info(f)
     assert (info["layout"], info["n_frames"], info["ground_truth"]) == ("traversals", 8, "pairs")
     assert info["traversals"] == "night 0-3, day 4-7"
     assert sequence.load_frames(f, size=None).shape == (8, 8, 16, 1)
@@ -344,7 +344,7 @@ def test_gardenspoint_builder_on_the_real_source(tmp_path):
     if not (REAL_GP / "night_right").is_dir():
         pytest.skip(f"Gardens Point not found at {REAL_GP}")
     out = gardenspoint.build(tmp_path / "gp", REAL_GP, progress=False)
-    info = sequence.describe(out)
+    info = sequence.folder_info(out)
     assert (info["n_frames"], info["width"], info["height"]) == (600, 640, 360)
     assert {cv2.imread(str(p)).shape for p in sequence.list_frames(out)[::37]} == {(360, 640, 3)}
     gt = groundtruth.for_sequence(out)                        # the default exclude of 150 keeps every loop

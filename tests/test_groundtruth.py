@@ -84,7 +84,7 @@ def test_pairs_tolerance_symmetry_and_exclusion(tmp_path):
     assert not gt[1, 30] and not gt[3, 30]
     # the file's pairs are what sequence.read_loop_pairs returns, tolerance 0 where absent
     assert sequence.read_loop_pairs(folder).tolist() == [[2, 30, 1], [5, 20, 0], [10, 12, 0]]
-    assert sequence.describe(folder)["ground_truth"] == "pairs"
+    assert sequence.folder_info(folder)["ground_truth"] == "pairs"
     assert "3 rows, tolerance 0-1 frames" in groundtruth.definition(folder, exclude=5)
 
 
@@ -116,7 +116,7 @@ def test_poses_come_first_and_match_loop_matrix(tmp_path):
     gt = groundtruth.for_sequence(folder, frames=frames, threshold=0.05, exclude=10)
     ref = groundtruth.loop_matrix(P[frames], threshold=0.05, exclude=10 // 3)
     assert gt.any() and (gt == ref).all()      # same as the step-wise exclusion for a uniform step
-    assert sequence.describe(folder)["ground_truth"] == "poses"
+    assert sequence.folder_info(folder)["ground_truth"] == "poses"
     assert groundtruth.definition(folder, 0.05, 10).startswith("Qi 2024 Eq. 5")
 
 
@@ -155,7 +155,7 @@ def test_bad_arguments_and_no_ground_truth(tmp_path):
     with pytest.raises(groundtruth.NoGroundTruthError, match="add CameraTrajectory.txt .* or ground_truth.csv"):
         groundtruth.for_sequence(bare)
     assert issubclass(groundtruth.NoGroundTruthError, FileNotFoundError)
-    assert sequence.describe(bare)["ground_truth"] is None
+    assert sequence.folder_info(bare)["ground_truth"] is None
 
 
 def test_write_loop_pairs_round_trip(tmp_path):
@@ -167,7 +167,7 @@ def test_write_loop_pairs_round_trip(tmp_path):
 
 
 def test_pair_file_reproduces_the_pose_ground_truth(tiny_sequence, tiny_pairs_sequence):
-    info = sequence.describe(tiny_pairs_sequence)
+    info = sequence.folder_info(tiny_pairs_sequence)
     assert info["ground_truth"] == "pairs" and not info["trajectory"] and not info["depth"]
     pairs = sequence.read_loop_pairs(tiny_pairs_sequence)
     assert (pairs[:, 2] > 0).any(), "the fixture should exercise tolerances"

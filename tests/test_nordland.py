@@ -48,7 +48,7 @@ def test_build_order_ground_truth_and_metadata(tmp_path):
     assert meta["frames_per_season"] == n and meta["n_frames"] == 2 * n
     assert meta["traversals"] == {"summer": [0, n], "winter": [n, 2 * n]}
     assert meta["ground_truth"]["tolerance_frames"] == 2 and (meta["width"], meta["height"]) == (16, 8)
-    info = sequence.describe(out)
+    info = sequence.folder_info(out)
     assert info["ground_truth"] == "pairs" and info["n_frames"] == 2 * n and not info["depth"]
     gt = groundtruth.for_sequence(out, exclude=1)
     assert gt[0, n] and gt[0, n + 2] and not gt[0, n + 3] and gt[n + 1, 0]

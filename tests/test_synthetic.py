@@ -92,7 +92,7 @@ def test_layout_and_camera_file(tiny_sequence):
     assert cam["depth_scale"] == 5000.0
     meta = json.loads((folder / "synthetic.json").read_text())
     assert meta["n_frames"] == N and (meta["width"], meta["height"]) == SIZE and meta["seed"] == 0
-    assert sequence.describe(folder)["kind"] == "synthetic"
+    assert sequence.folder_info(folder)["kind"] == "synthetic"
     assert not list(folder.parent.glob(".*tmp*")), "temporary folder left behind"
 
 

@@ -416,7 +416,7 @@ def fingerprint(folder, limit: int | None = None) -> str:
     return h.hexdigest()[:12]
 
 
-def describe(folder) -> dict:
+def folder_info(folder) -> dict:
     """What a sequence folder holds: {'path', 'kind', 'n_frames', 'width', 'height', 'depth',
     'trajectory', 'camera', 'ground_truth', 'layout', 'traversals'}. layout as :func:`layout`;
     traversals: "name start-stop, ..." (:func:`traversals`). kind is 'synthetic' when the folder carries the

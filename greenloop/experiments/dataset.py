@@ -44,7 +44,7 @@ def reference(path, loop_threshold: float = 0.5, exclude: int = 150):
 def summary(dataset, info: dict, poses, gt, reference_row: dict | None = None) -> pd.DataFrame:
     """One row per sequence: the dataset's, then the real trajectory's when given.
 
-    dataset: the sequence folder; info: ``sequence.describe(dataset)``; poses: (N, 4, 4) or None;
+    dataset: the sequence folder; info: ``sequence.folder_info(dataset)``; poses: (N, 4, 4) or None;
     gt: (N, N) bool loops or None; reference_row: :func:`reference`'s row or None. Columns:
     sequence, frames, ground_truth, path_m (metres; None without poses), loop_pairs,
     revisit_frames, first_revisit_frame (None without ground truth or loops).

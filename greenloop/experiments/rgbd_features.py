@@ -78,7 +78,7 @@ def skipped_table(backbones, weights="auto") -> pd.DataFrame:
 def paper_rows(table: pd.DataFrame, paper: dict, kind: str, dataset, has_depth: bool) -> pd.DataFrame:
     """Paper vs run (``report.paper_vs_run``). paper: {backbone: dict(t3=(AP %, s), t4=(AP %, s))},
     Tables 3 (TUM) and 4 (GreenHouse). table: :func:`rgbd_table`'s table as shown (its cells are
-    copied). kind: the dataset's kind (``sequence.describe``). Without depth one "skipped" row."""
+    copied). kind: the dataset's kind (``sequence.folder_info``). Without depth one "skipped" row."""
     if not has_depth:
         return report.paper_vs_run([("RGB-D experiment", "Tables 3 and 4", "skipped", f"{dataset} has no depth/ folder")])
     t, rows = table.set_index("backbone"), []

@@ -33,7 +33,7 @@ PAPER_T3 = {"scnn": (0.208, 0.029), "cnn": (0.142, 0.021), "gist": 0.524, "bovw"
 class Setup(NamedTuple):
     """What every table of notebook 10 is computed on (frame counts in steps of frame_step).
 
-    info: ``sequence.describe``; frames (M,) original frame numbers; ex: the exclusion band in
+    info: ``sequence.folder_info``; frames (M,) original frame numbers; ex: the exclusion band in
     steps; GT (M, M) bool; gap, L: held-out gap and spot length in steps; train, held (M,) bool
     (``siamese.training_split``); split_note: its Markdown note or None; labels (M,) int place
     labels (-1 outside train); X (M, S, S, 3 or 4) float32 inputs in [0, 1]; has_depth;
@@ -75,7 +75,7 @@ def setup(dataset, frame_step: int, frames_per_spot: int, loop_threshold: float,
     gap). loop_threshold: Qi 2024 Eq. 5. train_fraction: share of the revisit frames before the
     cut. input_size: square network input (pixels). max_depth: metres mapped to 1.
     """
-    info = sequence.describe(dataset)
+    info = sequence.folder_info(dataset)
     frames, ex, GT, summary = groundtruth.described_frames(dataset, frame_step, loop_threshold, exclude)
     gap = max(1, int(heldout_gap) // int(frame_step))
     L = max(1, int(frames_per_spot) // int(frame_step))

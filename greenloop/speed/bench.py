@@ -72,7 +72,7 @@ def _load(dataset: Path):
         if any(r is None for r in raw):
             raise ValueError(f"cannot read the first {n_raw} frames of {dataset}")
         u8 = sequence.load_frames(dataset, dtype=np.uint8, progress=False)[..., 0]
-        info = {"dataset": str(dataset), "random_frames": False, **sequence.describe(dataset)}
+        info = {"dataset": str(dataset), "random_frames": False, **sequence.folder_info(dataset)}
     else:
         n = 2260
         raw, u8 = _synthetic(n, n_raw)
