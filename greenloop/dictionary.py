@@ -311,11 +311,11 @@ def operating_points(X, frames_per_spot: int, taus, frames, gt, exclude: int = 1
     run_ = cnn.run_seeds(X[:n_train], y[:n_train], [seed], progress=progress, **train_kw)[0]
     pred = cnn.predict(run_["model"], X)
     f = np.asarray(frames)
-    ex = exclude if exclude_steps is None else exclude_steps
+    exclude_steps = exclude if exclude_steps is None else exclude_steps
     points = []
     for tau in taus:
         D = declared_pairs(pred, y, tau, exclude)[np.ix_(f, f)]
         points.append({"tau": tau, "flagged_frames": int(run(pred, int(max(y.max(), pred.max()) + 1), tau).sum()),
-                       "closures": query_closures(D, gt, queries=queries), "op": operating_point(D, gt, ex, queries=queries)})
+                       "closures": query_closures(D, gt, queries=queries), "op": operating_point(D, gt, exclude_steps, queries=queries)})
     return SpotDetector(run_, y, pred, n_train), points
 

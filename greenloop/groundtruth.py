@@ -208,7 +208,7 @@ def for_sequence(folder, frames=None, threshold: float = 0.5, exclude: int = 150
 class Described(NamedTuple):
     """What :func:`described_frames` returns (the prelude of the descriptor notebooks)."""
     frames: np.ndarray   # (M,) original frame numbers of the described frames, 0, step, 2 step, ...
-    ex: int              # exclude in steps of frame_step: exclude // frame_step
+    exclude_steps: int              # exclude in steps of frame_step: exclude // frame_step
     gt: np.ndarray       # (M, M) bool ground truth of those frames (for_sequence)
     summary: str         # one line naming the frames, the exclusion band and the ground truth
 
@@ -218,19 +218,19 @@ def described_frames(folder, frame_step: int, threshold: float = 0.5, exclude: i
 
     folder: a sequence folder. frame_step: describe frames 0, frame_step, 2 frame_step, ...
     (an integer >= 1). threshold, exclude: as :func:`for_sequence` (exclude in ORIGINAL frames).
-    Returns Described(frames, ex, gt, summary): ``ex = exclude // frame_step`` is the band the
+    Returns Described(frames, exclude_steps, gt, summary): ``exclude_steps = exclude // frame_step`` is the band the
     scoring functions take for the described frames, ``gt = for_sequence(folder, frames,
     threshold, exclude)`` and ``summary`` the line the notebooks print (frames, band in steps and
     original frames, the ground-truth definition, its loop pairs and revisit frames).
     """
     step = positive_int("frame_step", frame_step, whole_floats=True)
     frames = np.arange(0, len(sequence.list_frames(folder)), step)
-    ex = int(exclude) // step
+    exclude_steps = int(exclude) // step
     gt = for_sequence(folder, frames, threshold, exclude)
-    summary = (f"{len(frames)} frames (frame_step {frame_step}), exclusion band {ex} steps = {ex * step} original "
+    summary = (f"{len(frames)} frames (frame_step {frame_step}), exclusion band {exclude_steps} steps = {exclude_steps * step} original "
                f"frames; ground truth ({definition(folder, threshold, exclude)}): {len(loop_pairs(gt))} loop pairs, "
                f"{int(revisit_frames(gt).sum())} revisit frames")
-    return Described(frames, ex, gt, summary)
+    return Described(frames, exclude_steps, gt, summary)
 
 
 def variants(folder, frames=None, thresholds=(0.3, 0.4, 0.5, 0.6, 0.7, 0.8), exclude: int = 150,

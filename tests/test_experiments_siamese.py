@@ -61,7 +61,7 @@ def setup(tiny_sequence):
 def test_setup_composes_the_stage_functions(setup, tiny_sequence):
     s = setup
     frames, ex, GT, summary = groundtruth.described_frames(tiny_sequence, STEP, 0.5, 20)
-    assert np.array_equal(s.frames, frames) and s.ex == ex == 10 and np.array_equal(s.GT, GT)
+    assert np.array_equal(s.frames, frames) and s.exclude_steps == ex == 10 and np.array_equal(s.GT, GT)
     assert (s.gap, s.L) == (5 // STEP, 20 // STEP)                      # ORIGINAL frames in steps
     train, held, note = sm.training_split(len(frames), 0.5, GT, s.gap, s.L, frames)
     assert np.array_equal(s.train, train) and np.array_equal(s.held, held) and s.split_note == note
@@ -86,7 +86,7 @@ def test_supervisions_table_is_each_network_scored_on_the_heldout_part(setup, tr
     t = sup.table
     assert t.descriptor.tolist() == ["scnn softmax, RGB", "scnn untrained, RGB", "pixels (32x32 gray)"]
     assert t.weights.tolist() == ["trained here", "random init", "none"] and list(sup.sims) == ["softmax", "untrained", "pixels"]
-    _, ap, r100 = sr.score_descriptors(sm.describe(sup.models["softmax"], s.X[..., :3]), s.GT, s.ex, s.held)
+    _, ap, r100 = sr.score_descriptors(sm.describe(sup.models["softmax"], s.X[..., :3]), s.GT, s.exclude_steps, s.held)
     assert t.loc[0, "AP_%"] == ap and t.loc[0, "R@100P_%"] == r100 and t.loc[0, "train_pairs"] == 20
     assert [name for name, *_ in sup.trained] == ["scnn softmax, RGB"] and list(sup.hists) == ["softmax"]
 
@@ -99,10 +99,10 @@ def test_fusions_table_rgb_only_each_fusion_and_each_late_stream(setup, trained)
     rgb = t.iloc[0].drop(["descriptor", "fusion"])
     assert rgb.equals(sup.table.iloc[0].drop(["descriptor", "fusion"]))          # the softmax RGB row, unchanged
     for stream in ("rgb", "depth"):
-        _, ap, r100 = sr.score_descriptors(sm.describe(fus.models["late"], s.X, stream=stream), s.GT, s.ex, s.held)
+        _, ap, r100 = sr.score_descriptors(sm.describe(fus.models["late"], s.X, stream=stream), s.GT, s.exclude_steps, s.held)
         row = t[t.fusion == f"late ({stream} stream)"].iloc[0]
         assert row["AP_%"] == ap and row["R@100P_%"] == r100 and row.label == f"scnn late fusion, {stream} stream alone (trained here)"
-    _, ap, _ = sr.score_descriptors(sm.describe(fus.models["mid conv2"], s.X), s.GT, s.ex, s.held)
+    _, ap, _ = sr.score_descriptors(sm.describe(fus.models["mid conv2"], s.X), s.GT, s.exclude_steps, s.held)
     assert t.loc[2, "AP_%"] == ap
     assert [n for n, *_ in fus.trained] == ["scnn early fusion", "scnn mid-level fusion at conv2", "scnn late fusion"]
     skipped = sr.fusions(s._replace(has_depth=False), sup, "softmax", ["conv2"], "sum", {})
@@ -121,7 +121,7 @@ def test_timing_paper_vs_run_and_summary(setup, trained, tiny_sequence):
         assert run[q] == sr.UNRESOLVED
     ap = sup.table.set_index("descriptor")["AP_%"]
     assert run["AP of each supervision, RGB (%)"] == f"softmax {ap['scnn softmax, RGB']:.2f}"
-    p = evaluate.precision_at_recall(fus.sims["late"], s.GT, 0.82, s.ex, queries=s.held)
+    p = evaluate.precision_at_recall(fus.sims["late"], s.GT, 0.82, s.exclude_steps, queries=s.held)
     assert run["precision at 82 % recall, late fusion"] == f"{p:.3f}"
     assert t2["this run"].tolist() == [round(fus.table.loc[2, "AP_%"] / 100, 4)] and t2.paper.tolist() == [0.8111]
     assert len(t3) == len(tim) + 3

@@ -200,7 +200,7 @@ def test_far_in_time_is_the_one_rule():
 def test_described_frames_is_the_notebooks_prelude(tiny_sequence):
     n = len(sequence.list_frames(tiny_sequence))
     d = groundtruth.described_frames(tiny_sequence, 3, 0.5, 10)
-    assert np.array_equal(d.frames, np.arange(0, n, 3)) and d.ex == 10 // 3
+    assert np.array_equal(d.frames, np.arange(0, n, 3)) and d.exclude_steps == 10 // 3
     assert np.array_equal(d.gt, groundtruth.for_sequence(tiny_sequence, np.arange(0, n, 3), 0.5, 10))
     assert d.summary.startswith(f"{len(d.frames)} frames (frame_step 3), exclusion band 3 steps = 9 original frames")
     assert f"{len(groundtruth.loop_pairs(d.gt))} loop pairs" in d.summary

@@ -87,7 +87,7 @@ def prepare(dataset, frame_step: int, loop_threshold: float, exclude: int, tune_
     longest of ``params["seq_lens"]``), and the timed window (the first ``params["fps_frames"]``
     evaluation frames). exclude: ORIGINAL frames. Returns (Data, Split); without an honest split
     Data.tune is None and every query is an evaluation query."""
-    frames, ex, GT, summary = groundtruth.described_frames(dataset, frame_step, loop_threshold, exclude)
+    frames, exclude_steps, GT, summary = groundtruth.described_frames(dataset, frame_step, loop_threshold, exclude)
     M, gap = len(frames), max(params["seq_lens"])
     ref = lb.reference_mask(frames, reference_frames)
     tune_q, evalq, no_split = evaluate.honest_split(M, tune_fraction, GT, gap, frames, NO_SPLIT_DROPPED, NO_SPLIT_KEPT)
@@ -96,7 +96,7 @@ def prepare(dataset, frame_step: int, loop_threshold: float, exclude: int, tune_
     else:
         evalq, scored_on = np.ones(M, dtype=bool), f"every query (frames 0..{M - 1} of {M}; no honest split)"
     window = lb.timing_window(evalq, params["fps_frames"])
-    data = Data(dataset, frame_step, frames, GT, ex, tune_q, evalq,
+    data = Data(dataset, frame_step, frames, GT, exclude_steps, tune_q, evalq,
                 dict(params, exclude=exclude, timing_window=window), {}, {}, {})
     return data, Split(ref, gap, no_split, scored_on, summary)
 
@@ -200,10 +200,10 @@ def figure_r1(table: pd.DataFrame):
 
 def note(data: Data, split: Split, target: dict, loop_threshold: float, reference_frames) -> str:
     """The leaderboard's note: frames, ground truth, metrics, budget, timing, targets."""
-    p, ex, (start, stop) = data.params, data.exclude, data.params["timing_window"]
+    p, exclude_steps, (start, stop) = data.params, data.exclude, data.params["timing_window"]
     return (f"{len(data.frames)} frames (frame_step {data.frame_step}) of {data.dataset}; ground truth: "
             f"{groundtruth.definition(data.dataset, loop_threshold, p['exclude'])}; "
-            f"candidates more than {ex} steps ({ex * data.frame_step} original frames) back (loop closure"
+            f"candidates more than {exclude_steps} steps ({exclude_steps * data.frame_step} original frames) back (loop closure"
             + ("" if split.reference is None else f"; place recognition: the reference = original frames < {reference_frames}")
             + "). Per-query metrics (evaluate.per_query) in %: R@1, R@5, AUC-PR (step-wise area of the PR curve over each "
             "query's best match), R@100P, R@95P; *_lo_% / *_hi_% = 95 % block-bootstrap interval of R@1 and AUC-PR over "

@@ -185,7 +185,7 @@ def match_runs(feats: dict, infos: dict, GT, exclude: int, seeds, n_bits: int = 
     """Every matcher of :func:`table6_variants` on every backbone's descriptors, once per seed.
 
     feats: {backbone: (N, D) descriptors}; infos: {backbone: features info with weights, label}.
-    GT: (N, N) bool ground truth; exclude: band in frames of the descriptors (the notebook's ex).
+    GT: (N, N) bool ground truth; exclude: band in frames of the descriptors (the notebook's exclude_steps).
     seeds: hyperplane seeds (scikit-learn, seed-free and slow, runs with the first only).
     n_bits, radius, qdp_probes, qdp_score: as ``lsh.incremental_match``. centre: add the centred
     SWP / QDP rows (hyperplanes through the mean of the first exclude + 1 frames).

@@ -33,7 +33,7 @@ PAPER_T3 = {"scnn": (0.208, 0.029), "cnn": (0.142, 0.021), "gist": 0.524, "bovw"
 class Setup(NamedTuple):
     """What every table of notebook 10 is computed on (frame counts in steps of frame_step).
 
-    info: ``sequence.folder_info``; frames (M,) original frame numbers; ex: the exclusion band in
+    info: ``sequence.folder_info``; frames (M,) original frame numbers; exclude_steps: the exclusion band in
     steps; GT (M, M) bool; gap, L: held-out gap and spot length in steps; train, held (M,) bool
     (``siamese.training_split``); split_note: its Markdown note or None; labels (M,) int place
     labels (-1 outside train); X (M, S, S, 3 or 4) float32 inputs in [0, 1]; has_depth;
@@ -41,7 +41,7 @@ class Setup(NamedTuple):
     """
     info: dict
     frames: np.ndarray
-    ex: int
+    exclude_steps: int
     GT: np.ndarray
     gap: int
     L: int
@@ -76,14 +76,14 @@ def setup(dataset, frame_step: int, frames_per_spot: int, loop_threshold: float,
     cut. input_size: square network input (pixels). max_depth: metres mapped to 1.
     """
     info = sequence.folder_info(dataset)
-    frames, ex, GT, summary = groundtruth.described_frames(dataset, frame_step, loop_threshold, exclude)
+    frames, exclude_steps, GT, summary = groundtruth.described_frames(dataset, frame_step, loop_threshold, exclude)
     gap = max(1, int(heldout_gap) // int(frame_step))
     L = max(1, int(frames_per_spot) // int(frame_step))
     train, held, note = siamese.training_split(len(frames), train_fraction, GT, gap, L, frames)
     labels = siamese.place_labels(train, GT, L)
     has_depth = bool(info["depth"])
     X = siamese.load_inputs(dataset, (input_size, input_size), step=frame_step, depth=has_depth, max_depth=max_depth)
-    chance = evaluate.chance_level(GT, ex, queries=held)
+    chance = evaluate.chance_level(GT, exclude_steps, queries=held)
     rev = groundtruth.revisit_frames(GT)
     text = "\n".join([
         f"Dataset: {info['path']} ({info['kind']}), {info['n_frames']} frames of {info['width']}x{info['height']}, "
@@ -94,7 +94,7 @@ def setup(dataset, frame_step: int, frames_per_spot: int, loop_threshold: float,
         f"between belong to neither",
         f"inputs {X.shape[1:]} ({'RGB + depth' if has_depth else 'RGB'}); chance AP on the held-out part: "
         f"{100 * chance:.2f} %"])
-    return Setup(info, frames, ex, GT, gap, L, train, held, note, labels, X, has_depth, chance, text)
+    return Setup(info, frames, exclude_steps, GT, gap, L, train, held, note, labels, X, has_depth, chance, text)
 
 
 # ------------------------------------------------------------------------ scoring one network
@@ -169,7 +169,7 @@ def _fit_all(s: Setup, specs, train_kw: dict, X) -> Runs:
     """fit_and_score for each (key, name, kw) of specs on inputs X; the table of their rows."""
     rows, runs = [], Runs(None, {}, {}, {}, [])
     for key, name, kw in specs:
-        row, runs.sims[key], runs.models[key], hist = fit_and_score(name, X, s.labels, s.held, s.gap, s.GT, s.ex,
+        row, runs.sims[key], runs.models[key], hist = fit_and_score(name, X, s.labels, s.held, s.gap, s.GT, s.exclude_steps,
                                                                     train_kw, **kw)
         runs.hists[key] = hist
         runs.trained.append((name, hist["seconds"], hist.get("cpu_seconds", float("nan"))))
@@ -187,7 +187,7 @@ def supervisions(s: Setup, supervisions, train_kw: dict) -> Runs:
     """
     X_rgb = s.X[..., :3]
     runs = _fit_all(s, [(sup, f"scnn {sup}, RGB", {"supervision": sup}) for sup in supervisions], train_kw, X_rgb)
-    rows, sims = reference_scores(X_rgb, s.GT, s.ex, s.held, train_kw.get("seed", 0), train_kw.get("width", 1.0))
+    rows, sims = reference_scores(X_rgb, s.GT, s.exclude_steps, s.held, train_kw.get("seed", 0), train_kw.get("width", 1.0))
     runs.sims.update(sims)
     return runs._replace(table=pd.concat([runs.table, pd.DataFrame(rows)], ignore_index=True))
 
@@ -225,7 +225,7 @@ def fusions(s: Setup, sup: Runs, fusion_supervision: str, mid_layers, merge: str
     for stream in ("rgb", "depth"):          # each stream of the late-fusion network alone
         key = f"late ({stream} stream)"
         runs.sims[key], ap, r100 = score_descriptors(siamese.describe(runs.models["late"], s.X, stream=stream),
-                                                     s.GT, s.ex, s.held)
+                                                     s.GT, s.exclude_steps, s.held)
         name = f"scnn late fusion, {stream} stream alone"
         rows.append(dict(late, descriptor=name, label=f"{name} ({late['weights']})", fusion=key,
                          **{"AP_%": ap, "R@100P_%": r100}))
@@ -276,7 +276,7 @@ def _supervision_rows(s: Setup, sup: Runs, supervisions) -> list:
              f"pixels {ap['pixels (32x32 gray)']:.2f} %, chance {100 * s.chance:.2f} %")]
     if "multitask" in sup.sims:
         rows.append(("precision at 83 % recall, multi-task", "> 0.90",
-                     f"{evaluate.precision_at_recall(sup.sims['multitask'], s.GT, 0.83, s.ex, queries=s.held):.3f}",
+                     f"{evaluate.precision_at_recall(sup.sims['multitask'], s.GT, 0.83, s.exclude_steps, queries=s.held):.3f}",
                      "New College vs the held-out part here"))
     return rows
 
@@ -299,7 +299,7 @@ def _fusion_rows(s: Setup, fus: Runs, mid_layers, merge: str, dataset) -> tuple[
             f"early {fz.loc['early', 'AP_%']:.2f} %, highest mid {mid.loc[top, 'AP_%']:.2f} %, "
             f"late {fz.loc['late', 'AP_%']:.2f} %; one seed each"),
            ("precision at 82 % recall, late fusion", 0.92,
-            f"{evaluate.precision_at_recall(fus.sims['late'], s.GT, 0.82, s.ex, queries=s.held):.3f}",
+            f"{evaluate.precision_at_recall(fus.sims['late'], s.GT, 0.82, s.exclude_steps, queries=s.held):.3f}",
             "NYU vs the held-out part here"),
            ("late fusion vs RGB only: AP (%)", None, f"{rgb} -> {fz.loc['late', 'AP_%']:.2f}",
             f"depth stream alone {fz.loc['late (depth stream)', 'AP_%']:.2f} %")]
@@ -337,7 +337,7 @@ def paper_vs_run(s: Setup, sup: Runs, fus: Runs, tim: pd.DataFrame, supervisions
 def note(s: Setup, frame_step: int, dataset) -> str:
     """The tables' note: how AP is scored, on which frames, what the weights mean."""
     f, held, train = s.frames, s.held, s.train
-    return (f"AP = sklearn step-wise average precision over pairs > {s.ex} steps ({s.ex * frame_step} original frames) "
+    return (f"AP = sklearn step-wise average precision over pairs > {s.exclude_steps} steps ({s.exclude_steps * frame_step} original frames) "
             f"apart whose later frame is in the held-out part ({int(held.sum())} frames from frame {f[held][0]}); "
             f"similarity = -L2 distance of the fc7 descriptors; {len(f)} frames (frame_step {frame_step}) of "
             f"{dataset}; weights: 'trained here' = trained in this run on the training part (frames "
@@ -350,7 +350,7 @@ def summary(s: Setup, sup_table, fusion_table, timing_table, frame_step: int, tr
     near = siamese.near_heldout(s.held, s.gap)          # held-out frames and their neighbours within gap
     return {"supervisions": sup_table.to_dict("records"), "fusions": fusion_table.to_dict("records"),
             "timing": timing_table.to_dict("records"), "frames": len(s.frames), "frame_step": frame_step,
-            "exclude_steps": s.ex, "gap_steps": s.gap, "spot_steps": s.L, "places": int(s.labels.max() + 1),
+            "exclude_steps": s.exclude_steps, "gap_steps": s.gap, "spot_steps": s.L, "places": int(s.labels.max() + 1),
             "train_frames": int(s.train.sum()), "heldout_frames": int(s.held.sum()),
             "first_heldout_frame": int(s.frames[s.held][0]), "last_train_frame": int(s.frames[s.train][-1]),
             "labelled_frames_near_heldout": int(((s.labels >= 0) & near).sum()), "chance_ap": s.chance,
@@ -376,7 +376,7 @@ def figure_supervisions(s: Setup, sup: Runs, supervisions, dataset):
     curves = [(x, styles.get(x, "-"), "C3", 1.8 - 0.3 * k) for k, x in enumerate(supervisions)]
     curves += [("untrained", "-", "0.5", 1), ("pixels", "-", "C2", 1)]
     for k, (key, ls, colour, lw) in enumerate(curves):
-        p, r, _ = evaluate.pr_curve(sup.sims[key], s.GT, s.ex, queries=s.held)
+        p, r, _ = evaluate.pr_curve(sup.sims[key], s.GT, s.exclude_steps, queries=s.held)
         ax.plot(r, p, ls, color=colour, lw=lw, label=f"{t.loc[k, 'label']}: AP {t.loc[k, 'AP_%']:.1f} %")
     _pr_axes(ax, s.chance, f"chance ({100 * s.chance:.1f} %)")
     ax.set_title(f"Figure 8 layout: supervisions, RGB, held-out part of {Path(dataset).name} "
@@ -401,13 +401,13 @@ def figure_fusions(s: Setup, fus: Runs, mid_layers, merge: str, fusion_supervisi
     show = [("RGB only", "C0", ":"), ("late (depth stream)", "C2", ":"), ("early", "C1", "--"),
             (f"mid {_paper_layer(mid_layers)}", "C4", "-."), ("late", "C3", "-")]
     for key, colour, ls in [x for x in show if x[0] in fus.sims]:
-        p, r, _ = evaluate.pr_curve(fus.sims[key], s.GT, s.ex, queries=s.held)
+        p, r, _ = evaluate.pr_curve(fus.sims[key], s.GT, s.exclude_steps, queries=s.held)
         axes[0].plot(r, p, ls, color=colour, lw=1.6, label=f"{row[key]['label']}: AP {row[key]['AP_%']:.1f} %")
     axes[0].set_title(f"Figure 9 layout: fusions ({fusion_supervision}), held-out part", fontsize=10)
     axes[0].legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=1, borderaxespad=0)
     cmap = plt.get_cmap("viridis")
     for k, layer in enumerate(mid_layers):
-        p, r, _ = evaluate.pr_curve(fus.sims[f"mid {layer}"], s.GT, s.ex, queries=s.held)
+        p, r, _ = evaluate.pr_curve(fus.sims[f"mid {layer}"], s.GT, s.exclude_steps, queries=s.held)
         axes[1].plot(r, p, color=cmap(k / max(1, len(mid_layers) - 1)), lw=1.2,
                      label=f"at {layer}: AP {row[f'mid {layer}']['AP_%']:.1f} %")
     axes[1].set_title(f"mid-level fusion at each layer ({merge}), held-out part", fontsize=10)
