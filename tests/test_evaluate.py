@@ -52,7 +52,7 @@ def stepwise_ap_by_hand(scores, labels):
 
 def test_pair_scores_counts_each_far_pair_once_and_ignores_the_window():
     S, GT = hand_example()
-    y, s = ev.pair_scores(S, GT, exclude=EXCL)
+    y, s = ev.pair_samples(S, GT, exclude=EXCL)
     assert len(y) == len(PAIRS) == 10
     assert sorted(s.tolist()) == sorted(v[0] for v in PAIRS.values())
     assert 0.99 not in s and 0.98 not in s
@@ -151,7 +151,7 @@ def test_queries_mask_restricts_pairs_by_later_frame():
     S, GT = hand_example()
     q = np.zeros(N, dtype=bool)
     q[[5, 6]] = True
-    y, s = ev.pair_scores(S, GT, exclude=EXCL, queries=q)
+    y, s = ev.pair_samples(S, GT, exclude=EXCL, queries=q)
     keep = [(i, j) for (i, j) in PAIRS if q[j]]
     assert sorted(s.tolist()) == sorted(PAIRS[p][0] for p in keep)
     ap = ev.average_precision(S, GT, exclude=EXCL, queries=q)
@@ -190,7 +190,7 @@ def test_errors_size_mismatch_no_loops_bad_input():
         ev.average_precision(S, np.zeros_like(GT), exclude=EXCL)
     only_near = np.zeros_like(GT)
     only_near[2, 3] = only_near[3, 2] = True  # a loop, but inside the window
-    for f in (ev.pair_scores, ev.pr_curve, ev.average_precision, ev.recall_at_100_precision,
+    for f in (ev.pair_samples, ev.pr_curve, ev.average_precision, ev.recall_at_100_precision,
               ev.recall_at_k):
         with pytest.raises(ValueError, match="no loops"):
             f(S, only_near, exclude=EXCL)
@@ -318,7 +318,7 @@ def test_pose_similarity_is_perfect_on_greenhouse(greenhouse_poses):
     assert ev.average_precision(S, GT, exclude=150) == pytest.approx(1.0)
     assert ev.recall_at_100_precision(S, GT, exclude=150) == pytest.approx(1.0)
     assert ev.recall_at_k(S, GT, k=1, exclude=150) == pytest.approx(1.0)
-    y, _ = ev.pair_scores(S, GT, exclude=150)
+    y, _ = ev.pair_samples(S, GT, exclude=150)
     n = len(poses)
     assert len(y) == (n - 151) * (n - 150) // 2
     # a random similarity scores about the fraction of loop pairs
@@ -376,8 +376,8 @@ def test_same_place_errors():
 def test_loop_scores_and_chance_level_on_the_hand_example():
     S, GT = hand_example()
     ap = (1 + 2 / 3 + 3 / 4 + 4 / 8) / 4
-    assert ev.loop_scores(S, GT, EXCL) == pytest.approx({"AP_%": 100 * ap, "R@100P_%": 25.0})
-    assert list(ev.loop_scores(S, GT, EXCL, tag="_RGB")) == ["AP_RGB_%", "R@100P_RGB_%"]
+    assert ev.pair_metrics(S, GT, EXCL) == pytest.approx({"AP_%": 100 * ap, "R@100P_%": 25.0})
+    assert list(ev.pair_metrics(S, GT, EXCL, tag="_RGB")) == ["AP_RGB_%", "R@100P_RGB_%"]
     assert ev.chance_level(GT, EXCL) == pytest.approx(4 / 10)      # 4 loops among 10 counted pairs
     q = np.zeros(N, bool); q[6] = True                              # pairs (0,6) (1,6) (2,6) (3,6): one loop
     assert ev.chance_level(GT, EXCL, queries=q) == pytest.approx(1 / 4)

@@ -63,7 +63,7 @@ def _check_queries(queries, n: int):
 def pair_mask(n: int, exclude: int = 150, queries=None) -> np.ndarray:
     """The counted pairs: (n, n) bool, True at [i, j] iff i < j, j - i > exclude and
     (queries is None or queries[j]). ``S[pair_mask(...)]`` lists them in row-major order,
-    the order used by :func:`pair_scores` and by a (P,) ``predicted`` in :func:`operating_point`.
+    the order used by :func:`pair_samples` and by a (P,) ``predicted`` in :func:`operating_point`.
     """
     exclude = _check_exclude(exclude)
     q = _check_queries(queries, n)
@@ -74,7 +74,7 @@ def pair_mask(n: int, exclude: int = 150, queries=None) -> np.ndarray:
 
 
 # ------------------------------------------------------------------------------ scores
-def pair_scores(S, GT, exclude: int = 150, queries=None):
+def pair_samples(S, GT, exclude: int = 150, queries=None):
     """Labels and scores of the counted pairs, ready for scikit-learn metrics.
 
     S: (N, N) similarity matrix, higher = more similar; S[i, j], i < j, is used (earlier frame
@@ -103,12 +103,12 @@ def pair_scores(S, GT, exclude: int = 150, queries=None):
 def pr_curve(S, GT, exclude: int = 150, queries=None):
     """Precision-recall curve over the counted pairs (sklearn.metrics.precision_recall_curve).
 
-    Arguments as in :func:`pair_scores`. Returns (precision, recall, thresholds) exactly as
+    Arguments as in :func:`pair_samples`. Returns (precision, recall, thresholds) exactly as
     scikit-learn does: thresholds (T,) are the distinct scores in increasing order; precision
     and recall have T + 1 entries, the last being precision 1, recall 0 (no threshold).
     Declaring pairs with S >= thresholds[k] loops gives precision[k], recall[k].
     """
-    y_true, y_score = pair_scores(S, GT, exclude, queries)
+    y_true, y_score = pair_samples(S, GT, exclude, queries)
     return precision_recall_curve(y_true, y_score)
 
 
@@ -116,17 +116,17 @@ def average_precision(S, GT, exclude: int = 150, queries=None) -> float:
     """Average precision over the counted pairs (sklearn.metrics.average_precision_score).
 
     Step-wise: AP = sum_n (R_n - R_{n-1}) P_n over the distinct thresholds, highest first;
-    NOT the trapezoidal area under the PR curve. Arguments as in :func:`pair_scores`.
+    NOT the trapezoidal area under the PR curve. Arguments as in :func:`pair_samples`.
     Returns a float in [0, 1]; a random score gives about the fraction of loop pairs.
     """
-    y_true, y_score = pair_scores(S, GT, exclude, queries)
+    y_true, y_score = pair_samples(S, GT, exclude, queries)
     return float(average_precision_score(y_true, y_score))
 
 
 def recall_at_precision(S, GT, precision: float = 0.95, exclude: int = 150, queries=None) -> float:
     """The largest pair recall reached with precision >= ``precision`` (0 < precision <= 1).
 
-    Arguments otherwise as in :func:`pair_scores`. Thresholds are the distinct scores, so tied
+    Arguments otherwise as in :func:`pair_samples`. Thresholds are the distinct scores, so tied
     pairs are declared together. Returns a float in [0, 1] (0.0 when no threshold reaches it).
     """
     if not 0 < precision <= 1:
@@ -352,14 +352,14 @@ def query_chance(GT, exclude: int = 150, queries=None, reference=None, ks=(1, 5,
 def mean_per_class_accuracy(S, GT, threshold: float, exclude: int = 150, queries=None) -> float:
     """Mean per-class accuracy (MPCA) of declaring every counted pair with S >= threshold a loop.
 
-    The two classes are the counted pairs (:func:`pair_scores`) that are loops and those that
+    The two classes are the counted pairs (:func:`pair_samples`) that are loops and those that
     are not; MPCA = (recall on loop pairs + recall on non-loop pairs) / 2, scikit-learn's
     balanced accuracy. 0.5 is chance, 1 is perfect. The ResNet/Inception/ZCA paper reports it
     (Table III) without stating its threshold; pick one with :func:`mpca_threshold` on a tuning
-    part and score it here on another. S, GT, exclude, queries as in :func:`pair_scores`;
+    part and score it here on another. S, GT, exclude, queries as in :func:`pair_samples`;
     threshold in the units of S. Returns a float in [0, 1].
     """
-    y_true, y_score = pair_scores(S, GT, exclude, queries)
+    y_true, y_score = pair_samples(S, GT, exclude, queries)
     declared = y_score >= threshold
     return float((declared[y_true].mean() + (~declared[~y_true]).mean()) / 2)
 
@@ -367,10 +367,10 @@ def mean_per_class_accuracy(S, GT, threshold: float, exclude: int = 150, queries
 def mpca_threshold(S, GT, exclude: int = 150, queries=None) -> float:
     """The threshold on S that maximises :func:`mean_per_class_accuracy` over the counted pairs
     (the point of the ROC curve furthest above the diagonal, max TPR - FPR). Arguments as in
-    :func:`pair_scores`; call it with the tuning part's ``queries``. Returns a float in S's units
+    :func:`pair_samples`; call it with the tuning part's ``queries``. Returns a float in S's units
     (``inf`` would declare nothing; it is never returned, since declaring the top pair is at
     least as good)."""
-    y_true, y_score = pair_scores(S, GT, exclude, queries)
+    y_true, y_score = pair_samples(S, GT, exclude, queries)
     fpr, tpr, thr = roc_curve(y_true, y_score)
     k = int(np.argmax(tpr - fpr))
     return float(thr[k]) if np.isfinite(thr[k]) else float(thr[1])
@@ -383,8 +383,8 @@ def operating_point(predicted, GT, exclude: int = 150, queries=None) -> dict:
     predicted: either an (N, N) bool matrix of declared loop pairs (a pair i < j counts as
         declared if predicted[i, j] or predicted[j, i], so a detector may fill either triangle,
         e.g. row = query, column = matched earlier frame), or a (P,) bool vector aligned with
-        the counted pairs of :func:`pair_scores` (row-major order of :func:`pair_mask`).
-    GT, exclude, queries: as in :func:`pair_scores`; only counted pairs are scored.
+        the counted pairs of :func:`pair_samples` (row-major order of :func:`pair_mask`).
+    GT, exclude, queries: as in :func:`pair_samples`; only counted pairs are scored.
     Returns dict(precision, recall, tp, fp, fn, ignored): counts over counted pairs;
     precision = tp / (tp + fp) (NaN if nothing was declared: undefined, not 1), recall =
     tp / (tp + fn); ``ignored`` = declared pairs not counted (within ``exclude`` frames or
@@ -451,10 +451,10 @@ def closure_counts(declared, correct, revisit, at=None) -> dict:
 
 
 # ------------------------------------------------- the notebooks' scoring protocol (07-11)
-def loop_scores(S, GT, exclude: int = 150, queries=None, tag: str = "") -> dict:
+def pair_metrics(S, GT, exclude: int = 150, queries=None, tag: str = "") -> dict:
     """AP and recall at 100 % precision of one similarity matrix, in % (unrounded).
 
-    S, GT, exclude, queries: as in :func:`pair_scores`. tag: inserted in the keys, e.g. "_RGB".
+    S, GT, exclude, queries: as in :func:`pair_samples`. tag: inserted in the keys, e.g. "_RGB".
     Returns {f"AP{tag}_%": float, f"R@100P{tag}_%": float}, the columns of the notebooks' tables.
     """
     return {f"AP{tag}_%": 100 * average_precision(S, GT, exclude, queries=queries),
@@ -464,12 +464,12 @@ def loop_scores(S, GT, exclude: int = 150, queries=None, tag: str = "") -> dict:
 def chance_level(GT, exclude: int = 150, queries=None) -> float:
     """The fraction of counted pairs that are loops: the AP a random score gets on average.
 
-    GT: (N, N) bool ground truth; exclude, queries: as in :func:`pair_scores`. Returns a float in
-    (0, 1] (a fraction, not %). ValueError as :func:`pair_scores` (no loop among the pairs).
+    GT: (N, N) bool ground truth; exclude, queries: as in :func:`pair_samples`. Returns a float in
+    (0, 1] (a fraction, not %). ValueError as :func:`pair_samples` (no loop among the pairs).
     """
     G = _check_gt(GT)
     n = G.shape[0]
-    return float(pair_scores(np.zeros((n, n), np.float32), G, exclude, queries)[0].mean())
+    return float(pair_samples(np.zeros((n, n), np.float32), G, exclude, queries)[0].mean())
 
 
 def revisit_queries(GT, exclude: int = 150) -> np.ndarray:

@@ -40,7 +40,7 @@ def tune_then_score(candidates, GT, exclude: int, tune, evaluate) -> dict:
     """Pick a knob's value by AP on the tuning queries and score the pick on the evaluation queries.
 
     candidates: {value: S}, one (N, N) similarity matrix per candidate value of the knob (a
-        whitening dimension, a median-filter size, ...). GT, exclude: as in ``evaluate.pair_scores``.
+        whitening dimension, a median-filter size, ...). GT, exclude: as in ``evaluate.pair_samples``.
     tune, evaluate: (N,) bool query masks from ``evaluate.split_mask`` (swap them for the second split).
     Returns dict(value, AP_tune, AP_eval, R@100P_eval, AP_tune_all): the picked value (the first
     of equal tuning APs), its AP on the tuning queries and its AP and recall at 100 % precision on
@@ -62,7 +62,7 @@ def whitened_variants(X, GT, exclude: int, tune, evaluate, pca_dim: int = 500,
                       dims=(8, 16, 32, 64, 128, 256, 500), eps: float = 1e-5):
     """Zhang 2017's post-processing variants of one descriptor, whitening fitted on the tuning part.
 
-    X: (N, D) raw descriptors. GT, exclude: as ``evaluate.pair_scores``. tune, evaluate: (N,) bool
+    X: (N, D) raw descriptors. GT, exclude: as ``evaluate.pair_samples``. tune, evaluate: (N,) bool
     query masks of ``evaluate.split_mask``, or both None where no honest split exists. pca_dim: the
     paper's PCA dimension; dims: the candidate dimensions of the tuned variants; eps: whitening ε.
     Returns (variants, curves). variants: {name: (S (N, N) float, whitening note)} with "raw"
@@ -98,7 +98,7 @@ def _mpca(S, GT, exclude, tune, evaluate) -> dict:
 def median_scores(S, GT, exclude: int, tune, evaluate, sizes=(1, 3, 5, 9, 15)):
     """One variant's rows of notebook 08's table: unfiltered and with the median size tuned.
 
-    S: (N, N) similarity of the variant. GT, exclude: as ``evaluate.pair_scores``. tune, evaluate: (N,)
+    S: (N, N) similarity of the variant. GT, exclude: as ``evaluate.pair_samples``. tune, evaluate: (N,)
     bool query masks of ``evaluate.split_mask``, or both None where no honest split exists. sizes:
     candidate median-filter sizes in frames (1: no filter, :func:`similarity.median_candidates`).
     Returns (rows, curve). With a split: two rows (median_filter "none" at size 1, then
@@ -129,7 +129,7 @@ def swapped_split(X, S_l2, GT, exclude: int, tune, evaluate, dims=(8, 16, 32, 64
 
     X: (N, D) raw descriptors (L2-normalised here; the PCA whitening is refitted on each tuning
     part). S_l2: (N, N) similarity of the L2 variant, whose median-filter size is the second knob.
-    GT, exclude: as ``evaluate.pair_scores``; tune, evaluate: (N,) bool masks of ``evaluate.split_mask``.
+    GT, exclude: as ``evaluate.pair_samples``; tune, evaluate: (N,) bool masks of ``evaluate.split_mask``.
     dims, sizes, eps: as :func:`whitened_variants` and :func:`median_scores`.
     Returns a list of 4 dicts (split A = tune early/score late, then B = swapped; per split the
     PCA-whitening dimension, then the median size): knob, split, picked, AP_tune_%, AP_eval_%,

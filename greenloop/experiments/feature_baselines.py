@@ -43,7 +43,7 @@ def table2(S: dict, infos: dict, match_s: dict, GT, exclude: int) -> pd.DataFram
     match_s: :func:`similarity_matrices`' seconds; GT: (M, M) bool; exclude: band in steps."""
     table = pd.DataFrame([{"backbone": b, "weights": infos[b].weights, "label": infos[b].label, "dim": infos[b].dim,
                            "input": "native" if infos[b].input_size is None else "x".join(map(str, infos[b].input_size)),
-                           **evaluate.loop_scores(S[b], GT, exclude),
+                           **evaluate.pair_metrics(S[b], GT, exclude),
                            "R@1_%": 100 * evaluate.recall_at_k(S[b], GT, 1, exclude),
                            "extract_s_per_image": infos[b].seconds_per_image, "match_s_MxM": match_s[b]} for b in S])
     table["R_a_%"] = table["R_t_%"] = np.nan

@@ -3,7 +3,7 @@
 Each CNN backbone describes every described frame's RGB image and its depth image (replicated to
 three channels) and the two vectors are concatenated (``features.extract_rgbd``); the RGB half,
 the depth half and the whole are scored with cosine similarity (``similarity.rgbd_matrices``,
-``evaluate.loop_scores``). :func:`rgbd_table` gives the table (unrounded; :data:`DECIMALS` is how
+``evaluate.pair_metrics``). :func:`rgbd_table` gives the table (unrounded; :data:`DECIMALS` is how
 the notebook shows it), :func:`paper_rows` the paper-vs-run rows, the ``figure_*`` functions the
 figures.
 """
@@ -55,7 +55,7 @@ def rgbd_table(dataset, backbones, GT, exclude: int, weights="auto", input_size=
         row = {"backbone": b, "weights": inf.weights, "label": inf.label, "dim_rgbd": X.shape[1],
                "input": "x".join(map(str, inf.input_size))}
         for k, Sk in S[b].items():
-            row.update(evaluate.loop_scores(Sk, GT, exclude, tag=f"_{k}"))
+            row.update(evaluate.pair_metrics(Sk, GT, exclude, tag=f"_{k}"))
         rows.append({**row, "extract_s_per_image_rgbd": inf.seconds_per_image})
     features.clear_cache()
     table = pd.DataFrame(rows)
