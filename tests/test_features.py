@@ -14,7 +14,9 @@ keras = pytest.importorskip("keras")
 from safetensors.numpy import save_file  # noqa: E402
 
 from greenloop import features as F  # noqa: E402
+from greenloop.backbones import efficientnet_lite as LITE  # noqa: E402
 from greenloop.backbones import ghostnet as G  # noqa: E402
+from greenloop.features import cnn as FCNN  # noqa: E402
 from greenloop.datasets import sequence  # noqa: E402
 
 SIZE = 32  # smallest input every Keras application accepts
@@ -32,7 +34,7 @@ def empty_keras_home(tmp_path, monkeypatch):
     (home / "models").mkdir(parents=True)
     monkeypatch.setenv("KERAS_HOME", str(home))
     monkeypatch.delenv(F.WEIGHTS_ENV, raising=False)
-    monkeypatch.setattr(F._lite, "package_weights_path", lambda: None)
+    monkeypatch.setattr(LITE, "package_weights_path", lambda: None)
     return home
 
 
@@ -74,12 +76,14 @@ def write_sequence(folder, rgb, depth_m=None):
 # ---- names, dims ------------------------------------------------------------------------------
 
 def test_backbone_table():
-    assert set(F.BACKBONES) == set(DIMS) | {"sift_bovw", "pixels", "spot_cnn"}
+    assert set(F.BACKBONES) == set(DIMS) | {"sift_bovw", "pixels", "spot_cnn", "pixels-patchnorm",
+                                            "gradients"}
     for name, d in DIMS.items():
         assert F.BACKBONES[name].dim == d
         assert F.BACKBONES[name].input_size == (224, 224)
         assert F.BACKBONES[name].weights_file or name == "shufflenetv2"   # no weights exist offline
-    assert F.BACKBONES["pixels"].dim == 1024
+    assert F.BACKBONES["pixels"].dim == F.BACKBONES["pixels-patchnorm"].dim == 1024
+    assert F.BACKBONES["gradients"].dim == (128 // 16) * (64 // 16) * 8 == 256
 
 
 def test_unknown_backbone_lists_valid_names(frames):
@@ -104,7 +108,7 @@ def test_cnn_descriptor_shapes(frames, backbone):
 @pytest.mark.parametrize("backbone", ["resnet101", "resnet152"])
 def test_deep_resnets_build(backbone):
     """Same code path as resnet50; building (not running) them keeps the suite fast."""
-    model = F._cnn_model(backbone, None, (SIZE, SIZE))
+    model = FCNN._cnn_model(backbone, None, (SIZE, SIZE))
     assert model.output_shape == (None, DIMS[backbone])
     F.clear_cache()
 
@@ -112,8 +116,8 @@ def test_deep_resnets_build(backbone):
 def test_inception_and_vgg19_fc1_build():
     """InceptionV3 (Inception-v4's stand-in) needs >= 75x75; vgg19_fc1 is the whole classifier cut
     at fc1, so it runs at 224x224 only and says why."""
-    assert F._cnn_model("inceptionv3", None, (75, 75)).output_shape == (None, 2048)
-    fc1 = F._cnn_model("vgg19_fc1", None, (224, 224))
+    assert FCNN._cnn_model("inceptionv3", None, (75, 75)).output_shape == (None, 2048)
+    fc1 = FCNN._cnn_model("vgg19_fc1", None, (224, 224))
     assert fc1.output_shape == (None, 4096) and fc1.layers[-1].name == "fc1"
     F.clear_cache()
     with pytest.raises(ValueError, match="fixed 224x224.*fully connected"):
