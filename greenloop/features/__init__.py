@@ -80,22 +80,22 @@ shortcut on synthetic frames. For sift_bovw the time covers SIFT plus quantisati
 vocabulary fit.
 
 Package layout (one module per job; imports run downward: registry <- weights, frames <- the
-extractor families cnn / pixels / sift / spot <- extract <- cache)::
+extractor families cnn / pixels / sift / spot <- extraction <- cache)::
 
     registry.py  Backbone records, BACKBONES, SEQUENCE_DESCRIPTORS, Options, ExtractInfo, split_spec
     weights.py   weight resolution: resolve(backbone, weights) -> Resolved(label, source), once per pair
     frames.py    input checks, gray/RGB batches (via sequence.preprocess_image), depth_to_uint8
     cnn.py       Keras / port / TFLite extractor;  pixels.py  pixels, pixels-patchnorm, gradients
     sift.py      SIFT bag of words;  spot.py  the main paper's CNN
-    extract.py   extract, extract_spec, extract_rgbd, time_per_image; EXTRACTORS {kind: extractor}
+    extraction.py  extract, extract_spec, extract_rgbd, time_per_image; EXTRACTORS {kind: fn}
     cache.py     extract_all and its descriptor cache
 """
 from __future__ import annotations
 
 from greenloop.features.cache import extract_all, random_init_reported
 from greenloop.features.cnn import clear_models
-from greenloop.features.extract import (EXTRACTORS, clear_cache, extract, extract_rgbd, extract_spec,
-                                        time_per_image)
+from greenloop.features.extraction import (EXTRACTORS, clear_cache, extract, extract_rgbd,
+                                           extract_spec, time_per_image)
 from greenloop.features.frames import depth_to_uint8
 from greenloop.features.pixels import gradient_histograms, patch_normalise
 from greenloop.features.registry import (BACKBONES, CNN_BACKBONES, CNN_KINDS, DEFAULT_VOCAB_SIZE,

@@ -16,7 +16,7 @@ from greenloop.backbones import mobilenet_tflite as _tflite
 from greenloop.backbones import shufflenet as _shufflenet
 from greenloop.backbones import torch_weights as _torch_weights
 from greenloop.datasets import sequence
-from greenloop.features.extract import clear_cache, extract_spec
+from greenloop.features.extraction import clear_cache, extract_spec
 from greenloop.features.registry import (BACKBONES, CNN_KINDS, DEFAULT_VOCAB_SIZE, ExtractInfo,
                                          split_spec)
 from greenloop.features.weights import resolve, source_key

@@ -146,7 +146,7 @@ class Options(NamedTuple):
     The extractor protocol: ``fn(b: Backbone, frames_or_folder, source, size, opt: Options)`` ->
     (features (N, D) float32, seconds per image, extra dict); frames_or_folder is a sequence folder
     or an (N, H, W[, 1 | 3]) uint8 / [0, 1] float array, source the ``weights.Resolved`` source,
-    size the (width, height) input (None: native). ``extract.EXTRACTORS`` maps each kind to its fn.
+    size the (width, height) input (None: native). ``extraction.EXTRACTORS`` maps each kind to its fn.
     """
     batch_size: int = 32
     progress: bool = True
