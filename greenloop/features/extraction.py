@@ -106,6 +106,7 @@ def extract_rgbd(folder, backbone: str, weights="auto", batch_size: int = 32, pr
     alike; without one, each modality fits its own on its frames).
     """
     b = get_backbone(backbone)
+    kwargs["resolved"] = kwargs.get("resolved") or resolve(b.name, weights)   # once for both passes
     Xr, ir = extract(folder, b.name, weights, batch_size, progress, input_size, return_info=True,
                      limit=limit, step=step, **kwargs)
     size = input_size_of(input_size, b.input_size) if b.kind != "spot_cnn" else None
