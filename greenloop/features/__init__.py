@@ -30,6 +30,10 @@ Backbones (``BACKBONES[name].dim`` is D)::
                             main paper's preprocessing)
     spot_cnn          68    penultimate layer (Dense 68, ReLU) of the main paper's   the model's
                             trained CNN (greenloop.cnn.build)                         (32x32 gray)
+    pixels-patchnorm  1024  pixels, SeqSLAM patch-normalised (8x8 blocks to zero      32x32
+                            mean, unit std); greenloop-seq's descriptor
+    gradients         256   16x16-cell orientation histograms (8 bins, L2 per cell)   128x64
+                            of the gray frame; greenloop-seq's default descriptor
 
 "GAP" is global average pooling of the last feature map (the classifier head is dropped:
 ``include_top=False``), so every CNN descriptor is independent of the input size. Each Keras
