@@ -454,7 +454,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--variant", default=None, metavar="ROW",
                    help="which of --tuned's rows (greenloop-seq: greenloop-seq or greenloop-seq-fast, the default: no "
                         "CNN; another --method: the row to stream, e.g. 'SeqSLAM (tuned)')")
-    g.add_argument("--descriptor", default=None, choices=("pixels", "pixels-patchnorm", "mobilenetv2"),
+    g.add_argument("--descriptor", default=None, choices=seqmatch.DESCRIPTORS,
                    help="per-frame descriptor (default pixels-patchnorm)")
     g.add_argument("--seq-len", type=int, default=None, help="frames per matched sequence (default 10)")
     g.add_argument("--exclude", type=int, default=None,

@@ -51,26 +51,21 @@ the stream except the event list.
 from __future__ import annotations
 
 import math
-import time
 import warnings
 
-import cv2
 import numpy as np
 
 from greenloop import evaluate, features
-from greenloop.datasets.sequence import load_frames, preprocess_image
+from greenloop.datasets.sequence import preprocess_image
+from greenloop.features import GRADIENT_SIZE, gradient_histograms, patch_normalise
 from greenloop.similarity import apply_projection, l2_normalise, pca_whiten
-from greenloop.util.checks import positive_int
 
-DESCRIPTORS = ("pixels", "pixels-patchnorm", "mobilenetv2", "gradients")
+DESCRIPTORS = features.SEQUENCE_DESCRIPTORS   # each a features.BACKBONES entry (one registry)
 COLORS = ("bgr", "rgb")
 STORE_DTYPES = ("float32", "float16")
 DEFAULT_VELOCITIES = (0.8, 1.0, 1.25)     # SeqSLAM's V_min..V_max range around unit speed
-PATCH = 8                                  # SeqSLAM patch-normalisation size (pixels)
-PIXEL_SIZE = (32, 32)                      # the study's raw-pixel descriptor (width, height)
-CNN_SIZE = (224, 224)                      # MobileNet v2's fixed TFLite input
-GRADIENT_SIZE = (128, 64)                  # "gradients": gray frame (width, height), 2:1 like SeqSLAM
-GRADIENT_CELL, GRADIENT_BINS = 16, 8       # 16x16-pixel cells (4 x 8 of them), 8 unsigned bins -> 256-d
+PIXEL_SIZE = features.PIXELS_SIZE          # the study's raw-pixel descriptor (width, height)
+CNN_SIZE = features.BACKBONES["mobilenetv2"].input_size   # MobileNet v2's fixed TFLite input
 _EPS = 1e-6
 
 # The named default configuration: what `python -m greenloop detect --method
@@ -88,54 +83,6 @@ __all__ = ["DESCRIPTORS", "DEFAULT_NAME", "DEFAULT_KNOBS", "DEFAULT_THRESHOLD", 
 
 
 # ------------------------------------------------------------------------------ descriptors
-def patch_normalise(gray, patch: int = PATCH) -> np.ndarray:
-    """SeqSLAM patch normalisation: every ``patch`` x ``patch`` block to zero mean, unit std.
-
-    gray: (N, H, W) float images, H and W multiples of ``patch``. A flat block becomes 0.
-    Returns (N, H * W) float32, the normalised images flattened row-major.
-    """
-    g = np.asarray(gray, dtype=np.float32)
-    if g.ndim != 3 or g.shape[1] % patch or g.shape[2] % patch:
-        raise ValueError(f"patch_normalise needs (N, H, W) images with H, W multiples of {patch}, "
-                         f"got shape {g.shape}")
-    n, h, w = g.shape
-    b = g.reshape(n, h // patch, patch, w // patch, patch)
-    mu = b.mean(axis=(2, 4), keepdims=True)
-    sd = b.std(axis=(2, 4), keepdims=True)
-    z = np.where(sd > _EPS, (b - mu) / np.maximum(sd, _EPS), 0.0)
-    return z.reshape(n, h * w).astype(np.float32)
-
-
-def gradient_histograms(gray, cell: int = GRADIENT_CELL, bins: int = GRADIENT_BINS) -> np.ndarray:
-    """A HOG-like layout-keeping descriptor: per-cell histograms of gradient orientation.
-
-    gray: (N, H, W) float images, H and W multiples of ``cell``. Gradients are 3x3 Sobel
-    (``cv2.Sobel``, border reflected; ``cv2.cartToPolar``); each pixel adds its gradient magnitude to the bin of its
-    unsigned orientation (angle mod pi, ``bins`` equal bins, hard assignment) of its cell; each
-    cell's histogram is then L2-normalised (a flat cell stays 0), which removes the cell's
-    contrast and so most of an illumination change (Dalal and Triggs 2005, without blocks).
-    Returns (N, (H / cell) * (W / cell) * bins) float32, cells row-major, bins innermost.
-    """
-    g = np.asarray(gray, dtype=np.float32)
-    if g.ndim != 3 or g.shape[1] % cell or g.shape[2] % cell:
-        raise ValueError(f"gradient_histograms needs (N, H, W) images with H, W multiples of {cell}, "
-                         f"got shape {g.shape}")
-    n, h, w = g.shape
-    polar = [cv2.cartToPolar(cv2.Sobel(x, cv2.CV_32F, 1, 0, ksize=3), cv2.Sobel(x, cv2.CV_32F, 0, 1, ksize=3),
-                             angleInDegrees=True) for x in g]
-    mag = np.stack([p[0] for p in polar])
-    ang = np.stack([p[1] for p in polar])                      # degrees in [0, 360), ~0.3 degree accuracy
-    ang = np.where(ang >= 180.0, ang - 180.0, ang)
-    b = np.minimum((ang * np.float32(bins / 180.0)).astype(np.int64), bins - 1)
-    cells = (np.arange(h)[:, None] // cell) * (w // cell) + np.arange(w)[None, :] // cell     # (H, W)
-    m = (h // cell) * (w // cell) * bins
-    idx = (np.arange(n)[:, None, None] * m + cells[None] * bins + b).ravel()
-    hist = np.bincount(idx, weights=mag.ravel(), minlength=n * m).reshape(n, h // cell, w // cell, bins)
-    norm = np.linalg.norm(hist, axis=3, keepdims=True)
-    hist = np.where(norm > _EPS, hist / np.maximum(norm, _EPS), 0.0)
-    return hist.reshape(n, -1).astype(np.float32)
-
-
 def _check_descriptor(descriptor: str) -> str:
     if descriptor not in DESCRIPTORS:
         raise ValueError(f"descriptor must be one of {DESCRIPTORS}, got {descriptor!r}")
@@ -148,40 +95,16 @@ def describe(frames_or_folder, descriptor: str = "pixels", step: int = 1, weight
 
     frames_or_folder: a sequence folder (its rgb/ frames) or an (N, H, W[, 3]) uint8 array (RGB).
     descriptor: "pixels" (32x32 gray in [0, 1], 1024-d), "pixels-patchnorm" (the same, SeqSLAM
-        patch-normalised, 1024-d) or "mobilenetv2" (ImageNet TFLite graph, 224x224, 1280-d).
+        patch-normalised, 1024-d), "mobilenetv2" (ImageNet TFLite graph, 224x224, 1280-d) or
+        "gradients" (128x64 gray, 16x16-cell orientation histograms, 256-d): ``features.extract``
+        of that ``features.BACKBONES`` entry.
     step: every step-th frame. weights: for mobilenetv2 (see ``greenloop.features.extract``).
     Returns (N, D) float32, or (X, info) with return_info (``greenloop.features.ExtractInfo``; its
     seconds_per_image includes loading, preprocessing and the descriptor).
     """
-    _check_descriptor(descriptor)
-    if descriptor == "gradients":
-        return _describe_gradients(frames_or_folder, step, return_info)
-    name = "mobilenetv2" if descriptor == "mobilenetv2" else "pixels"
-    X, info = features.extract(frames_or_folder, name, weights=weights, progress=False,
-                               return_info=True, step=step)
-    if descriptor == "pixels-patchnorm":
-        t0 = time.perf_counter()
-        X = patch_normalise(X.reshape(-1, PIXEL_SIZE[1], PIXEL_SIZE[0]))
-        info.seconds_per_image += (time.perf_counter() - t0) / max(len(X), 1)
+    X, info = features.extract(frames_or_folder, _check_descriptor(descriptor), weights=weights,
+                               progress=False, return_info=True, step=step)
     return (X, info) if return_info else X
-
-
-def _describe_gradients(frames_or_folder, step: int, return_info: bool):
-    """:func:`describe` for "gradients": 64x32 gray frames (``load_frames``, or ``preprocess_image``
-    of each RGB frame of an array) -> :func:`gradient_histograms` (N, 256)."""
-    t0 = time.perf_counter()
-    if isinstance(frames_or_folder, np.ndarray):
-        frames = frames_or_folder[::positive_int("step", step, 1)]
-        g = np.stack([preprocess_image(f, GRADIENT_SIZE, gray=True, color="rgb") for f in frames])
-        g = g.astype(np.float32) / np.float32(255.0)
-    else:
-        g = load_frames(frames_or_folder, size=GRADIENT_SIZE, gray=True, step=step)[..., 0]
-    X = gradient_histograms(g)
-    if not return_info:
-        return X
-    per = (time.perf_counter() - t0) / max(len(X), 1)
-    return X, features.ExtractInfo("gradients", "none", X.shape[1], len(X), GRADIENT_SIZE,
-                                   f"{GRADIENT_CELL}x{GRADIENT_CELL}-cell orientation histograms", per)
 
 
 def describe_frames(frames, descriptor: str = "pixels", color: str = "bgr", weights="auto") -> np.ndarray:

@@ -14,7 +14,9 @@ keras = pytest.importorskip("keras")
 from safetensors.numpy import save_file  # noqa: E402
 
 from greenloop import features as F  # noqa: E402
+from greenloop.backbones import efficientnet_lite as LITE  # noqa: E402
 from greenloop.backbones import ghostnet as G  # noqa: E402
+from greenloop.features import cnn as FCNN  # noqa: E402
 from greenloop.datasets import sequence  # noqa: E402
 
 SIZE = 32  # smallest input every Keras application accepts
@@ -32,7 +34,7 @@ def empty_keras_home(tmp_path, monkeypatch):
     (home / "models").mkdir(parents=True)
     monkeypatch.setenv("KERAS_HOME", str(home))
     monkeypatch.delenv(F.WEIGHTS_ENV, raising=False)
-    monkeypatch.setattr(F._lite, "package_weights_path", lambda: None)
+    monkeypatch.setattr(LITE, "package_weights_path", lambda: None)
     return home
 
 
@@ -74,12 +76,14 @@ def write_sequence(folder, rgb, depth_m=None):
 # ---- names, dims ------------------------------------------------------------------------------
 
 def test_backbone_table():
-    assert set(F.BACKBONES) == set(DIMS) | {"sift_bovw", "pixels", "spot_cnn"}
+    assert set(F.BACKBONES) == set(DIMS) | {"sift_bovw", "pixels", "spot_cnn", "pixels-patchnorm",
+                                            "gradients"}
     for name, d in DIMS.items():
         assert F.BACKBONES[name].dim == d
         assert F.BACKBONES[name].input_size == (224, 224)
         assert F.BACKBONES[name].weights_file or name == "shufflenetv2"   # no weights exist offline
-    assert F.BACKBONES["pixels"].dim == 1024
+    assert F.BACKBONES["pixels"].dim == F.BACKBONES["pixels-patchnorm"].dim == 1024
+    assert F.BACKBONES["gradients"].dim == (128 // 16) * (64 // 16) * 8 == 256
 
 
 def test_unknown_backbone_lists_valid_names(frames):
@@ -104,7 +108,7 @@ def test_cnn_descriptor_shapes(frames, backbone):
 @pytest.mark.parametrize("backbone", ["resnet101", "resnet152"])
 def test_deep_resnets_build(backbone):
     """Same code path as resnet50; building (not running) them keeps the suite fast."""
-    model = F._cnn_model(backbone, None, (SIZE, SIZE))
+    model = FCNN._cnn_model(backbone, None, (SIZE, SIZE))
     assert model.output_shape == (None, DIMS[backbone])
     F.clear_cache()
 
@@ -112,8 +116,8 @@ def test_deep_resnets_build(backbone):
 def test_inception_and_vgg19_fc1_build():
     """InceptionV3 (Inception-v4's stand-in) needs >= 75x75; vgg19_fc1 is the whole classifier cut
     at fc1, so it runs at 224x224 only and says why."""
-    assert F._cnn_model("inceptionv3", None, (75, 75)).output_shape == (None, 2048)
-    fc1 = F._cnn_model("vgg19_fc1", None, (224, 224))
+    assert FCNN._cnn_model("inceptionv3", None, (75, 75)).output_shape == (None, 2048)
+    fc1 = FCNN._cnn_model("vgg19_fc1", None, (224, 224))
     assert fc1.output_shape == (None, 4096) and fc1.layers[-1].name == "fc1"
     F.clear_cache()
     with pytest.raises(ValueError, match="fixed 224x224.*fully connected"):
@@ -410,3 +414,67 @@ def test_random_init_fallback_is_reported_in_one_line_without_paths(frames, caps
         warnings.simplefilter("always")
         F.extract(frames, "ghostnet", "auto", input_size=64)
     assert [w for w in caught if "RANDOM-INITIALISED" in str(w.message)]
+
+
+# ---- one registry, one protocol, weights resolved once ------------------------------------------
+
+def test_sequence_descriptors_are_registry_entries():
+    """greenloop-seq's names are the features registry's: every one a BACKBONES entry with an
+    extractor, and seqmatch's tuple is that same object (no second list)."""
+    from greenloop import seqmatch
+    assert seqmatch.DESCRIPTORS is F.SEQUENCE_DESCRIPTORS
+    assert seqmatch.DESCRIPTORS == ("pixels", "pixels-patchnorm", "mobilenetv2", "gradients")
+    for name in seqmatch.DESCRIPTORS:
+        assert F.BACKBONES[name].kind in F.EXTRACTORS
+    assert set(F.EXTRACTORS) == {b.kind for b in F.BACKBONES.values()}
+
+
+def test_patchnorm_and_gradients_entries(frames):
+    """The two greenloop-seq descriptors as registry entries: computed from an independent cv2
+    path (RGB -> gray, resize, / 255) and seqmatch's stage functions. The 96x72 frames shrink to
+    32x32 (INTER_AREA) and are enlarged to 128 wide for gradients (INTER_LINEAR)."""
+    def gray(size):
+        interp = cv2.INTER_AREA if frames.shape[2] > size[0] else cv2.INTER_LINEAR
+        g = [cv2.resize(cv2.cvtColor(f, cv2.COLOR_RGB2GRAY), size, interpolation=interp)
+             for f in frames]
+        return np.stack(g).astype(np.float32) / np.float32(255.0)
+    P, ip = F.extract(frames, "pixels-patchnorm", progress=False, return_info=True)
+    assert np.array_equal(P, F.patch_normalise(gray((32, 32))))
+    assert ip.dim == 1024 and ip.weights == "none" and ip.input_size == (32, 32)
+    # every 8x8 block of a patch-normalised frame: mean 0, std 1 (hand-checked definition)
+    blocks = P[0].reshape(4, 8, 4, 8)
+    assert np.allclose(blocks.mean(axis=(1, 3)), 0, atol=1e-5)
+    assert np.allclose(blocks.std(axis=(1, 3)), 1, atol=1e-4)
+    G_, ig = F.extract(frames, "gradients", progress=False, return_info=True)
+    assert G_.shape == (len(frames), 256) and ig.input_size == (128, 64)
+    assert np.array_equal(G_, F.gradient_histograms(gray((128, 64))))
+    with pytest.raises(ValueError, match="has no weights"):
+        F.extract(frames, "gradients", weights="imagenet")
+
+
+def test_gray_float_frames_round_then_preprocess(frames):
+    """Float frames in [0, 1] are rounded to uint8 and then take sequence.preprocess_image's path:
+    the same descriptor as the uint8 frames they came from."""
+    f = frames.astype(np.float32) / np.float32(255.0)
+    assert np.array_equal(F.extract(f, "pixels", progress=False),
+                          F.extract(frames, "pixels", progress=False))
+    ref = np.stack([sequence.preprocess_image(im, (32, 32), gray=True, color="rgb") for im in frames])
+    assert np.array_equal(F.extract(frames, "pixels", progress=False),
+                          ref.reshape(len(frames), -1).astype(np.float32) / np.float32(255.0))
+
+
+def test_extract_all_resolves_weights_once_per_entry(tiny_sequence, tmp_path, monkeypatch):
+    """extract_all resolves each (backbone, weights) pair once and passes the result on (the
+    cache key, the random-init report and extract all use it); before, it resolved three times."""
+    from greenloop.features import cache as FC
+    from greenloop.features import extraction as FE
+    calls = []
+
+    def counting(name, weights, warn=True):
+        calls.append(name)
+        return real(name, weights, warn)
+    real = FC.resolve
+    monkeypatch.setattr(FC, "resolve", counting)
+    monkeypatch.setattr(FE, "resolve", counting)
+    F.extract_all(tiny_sequence, ["pixels", "sift_bovw"], step=5, vocab_size=8, cache=tmp_path)
+    assert calls == ["pixels", "sift_bovw"]

@@ -1,0 +1,162 @@
+"""The CNN extractor family: Keras applications, the Keras ports and the TFLite MobileNets.
+
+``extract_cnn`` follows the extractor protocol of ``greenloop.features.extract`` (see
+``registry.Options``). Models are built once per process (``clear_models`` forgets them).
+"""
+from __future__ import annotations
+
+import functools
+import importlib
+import random
+import time
+from pathlib import Path
+
+import numpy as np
+
+from greenloop.backbones import efficientnet_lite as _lite
+from greenloop.backbones import ghostnet as _ghostnet
+from greenloop.backbones import mobilenet_tflite as _tflite
+from greenloop.backbones import shufflenet as _shufflenet
+from greenloop.features.frames import load, rgb_batch
+from greenloop.features.registry import BACKBONES, RANDOM_INIT_SEED, Backbone, Options
+from greenloop.features.weights import WeightsNotFoundError, _missing_weights_message, source_key
+from greenloop.util.progress import bar as tqdm  # in the terminal, never in a notebook
+
+# the Keras ports: build (input_shape -> headless pooled model), native weights suffix, its loader
+_PORTS = {
+    "ghostnet": (lambda shape: _ghostnet.build_ghostnet(input_shape=shape, include_top=False,
+                                                        pooling="avg"),
+                 ".safetensors", _ghostnet.load_timm_weights),
+    "efficientnet_lite": (lambda shape: _lite.build_efficientnet_lite0(input_shape=shape),
+                          ".pth", _lite.load_weights),
+    "shufflenet": (lambda shape: _shufflenet.build_shufflenet_v2(input_shape=shape), None, None),
+}
+
+def _seeded(fn, seed=RANDOM_INIT_SEED):
+    """Run fn() with Keras's global seed set (deterministic initialisers); Python's and NumPy's global
+    random states are restored afterwards so callers' streams are not disturbed."""
+    import keras
+    py_state, np_state = random.getstate(), np.random.get_state()
+    keras.utils.set_random_seed(seed)
+    try:
+        return fn()
+    finally:
+        random.setstate(py_state)
+        np.random.set_state(np_state)
+
+@functools.lru_cache(maxsize=4)
+def _cnn_model(name: str, source_key, size: tuple[int, int]):
+    """Keras model (N, h, w, 3) -> (N, D) for a CNN backbone. source_key: None, 'download' or
+    (path string, mtime) (the mtime keys the cache to the file's content)."""
+    import keras
+    b = BACKBONES[name]
+    shape = (size[1], size[0], 3)
+    source = source_key[0] if isinstance(source_key, tuple) else source_key
+    if b.kind in _PORTS:
+        build, suffix, load_native = _PORTS[b.kind]
+        model = _seeded(lambda: build(shape))
+        if source is not None:
+            path = Path(source)
+            if suffix is not None and path.suffix == suffix:
+                load_native(model, path)  # ValueError on a wrong architecture
+            else:
+                try:
+                    model.load_weights(str(path))
+                except Exception as e:
+                    raise ValueError(f"weights file {path} does not fit {b.name} (expected its "
+                                     f"{suffix} file {b.weights_file} or Keras weights of the "
+                                     f"same port): {_short(e)}") from e
+        return model
+    ctor = getattr(keras.applications, b.app)
+    kwargs = dict(include_top=b.top_layer is not None, input_shape=shape)
+    if b.top_layer is None:
+        kwargs["pooling"] = "avg"
+    if source is None:
+        model = _seeded(lambda: ctor(weights=None, **kwargs))
+    elif source == "download":
+        try:
+            model = ctor(weights="imagenet", **kwargs)
+        except Exception as e:
+            raise WeightsNotFoundError(f"{_missing_weights_message(b)}. Keras could not download "
+                                       f"{b.weights_file}: {e}") from e
+    else:
+        try:
+            model = _seeded(lambda: ctor(weights=str(source), **kwargs))
+        except Exception as e:
+            raise ValueError(f"weights file {source} does not fit {b.name} ({b.app}, include_top="
+                             f"{kwargs['include_top']}): {type(e).__name__}: {_short(e)}") from e
+    if b.top_layer is None:
+        return model
+    return keras.Model(model.inputs, model.get_layer(b.top_layer).output, name=b.name)
+
+@functools.lru_cache(maxsize=8)
+def _tflite_interpreter(name: str, source_key, batch: int):
+    """(interpreter, frames per invoke) for a TFLite backbone's graph file, resized to ``batch``
+    frames where the graph allows it; checked to be that backbone's graph."""
+    path = source_key[0]
+    interp, used = _tflite.load_interpreter(path, batch)
+    _tflite.check_graph(interp, name, path)
+    return interp, used
+
+def _short(e: Exception, n: int = 300) -> str:
+    text = " ".join(str(e).split())
+    return text if len(text) <= n else text[:n] + " ..."
+
+def _preprocess_fn(b: Backbone):
+    if b.kind == "ghostnet":
+        return _ghostnet.preprocess_input
+    if b.kind == "efficientnet_lite":
+        return _lite.preprocess_input
+    if b.kind == "shufflenet":
+        return _shufflenet.preprocess_input
+    module = importlib.import_module(f"keras.applications.{b.module}")
+    return module.preprocess_input
+
+def _batches(n, batch_size):
+    return [(i, min(i + batch_size, n)) for i in range(0, n, batch_size)]
+
+
+
+def _progress(total, desc, progress):
+    return tqdm(total=total, desc=desc, unit="img", disable=not progress)
+
+
+def run_model(predict, frames, batch_fn, batch_size, progress, desc):
+    """Batched ``predict(batch_fn(frames[i:j]))`` (a Keras ``predict_on_batch`` or a TFLite runner)
+    with an untimed warm-up batch; returns (features (N, D) float32, seconds per image)."""
+    n = len(frames)
+    spans = _batches(n, batch_size)
+    # warm-up, untimed: traces the graph for the full batch shape and, if different, the last one
+    first, last = spans[0], spans[-1]
+    for i, j in [first] + ([last] if last[1] - last[0] != first[1] - first[0] else []):
+        predict(batch_fn(frames[i:j]))
+    out = []
+    with _progress(n, desc, progress) as bar:
+        t0 = time.perf_counter()
+        for i, j in spans:
+            out.append(np.asarray(predict(batch_fn(frames[i:j])), dtype=np.float32))
+            bar.update(j - i)
+        dt = time.perf_counter() - t0
+    return np.concatenate(out).reshape(n, -1), dt / n
+
+
+def extract_cnn(b: Backbone, frames_or_folder, source, size, opt: Options):
+    """The extractor of the CNN kinds: frames -> (features (N, D) float32, s/image, {})."""
+    frames = load(frames_or_folder, size, gray=False, limit=opt.limit, step=opt.step)
+    key = source_key(source)
+    if b.kind == "tflite" and isinstance(source, Path) and source.suffix == ".tflite":
+        def predict(rgb):  # RGB 0..255 -> the graph's uint8 input: mobilenet_tflite.quantise_input
+            interp, used = _tflite_interpreter(b.name, key, len(rgb))
+            return _tflite.describe(interp, used, b.name, rgb)
+        return (*run_model(predict, frames, lambda a: rgb_batch(a, size), opt.batch_size, opt.progress,
+                            f"{b.name} features"), {})
+    model = _cnn_model(b.name, key, size)
+    pre = _preprocess_fn(b)
+    return (*run_model(model.predict_on_batch, frames, lambda a: pre(rgb_batch(a, size)),
+                        opt.batch_size, opt.progress, f"{b.name} features"), {})
+
+
+def clear_models() -> None:
+    """Forget the CNN models and TFLite interpreters built so far."""
+    _cnn_model.cache_clear()
+    _tflite_interpreter.cache_clear()
