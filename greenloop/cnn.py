@@ -12,7 +12,6 @@ from pathlib import Path
 import numpy as np
 
 from greenloop.util import numba_kernels as kernels
-from greenloop.util.threads import run_slices
 from greenloop.util.cache import cache_key, cached_model
 from greenloop.util.checks import positive_int
 from greenloop.util.progress import bar as tqdm   # in the terminal, never in a notebook
@@ -385,7 +384,7 @@ def _fit_fused(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size
     epoch_seconds = []
     t0 = time.perf_counter()
     bar = tqdm(total=epochs, desc=f"train seed {seed} ({split})", unit="epoch", leave=False, disable=not progress)
-    # one BLAS thread per call: run_slices spreads the work over the cores itself
+    # one BLAS thread per call: util.threads.run_slices spreads the work over the cores itself
     with threadpool_limits(limits=1, user_api="blas"):
         for _ in range(epochs):
             t_epoch = time.perf_counter()
