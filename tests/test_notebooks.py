@@ -309,6 +309,18 @@ def _check_08(folder):
     assert t["AP_eval_%"].between(0, 100).all() and t["AP_tune_%"].between(0, 100).all()
     assert set(t["size"]) <= set(TINY["median_sizes"])
     assert t["MPCA_eval"].between(0, 1).all()                 # mean per-class accuracy, threshold tuned
+    # ZCA is PCA whitening rotated back (W_zca = U W_pca, U orthogonal): the same cosines, so the same APs
+    # wherever both picked the same dim (up to float near-ties of the scores)
+    k, ap = ["backbone", "median_filter"], ["AP_tune_%", "AP_eval_%"]
+    pca = t[t.variant == "PCA-whitened, tuned dim"].set_index(k)
+    zca = t[t.variant == "ZCA, tuned dim"].set_index(k).loc[pca.index]
+    same = pca.whitening == zca.whitening
+    assert same.any() and np.allclose(pca.loc[same, ap], zca.loc[same, ap], atol=0.25), (pca[ap], zca[ap])
+    # a median filter of size 1 is the identity: its rows equal the unfiltered ones
+    k = ["backbone", "variant"]
+    one = t[(t.median_filter == "median (tuned)") & (t["size"] == 1)].set_index(k)
+    none = t[t.median_filter == "none"].set_index(k).loc[one.index]
+    assert np.allclose(one[ap + ["R@100P_eval_%"]], none[ap + ["R@100P_eval_%"]], atol=1e-9)
     two = pd.read_csv(folder / "second_split.csv")             # knobs re-picked with the parts swapped
     assert two.split.nunique() == 2 and len(two) == 2 * 2 * len(done)
     assert set(two[two.knob == "median size, L2"].picked) <= set(TINY["median_sizes"])
@@ -386,6 +398,10 @@ def _check_10(folder):
     assert pd.to_numeric(t2["this run"]).between(0, 1).all() and t2.paper.notna().all()
     t = pd.read_csv(folder / "timing.csv")
     assert (t.s_per_image_batched > 0).all() and (t.s_per_image_one_at_a_time > 0).all()
+    t3 = pd.read_csv(folder / "table3_extraction_time.csv").set_index("quantity")["this run"]
+    for r in t.itertuples():                           # Table 3's cells are timing.csv's, neither column swapped
+        assert t3[f"extraction time per image, CPU (s): {r.descriptor}"] == (
+            f"{r.s_per_image_one_at_a_time:.5f} one at a time; {r.s_per_image_batched:.5f} batched"), r.descriptor
     s = json.loads((folder / "summary.json").read_text())
     assert s["labelled_frames_near_heldout"] == 0 and s["last_train_frame"] < s["first_heldout_frame"]
     assert s["networks_trained"] == 3 + 2 + len(TINY["mid_layers"])
