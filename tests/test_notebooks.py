@@ -435,6 +435,21 @@ def _check_12(folder):
     assert s["split"]["honest"] and s["revisit_frames"] == per_seed.revisit_frames.iloc[0] > 0
 
 
+def _leaderboard_bounds(t):
+    """What any correct leaderboard satisfies: its columns, R@5 >= R@1 and R@95P >= R@100P (a looser
+    condition finds at least as much), every interval around its value, one for each scored row but chance."""
+    from greenloop.study import leaderboard
+    assert list(t.columns) == leaderboard.COLUMNS
+    scored = t.dropna(subset=["R@1_%"])
+    for c in leaderboard.METRICS + ["pair_AP_%"]:
+        assert scored[c].dropna().between(0, 100).all(), c
+    assert (scored["R@5_%"] >= scored["R@1_%"]).all() and (scored["R@95P_%"] >= scored["R@100P_%"]).all()
+    m = scored.dropna(subset=["R@1_lo_%"])                       # every scored row but chance has its interval
+    assert len(m) == len(scored) - len(t[t.method.str.startswith("chance")])
+    for k in ("R@1", "AUC-PR"):
+        assert (m[f"{k}_lo_%"] <= m[f"{k}_%"] + 1e-9).all() and (m[f"{k}_%"] <= m[f"{k}_hi_%"] + 1e-9).all(), k
+
+
 def _check_13(folder):
     from greenloop.study import leaderboard
     csv = folder / "leaderboard.csv"
@@ -446,14 +461,7 @@ def _check_13(folder):
     single = [f"{s} (single frame)" for s in TINY["cnn_backbones"] + [TINY["random_control"], "sift_bovw", "pixels"]]
     seq = ["greenloop-seq", "greenloop-seq-fast", "SeqSLAM (published)", "SeqSLAM (tuned)"]
     assert set(single + seq + ["chance (random scores)"]) <= set(lc.index) and lc.index.str.contains("dictionary").sum() == 1
-    scored = t.dropna(subset=["R@1_%"])
-    for c in leaderboard.METRICS + ["pair_AP_%"]:
-        assert scored[c].dropna().between(0, 100).all(), c
-    assert (scored["R@5_%"] >= scored["R@1_%"]).all() and (scored["R@95P_%"] >= scored["R@100P_%"]).all()
-    m = scored.dropna(subset=["R@1_lo_%"])                       # every scored row but chance has its interval
-    assert len(m) == len(scored) - len(t[t.method.str.startswith("chance")])
-    for k in ("R@1", "AUC-PR"):
-        assert (m[f"{k}_lo_%"] <= m[f"{k}_%"] + 1e-9).all() and (m[f"{k}_%"] <= m[f"{k}_hi_%"] + 1e-9).all(), k
+    _leaderboard_bounds(t)
     # chance sits below greenloop-seq (the tiny sequence's revisit is found far above chance)
     ch = lc.loc["chance (random scores)"]
     for n in ("greenloop-seq", "SeqSLAM (published)"):
@@ -584,6 +592,7 @@ def _end_loop_12(folder):
 def _end_loop_13(folder):
     t = pd.read_csv(folder / "leaderboard.csv")
     assert len(t) and t.filter(like="AP").stack().dropna().between(0, 100).all()
+    _leaderboard_bounds(t)
 
 
 def _end_loop_10(folder):
