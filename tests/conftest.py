@@ -28,6 +28,20 @@ def write_frames(folder: Path, n: int, size=(40, 30), ext=".png", seed=0) -> Pat
     return folder
 
 
+def revisit_example():
+    """40 frames, spots of 10; frames 30..39 revisit frames 0..9 (spot 0). Returns (pred, ref, gt):
+    a loop-aware classifier's labels (the revisit is spot 0) with one error at frame 15."""
+    n = 40
+    ref = np.arange(n) // 10
+    gt = np.zeros((n, n), bool)
+    for k in range(10):
+        gt[k, 30 + k] = gt[30 + k, k] = True
+    pred = ref.copy()
+    pred[30:] = 0
+    pred[15] = 2
+    return pred, ref, gt
+
+
 @pytest.fixture(scope="session")
 def tiny_sequence(tmp_path_factory):
     """A 200-frame, 160x120 synthetic greenhouse sequence (rgb, depth, trajectory, camera)."""

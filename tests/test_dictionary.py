@@ -1,6 +1,7 @@
 import numpy as np
 import pytest
 
+from conftest import revisit_example
 from greenloop import dictionary
 
 
@@ -49,22 +50,8 @@ def test_detector_rejects_bad_input():
         dictionary.run([0, 5], 3, 2)
 
 
-def _revisit_example():
-    """40 frames, spots of 10; frames 30..39 revisit frames 0..9 (spot 0). Returns (pred, ref, gt):
-    a loop-aware classifier's labels (the revisit is spot 0) with one error at frame 15."""
-    n = 40
-    ref = np.arange(n) // 10
-    gt = np.zeros((n, n), bool)
-    for k in range(10):
-        gt[k, 30 + k] = gt[30 + k, k] = True
-    pred = ref.copy()
-    pred[30:] = 0
-    pred[15] = 2
-    return pred, ref, gt
-
-
 def test_score_closures_against_ground_truth():
-    pred, ref, gt = _revisit_example()
+    pred, ref, gt = revisit_example()
     s = dictionary.score_closures(pred, ref, gt, threshold=12, exclude=5)
     assert s["true_events"] == 1 and s["false_events"] == 0
     assert s["event_list"][0]["frame"] == 31  # 10 + 2 more counts of spot 0

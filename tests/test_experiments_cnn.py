@@ -4,6 +4,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from conftest import revisit_example
 from greenloop import cnn, dictionary, evaluate, groundtruth, shift, spots
 from greenloop.experiments import (confusion_matrix, dataset, dictionary_threshold, shift_robustness,
                                    speed_claim, spot_grouping, training_over_seeds as tos)
@@ -316,22 +317,10 @@ def test_control_scores_and_the_one_shift_table():
 
 
 # ------------------------------------------------------------ 05: the dictionary's threshold
-def _revisit_example():
-    """40 frames, spots of 10; frames 30..39 revisit frames 0..9 (spot 0). Returns (pred, ref, gt):
-    a loop-aware classifier's labels (the revisit is spot 0) with one error at frame 15."""
-    n = 40
-    ref = np.arange(n) // 10
-    gt = np.zeros((n, n), bool)
-    for k in range(10):
-        gt[k, 30 + k] = gt[30 + k, k] = True
-    pred = ref.copy()
-    pred[30:] = 0
-    pred[15] = 2
-    return pred, ref, gt
 
 
 def test_tau_sweep_scores_every_threshold():
-    pred, ref, gt = _revisit_example()
+    pred, ref, gt = revisit_example()
     rows = dictionary_threshold.tau_sweep(pred, ref, gt, [3, 12, 25], exclude=5)
     assert list(rows[0]) == ["tau", "true_events", "false_events", "true_frames", "false_frames", "revisit_recall_%",
                              "first_delay_frames"]
@@ -343,7 +332,7 @@ def test_tau_sweep_scores_every_threshold():
 
 
 def test_variants_scores_events_and_sweep(monkeypatch):
-    pred, ref, gt = _revisit_example()
+    pred, ref, gt = revisit_example()
     trained = []
     monkeypatch.setattr(cnn, "run_seeds", lambda X, y, seeds, **kw: trained.append((y.tolist(), list(seeds), kw))
                         or [{"seed": seeds[0], "model": "aware"}])

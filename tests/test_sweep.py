@@ -99,6 +99,7 @@ def _plain_loop(points, base, dataset, folder):
                                    progress_bar=False)
 
 
+@pytest.mark.notebook
 def test_two_worker_sweep_matches_the_points_run_one_after_another(tiny_sequence, tmp_path, monkeypatch):
     from concurrent.futures import ThreadPoolExecutor
 
