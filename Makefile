@@ -188,7 +188,7 @@ endif
 	@touch $@
 
 test: $(VENV)/.timm | $(STAMP) ## run the test suite (unit tests and every notebook on tiny parameters)
-	$(BIN)/python -m pytest -q tests
+	$(BIN)/python -m pytest -q -n auto --dist worksteal tests
 
 clean-results: ## remove executed notebooks and tables (keeps the model cache)
 	rm -rf $(EXECUTED) $(HTML) $(RESULTS)/tables.md
