@@ -253,7 +253,7 @@ def fit_orders(n: int, batch_size: int):
     the epoch's dataset is iterated, so a seeded ``model.fit`` (Keras 3.15, TF 2.21) visits the
     frames in the same order in every epoch (unseeded, a new one each epoch); on the JAX backend
     it draws a new ``np.random.permutation`` each epoch (followed from Keras's source; only the
-    TensorFlow backend is tested here). tests/test_numba_kernels.py checks the orders against
+    TensorFlow backend is tested here). tests/test_kernels.py checks the orders against
     ``model.fit`` itself."""
     import keras
 
@@ -363,7 +363,7 @@ def _fit_fused(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size
     The weights start from the seeded ``build`` model (Keras's own initialisers) and are written
     back into it at the end, so the model returned and cached is the ordinary Keras model.
     The batches are those ``model.fit`` would draw (``fit_orders``), so each seed takes the same
-    steps as under ``model.fit``, up to float rounding; tests/test_numba_kernels.py checks the weights
+    steps as under ``model.fit``, up to float rounding; tests/test_kernels.py checks the weights
     against ``model.fit``'s. Same history keys as ``model.fit``."""
     import keras
     from threadpoolctl import threadpool_limits
