@@ -67,7 +67,7 @@ venv: $(STAMP) ## create .venv from environment.txt (and register the Jupyter ke
 $(STAMP): environment.txt
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q --no-compile -r environment.txt
+	$(BIN)/python -m pip install -q -r environment.txt
 	$(BIN)/python -m ipykernel install --sys-prefix --name $(KERNEL) --display-name "Python (greenloop)" >/dev/null
 	@# the kernel does not copy low-level output (TensorFlow's C++ logs, progress bars on the real
 	@# stderr) into executed notebooks: it goes to the terminal that runs make (greenloop.util.progress)
