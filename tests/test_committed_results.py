@@ -1,0 +1,77 @@
+"""The committed results folders are each one run: one CPU and the pinned package set in every
+notebook's manifest, and no copy of a table that differs from its source."""
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+from greenloop.study import report
+
+ROOT = Path(__file__).resolve().parents[1]
+FOLDERS = [ROOT / "results", ROOT / "results" / "nordland", ROOT / "results" / "gardenspoint"]
+NOTEBOOKS = sorted(p.stem for p in (ROOT / "notebooks").glob("[0-9][0-9]_*.ipynb"))
+
+
+def pins(path=ROOT / "environment.txt") -> dict:
+    """environment.txt's `name==version` lines as {name: version}."""
+    out = {}
+    for line in path.read_text().splitlines():
+        m = re.match(r"^([A-Za-z0-9_.-]+)==([^\s#]+)", line.strip())
+        if m:
+            out[m.group(1).lower()] = m.group(2)
+    return out
+
+
+def manifests(folder: Path) -> dict:
+    """{notebook stem: its manifest} of one results folder."""
+    return {s: json.loads((folder / s / "manifest.json").read_text())
+            for s in NOTEBOOKS if (folder / s / "manifest.json").is_file()}
+
+
+def mixed(mans: dict) -> list[str]:
+    """What differs between the manifests of one folder: the CPU, or any library version."""
+    out = []
+    for key in ("cpu",):
+        seen = {m.get(key) for m in mans.values()}
+        if len(seen) > 1:
+            out.append(f"{key}: {sorted(map(str, seen))}")
+    names = {k for m in mans.values() for k in m.get("versions", {})}
+    for name in sorted(names):
+        seen = {m.get("versions", {}).get(name) for m in mans.values()}
+        if len(seen) > 1:
+            out.append(f"{name}: {sorted(map(str, seen))}")
+    return out
+
+
+def unpinned(mans: dict, pinned: dict) -> list[str]:
+    """Versions a manifest records that differ from environment.txt's pin of the same package."""
+    return sorted({f"{s}: {name} {v} (pinned {pinned[name]})" for s, m in mans.items()
+                   for name, v in m.get("versions", {}).items()
+                   if name.lower() in pinned and v != pinned[name.lower()]})
+
+
+def test_mixed_and_unpinned_name_what_differs():
+    a = {"cpu": "A (2 cores)", "versions": {"numpy": "2.4.6", "pandas": "3.1.1"}}
+    b = {"cpu": "B (2 cores)", "versions": {"numpy": "2.4.6", "pandas": "3.0.0"}}
+    assert mixed({"00": a, "01": dict(a)}) == []
+    assert mixed({"00": a, "01": b}) == ["cpu: ['A (2 cores)', 'B (2 cores)']", "pandas: ['3.0.0', '3.1.1']"]
+    assert unpinned({"01": b}, {"numpy": "2.4.6", "pandas": "3.1.1"}) == ["01: pandas 3.0.0 (pinned 3.1.1)"]
+    assert "numpy" in pins() and "tensorflow" in pins()
+
+
+@pytest.mark.parametrize("folder", FOLDERS, ids=lambda p: p.relative_to(ROOT).as_posix())
+def test_each_results_folder_is_one_run_on_the_pinned_packages(folder):
+    mans = manifests(folder)
+    assert set(mans) == set(NOTEBOOKS), f"notebooks without a manifest: {sorted(set(NOTEBOOKS) - set(mans))}"
+    assert not mixed(mans), f"{folder.name}: notebooks ran on different machines or packages: {mixed(mans)}"
+    assert not unpinned(mans, pins()), unpinned(mans, pins())
+
+
+@pytest.mark.parametrize("folder", FOLDERS, ids=lambda p: p.relative_to(ROOT).as_posix())
+def test_no_copy_differs_from_its_source(folder, tmp_path):
+    copy, source = folder / "leaderboard.csv", folder / "13_leaderboard" / "leaderboard.csv"
+    assert copy.read_bytes() == source.read_bytes()
+    # tables.md is what make assembles from the folder's tables now
+    out = report.assemble_tables(folder, tmp_path / "tables.md")
+    assert out.read_text() == (folder / "tables.md").read_text(), f"{folder}/tables.md is stale: make all RESULTS={folder}"
