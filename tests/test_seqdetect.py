@@ -262,3 +262,20 @@ def test_stream_matches_matrix(revisit):
     assert not seqstream.stream_matches_matrix(det, S)
     with pytest.raises(ValueError, match="no threshold"):
         seqstream.stream_matches_matrix(Detector(None), S)
+
+
+def test_stream_disagreement_at_the_threshold_itself_is_float_rounding(revisit):
+    """A frame whose matrix score is the threshold may fire on one side only (the stream's
+    matrix-vector products round differently): reported apart, not a disagreement; a frame
+    clear of the threshold still is one."""
+    X, _ = revisit
+    S = seqstream.score_matrix(X, EXCLUDE, 10, contrast_window=0)
+    det, events = _run(X, threshold=0.55)
+    j = events[len(events) // 2]["frame"]
+    det.threshold = float(S[:j - EXCLUDE, j].max())          # the threshold is frame j's own score
+    det.events = [e for e in det.events if e["frame"] != j]  # ... and the stream rounded it below
+    batch = set(seqmatch.matrix_events(S, det.threshold, EXCLUDE, det.frame_index))
+    det.events = [e for e in det.events if e["frame"] in batch]   # every other frame as the matrix says
+    assert seqstream.stream_disagreements(det, S) == ([], [j]) and seqstream.stream_matches_matrix(det, S)
+    k = det.events.pop(0)["frame"]                              # a frame clear of the threshold
+    assert seqstream.stream_disagreements(det, S) == ([k], [j]) and not seqstream.stream_matches_matrix(det, S)

@@ -22,7 +22,7 @@ from greenloop.seqmatch import (_EPS, COLORS, DEFAULT_VELOCITIES, STORE_DTYPES, 
 from greenloop.util.checks import positive_int
 from greenloop.util.threads import one_blas_thread
 
-__all__ = ["Detector", "score_matrix", "tune_knobs", "stream_matches_matrix", "stream_check"]
+__all__ = ["Detector", "score_matrix", "tune_knobs", "stream_disagreements", "stream_matches_matrix", "stream_check"]
 
 
 def _offsets(seq_len: int, velocities) -> np.ndarray:
@@ -471,14 +471,31 @@ def tune_knobs(descriptors: dict, GT, exclude: int, tune, seq_lens, contrast_win
                                  "AUC-PR_tune_%": round(100 * q["AUC-PR"], 2), "R@1_tune_%": round(100 * q["R@1"], 2)})
     return rows
 
-def stream_matches_matrix(detector: Detector, S) -> bool:
-    """Whether a streaming :class:`Detector`'s events fall on exactly the query frames where the
-    score matrix S (N, N), computed on the same descriptors, reaches its threshold
-    (:func:`matrix_events` over the ``detector.frame_index`` frames it has seen)."""
+def stream_disagreements(detector: Detector, S, tol: float = 1e-5) -> tuple[list[int], list[int]]:
+    """The query frames where a streaming :class:`Detector`'s events and the score matrix S (N, N),
+    computed on the same descriptors, disagree (:func:`matrix_events` over the
+    ``detector.frame_index`` frames it has seen), split in two: (frames whose best matrix score
+    lies farther than ``tol * max(1, |threshold|)`` from the threshold, frames within it).
+
+    The stream scores a frame with matrix-vector products and S comes from one matrix product:
+    the two round differently in the last bits, so a frame whose score *is* the threshold (a
+    threshold picked among the tuning scores often is one) may fire on one side only. Those
+    frames are the second list; the first must be empty."""
     if detector.threshold is None:
         raise ValueError("the detector has no threshold, so it declares nothing to compare")
-    batch = matrix_events(S, detector.threshold, detector.exclude, detector.frame_index)
-    return [e["frame"] for e in detector.events] == batch
+    streamed = {e["frame"] for e in detector.events}
+    batch = set(matrix_events(S, detector.threshold, detector.exclude, detector.frame_index))
+    S = np.asarray(S)
+    margin = tol * max(1.0, abs(float(detector.threshold)))
+    gap = {j: abs(float(S[:j - detector.exclude, j].max()) - detector.threshold) for j in streamed ^ batch}
+    return sorted(j for j, g in gap.items() if g > margin), sorted(j for j, g in gap.items() if g <= margin)
+
+
+def stream_matches_matrix(detector: Detector, S, tol: float = 1e-5) -> bool:
+    """Whether a streaming :class:`Detector`'s events fall on exactly the query frames where the
+    score matrix S (N, N), computed on the same descriptors, reaches its threshold, up to float
+    rounding at the threshold itself (:func:`stream_disagreements`' first list is empty)."""
+    return not stream_disagreements(detector, S, tol)[0]
 
 
 def stream_check(detector: Detector, X, S, GT) -> dict:
@@ -487,9 +504,11 @@ def stream_check(detector: Detector, X, S, GT) -> dict:
 
     detector: a thresholded :class:`Detector` (or ``seqslam_stream.Detector``) with the knobs S was made
     with. X: (N, D) descriptors in stream order; S: (N, N) its score matrix; GT: (N, N) bool.
-    Returns dict(equal (:func:`stream_matches_matrix`), events (declared), correct_events (events
-    whose match is a ground-truth partner), revisit_queries (frames with a partner among their
-    candidates)). ``equal`` with correct_events 0 says little: report both.
+    Returns dict(equal (:func:`stream_matches_matrix`), at_threshold (frames declared on one side
+    only whose score is the threshold up to float rounding, :func:`stream_disagreements`), events
+    (declared), correct_events (events whose match is a ground-truth partner), revisit_queries
+    (frames with a partner among their candidates)). ``equal`` with correct_events 0 says little:
+    report both.
     """
     X = np.asarray(X)
     if len(X) != len(S):
@@ -499,5 +518,6 @@ def stream_check(detector: Detector, X, S, GT) -> dict:
     for x in X:
         detector.update_descriptor(x)
     ok = [e for e in detector.events if G[e["match"], e["frame"]]]
-    return {"equal": stream_matches_matrix(detector, S), "events": len(detector.events),
+    hard, at_threshold = stream_disagreements(detector, S)
+    return {"equal": not hard, "at_threshold": len(at_threshold), "events": len(detector.events),
             "correct_events": len(ok), "revisit_queries": int(evaluate.revisit_queries(G, detector.exclude).sum())}
