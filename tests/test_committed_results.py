@@ -31,17 +31,10 @@ def manifests(folder: Path) -> dict:
 
 def mixed(mans: dict) -> list[str]:
     """What differs between the manifests of one folder: the CPU, or any library version."""
-    out = []
-    for key in ("cpu",):
-        seen = {m.get(key) for m in mans.values()}
-        if len(seen) > 1:
-            out.append(f"{key}: {sorted(map(str, seen))}")
-    names = {k for m in mans.values() for k in m.get("versions", {})}
-    for name in sorted(names):
-        seen = {m.get("versions", {}).get(name) for m in mans.values()}
-        if len(seen) > 1:
-            out.append(f"{name}: {sorted(map(str, seen))}")
-    return out
+    fields = [{"cpu": m.get("cpu"), **m.get("versions", {})} for m in mans.values()]
+    names = sorted({k for f in fields for k in f}, key=lambda k: (k != "cpu", k))
+    seen = {k: {f.get(k) for f in fields} for k in names}
+    return [f"{k}: {sorted(map(str, v))}" for k, v in seen.items() if len(v) > 1]
 
 
 def unpinned(mans: dict, pinned: dict) -> list[str]:
