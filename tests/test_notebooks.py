@@ -294,9 +294,7 @@ def _check_07_table(folder):
     assert (t.label == t.backbone.str.split(":").str[0] + " (" + t.weights + ")").all()
     assert t["AP_%"].between(0, 100).all() and t["R@100P_%"].between(0, 100).all()
     assert t["R@1_%"].between(0, 100).all()
-    # seconds as written (4 decimals): on a fast CPU a tiny run's M x M matrix takes under 50 us and reads 0.0000
-    assert (t.extract_s_per_image >= 0).all() and (t.match_s_MxM >= 0).all()
-    assert t.extract_s_per_image.max() > 0 and t.match_s_MxM.max() > 0
+    assert (t.extract_s_per_image > 0).all() and (t.match_s_MxM > 0).all()
     controls = t[t.backbone.str.endswith(":random")]
     assert len(controls) and (controls.weights == "random init").all()
     fixed = controls[controls.backbone.str.startswith(("mobilenetv1", "mobilenetv2"))]   # the TFLite graphs
