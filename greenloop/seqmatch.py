@@ -56,16 +56,12 @@ import warnings
 import numpy as np
 
 from greenloop import evaluate, features
-from greenloop.datasets.sequence import preprocess_image
-from greenloop.features import GRADIENT_SIZE, gradient_histograms, patch_normalise
 from greenloop.similarity import apply_projection, l2_normalise, pca_whiten
 
 DESCRIPTORS = features.SEQUENCE_DESCRIPTORS   # each a features.BACKBONES entry (one registry)
 COLORS = ("bgr", "rgb")
 STORE_DTYPES = ("float32", "float16")
 DEFAULT_VELOCITIES = (0.8, 1.0, 1.25)     # SeqSLAM's V_min..V_max range around unit speed
-PIXEL_SIZE = features.PIXELS_SIZE          # the study's raw-pixel descriptor (width, height)
-CNN_SIZE = features.BACKBONES["mobilenetv2"].input_size   # MobileNet v2's fixed TFLite input
 _EPS = 1e-6
 
 # The named default configuration: what `python -m greenloop detect --method
@@ -76,8 +72,7 @@ DEFAULT_KNOBS = dict(descriptor="gradients", seq_len=10, contrast_window=0, cent
                      repeat_cos=0.995)
 DEFAULT_THRESHOLD = 1.8   # calibrated score (calibrate_scores); Nordland's tuning part, precision >= 0.95
 
-__all__ = ["DESCRIPTORS", "DEFAULT_NAME", "DEFAULT_KNOBS", "DEFAULT_THRESHOLD", "patch_normalise", "gradient_histograms",
-           "center", "calibrate_scores", "describe", "describe_frames", "normalise",
+__all__ = ["DESCRIPTORS", "DEFAULT_NAME", "DEFAULT_KNOBS", "DEFAULT_THRESHOLD", "center", "calibrate_scores", "describe", "describe_frames", "normalise",
            "fit_projection", "contrast_normalise", "columns_to_scores",
            "closures", "choose_threshold", "threshold_range", "pick_knobs", "matrix_events"]
 
@@ -110,20 +105,12 @@ def describe(frames_or_folder, descriptor: str = "pixels", step: int = 1, weight
 def describe_frames(frames, descriptor: str = "pixels", color: str = "bgr", weights="auto") -> np.ndarray:
     """Raw camera frames -> descriptors (M, D) float32, the streaming path of ``speed.seqstream.Detector``.
 
-    frames: a list of (H, W, 3) uint8 frames (BGR as cv2 decodes them, or RGB with color="rgb")
-    or (H, W) gray uint8. Preprocessing is ``greenloop.datasets.sequence.preprocess_image``, the path
-    ``load_frames`` takes, so a frame from disk gives the same descriptor as :func:`describe`.
+    frames: a list of M same-sized (H, W, 3) uint8 frames (BGR as cv2 decodes them, or RGB with
+    color="rgb") or (H, W) gray uint8. ``features.extract`` of the descriptor's registry entry, with
+    the frames' channel order, so a frame from disk gives the same descriptor as :func:`describe`.
     """
-    _check_descriptor(descriptor)
-    if descriptor == "mobilenetv2":
-        rgb = np.stack([preprocess_image(f, CNN_SIZE, gray=False, color=color) for f in frames])
-        return features.extract(rgb, "mobilenetv2", weights=weights, progress=False)
-    size = GRADIENT_SIZE if descriptor == "gradients" else PIXEL_SIZE
-    g = np.stack([preprocess_image(f, size, gray=True, color=color) for f in frames])
-    g = g.astype(np.float32) / np.float32(255.0)
-    if descriptor == "gradients":
-        return gradient_histograms(g)
-    return patch_normalise(g) if descriptor == "pixels-patchnorm" else g.reshape(len(g), -1)
+    return features.extract(features.stack_frames(frames), _check_descriptor(descriptor), weights=weights,
+                            progress=False, color=color)
 
 
 def normalise(X, projection=None) -> np.ndarray:

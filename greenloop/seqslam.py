@@ -49,12 +49,11 @@ import math
 import numpy as np
 from scipy.spatial.distance import cdist
 
-from greenloop import seqmatch
-from greenloop.datasets.sequence import load_frames, preprocess_image
+from greenloop import features, seqmatch
 from greenloop.util.checks import positive_int
 
 SIZE = (64, 32)                 # (width, height) of the downsampled frames
-PATCH = 8                       # patch-normalisation side length (pixels)
+PATCH = features.PATCH          # patch-normalisation side length (pixels), the registry's
 R_WINDOW = 10                   # contrast enhancement: database templates
 DS = 10                         # sequence length (a trajectory spans DS + 1 columns)
 V_MIN, V_MAX, V_STEP = 0.8, 1.2, 0.1
@@ -85,19 +84,18 @@ def offsets(ds: int = DS, vs=None) -> np.ndarray:
 
 
 def describe_frames(frames, color: str = "bgr") -> np.ndarray:
-    """Decoded frames -> SeqSLAM descriptors (M, 2048) float32: gray (``preprocess_image``), 64x32,
-    in [0, 1], patch-normalised (``seqmatch.patch_normalise``, P = 8), flattened row-major.
+    """Decoded frames -> SeqSLAM descriptors (M, 2048) float32: the features registry's
+    "pixels-patchnorm" (gray in [0, 1], ``features.patch_normalise`` with P = 8, flattened
+    row-major) at SeqSLAM's 64x32 instead of 32x32.
     frames: list of (H, W, 3) uint8 BGR (RGB with color="rgb") or (H, W) gray uint8."""
-    g = np.stack([preprocess_image(f, SIZE, gray=True, color=color) for f in frames])
-    return seqmatch.patch_normalise(g.astype(np.float32) / np.float32(255.0), PATCH)
+    return features.extract(features.stack_frames(frames), "pixels-patchnorm", input_size=SIZE, progress=False,
+                            color=color)
 
 
 def describe(folder, step: int = 1) -> np.ndarray:
     """The SeqSLAM descriptors (N, 2048) float32 of every step-th frame of a sequence folder, the
-    same values :func:`describe_frames` gives frame by frame (``load_frames`` decodes in colour
-    and calls ``preprocess_image``, as the stream does)."""
-    g = load_frames(folder, size=SIZE, gray=True, step=step, progress=False)[..., 0]
-    return seqmatch.patch_normalise(g, PATCH)
+    same values :func:`describe_frames` gives frame by frame (both are ``features.extract``)."""
+    return features.extract(folder, "pixels-patchnorm", input_size=SIZE, step=step, progress=False)
 
 
 def difference_similarity(db, y) -> np.ndarray:

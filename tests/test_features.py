@@ -478,3 +478,27 @@ def test_extract_all_resolves_weights_once_per_entry(tiny_sequence, tmp_path, mo
     monkeypatch.setattr(FE, "resolve", counting)
     F.extract_all(tiny_sequence, ["pixels", "sift_bovw"], step=5, vocab_size=8, cache=tmp_path)
     assert calls == ["pixels", "sift_bovw"]
+
+
+@pytest.mark.parametrize("backbone", ["pixels", "gradients", "sift_bovw", "mobilenetv3small"])
+def test_bgr_frames_give_the_rgb_frames_descriptors(frames, tmp_path, backbone):
+    """color="bgr" (frames as cv2.imread decodes them, the streams' input) gives exactly the
+    descriptors of the same frames in RGB, for the gray families and a CNN; a folder is decoded
+    to RGB whatever color says; a wrong channel order changes a CNN descriptor."""
+    bgr = np.ascontiguousarray(frames[..., ::-1])
+    size = SIZE if backbone == "mobilenetv3small" else None
+    rgb_x = F.extract(frames, backbone, None, progress=False, input_size=size)
+    assert np.array_equal(F.extract(bgr, backbone, None, progress=False, input_size=size, color="bgr"), rgb_x)
+    if backbone != "sift_bovw":   # (its vocabulary is fitted on the frames given)
+        one = F.stack_frames([bgr[0]])            # one frame: a (1, H, W, 3) view, not a copy
+        assert one.shape == (1, *bgr.shape[1:]) and np.shares_memory(one, bgr)
+        assert np.allclose(F.extract(one, backbone, None, progress=False, input_size=size, color="bgr"),
+                           rgb_x[:1], rtol=1e-4, atol=0)
+    if backbone == "mobilenetv3small":
+        assert not np.allclose(F.extract(bgr, backbone, None, progress=False, input_size=size), rgb_x,
+                               rtol=1e-2, atol=0)
+        folder = write_sequence(tmp_path / "seq", frames[:3])
+        assert np.allclose(F.extract(folder, backbone, None, progress=False, input_size=size, color="bgr"),
+                           F.extract(folder, backbone, None, progress=False, input_size=size), rtol=1e-4, atol=0)
+    with pytest.raises(ValueError, match="color must be"):
+        F.extract(frames, backbone, None, progress=False, color="hsv")

@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 import pytest
 
-from greenloop import evaluate, seqmatch
+from greenloop import evaluate, features, seqmatch
 from greenloop.datasets import sequence
 from greenloop.speed import seqstream
 from greenloop.speed.seqstream import Detector
@@ -113,21 +113,25 @@ def test_projection_and_metrics(revisit):
 def test_patch_normalise():
     rng = np.random.default_rng(0)
     g = rng.random((3, 32, 32)).astype(np.float32)
-    z = seqmatch.patch_normalise(g).reshape(3, 4, 8, 4, 8)
+    z = features.patch_normalise(g).reshape(3, 4, 8, 4, 8)
     assert np.allclose(z.mean(axis=(2, 4)), 0, atol=1e-5) and np.allclose(z.std(axis=(2, 4)), 1, atol=1e-3)
-    assert np.all(seqmatch.patch_normalise(np.ones((1, 16, 16))) == 0)
+    assert np.all(features.patch_normalise(np.ones((1, 16, 16))) == 0)
     with pytest.raises(ValueError, match="multiples"):
-        seqmatch.patch_normalise(np.zeros((1, 30, 32)))
+        features.patch_normalise(np.zeros((1, 30, 32)))
 
 
-@pytest.mark.parametrize("descriptor", ["pixels", "pixels-patchnorm"])
+@pytest.mark.parametrize("descriptor", ["pixels", "pixels-patchnorm", "gradients"])
 def test_frames_give_the_descriptors_of_the_folder(tmp_path, descriptor):
+    """cv2-decoded (BGR) frames, one at a time or together, give the folder's very descriptors."""
     folder = write_frames(tmp_path / "seq", 6, size=(50, 40))
     ref = seqmatch.describe(folder, descriptor)
     frames = [cv2.imread(str(p), cv2.IMREAD_COLOR) for p in sequence.list_frames(folder)]
-    assert np.allclose(seqmatch.describe_frames(frames, descriptor), ref, atol=1e-6)
+    assert np.array_equal(seqmatch.describe_frames(frames, descriptor), ref)
+    assert np.array_equal(np.concatenate([seqmatch.describe_frames([f], descriptor) for f in frames]), ref)
+    assert not np.array_equal(seqmatch.describe_frames(frames, descriptor, color="rgb"), ref)
     det = Detector(None, descriptor=descriptor, exclude=2, seq_len=2)
-    assert det.update_many(frames) == [] and det.frame_index == 6 and det.bytes_per_frame == 1024 * 4 + 8
+    d = features.BACKBONES[descriptor].dim
+    assert det.update_many(frames) == [] and det.frame_index == 6 and det.bytes_per_frame == d * 4 + 8
 
 
 def test_bad_inputs():

@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 import pytest
 
-from greenloop import evaluate, seqmatch
+from greenloop import evaluate, features, seqmatch
 from greenloop.speed import seqstream
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -133,10 +133,10 @@ def test_gradient_histograms_by_hand():
     L2-normalised to one; flat cells stay 0."""
     img = np.zeros((1, 32, 64), np.float32)
     img[:, :, 40:56] = 1.0                                # rising edge in cell column 2, falling in 3
-    H = seqmatch.gradient_histograms(img, cell=16, bins=8).reshape(2, 4, 8)
+    H = features.gradient_histograms(img, cell=16, bins=8).reshape(2, 4, 8)
     np.testing.assert_allclose(H[:, 2:, 0], 1.0, rtol=1e-6)
     assert np.count_nonzero(H) == 4                       # the four cells on the edges, bin 0 only
-    rot = seqmatch.gradient_histograms(img.transpose(0, 2, 1).copy(), cell=16, bins=8).reshape(4, 2, 8)
+    rot = features.gradient_histograms(img.transpose(0, 2, 1).copy(), cell=16, bins=8).reshape(4, 2, 8)
     np.testing.assert_allclose(rot[2, :, 4], 1.0, rtol=1e-6)   # a horizontal edge: 90 degrees, bin 4
 
 

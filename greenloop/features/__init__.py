@@ -88,7 +88,8 @@ extractor families cnn / pixels / sift / spot <- extraction <- cache)::
 
     registry.py  Backbone records, BACKBONES, SEQUENCE_DESCRIPTORS, Options, ExtractInfo, split_spec
     weights.py   weight resolution: resolve(backbone, weights) -> Resolved(label, source), once per pair
-    frames.py    input checks, gray/RGB batches (via sequence.preprocess_image), depth_to_uint8
+    frames.py    input checks, stack_frames, gray/RGB batches (via sequence.preprocess_image, RGB or
+                 BGR channel order), depth_to_uint8
     cnn.py       Keras / port / TFLite extractor;  pixels.py  pixels, pixels-patchnorm, gradients
     sift.py      SIFT bag of words;  spot.py  the main paper's CNN
     extraction.py  extract, extract_spec, extract_rgbd, time_per_image; EXTRACTORS {kind: fn}
@@ -100,7 +101,7 @@ from greenloop.features.cache import extract_all, random_init_reported
 from greenloop.features.cnn import clear_models
 from greenloop.features.extraction import (EXTRACTORS, clear_cache, extract, extract_rgbd,
                                            extract_spec, time_per_image)
-from greenloop.features.frames import depth_to_uint8
+from greenloop.features.frames import depth_to_uint8, stack_frames
 from greenloop.features.pixels import gradient_histograms, patch_normalise
 from greenloop.features.registry import (BACKBONES, CNN_BACKBONES, CNN_KINDS, DEFAULT_VOCAB_SIZE,
                                          DEPTH_MAX_M, GRADIENT_BINS, GRADIENT_CELL, GRADIENT_SIZE,
@@ -118,5 +119,5 @@ __all__ = ["BACKBONES", "CNN_BACKBONES", "CNN_KINDS", "DEFAULT_VOCAB_SIZE", "DEP
            "ExtractInfo", "Options", "Resolved", "WeightsNotFoundError", "clear_cache", "clear_models",
            "depth_to_uint8", "extract", "extract_all", "extract_rgbd", "extract_spec", "fit_vocabulary",
            "get_backbone", "gradient_histograms", "imagenet_weights_path", "patch_normalise",
-           "random_init_reported", "resolve", "spot_feature_model", "split_spec", "time_per_image",
+           "random_init_reported", "resolve", "spot_feature_model", "split_spec", "stack_frames", "time_per_image",
            "weights_search_path", "weights_used"]

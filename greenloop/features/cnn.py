@@ -148,11 +148,11 @@ def extract_cnn(b: Backbone, frames_or_folder, source, size, opt: Options):
         def predict(rgb):  # RGB 0..255 -> the graph's uint8 input: mobilenet_tflite.quantise_input
             interp, used = _tflite_interpreter(b.name, key, len(rgb))
             return _tflite.describe(interp, used, b.name, rgb)
-        return (*run_model(predict, frames, lambda a: rgb_batch(a, size), opt.batch_size, opt.progress,
+        return (*run_model(predict, frames, lambda a: rgb_batch(a, size, opt.color), opt.batch_size, opt.progress,
                             f"{b.name} features"), {})
     model = _cnn_model(b.name, key, size)
     pre = _preprocess_fn(b)
-    return (*run_model(model.predict_on_batch, frames, lambda a: pre(rgb_batch(a, size)),
+    return (*run_model(model.predict_on_batch, frames, lambda a: pre(rgb_batch(a, size, opt.color)),
                         opt.batch_size, opt.progress, f"{b.name} features"), {})
 
 

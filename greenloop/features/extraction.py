@@ -3,6 +3,7 @@
 ``registry.Options``)."""
 from __future__ import annotations
 
+import os
 import warnings
 
 import numpy as np
@@ -26,13 +27,14 @@ EXTRACTORS = {**{kind: extract_cnn for kind in CNN_KINDS}, "pixels": extract_pix
 def extract(frames_or_folder, backbone: str, weights="auto", batch_size: int = 32,
             progress: bool = True, input_size=None, *, return_info: bool = False,
             limit: int | None = None, vocabulary=None, vocab_size: int = DEFAULT_VOCAB_SIZE,
-            seed: int = 0, step: int = 1, resolved: Resolved | None = None):
+            seed: int = 0, step: int = 1, resolved: Resolved | None = None, color: str = "rgb"):
     """Describe every frame of a sequence with one vector.
 
     frames_or_folder: a sequence folder (its rgb/ frames are loaded with
         greenloop.datasets.sequence.load_frames at the backbone's input size), or an array of frames: (N, H, W, 3)
-        RGB, (N, H, W, 1) or (N, H, W) single-channel (depth/gray: replicated to 3 channels for the
-        CNNs), uint8 0..255 or float in [0, 1]; resized to the input size as needed.
+        RGB (BGR with color="bgr"), (N, H, W, 1) or (N, H, W) single-channel (depth/gray: replicated
+        to 3 channels for the CNNs), uint8 0..255 or float in [0, 1]; resized to the input size as
+        needed, through ``sequence.preprocess_image`` for the gray descriptors.
     backbone: a name in BACKBONES (see the module doc for D and the layer of each).
     weights: 'auto' | 'imagenet' | None | path (CNNs, see module doc); for spot_cnn the trained
         keras Model or its .keras path; ignored ('auto'/None only) for pixels and sift_bovw.
@@ -46,6 +48,8 @@ def extract(frames_or_folder, backbone: str, weights="auto", batch_size: int = 3
         one of vocab_size words is fitted on these frames themselves (k-means seeded by ``seed``).
     resolved: ``weights.resolve(backbone, weights)`` already computed by the caller (then not
         resolved again; ``weights`` is ignored).
+    color: channel order of a 3-channel frame array: "rgb" or "bgr" (frames as ``cv2.imread``
+        decodes them, the streaming detectors' input); ignored for a folder (decoded to RGB).
     Returns features (N, D) float32, or (features, info) with return_info=True.
 
     Raises ValueError for an unknown backbone (listing the valid names), bad frames or weights of
@@ -60,6 +64,10 @@ def extract(frames_or_folder, backbone: str, weights="auto", batch_size: int = 3
         raise ValueError(f"limit must be >= 1, got {limit}")
     if int(step) != step or step < 1:
         raise ValueError(f"step must be an integer >= 1, got {step}")
+    if color not in ("rgb", "bgr"):
+        raise ValueError(f"color must be 'rgb' or 'bgr', got {color!r}")
+    if isinstance(frames_or_folder, (str, os.PathLike)):
+        color = "rgb"                      # load_frames decodes a folder's files to RGB
     size = input_size_of(input_size, b.input_size)
     if b.fixed_input and size != b.input_size:
         why = ("its fully connected layer takes the 7x7 map of a 224x224 input" if b.top_layer
@@ -69,7 +77,7 @@ def extract(frames_or_folder, backbone: str, weights="auto", batch_size: int = 3
     label, source = resolved if resolved is not None else resolve(b.name, weights)
     if b.kind in CNN_KINDS and min(size) < 32:
         raise ValueError(f"{b.name} needs an input of at least 32x32 pixels, got {size}")
-    opt = Options(int(batch_size), progress, limit, int(step), vocabulary, vocab_size, seed)
+    opt = Options(int(batch_size), progress, limit, int(step), vocabulary, vocab_size, seed, color)
     X, spi, extra = EXTRACTORS[b.kind](b, frames_or_folder, source, size, opt)
     if b.kind == "spot_cnn":   # the model's own input size
         size = None

@@ -42,6 +42,13 @@ def check_frames(frames) -> np.ndarray:
                      f"(for uint16 depth use greenloop.datasets.sequence.load_depth and depth_to_uint8)")
 
 
+def stack_frames(frames) -> np.ndarray:
+    """A list of M same-sized decoded frames -> one (M, ...) array for ``extract``; one frame (a
+    stream's case) as a (1, ...) view, so a large camera frame is not copied before it is shrunk."""
+    frames = list(frames)
+    return np.asarray(frames[0])[None] if len(frames) == 1 else np.stack(frames)
+
+
 def _resize(img: np.ndarray, size) -> np.ndarray:
     """(h, w[, c]) -> size (W, H), INTER_AREA when shrinking, INTER_LINEAR when enlarging, keeping
     the dtype: unlike ``sequence.preprocess_image`` (uint8 only) it resizes float frames in float."""
@@ -55,9 +62,12 @@ def _resize(img: np.ndarray, size) -> np.ndarray:
     return out[..., None] if img.ndim == 3 and out.ndim == 2 else out
 
 
-def rgb_batch(a: np.ndarray, size) -> np.ndarray:
+def rgb_batch(a: np.ndarray, size, color: str = "rgb") -> np.ndarray:
     """A slice of checked frames -> float32 RGB 0..255 (b, h, w, 3) at size (w, h).
 
+    color: "rgb", or "bgr" for 3-channel frames as ``cv2.imread`` decodes them (the channels are
+    swapped after the resize, which treats each channel alike, so the values are those of
+    ``sequence.preprocess_image(im, size, gray=False, color="bgr")``).
     Differs from ``sequence.preprocess_image`` on purpose: float frames are scaled and resized in
     float32 (no rounding to uint8), and single-channel frames are resized before replication."""
     x = a if a.dtype == np.uint8 else a.astype(np.float32) * np.float32(255.0)
@@ -67,18 +77,21 @@ def rgb_batch(a: np.ndarray, size) -> np.ndarray:
         x = np.stack([_resize(im, size) for im in x])
     if x.shape[-1] == 1:   # depth / grayscale: replicate to 3 channels (Qi 2024)
         x = np.repeat(x, 3, axis=-1)
-    return x.astype(np.float32, copy=False)
+    elif color == "bgr":
+        x = x[..., ::-1]
+    return np.ascontiguousarray(x, dtype=np.float32)
 
 
-def gray_batch(a: np.ndarray, size, as_float: bool) -> np.ndarray:
-    """Checked frames (b, h, w[, 1 | 3]) RGB -> grayscale (b, H, W) at size (W, H): float32 in
-    [0, 1] (as_float) or uint8. Float frames are rounded to uint8 first, then each frame goes through
-    ``sequence.preprocess_image`` (gray first, then INTER_AREA / INTER_LINEAR), as folders do."""
+def gray_batch(a: np.ndarray, size, as_float: bool, color: str = "rgb") -> np.ndarray:
+    """Checked frames (b, h, w[, 1 | 3]) RGB (or BGR with color="bgr") -> grayscale (b, H, W) at
+    size (W, H): float32 in [0, 1] (as_float) or uint8. Float frames are rounded to uint8 first,
+    then each frame goes through ``sequence.preprocess_image`` (gray first, then INTER_AREA /
+    INTER_LINEAR), as folders do."""
     out = []
     for im in a:
         if im.dtype != np.uint8:
             im = np.clip(np.rint(im * 255.0), 0, 255).astype(np.uint8)
-        out.append(sequence.preprocess_image(im, size, gray=True, color="rgb"))
+        out.append(sequence.preprocess_image(im, size, gray=True, color=color))
     g = np.stack(out)
     return g.astype(np.float32) / np.float32(255.0) if as_float else g
 
@@ -106,11 +119,12 @@ def depth_to_uint8(depth_m, max_depth: float = DEPTH_MAX_M) -> np.ndarray:
     return np.rint(np.clip(d / np.float32(max_depth), 0.0, 1.0) * 255.0).astype(np.uint8)
 
 
-def gray_frames(frames_or_folder, size, limit, step, as_float: bool, progress=None) -> np.ndarray:
-    """A folder (``sequence.load_frames``) or an array (``check_frames`` + ``gray_batch``) ->
-    grayscale (N, H, W) at size (W, H): float32 in [0, 1] (as_float) or uint8."""
+def gray_frames(frames_or_folder, size, limit, step, as_float: bool, progress=None,
+                color: str = "rgb") -> np.ndarray:
+    """A folder (``sequence.load_frames``) or an array (``check_frames`` + ``gray_batch``, channels
+    in ``color`` order) -> grayscale (N, H, W) at size (W, H): float32 in [0, 1] (as_float) or uint8."""
     if isinstance(frames_or_folder, (str, os.PathLike)):
         return sequence.load_frames(frames_or_folder, size=size, gray=True, limit=limit,
                                     progress=progress, dtype=np.float32 if as_float else np.uint8,
                                     step=step)[..., 0]
-    return gray_batch(load(frames_or_folder, size, True, limit, step), size, as_float)
+    return gray_batch(load(frames_or_folder, size, True, limit, step), size, as_float, color)

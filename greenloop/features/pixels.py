@@ -67,7 +67,8 @@ def gradient_histograms(gray, cell: int = GRADIENT_CELL, bins: int = GRADIENT_BI
 def _timed_gray(frames_or_folder, size, opt: Options, post):
     """post(gray frames (N, H, W) float32 in [0, 1]) -> (features (N, D) float32, s/image, {})."""
     t0 = time.perf_counter()
-    g = gray_frames(frames_or_folder, size, opt.limit, opt.step, as_float=True, progress=opt.progress)
+    g = gray_frames(frames_or_folder, size, opt.limit, opt.step, as_float=True, progress=opt.progress,
+                    color=opt.color)
     X = post(g)
     dt = time.perf_counter() - t0
     return X.reshape(len(X), -1).astype(np.float32), dt / len(X), {}

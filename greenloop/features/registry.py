@@ -147,6 +147,8 @@ class Options(NamedTuple):
     (features (N, D) float32, seconds per image, extra dict); frames_or_folder is a sequence folder
     or an (N, H, W[, 1 | 3]) uint8 / [0, 1] float array, source the ``weights.Resolved`` source,
     size the (width, height) input (None: native). ``extraction.EXTRACTORS`` maps each kind to its fn.
+    color: the channel order of a 3-channel array, "rgb" or "bgr" (as ``cv2.imread`` decodes);
+    always "rgb" for a folder, which ``sequence.load_frames`` decodes to RGB.
     """
     batch_size: int = 32
     progress: bool = True
@@ -155,6 +157,7 @@ class Options(NamedTuple):
     vocabulary: Any = None     # sift_bovw: (k, 128) centres, or None to fit on the input
     vocab_size: int = DEFAULT_VOCAB_SIZE
     seed: int = 0
+    color: str = "rgb"
 
 
 def get_backbone(name: str) -> Backbone:

@@ -76,7 +76,7 @@ def extract_sift(b: Backbone, frames_or_folder, source, size, opt: Options):
     """The sift_bovw extractor: frames -> (tf-idf (N, k) float32, s/image, {'vocabulary',
     'vocabulary_fitted_on_input'})."""
     progress, vocabulary, vocab_size, seed = opt.progress, opt.vocabulary, opt.vocab_size, opt.seed
-    gray = gray_frames(frames_or_folder, size, opt.limit, opt.step, as_float=False)
+    gray = gray_frames(frames_or_folder, size, opt.limit, opt.step, as_float=False, color=opt.color)
     n = len(gray)
     t0 = time.perf_counter()
     descs = _sift_descriptors(gray, progress)

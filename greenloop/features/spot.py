@@ -70,8 +70,8 @@ def extract_spot(b: Backbone, frames_or_folder, source, size, opt: Options):
 
     def batch(x):
         if channels == 1:
-            return gray_batch(x, size, as_float=True)[..., None]
-        return rgb_batch(x, size) / np.float32(255.0)
+            return gray_batch(x, size, as_float=True, color=opt.color)[..., None]
+        return rgb_batch(x, size, opt.color) / np.float32(255.0)
 
     return (*run_model(feat_model.predict_on_batch, a, batch, opt.batch_size, opt.progress,
                         "spot_cnn features"), {})
