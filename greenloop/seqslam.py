@@ -49,7 +49,7 @@ import math
 import numpy as np
 from scipy.spatial.distance import cdist
 
-from greenloop import features, seqmatch
+from greenloop import features
 from greenloop.util.checks import positive_int
 
 SIZE = (64, 32)                 # (width, height) of the downsampled frames

@@ -91,3 +91,15 @@ def test_decode_ms(tmp_path):
     (tmp_path / "bad.png").write_text("not an image")
     with pytest.raises(ValueError, match="cannot decode"):
         timing.decode_ms([tmp_path / "bad.png"])
+
+
+def test_timed_is_the_one_clock_of_the_speed_package():
+    """timed returns the call's result and its wall time; bench and scale read no clock of their own."""
+    import time
+    from pathlib import Path
+
+    out, secs = timing.timed(lambda s: time.sleep(s) or "done", 0.02)
+    assert out == "done" and 0.02 <= secs < 1.0
+    speed = Path(timing.__file__).parent
+    for module in ("bench.py", "scale.py"):
+        assert "perf_counter" not in (speed / module).read_text(), module

@@ -288,8 +288,8 @@ def _fusion_rows(s: Setup, fus: Runs, mid_layers, merge: str, dataset) -> tuple[
                 [(f"AP, mid-level fusion at {layer}", PAPER_T2.get(layer), "skipped", why) for layer in mid_layers])
     t = fus.table
     mid = t[t.fusion == "mid"].set_index("layer")
-    t2 = [(f"AP, mid-level fusion at {layer}", PAPER_T2.get(layer), round(mid.loc[layer, "AP_%"] / 100, 4),
-           f"{mid.loc[layer, 'label']}; {merge}; paper: NYU, Places-pretrained") for layer in mid_layers]
+    t2 = [(f"AP, mid-level fusion at {layer}", PAPER_T2.get(layer), float(mid.loc[layer, "AP_%"] / 100),
+           f"{mid.loc[layer, 'label']}; {merge}; paper: NYU, Places-pretrained", 4) for layer in mid_layers]
     top = mid["AP_%"].idxmax()
     fz = t.set_index("fusion")
     rgb = f"{fz.loc['RGB only', 'AP_%']:.2f}" if "RGB only" in fz.index else "n/a"

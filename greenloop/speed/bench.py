@@ -31,7 +31,6 @@ import os
 import platform
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
@@ -43,6 +42,7 @@ from greenloop import cnn, spots  # noqa: E402
 from greenloop.datasets import sequence  # noqa: E402
 from greenloop.dictionary import LoopDetector  # noqa: E402
 from greenloop.speed.stream import Detector, export_tflite, preprocess  # noqa: E402
+from greenloop.speed.timing import timed  # noqa: E402
 from greenloop.study import report  # noqa: E402
 from greenloop.util.threads import run_chunked  # noqa: E402
 
@@ -121,9 +121,7 @@ def paper_claim(model, X, n_classes: int, threshold: int | None, window: int = W
     times = []
     for k, s in enumerate(starts):
         batch = X[s:s + window]
-        t0 = time.perf_counter()
-        paper_window(model, batch, det)
-        dt = time.perf_counter() - t0
+        dt = timed(paper_window, model, batch, det)[1]
         if k >= warmup:
             times.append(dt)
     times, n = np.array(times), len(batch)
@@ -144,6 +142,16 @@ def _gray_pass(frames) -> None:
     run_chunked(work, len(frames))
 
 
+def _preprocess_all(frames) -> list:
+    return [preprocess(f) for f in frames]
+
+
+def _reference_frame(model, frame, detector):
+    """The paper's pipeline on one raw frame: preprocess, ``model.predict`` it alone, count it."""
+    c = model.predict(preprocess(frame)[None, ..., None], batch_size=1, verbose=0).argmax(1)[0]
+    return detector.update(int(c))
+
+
 def bench_windows(model, raw, dets, rounds: int) -> dict:
     """(a) 70-frame windows from raw frames; all pipelines interleaved round by round."""
     n_classes = int(model.output_shape[-1])
@@ -158,15 +166,14 @@ def bench_windows(model, raw, dets, rounds: int) -> dict:
         d.update_many(wins[0])
     for r in range(rounds):
         w, X = wins[r % len(wins)], pre[r % len(pre)]
-        t = time.perf_counter(); _reference_window(model, w, ref_dict); times["reference"].append(time.perf_counter() - t)
-        t = time.perf_counter(); paper_window(model, X, ref_dict); times["reference_no_preprocessing"].append(time.perf_counter() - t)
-        t = time.perf_counter(); [preprocess(f) for f in w]; times["preprocessing_only"].append(time.perf_counter() - t)
-        t = time.perf_counter(); _gray_pass(w); times["gray_pass_floor"].append(time.perf_counter() - t)
+        times["reference"].append(timed(_reference_window, model, w, ref_dict)[1])
+        times["reference_no_preprocessing"].append(timed(paper_window, model, X, ref_dict)[1])
+        times["preprocessing_only"].append(timed(_preprocess_all, w)[1])
+        times["gray_pass_floor"].append(timed(_gray_pass, w)[1])
         for k, d in dets.items():
-            t = time.perf_counter(); d.update_many(w); times[k].append(time.perf_counter() - t)
+            times[k].append(timed(d.update_many, w)[1])
         for k, d in dets.items():
-            t = time.perf_counter(); d.update_many(small[r % len(small)])
-            times[f"{k}_preprocessed_input"].append(time.perf_counter() - t)
+            times[f"{k}_preprocessed_input"].append(timed(d.update_many, small[r % len(small)])[1])
     out = {}
     for k, ts in times.items():
         s = _stats(ts)
@@ -189,15 +196,12 @@ def bench_single(model, raw, dets, n_ref: int, n_ours: int) -> dict:
     for _ in range(blocks):
         for _ in range(max(1, n_ref // blocks)):
             f = raw[i % len(raw)]; i += 1
-            t = time.perf_counter()
-            c = model.predict(preprocess(f)[None, ..., None], batch_size=1, verbose=0).argmax(1)[0]
-            ref_dict.update(int(c))
-            times["reference"].append(time.perf_counter() - t)
+            times["reference"].append(timed(_reference_frame, model, f, ref_dict)[1])
         for k, d in dets.items():
             upd = d.update
             for _ in range(max(1, n_ours // blocks)):
                 f = raw[i % len(raw)]; i += 1
-                t = time.perf_counter(); upd(f); times[k].append(time.perf_counter() - t)
+                times[k].append(timed(upd, f)[1])
     return {k: _stats(v) for k, v in times.items()}
 
 
@@ -300,9 +304,16 @@ def same_distribution(plain, fast) -> dict:
 def main(argv=None) -> int:
     """CLI: time the reference and greenloop.speed.stream, train both ways, write bench.json / .md / .csv."""
     args = _parse_args(argv)
-    t_start = time.perf_counter()
+    (result, rows, best), result_wall = timed(_measure, args)
+    result["wall_seconds"] = result_wall
+    _write(Path(args.out), result, rows)
+    print(f"[bench] wrote {Path(args.out) / 'bench.json'} in {result['wall_seconds']:.0f} s; "
+          f"fastest window backend: {best}")
+    return 0
 
 
+def _measure(args):
+    """Every measurement of :func:`main`: (bench.json's dict, the table's rows, the fastest backend)."""
     quick = args.quick
     raw, u8, y, info = _load(Path(args.dataset))
     X = (u8.astype(np.float32) / np.float32(255.0))[..., None]
@@ -339,11 +350,8 @@ def main(argv=None) -> int:
                      accuracy, agreement, quant)
     rows = (_window_rows(windows, dets) + _single_rows(single, dets)
             + _training_rows(training, accuracy, seeds, epochs) + _agreement_rows(agreement, quant))
-    result["wall_seconds"] = time.perf_counter() - t_start
-    _write(Path(args.out), result, rows)
-    print(f"[bench] wrote {Path(args.out) / 'bench.json'} in {result['wall_seconds']:.0f} s; "
-          f"fastest window backend: {best}")
-    return 0
+    tmpdir.cleanup()
+    return result, rows, best
 
 
 def _parse_args(argv):

@@ -35,6 +35,7 @@ import scipy.sparse
 from greenloop import evaluate, retrieval, seqmatch
 from greenloop.datasets import augment
 from greenloop.speed import seqstream
+from greenloop.speed.timing import timed
 from greenloop.similarity import l2_normalise
 from greenloop.study import report
 from greenloop.util.threads import one_blas_thread
@@ -91,9 +92,7 @@ def describe_ms(real, pca, start: int, n: int, seed: int = 0) -> dict:
     secs = np.zeros(n)
     with one_blas_thread():
         for r, (_, _, f) in enumerate(augment.recording(real, start, start + n, seed)):
-            t0 = time.perf_counter()
-            project([f], pca)
-            secs[r] = time.perf_counter() - t0
+            secs[r] = timed(project, [f], pca)[1]
     return {"describe_p50_ms": 1e3 * np.median(secs), "describe_p99_ms": 1e3 * np.quantile(secs, 0.99),
             "describe_mean_ms": 1e3 * secs.mean()}
 
@@ -135,12 +134,23 @@ def _setting(index, opts: dict) -> str:
     return ""
 
 
+def _add_singly(index, rows) -> None:
+    """Insert the rows (n, D) one call each, as a stream adds its frames."""
+    for x in rows:
+        index.add(x)
+
+
+def _stream_search(kind: str, X, k: int, exclude: int):
+    """A fresh index of ``kind`` streamed over X (N, D): ``retrieval.stream_search``'s (scores, ids)."""
+    index = retrieval.make_index(kind, X.shape[1], nlist=316, train_size=12_640)
+    with one_blas_thread():
+        return retrieval.stream_search(index, X, k, exclude)
+
+
 def _search_all(index, Q, exact_best, exact_score) -> dict:
     secs, best, score, scanned = np.zeros(len(Q)), np.zeros(len(Q), np.int64), np.zeros(len(Q)), []
     for q in range(len(Q)):
-        t0 = time.perf_counter()
-        s, i = index.search(Q[q], K)
-        secs[q] = time.perf_counter() - t0
+        (s, i), secs[q] = timed(index.search, Q[q], K)
         best[q], score[q] = i[0, 0], s[0, 0]
         scanned.append(getattr(index, "last_scanned", np.nan))
     hit = (best == exact_best) | (np.abs(score - exact_score) <= 1e-6)
@@ -156,16 +166,11 @@ def bench_one(kind: str, settings, X, Q, exact_best, exact_score, n_insert: int,
     nlist = max(16, int(round(np.sqrt(n_stored))))
     index = retrieval.make_index(kind, dim, nlist=nlist, train_size=min(n_stored, 40 * nlist))
     with one_blas_thread():
-        t0 = time.perf_counter()
-        index.add(X[:n_stored])
-        build = time.perf_counter() - t0
+        build = timed(index.add, X[:n_stored])[1]
         mem = index.bytes_per_frame()
         rows = [{"setting": _setting(index, o), **_search_all(index, Q, exact_best, exact_score)}
                 for o in settings]
-        t0 = time.perf_counter()
-        for r in range(n_stored, n_stored + n_insert):
-            index.add(X[r])
-        insert = (time.perf_counter() - t0) / max(n_insert, 1)
+        insert = timed(_add_singly, index, X[n_stored:n_stored + n_insert])[1] / max(n_insert, 1)
     return [{**r, "build_s": build, "insert_us": 1e6 * insert, "bytes_per_frame": mem} for r in rows]
 
 
@@ -229,9 +234,7 @@ def decisions(X, m: int, sizes=SIZES, n_queries: int = 2000, methods=DECISIONS, 
         for label, kind, opts in methods:
             det = seqstream.Detector(0.0, seq_len=seq_len, exclude=exclude, contrast_window=contrast_window,
                                     index=kind, k=k, index_options={"nlist": nlist, "train_size": min(n, 40 * nlist), **opts})
-            t0 = time.perf_counter()
-            det.preload(X[:n])
-            preload = time.perf_counter() - t0
+            preload = timed(det.preload, X[:n])[1]
             secs, best, score = _stream(det, X[n:n + n_queries])
             if kind == "scan":
                 ref = (best, score)
@@ -253,9 +256,7 @@ def _stream(det, Q):
     secs, best, score = np.zeros(len(Q)), np.zeros(len(Q), np.int64), np.zeros(len(Q))
     with one_blas_thread():
         for q, x in enumerate(Q):
-            t0 = time.perf_counter()
-            det.update_descriptor(x)
-            secs[q] = time.perf_counter() - t0
+            secs[q] = timed(det.update_descriptor, x)[1]
             i = int(np.argmax(det.last_scores))
             best[q], score[q] = det.last_candidates[i], det.last_scores[i]
     return secs, best, score
@@ -294,11 +295,7 @@ def long_run_metrics(X, m: int, n: int = 100_000, kinds=("scan", "hnsw"), k: int
     GT = route_ground_truth(len(X), m)
     rows = []
     for kind in kinds:
-        t0 = time.perf_counter()
-        index = retrieval.make_index(kind, X.shape[1], nlist=316, train_size=12_640)
-        with one_blas_thread():
-            scores, ids = retrieval.stream_search(index, X, k, exclude)
-        secs = time.perf_counter() - t0
+        (scores, ids), secs = timed(_stream_search, kind, X, k, exclude)
         met = evaluate.query_metrics(retrieval.candidate_matches(scores, ids, GT, exclude), ks=(1, 5, 10))
         rows.append({"frames": len(X), "index": kind, "k": k, "stream_s": secs,
                      **{key: (100 * v if key not in ("queries", "revisits") else v) for key, v in met.items()},

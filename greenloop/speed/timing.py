@@ -18,6 +18,10 @@ What is timed, for every method alike (:func:`time_methods`)
 One more quantity, not per frame: the wall time of one whole computation (notebook 07's M x M
 cosine matrix), the best of ``repeats`` calls (:func:`best_of`).
 
+Every time greenloop reports under ``speed/`` is read by one clock, :func:`timed` (one call, wall
+seconds on ``time.perf_counter``): this module's functions, notebook 06's paper windows and stream
+comparison (``speed.bench``) and the scaling benchmark (``speed.scale``) all call it.
+
 A method is a :class:`Method`: ``start(preload)`` builds its database from the preloaded data
 (untimed) and returns a state, ``step(state, frame)`` is the timed path. :func:`detector_method`
 wraps a streaming detector that takes descriptors (``seqstream.Detector``, ``seqslam_stream.Detector``,
@@ -35,7 +39,15 @@ import numpy as np
 from greenloop.study import report
 from greenloop.util.checks import positive_int
 
-__all__ = ["Method", "detector_method", "dictionary_method", "time_methods", "decode_ms", "best_of"]
+__all__ = ["Method", "timed", "detector_method", "dictionary_method", "time_methods", "decode_ms", "best_of"]
+
+
+def timed(fn, *args):
+    """One call ``fn(*args)`` on the wall clock (``time.perf_counter``).
+    Returns (its result, seconds)."""
+    t0 = time.perf_counter()
+    out = fn(*args)
+    return out, time.perf_counter() - t0
 
 
 class Method(NamedTuple):
@@ -83,12 +95,14 @@ def dictionary_method(name: str, detector) -> Method:
     return Method(name, start, step)
 
 
-def _run_once(m: Method, preload, frames) -> float:
-    state = m.start(preload)
-    t0 = time.perf_counter()
+def _steps(m: Method, state, frames) -> None:
     for f in frames:
         m.step(state, f)
-    return time.perf_counter() - t0
+
+
+def _run_once(m: Method, preload, frames) -> float:
+    state = m.start(preload)
+    return timed(_steps, m, state, frames)[1]
 
 
 def time_methods(methods, frames, preload: dict, repeats: int = 3) -> list[dict]:
@@ -130,15 +144,15 @@ def decode_ms(paths, repeats: int = 3) -> dict:
     paths = [str(p) for p in paths]
     if not paths:
         raise ValueError("paths is empty: give the files of the timed window")
-    ts = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        for p in paths:
-            if cv2.imread(p, cv2.IMREAD_COLOR) is None:
-                raise ValueError(f"cannot decode {p}: not an image file OpenCV reads")
-        ts.append(1e3 * (time.perf_counter() - t0) / len(paths))
+    ts = [1e3 * timed(_decode_all, paths)[1] / len(paths) for _ in range(repeats)]
     return {"decode_ms_median": float(np.median(ts)), "decode_ms_min": float(min(ts)),
             "decode_ms_max": float(max(ts))}
+
+
+def _decode_all(paths) -> None:
+    for p in paths:
+        if cv2.imread(p, cv2.IMREAD_COLOR) is None:
+            raise ValueError(f"cannot decode {p}: not an image file OpenCV reads")
 
 
 def best_of(fn, *args, repeats: int = 3):
@@ -150,8 +164,7 @@ def best_of(fn, *args, repeats: int = 3):
     repeats = positive_int("repeats", repeats, 1)
     best, out = float("inf"), None
     for _ in range(repeats):
-        t0 = time.perf_counter()
-        out = fn(*args)
-        best = min(best, time.perf_counter() - t0)
+        out, secs = timed(fn, *args)
+        best = min(best, secs)
     return out, best
 
