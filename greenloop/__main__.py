@@ -30,7 +30,6 @@ import json
 import os
 import pickle
 import sys
-import time
 from pathlib import Path
 
 os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
@@ -63,6 +62,35 @@ def _read_window(paths):
                              f"image; replace or delete it")
         frames.append(img)
     return frames
+
+
+def _stream_windows(paths, window: int, events_of, line_of, desc: str, first: int = 0,
+                    stop: int | None = None, after=None) -> float:
+    """The CLI's one streaming loop: decode paths[first:stop] in windows of ``window`` frames
+    (:func:`_read_window`), print ``line_of(e)`` for each event ``events_of(frames)`` returns, a
+    progress bar on stderr, ``after()`` once per window (state saving). Returns the wall seconds
+    (decoding included; ``speed.timing.timed``)."""
+    stop = len(paths) if stop is None else stop
+    progress = bar(total=len(paths), initial=first, desc=desc, unit="frame")
+
+    def run():
+        for start in range(first, stop, window):
+            chunk = paths[start:min(start + window, stop)]
+            for e in events_of(_read_window(chunk)):
+                print(line_of(e), flush=True)
+            progress.update(len(chunk))
+            if after is not None:
+                after()
+    try:
+        return timing.timed(run)[1]
+    finally:
+        progress.close()
+
+
+def _closure_line(paths):
+    """An event {'frame', 'match', 'score'} -> the detect table's line (tab-separated, with files)."""
+    return lambda e: (f"{e['frame']}\t{e['match']}\t{e['score']:.4f}\t{paths[e['frame']].name}\t"
+                      f"{paths[e['match']].name}")
 
 
 def _read_tuned(path, variant: str) -> tuple[dict, float, int, int]:
@@ -140,15 +168,14 @@ def _detect_seq(args) -> int:
           f"{'every stored frame' if det.index_kind is None else f'{det.k} from {det.index_kind}'}"
           + (f"; resumed at frame {det.frame_index}" if det.frame_index else ""), flush=True)
     print("frame\tmatch\tscore\tfile\tmatch_file", flush=True)
-    t0, start = time.perf_counter(), det.frame_index
+    start = det.frame_index
     try:
-        done = _seq_stream(det, paths, args, kn)
+        done, dt = _seq_stream(det, paths, args, kn)
     except KeyboardInterrupt:
         print(f"detect: interrupted at frame {det.frame_index}" + (
             f"; state saved in {args.state}: run the same command again to continue" if args.state else ""),
             file=sys.stderr)
         return 130
-    dt = time.perf_counter() - t0
     n = det.frame_index
     print(f"# summary: {n} frames, {len(det.events)} closures, {(n - start) / max(dt, 1e-9):.1f} "
           f"frames/s (decoding included, {dt:.2f} s for frames {start}..{n - 1}); "
@@ -186,32 +213,27 @@ def _seq_save(det: seqstream.Detector, args, kn: dict, paths) -> None:
     write_atomic(args.state, dump)
 
 
-def _seq_stream(det: seqstream.Detector, paths, args, kn: dict) -> bool:
-    """Feed paths[det.frame_index:] to det in windows, printing closures, with a progress bar on
-    stderr; with --state save every --save-every frames, on Ctrl-C and at the end; stop after
-    --stop-after frames of this run. Returns whether the recording was finished."""
-    first, last_save = det.frame_index, det.frame_index
+def _seq_stream(det: seqstream.Detector, paths, args, kn: dict) -> tuple[bool, float]:
+    """Feed paths[det.frame_index:] to det in windows (:func:`_stream_windows`), printing closures;
+    with --state save every --save-every frames, on Ctrl-C and at the end; stop after
+    --stop-after frames of this run. Returns (whether the recording was finished, wall seconds)."""
+    first, last_save = det.frame_index, [det.frame_index]
     stop = len(paths) if args.stop_after is None else min(len(paths), first + args.stop_after)
-    progress = bar(total=len(paths), initial=first, desc="greenloop-seq", unit="frame")
+
+    def save_now():
+        if args.state and det.frame_index - last_save[0] >= args.save_every:
+            _seq_save(det, args, kn, paths)
+            last_save[0] = det.frame_index
     try:
-        for start in range(first, stop, args.window):
-            chunk = paths[start:min(start + args.window, stop)]
-            for e in det.update_many(_read_window(chunk)):
-                print(f"{e['frame']}\t{e['match']}\t{e['score']:.4f}\t{paths[e['frame']].name}\t"
-                      f"{paths[e['match']].name}", flush=True)
-            progress.update(len(chunk))
-            if args.state and det.frame_index - last_save >= args.save_every:
-                _seq_save(det, args, kn, paths)
-                last_save = det.frame_index
+        dt = _stream_windows(paths, args.window, det.update_many, _closure_line(paths), "greenloop-seq",
+                             first, stop, save_now)
     except KeyboardInterrupt:
         if args.state:
             _seq_save(det, args, kn, paths)
-        progress.close()
         raise
-    progress.close()
     if args.state:
         _seq_save(det, args, kn, paths)
-    return det.frame_index == len(paths)
+    return det.frame_index == len(paths), dt
 
 
 def _registered_stream(args):
@@ -251,13 +273,8 @@ def _detect_registered(args) -> int:
     print(f"# {len(paths)} frames from {args.folder} (every {step}); {args.method} ({knobs}); exclude "
           f"{det.exclude}; threshold {det.threshold:g}", flush=True)
     print("frame\tmatch\tscore\tfile\tmatch_file", flush=True)
-    t0 = time.perf_counter()
-    for start in range(0, len(paths), args.window):
-        chunk = paths[start:start + args.window]
-        for e in filter(None, (update(det, f) for f in _read_window(chunk))):
-            print(f"{e['frame']}\t{e['match']}\t{e['score']:.4f}\t{paths[e['frame']].name}\t"
-                  f"{paths[e['match']].name}", flush=True)
-    dt = time.perf_counter() - t0
+    dt = _stream_windows(paths, args.window, lambda frames: [e for e in (update(det, f) for f in frames) if e],
+                         _closure_line(paths), args.method)
     print(f"# summary: {det.frame_index} frames, {len(det.events)} closures, {det.frame_index / max(dt, 1e-9):.1f} "
           f"frames/s (decoding included, {dt:.2f} s); {det.bytes_per_frame} bytes per stored frame", flush=True)
     return 0
@@ -294,12 +311,9 @@ def _detect(args) -> int:
     print(f"# {len(paths)} frames from {args.folder}; model {args.model} ({det.backend}, "
           f"{det.n_classes} spots); tau = {tau}", flush=True)
     print("frame\tspot\tcount\tfile", flush=True)
-    t0 = time.perf_counter()
-    for start in range(0, len(paths), args.window):
-        chunk = paths[start:start + args.window]
-        for e in det.update_many(_read_window(chunk)):
-            print(f"{e['frame']}\t{e['spot']}\t{e['count']}\t{paths[e['frame']].name}", flush=True)
-    dt = time.perf_counter() - t0
+    dt = _stream_windows(paths, args.window, det.update_many,
+                         lambda e: f"{e['frame']}\t{e['spot']}\t{e['count']}\t{paths[e['frame']].name}",
+                         "dictionary")
     n = det.frame_index
     print(f"# summary: {n} frames, {len(det.events)} closures, {n / dt:.1f} frames/s "
           f"(decoding included, {dt:.2f} s)", flush=True)

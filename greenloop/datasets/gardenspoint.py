@@ -23,19 +23,14 @@ temporary folder.
 """
 from __future__ import annotations
 
-import argparse
 import json
-import os
 import shutil
 import sys
-import tempfile
-import time
 from pathlib import Path
 
 import cv2
 
 from greenloop.datasets import sequence, sources
-from greenloop.util.files import publish_folder
 from greenloop.util.progress import bar as tqdm  # in the terminal, never in a notebook
 
 SOURCE_URL = "https://github.com/aghagol/loop-detection"
@@ -59,22 +54,7 @@ def check_source(src) -> dict:
     """Validate a source folder: every traversal holds the same file names (frame k of each is
     one place). Returns {traversal: [paths in numeric order]}; raises ValueError naming the first
     traversal that differs and FileNotFoundError for a missing folder."""
-    src = source_folder(src)
-    found = {}
-    for t in TRAVERSALS:
-        try:
-            found[t] = sequence.list_frames(src / t)
-        except ValueError:
-            raise ValueError(f"{src / t} holds no .jpg/.png images: {FIX}") from None
-    names = [p.name for p in found[TRAVERSALS[0]]]
-    for t in TRAVERSALS[1:]:
-        other = [p.name for p in found[t]]
-        if other != names:
-            raise ValueError(f"{src / t} does not match {src / TRAVERSALS[0]} ({len(other)} vs {len(names)} "
-                             f"frames; only in {t}/: {sorted(set(other) - set(names))[:3]}, missing there: "
-                             f"{sorted(set(names) - set(other))[:3]}): frame k of every traversal must show "
-                             f"the same place, so all need the same file names")
-    return found
+    return sources.aligned_traversals(source_folder(src), TRAVERSALS, FIX)
 
 
 def _convert(src: Path, dest: Path, size: tuple[int, int]) -> tuple[int, int]:
@@ -114,23 +94,14 @@ def build(out, src, size=SIZE, tolerance: int = TOLERANCE, overwrite: bool = Fal
     Writes into a temporary folder beside ``out`` and renames it at the end, so a complete folder
     means a complete build. Returns ``out`` as a Path.
     """
-    if isinstance(tolerance, bool) or not isinstance(tolerance, int) or tolerance < 0:
-        raise ValueError(f"tolerance must be an integer >= 0 frames, got {tolerance!r}")
+    out = sources.check_output(out, tolerance, overwrite)
     size = (int(size[0]), int(size[1]))
     if min(size) < 1:
         raise ValueError(f"size must be positive (width, height), got {size}")
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise FileExistsError(f"{out} exists and is not a folder: choose another output path")
-    if out.is_dir() and any(out.iterdir()) and not overwrite:
-        raise FileExistsError(f"{out} already exists and is not empty: delete it, choose another "
-                              f"folder, or pass overwrite=True (CLI: --overwrite)")
     found = check_source(src)
     n = len(found[TRAVERSALS[0]])
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.parent / f".{out.name}.tmp-{os.getpid()}"
-    shutil.rmtree(tmp, ignore_errors=True)
-    try:
+
+    def write(tmp: Path) -> None:
         native = {}
         for t in TRAVERSALS:
             (tmp / sequence.TRAVERSALS_DIR / t).mkdir(parents=True)
@@ -147,48 +118,31 @@ def build(out, src, size=SIZE, tolerance: int = TOLERANCE, overwrite: bool = Fal
                 "ground_truth": {"file": sequence.DESCRIPTION_NAME, "pairs": "frame k of every traversal "
                                  "with frame k +- tolerance of every later one", "tolerance_frames": tolerance}}
         (tmp / "gardenspoint.json").write_text(json.dumps(meta, indent=1, sort_keys=True) + "\n")
-        publish_folder(tmp, out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    return out
+    return sources.write_folder(out, write)
 
 
 def main(argv=None) -> int:
     """CLI: ``python -m greenloop.datasets.gardenspoint OUT [--src SRC] [--url URL] [--size WxH]``."""
-    ap = argparse.ArgumentParser(prog="python -m greenloop.datasets.gardenspoint",
-                                 description="Build the Gardens Point Walking sequence folder (3 traversals).")
-    ap.add_argument("out", help="output sequence folder, e.g. data/gardenspoint")
-    ap.add_argument("--src", help="local source folder (day_left/, day_right/, night_right/) or a clone of "
-                                  "the source repository; without it the source is cloned into a temporary folder")
-    ap.add_argument("--url", default=SOURCE_URL, help="repository to clone when --src is not given")
+    ap = sources.builder_parser("python -m greenloop.datasets.gardenspoint",
+                                "Build the Gardens Point Walking sequence folder (3 traversals).",
+                                "data/gardenspoint", "day_left/, day_right/, night_right/", SOURCE_URL)
     ap.add_argument("--size", default=f"{SIZE[0]}x{SIZE[1]}", help="WIDTHxHEIGHT of every frame (default %(default)s)")
     ap.add_argument("--tolerance", type=int, default=TOLERANCE,
                     help="ground-truth tolerance in frames (default %(default)s, VPR-Bench's)")
-    ap.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
-    ap.add_argument("--quiet", action="store_true", help="no progress bar")
     a = ap.parse_args(argv)
-    t0 = time.perf_counter()
-    try:
-        w, _, h = a.size.lower().partition("x")
-        if not (w.isdigit() and h.isdigit()):
-            raise ValueError(f"--size must be WIDTHxHEIGHT in pixels (e.g. 640x360), got {a.size!r}")
-        kw = dict(size=(int(w), int(h)), tolerance=a.tolerance, overwrite=a.overwrite, progress=not a.quiet)
-        if a.src:
-            out = build(a.out, a.src, **kw)
-        else:
-            with tempfile.TemporaryDirectory(prefix="gardenspoint-src-") as tmp:
-                print(f"cloning {a.url} (no --src given) ...", file=sys.stderr, flush=True)
-                src = source_folder(sources.shallow_clone(Path(tmp) / "loop-detection", a.url, FIX, "Gardens Point"))
-                out = build(a.out, src, source_name=f"{a.url} ({SOURCE_SUBDIR})", **kw)
-    except (RuntimeError, ValueError, FileNotFoundError, FileExistsError, OSError) as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 1
-    meta = json.loads((out / "gardenspoint.json").read_text())
-    print(f"wrote {meta['n_frames']} frames ({meta['frames_per_traversal']} per traversal, "
-          f"{meta['width']}x{meta['height']}) and {sequence.DESCRIPTION_NAME} to {out} in "
-          f"{time.perf_counter() - t0:.1f} s")
-    return 0
+    w, _, h = a.size.lower().partition("x")
+    if not (w.isdigit() and h.isdigit()):
+        ap.error(f"--size must be WIDTHxHEIGHT in pixels (e.g. 640x360), got {a.size!r}")
+    kw = dict(size=(int(w), int(h)), tolerance=a.tolerance, overwrite=a.overwrite, progress=not a.quiet)
+
+    def summary(out: Path) -> str:
+        meta = json.loads((out / "gardenspoint.json").read_text())
+        return (f"wrote {meta['n_frames']} frames ({meta['frames_per_traversal']} per traversal, "
+                f"{meta['width']}x{meta['height']}) and {sequence.DESCRIPTION_NAME} to {out}")
+    return sources.run_builder(
+        a, lambda src, **more: build(a.out, src, **kw, **more),
+        lambda tmp: source_folder(sources.shallow_clone(tmp / "loop-detection", a.url, FIX, "Gardens Point")),
+        SOURCE_SUBDIR, summary)
 
 
 if __name__ == "__main__":

@@ -29,13 +29,9 @@ Run ``make nordland`` or ``python -m greenloop.datasets.nordland data/nordland [
 """
 from __future__ import annotations
 
-import argparse
 import json
-import os
 import shutil
 import sys
-import tempfile
-import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -43,7 +39,6 @@ import cv2
 import numpy as np
 
 from greenloop.datasets import sequence, sources
-from greenloop.util.files import publish_folder
 from greenloop.util.progress import bar as tqdm  # in the terminal, never in a notebook
 
 SOURCE_URL = "https://github.com/TimQuelch/seqslam"
@@ -77,20 +72,8 @@ def check_source(src) -> tuple[list[Path], list[Path], tuple[int, int]]:
     Raises FileNotFoundError for a missing folder and ValueError for empty or mismatched seasons
     or mixed sizes, each naming the first offending file.
     """
-    src = source_folder(src)
-    seasons = {}
-    for s in SEASONS:
-        try:
-            seasons[s] = sequence.list_frames(src / s)
-        except ValueError:
-            raise ValueError(f"{src / s} holds no .png/.jpg images: {FIX}") from None
+    seasons = sources.aligned_traversals(source_folder(src), SEASONS, FIX)
     summer, winter = seasons["summer"], seasons["winter"]
-    a, b = [p.name for p in summer], [p.name for p in winter]
-    if a != b:
-        only_s, only_w = sorted(set(a) - set(b)), sorted(set(b) - set(a))
-        raise ValueError(f"the seasons do not match ({len(a)} summer, {len(b)} winter frames): "
-                         f"only in summer/: {only_s[:3]}, only in winter/: {only_w[:3]}; frame k of "
-                         f"each season must show the same place, so both need the same file names")
     with ThreadPoolExecutor(8) as pool:
         sizes = list(pool.map(_size, summer + winter))
     first = sizes[0]
@@ -136,14 +119,7 @@ def build(out, src, tolerance: int = TOLERANCE, overwrite: bool = False, progres
     Writes into a temporary folder beside ``out`` and renames it at the end, so a complete
     folder means a complete build. Returns ``out`` as a Path.
     """
-    if isinstance(tolerance, bool) or not isinstance(tolerance, int) or tolerance < 0:
-        raise ValueError(f"tolerance must be an integer >= 0 frames, got {tolerance!r}")
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise FileExistsError(f"{out} exists and is not a folder: choose another output path")
-    if out.is_dir() and any(out.iterdir()) and not overwrite:
-        raise FileExistsError(f"{out} already exists and is not empty: delete it, choose another "
-                              f"folder, or pass overwrite=True (CLI: --overwrite)")
+    out = sources.check_output(out, tolerance, overwrite)
     summer, winter, (w, h) = check_source(src)
     n = len(summer)
     meta = {"generator": "greenloop.datasets.nordland", "format": 1,
@@ -157,16 +133,7 @@ def build(out, src, tolerance: int = TOLERANCE, overwrite: bool = False, progres
                              "tolerance_frames": tolerance,
                              "default_tolerance": f"{SAMPLE_TOLERANCE}: the source's "
                              "sample_ground_truth.csv tolerance, read as frames of these images"}}
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.parent / f".{out.name}.tmp-{os.getpid()}"
-    shutil.rmtree(tmp, ignore_errors=True)
-    try:
-        _write(tmp, summer, winter, tolerance, meta, progress)
-        publish_folder(tmp, out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    return out
+    return sources.write_folder(out, lambda tmp: _write(tmp, summer, winter, tolerance, meta, progress))
 
 
 def clone_source(dest, url: str = SOURCE_URL, timeout: float = 20.0,
@@ -178,34 +145,20 @@ def clone_source(dest, url: str = SOURCE_URL, timeout: float = 20.0,
 
 def main(argv=None) -> int:
     """CLI: ``python -m greenloop.datasets.nordland OUT [--src SRC] [--url URL] [--tolerance T]``."""
-    ap = argparse.ArgumentParser(prog="python -m greenloop.datasets.nordland",
-                                 description="Build the Nordland summer+winter sequence folder.")
-    ap.add_argument("out", help="output sequence folder, e.g. data/nordland")
-    ap.add_argument("--src", help="local source folder (summer/, winter/) or a clone of the source "
-                                  "repository; without it the source is cloned into a temporary folder")
-    ap.add_argument("--url", default=SOURCE_URL, help="repository to clone when --src is not given")
+    ap = sources.builder_parser("python -m greenloop.datasets.nordland",
+                                "Build the Nordland summer+winter sequence folder.",
+                                "data/nordland", "summer/, winter/", SOURCE_URL)
     ap.add_argument("--tolerance", type=int, default=TOLERANCE,
                     help="ground-truth tolerance in frames (default %(default)s, from the source's sample)")
-    ap.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
-    ap.add_argument("--quiet", action="store_true", help="no progress bar")
     a = ap.parse_args(argv)
-    t0 = time.perf_counter()
-    try:
-        if a.src:
-            out = build(a.out, a.src, a.tolerance, a.overwrite, progress=not a.quiet)
-        else:
-            with tempfile.TemporaryDirectory(prefix="nordland-src-") as tmp:
-                print(f"cloning {a.url} (no --src given) ...", file=sys.stderr, flush=True)
-                src = clone_source(Path(tmp) / "seqslam", a.url)
-                out = build(a.out, src, a.tolerance, a.overwrite, progress=not a.quiet,
-                            source_name=f"{a.url} ({SOURCE_SUBDIR})")
-    except (RuntimeError, ValueError, FileNotFoundError, FileExistsError) as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 1
-    meta = json.loads((out / "nordland.json").read_text())
-    print(f"wrote {meta['n_frames']} frames ({meta['frames_per_season']} per season) and "
-          f"{sequence.GROUND_TRUTH_NAME} to {out} in {time.perf_counter() - t0:.1f} s")
-    return 0
+
+    def summary(out: Path) -> str:
+        meta = json.loads((out / "nordland.json").read_text())
+        return (f"wrote {meta['n_frames']} frames ({meta['frames_per_season']} per season) and "
+                f"{sequence.GROUND_TRUTH_NAME} to {out}")
+    return sources.run_builder(
+        a, lambda src, **more: build(a.out, src, a.tolerance, a.overwrite, progress=not a.quiet, **more),
+        lambda tmp: clone_source(tmp / "seqslam", a.url), SOURCE_SUBDIR, summary)
 
 
 if __name__ == "__main__":

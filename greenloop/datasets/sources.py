@@ -7,10 +7,17 @@ one error that ends with the builder's fix.
 """
 from __future__ import annotations
 
+import argparse
 import os
 import shutil
 import subprocess
+import sys
+import tempfile
+import time
 from pathlib import Path
+
+from greenloop.datasets import sequence
+from greenloop.util.files import publish_folder
 
 
 def source_folder(src, subdir: str, needs: tuple[str, ...], what: str, fix: str) -> Path:
@@ -23,6 +30,58 @@ def source_folder(src, subdir: str, needs: tuple[str, ...], what: str, fix: str)
             return cand
     raise FileNotFoundError(f"{what} source {src} not found or incomplete (it needs "
                             f"{', '.join(n + '/' for n in needs)} with the images): {fix}")
+
+
+def aligned_traversals(src: Path, names: tuple[str, ...], fix: str) -> dict[str, list[Path]]:
+    """The frames of aligned traversals (frame k of each is one place): {name: paths of src/name
+    in numeric order}. Raises ValueError ending with ``fix`` for a subfolder without images, and
+    ValueError naming the files only in one when two traversals' file names differ."""
+    found = {}
+    for t in names:
+        try:
+            found[t] = sequence.list_frames(src / t)
+        except ValueError:
+            raise ValueError(f"{src / t} holds no .png/.jpg images: {fix}") from None
+    first = [p.name for p in found[names[0]]]
+    for t in names[1:]:
+        other = [p.name for p in found[t]]
+        if other != first:
+            raise ValueError(f"{src / t} does not match {src / names[0]} ({len(other)} vs {len(first)} frames; "
+                             f"only in {names[0]}/: {sorted(set(first) - set(other))[:3]}, only in {t}/: "
+                             f"{sorted(set(other) - set(first))[:3]}): frame k of every traversal must show "
+                             f"the same place, so all need the same file names")
+    return found
+
+
+def check_output(out, tolerance: int, overwrite: bool) -> Path:
+    """A builder's arguments checked before any work: ``tolerance`` an integer >= 0 frames (else
+    ValueError), ``out`` not a file and, unless ``overwrite``, not a non-empty folder (else
+    FileExistsError). Returns ``out`` as a Path."""
+    if isinstance(tolerance, bool) or not isinstance(tolerance, int) or tolerance < 0:
+        raise ValueError(f"tolerance must be an integer >= 0 frames, got {tolerance!r}")
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise FileExistsError(f"{out} exists and is not a folder: choose another output path")
+    if out.is_dir() and any(out.iterdir()) and not overwrite:
+        raise FileExistsError(f"{out} already exists and is not empty: delete it, choose another "
+                              f"folder, or pass overwrite=True (CLI: --overwrite)")
+    return out
+
+
+def write_folder(out: Path, write) -> Path:
+    """``write(tmp)`` fills a temporary folder beside ``out``, which then replaces ``out``
+    (``util.files.publish_folder``), so a complete folder means a complete build; the temporary
+    folder is removed if anything fails. Returns ``out``."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.parent / f".{out.name}.tmp-{os.getpid()}"
+    shutil.rmtree(tmp, ignore_errors=True)
+    try:
+        write(tmp)
+        publish_folder(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return out
 
 
 def _git(args: list[str], timeout: float) -> subprocess.CompletedProcess:
@@ -53,3 +112,37 @@ def shallow_clone(dest, url: str, fix: str, what: str, timeout: float = 20.0,
         raise RuntimeError(f"could not clone {url} ({why[-1] if why else f'git exit {e.returncode}'}): "
                            f"{fix}") from None
     return Path(dest)
+
+
+def builder_parser(prog: str, description: str, example: str, subfolders: str, url: str) -> argparse.ArgumentParser:
+    """The arguments every builder's CLI shares: OUT, --src, --url, --overwrite, --quiet (a builder
+    adds its own, such as --tolerance). example: an output folder; subfolders: what --src holds."""
+    ap = argparse.ArgumentParser(prog=prog, description=description)
+    ap.add_argument("out", help=f"output sequence folder, e.g. {example}")
+    ap.add_argument("--src", help=f"local source folder ({subfolders}) or a clone of the source "
+                                  f"repository; without it the source is cloned into a temporary folder")
+    ap.add_argument("--url", default=url, help="repository to clone when --src is not given")
+    ap.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
+    ap.add_argument("--quiet", action="store_true", help="no progress bar")
+    return ap
+
+
+def run_builder(a: argparse.Namespace, build, clone, subdir: str, summary) -> int:
+    """A builder's CLI after parsing: ``build(src)`` from ``a.src``, or from ``clone(tmp)`` (the
+    source folder of a shallow clone of ``a.url`` into a temporary folder) as
+    ``build(src, source_name="URL (subdir)")``; then prints ``summary(out)`` and the seconds taken.
+    Returns the exit status: 0, or 1 with ``error: ...`` on stderr when the source is missing,
+    the clone fails or the output exists."""
+    t0 = time.perf_counter()
+    try:
+        if a.src:
+            out = build(a.src)
+        else:
+            with tempfile.TemporaryDirectory(prefix=f"{Path(a.out).name}-src-") as tmp:
+                print(f"cloning {a.url} (no --src given) ...", file=sys.stderr, flush=True)
+                out = build(clone(Path(tmp)), source_name=f"{a.url} ({subdir})")
+    except (RuntimeError, ValueError, FileNotFoundError, FileExistsError, OSError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 1
+    print(f"{summary(out)} in {time.perf_counter() - t0:.1f} s")
+    return 0
