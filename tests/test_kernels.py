@@ -202,3 +202,45 @@ def test_one_blas_thread_limits_numpys_blas_inside_only():
     with threads.one_blas_thread():
         assert blas_threads() and set(blas_threads()) == {1}
     assert blas_threads() == before
+
+
+# ---- greenloop-seq's candidate verification ----------------------------------------------------
+def test_candidate_rows_are_the_union_of_the_candidates_windows():
+    ids = np.array([40, -1, 7, 40, 12, 95, 0], np.int64)
+    cand, rows = kernels.candidate_rows(ids, before=6, after=2, limit=90)
+    assert cand.tolist() == [0, 7, 12, 40, 95]
+    want = sorted({r for i in cand for r in range(i - 6, i + 3) if 0 <= r < 90})
+    assert rows.tolist() == want
+    cand, rows = kernels.candidate_rows(np.full(4, -1, np.int64), 6, 2, 90)
+    assert cand.size == 0 and rows.size == 0
+
+
+@pytest.mark.parametrize("contrast_window, velocities, seq_len, store", [
+    (10, (0.8, 1.0, 1.25), 10, "float32"), (0, (0.8, 1.0, 1.25, 2.0), 5, "float16"),
+    (1, (1.0,), 3, "float32"), (7, (0.5, 1.0, 1.5), 8, "float32")])
+def test_candidate_kernel_equals_the_numpy_verification(contrast_window, velocities, seq_len, store):
+    """A candidate-mode stream over a revisit: every frame's candidates and scores from the kernels
+    equal the NumPy verification's of the same state (np.unique of the retrieved rows, then
+    _candidate_scores_numpy), and a revisit frame's best candidate is its own first visit."""
+    from greenloop.speed import seqstream
+
+    rng = np.random.default_rng(0)
+    base = rng.normal(size=(200, 32)).astype(np.float32)
+    X = np.concatenate([base, base + np.float32(0.3) * rng.normal(size=base.shape).astype(np.float32)])
+    det = seqstream.Detector(0.0, seq_len=seq_len, exclude=20, contrast_window=contrast_window,
+                             velocities=velocities, index="scan", k=10, store_dtype=store)
+    compared, found = 0, 0
+    for j, x in enumerate(X):
+        det.update_descriptor(x)
+        if det.last_candidates.size:
+            assert np.array_equal(det.last_candidates, np.unique(det.last_candidates))
+            ref = det._candidate_scores_numpy(det.last_candidates)
+            assert np.allclose(det.last_scores, ref, rtol=0, atol=1e-6)
+            compared += 1
+            if j >= 200 + seq_len:
+                found += abs(int(det.last_candidates[np.argmax(det.last_scores)]) - (j - 200)) <= 1
+    assert compared == len(X) - 21
+    if contrast_window == 1:    # a one-row window has no spread: every point normalises to 0
+        assert not det.last_scores.any() and found < 0.5 * (200 - seq_len)
+    else:
+        assert found >= 0.9 * (200 - seq_len)

@@ -19,6 +19,7 @@ from greenloop import evaluate, retrieval
 from greenloop.seqmatch import (_EPS, COLORS, DEFAULT_VELOCITIES, STORE_DTYPES, _check_descriptor,
                                 calibrate_scores, center, columns_to_scores, contrast_normalise,
                                 describe_frames, matrix_events, normalise, threshold_range)
+from greenloop.util import numba_kernels
 from greenloop.util.checks import positive_int
 from greenloop.util.threads import one_blas_thread
 
@@ -293,9 +294,7 @@ class Detector:
         self._qpad[self._qc == 0] = pad            # empty / pre-stream columns: the newest pad
         self.last_candidates, self.last_scores = np.zeros(0, np.int64), np.zeros(0, np.float32)
         if c:
-            ids = self._index.search(y, self.k)[1][0]
-            cand = np.unique(ids[ids >= 0])
-            self.last_candidates, self.last_scores = cand, self._candidate_scores(cand)
+            self.last_candidates, self.last_scores = self._candidate_scores(self._index.search(y, self.k)[1][0])
         self._store(y)
         self.frame_index += 1
         if c and self.threshold is not None and self.last_scores.size:
@@ -307,8 +306,23 @@ class Detector:
                 return event
         return None
 
-    def _candidate_scores(self, cand: np.ndarray) -> np.ndarray:
-        """Best-trajectory scores (m,) float32 of the candidate rows cand (m,) (ascending)."""
+    def _candidate_scores(self, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The retrieved rows ids (k,) (-1: none) -> (candidates (m,) int64 ascending and distinct,
+        their best-trajectory scores (m,) float32): numba_kernels.candidate_rows / candidate_scores
+        over the similarities of the rows they need to the last seq_len queries (one BLAS product),
+        or :meth:`_candidate_scores_numpy` without numba (the same values to float rounding)."""
+        if not numba_kernels.available():
+            cand = np.unique(ids[ids >= 0])
+            return cand, self._candidate_scores_numpy(cand)
+        h = self.contrast_window // 2
+        cand, R = numba_kernels.candidate_rows(ids, self._margin + h, h, int(self._qc.max()))
+        with one_blas_thread():
+            G = (self._db[R].astype(np.float32) @ self._Q.T).astype(np.float64)   # (|R|, L)
+        return cand, numba_kernels.candidate_scores(cand, R, G, self._margin - self._base, self._qc, self._qpad,
+                                                    h if self.contrast_window else -1)
+
+    def _candidate_scores_numpy(self, cand: np.ndarray) -> np.ndarray:
+        """Best-trajectory scores (m,) float32 of the candidate rows cand (m,) (ascending), in NumPy."""
         off = self._margin - self._base                               # (V, L) row offsets
         P = cand[:, None, None] - off[None]                           # (m, V, L) trajectory rows
         ck = self._qc[None, None, :]

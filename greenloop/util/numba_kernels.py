@@ -10,6 +10,10 @@
   main paper's 640x480 -> 32x32 is 20 x 15), bit-identical to ``cv2.resize`` and faster than
   it (OpenCV runs a scalar loop for factors other than 2); ``greenloop.datasets.sequence.preprocess_image``
   uses it after checking it against OpenCV once per image shape.
+* ``candidate_rows`` / ``candidate_scores``: greenloop-seq's sequence verification in candidate
+  mode (``speed.seqstream.Detector``): the stored rows its candidates' trajectories and contrast
+  windows need, and the best-trajectory score of each candidate from those rows' similarities to
+  the last seq_len queries, in one compiled pass instead of some thirty small NumPy calls.
 
 Each kernel is checked against the library it replaces in tests/test_kernels.py. numba is imported
 lazily; ``available()`` says whether it is installed, and callers fall back to plain
@@ -41,7 +45,8 @@ def available() -> bool:
 def _compiled():
     """The numba kernels, compiled (or loaded from numba's disk cache) once per process.
 
-    Returns {'conv3_relu', 'conv3_grad', 'adam1d', 'area_u8'}: serial kernels that release the
+    Returns {'conv3_relu', 'conv3_grad', 'adam1d', 'area_u8', 'cand_rows', 'cand_scores'}:
+    serial kernels that release the
     GIL; ``run_slices`` spreads them over the cores, so numba's own thread pool is never started
     (its spinning workers would compete with the BLAS calls on the other cores).
     """
@@ -55,7 +60,8 @@ def _compiled():
     # infinities behave as in NumPy.
     opts = dict(fastmath={"reassoc", "contract"}, error_model="numpy", cache=True, nogil=True)
     return {"conv3_relu": _compile_conv_relu(njit, opts), "conv3_grad": _compile_conv_grad(njit, opts),
-            "adam1d": _compile_adam(njit, opts), "area_u8": _compile_area(njit)}
+            "adam1d": _compile_adam(njit, opts), "area_u8": _compile_area(njit),
+            **_compile_candidates(njit)}
 
 
 def _compile_conv_relu(njit, opts: dict):
@@ -175,6 +181,86 @@ def _compile_area(njit):
         return out
 
     return area_u8
+
+
+def _compile_candidates(njit) -> dict:
+    """{'cand_rows', 'cand_scores'}: see :func:`candidate_rows` and :func:`candidate_scores` (no
+    fastmath: each sum runs in the order written, in float64)."""
+    @njit(cache=True, nogil=True)
+    def cand_rows(ids, before, after, limit):
+        c = np.sort(ids[ids >= 0])
+        keep = np.ones(len(c), np.bool_)
+        for t in range(1, len(c)):
+            keep[t] = c[t] != c[t - 1]
+        cand = c[keep]
+        rows = np.empty(len(cand) * (before + after + 1), np.int64)
+        n, nxt = 0, 0                      # nxt: the first row not yet listed (cand ascending)
+        for i in cand:
+            for r in range(max(i - before, nxt, 0), min(i + after + 1, limit)):
+                rows[n] = r
+                n += 1
+            nxt = max(nxt, i + after + 1)
+        return cand, rows[:n]
+
+    @njit(cache=True, nogil=True)
+    def cand_scores(cand, rows, G, off, qc, qpad, h, out):
+        nv, L = off.shape
+        for c in range(len(cand)):
+            best = -np.inf
+            for v in range(nv):
+                acc = 0.0
+                for k in range(L):
+                    p = cand[c] - off[v, k]
+                    if p < 0 or p >= qc[k]:
+                        acc += np.float64(np.float32(qpad[k]))
+                        continue
+                    a = np.searchsorted(rows, p)
+                    s = G[a, k]
+                    if h >= 0:
+                        lo, hi = max(p - h, 0), min(p + h + 1, qc[k])
+                        s1, s2 = 0.0, 0.0
+                        for t in range(a - (p - lo), a + (hi - p)):
+                            s1 += G[t, k]
+                            s2 += G[t, k] * G[t, k]
+                        mu = s1 / (hi - lo)
+                        sd = np.sqrt(max(s2 / (hi - lo) - mu * mu, 0.0))
+                        s = (s - mu) / max(sd, 1e-6) if sd > 1e-6 else 0.0
+                    acc += np.float64(np.float32(s))
+                best = max(best, acc)
+            out[c] = np.float32(best / L)
+        return out
+
+    return {"cand_rows": cand_rows, "cand_scores": cand_scores}
+
+
+def candidate_rows(ids: np.ndarray, before: int, after: int, limit: int) -> tuple[np.ndarray, np.ndarray]:
+    """The candidates of one query and the stored rows their verification needs.
+
+    ids: (k,) int64 retrieved rows (-1: none). before / after: rows needed before / after each
+    candidate i (its trajectories reach i - max offset, its contrast windows h more on each side).
+    limit: rows >= limit are not stored yet. Returns (cand (m,) int64 ascending, distinct;
+    rows (r,) int64 ascending, distinct: the union of [i - before, i + after] over the candidates,
+    clipped to [0, limit)). Needs numba (:func:`available`).
+    """
+    return _compiled()["cand_rows"](np.ascontiguousarray(ids, dtype=np.int64), int(before), int(after), int(limit))
+
+
+def candidate_scores(cand, rows, G, off, qc, qpad, half_window: int) -> np.ndarray:
+    """Best-trajectory scores (m,) float32 of the candidates cand (m,) of :func:`candidate_rows`.
+
+    rows (r,): the stored rows of :func:`candidate_rows`; G (r, L) float64: their cosine with the
+    last L queries (column k: the query k frames back). off (V, L) int64: the trajectories' row
+    offsets. qc (L,) int64: the rows each of those queries had (a point p counts when 0 <= p <
+    qc[k]); qpad (L,) float64: the value of a point outside them. half_window h: each point's
+    similarity is contrast-normalised over the rows p - h .. p + h within [0, qc[k]) (mean, then
+    population std; a std <= 1e-6 gives 0); h < 0: not normalised. Each point's value is rounded to
+    float32, summed over k in float64, maximised over v, divided by L, rounded to float32.
+    """
+    out = np.empty(len(cand), np.float32)
+    return _compiled()["cand_scores"](cand, rows, np.ascontiguousarray(G, dtype=np.float64),
+                                      np.ascontiguousarray(off, dtype=np.int64),
+                                      np.ascontiguousarray(qc, dtype=np.int64),
+                                      np.ascontiguousarray(qpad, dtype=np.float64), int(half_window), out)
 
 
 def conv_relu(X: np.ndarray, K: np.ndarray, bias: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
