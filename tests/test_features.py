@@ -480,6 +480,7 @@ def test_extract_all_resolves_weights_once_per_entry(tiny_sequence, tmp_path, mo
     assert calls == ["pixels", "sift_bovw"]
 
 
+@pytest.mark.filterwarnings("ignore:only .* SIFT descriptors")      # 8 small frames: a small vocabulary
 @pytest.mark.parametrize("backbone", ["pixels", "gradients", "sift_bovw", "mobilenetv3small"])
 def test_bgr_frames_give_the_rgb_frames_descriptors(frames, tmp_path, backbone):
     """color="bgr" (frames as cv2.imread decodes them, the streams' input) gives exactly the
