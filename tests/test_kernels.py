@@ -29,6 +29,7 @@ def test_area_shrink_declines_what_it_cannot_do():
     assert kernels.area_shrink(img, (32, 32)) is None  # 130 / 32 is not an integer
     assert kernels.area_shrink(img.astype(np.float32), (10, 10)) is None
     assert kernels.area_shrink(np.zeros((64, 64, 3), np.uint8), (32, 32)) is None
+    assert kernels.area_shrink(np.zeros((64, 64), np.uint8), (32, 32)) is None   # 2 x 2: OpenCV's own path
     # preprocess_image still gives OpenCV's bytes then
     frame = np.random.default_rng(1).integers(0, 256, (100, 130, 3), dtype=np.uint8)
     ref = cv2.resize(cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY), (32, 32), interpolation=cv2.INTER_AREA)

@@ -86,6 +86,17 @@ def test_coverage_status_comes_from_the_outputs(tmp_path):
     assert t.loc[(coverage.ZHANG, "Table I")].status == "not reproduced"  # no output: declared status kept
     assert set(t.status) <= {"reproduced", "partly", "not reproduced", "not an experiment", "not run"}
     assert (t.status != "not an experiment").sum() > 20
+    # an RGB-D table whose every row says skipped (no depth) is no result; one run row is
+    layers = "10_siamese_rgbd/table2_mid_level_layers.csv"
+    for folder, rows in ((a, "conv1,0.74,0.61,\nconv2,0.81,skipped,no depth\n"),
+                         (b, "conv1,0.74,skipped,no depth\nconv2,0.81,skipped,no depth\n")):
+        (folder / layers).parent.mkdir()
+        (folder / layers).write_text("quantity,paper,this run,note\n" + rows)
+    (b / "10_siamese_rgbd" / "fusions.csv").write_text("descriptor,status\nearly,skipped: the dataset has no depth/ folder\n")
+    t = coverage.coverage([a, b]).set_index(["paper", "item"])
+    assert t.loc[(coverage.XU, "Table 2")].datasets == "synthetic"
+    assert t.loc[(coverage.XU, "Fig. 5, Fig. 6")].status == "not run"
+    assert coverage.ran(a / layers) and not coverage.ran(b / layers) and not coverage.ran(b / "absent.csv")
 
 
 def test_readme_coverage_table_is_the_generated_one():

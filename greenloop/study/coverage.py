@@ -3,7 +3,8 @@
 ``ITEMS`` lists every table and figure of the papers in ``../shared/papers/`` with the notebook
 output that reproduces it (a file under ``<results>/<notebook stem>/``) and what differs from the
 paper. :func:`coverage` turns it into a table whose status comes from the results folders, not from
-this list: an item whose output file exists in none of them is reported as "not run", whatever is
+this list: an item whose output file exists in none of them, or only as a table whose every row
+says "skipped" (an RGB-D experiment on a set without depth), is reported as "not run", whatever is
 declared here, so the table cannot claim more than the committed outputs hold.
 
 Statuses: "reproduced" (the experiment's protocol runs end to end and is scored; the data differ
@@ -108,19 +109,31 @@ def _dataset_name(folder: Path) -> str:
     return Path(json.loads(man.read_text()).get("dataset", folder.name)).name if man else folder.name
 
 
+def ran(path: Path) -> bool:
+    """Whether a notebook output holds a result: it exists and, for a csv, not every row has a
+    cell that is "skipped" or starts with "skipped:" (what a notebook writes for rows it could not run)."""
+    if not path.is_file():
+        return False
+    if path.suffix != ".csv":
+        return True
+    cells = pd.read_csv(path, dtype=str, keep_default_na=False)
+    skipped = cells.apply(lambda col: col.str.match(r"^skipped(:|$)")).any(axis=1)
+    return not (len(cells) and skipped.all())
+
+
 def coverage(results_dirs) -> pd.DataFrame:
     """Every table and figure of the five papers with its status in these results folders.
 
     results_dirs: results folders (``results``, ``results/nordland``, ...). Returns a DataFrame
     with columns paper, item, content, notebook, status, datasets (those whose folder holds the
-    item's output), note. The status is the declared one when some folder holds the output and
+    item's output with a result in it, :func:`ran`), note. The status is the declared one when some folder holds the output and
     "not run" when none does; items without an output keep their declared status.
     """
     folders = [Path(d) for d in results_dirs]
     names = [_dataset_name(f) for f in folders]
     rows = []
     for paper, item, content, output, status, note in ITEMS:
-        found = [n for f, n in zip(folders, names) if output and (f / output).is_file()]
+        found = [n for f, n in zip(folders, names) if output and ran(f / output)]
         if output and not found and status != "not an experiment":
             status, note = "not run", f"no {output} in the results of {', '.join(names)}"
         rows.append({"paper": paper, "item": item, "content": content,

@@ -348,12 +348,13 @@ def area_shrink(gray: np.ndarray, size) -> np.ndarray | None:
 
     gray: (H, W) uint8 C-contiguous. size: (width, height) dividing (W, H) exactly.
     Returns (height, width) uint8, or None when the kernel does not apply (numba missing, factors
-    not integers, not uint8 2-D) so that the caller uses OpenCV.
+    not integers, not uint8 2-D, or 2 x 2: OpenCV's own vectorised path for that factor rounds
+    sums of exact halves its own way) so that the caller uses OpenCV.
     """
     h, w = gray.shape[:2]
     ow, oh = int(size[0]), int(size[1])
     if (gray.ndim != 2 or gray.dtype != np.uint8 or ow < 1 or oh < 1 or w % ow or h % oh
-            or (w == ow and h == oh) or not available()):
+            or (w == ow and h == oh) or (w == 2 * ow and h == 2 * oh) or not available()):
         return None
     fn = _checked_area((h, w, oh, ow))
     if fn is None:
@@ -364,8 +365,9 @@ def area_shrink(gray: np.ndarray, size) -> np.ndarray | None:
 @functools.lru_cache(maxsize=64)
 def _checked_area(shape):
     """The area kernel for one (h, w, oh, ow), or None if it disagrees with this OpenCV on a random
-    image of that shape (a future OpenCV could round differently; then OpenCV is used)."""
-    import warnings
+    image of that shape (a future OpenCV could round differently; then OpenCV is used, and a
+    warning goes to the log, which greenloop sends to the terminal, not into a notebook)."""
+    import logging
 
     import cv2
 
@@ -374,8 +376,8 @@ def _checked_area(shape):
     img = np.random.default_rng(0).integers(0, 256, (h, w), dtype=np.uint8)
     ours = fn(img, h // oh, w // ow, np.empty((oh, ow), np.uint8))
     if not np.array_equal(ours, cv2.resize(img, (ow, oh), interpolation=cv2.INTER_AREA)):
-        warnings.warn(f"greenloop.util.numba_kernels.area_shrink differs from cv2.resize on {w}x{h} -> {ow}x{oh}; "
-                      f"using OpenCV", RuntimeWarning, stacklevel=3)
+        logging.getLogger(__name__).warning(f"area_shrink differs from cv2.resize on {w}x{h} -> {ow}x{oh}; "
+                                            f"using OpenCV")
         return None
     return fn
 
