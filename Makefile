@@ -148,7 +148,8 @@ $(RESULTS)/%.html: $(RESULTS)/%.ipynb
 	$(BIN)/jupyter nbconvert --to html --log-level WARN --output-dir $(@D) --output .tmp-$* $<
 	@mv $(@D)/.tmp-$*.html $@
 
-$(RESULTS)/tables.md: $(EXECUTED)
+# results/tables.md also holds results/coverage.md, which every dataset's run may rewrite
+$(RESULTS)/tables.md: $(EXECUTED) $(wildcard $(RESULTS)/coverage.md)
 	$(BIN)/python -m greenloop.study.report $(RESULTS)
 
 # RESULTS given on the command line wins (make quick RESULTS=results/mine); else results/quick/
