@@ -72,8 +72,8 @@ DEFAULT_KNOBS = dict(descriptor="gradients", seq_len=10, contrast_window=0, cent
                      repeat_cos=0.995)
 DEFAULT_THRESHOLD = 1.8   # calibrated score (calibrate_scores); Nordland's tuning part, precision >= 0.95
 
-__all__ = ["DESCRIPTORS", "DEFAULT_NAME", "DEFAULT_KNOBS", "DEFAULT_THRESHOLD", "center", "calibrate_scores", "describe", "describe_frames", "normalise",
-           "fit_projection", "contrast_normalise", "columns_to_scores",
+__all__ = ["DESCRIPTORS", "DEFAULT_NAME", "DEFAULT_KNOBS", "DEFAULT_THRESHOLD", "center", "calibrate_scores",
+           "describe", "describe_frames", "normalise", "fit_projection", "contrast_normalise", "columns_to_scores",
            "closures", "choose_threshold", "threshold_range", "pick_knobs", "matrix_events"]
 
 

@@ -319,7 +319,7 @@ class Detector:
         with one_blas_thread():
             G = (self._db[R].astype(np.float32) @ self._Q.T).astype(np.float64)   # (|R|, L)
         return cand, numba_kernels.candidate_scores(cand, R, G, self._margin - self._base, self._qc, self._qpad,
-                                                    h if self.contrast_window else -1)
+                                                    h if self.contrast_window else -1, _EPS)
 
     def _candidate_scores_numpy(self, cand: np.ndarray) -> np.ndarray:
         """Best-trajectory scores (m,) float32 of the candidate rows cand (m,) (ascending), in NumPy."""

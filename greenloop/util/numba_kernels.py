@@ -203,7 +203,7 @@ def _compile_candidates(njit) -> dict:
         return cand, rows[:n]
 
     @njit(cache=True, nogil=True)
-    def cand_scores(cand, rows, G, off, qc, qpad, h, out):
+    def cand_scores(cand, rows, G, off, qc, qpad, h, eps, out):
         nv, L = off.shape
         for c in range(len(cand)):
             best = -np.inf
@@ -224,7 +224,7 @@ def _compile_candidates(njit) -> dict:
                             s2 += G[t, k] * G[t, k]
                         mu = s1 / (hi - lo)
                         sd = np.sqrt(max(s2 / (hi - lo) - mu * mu, 0.0))
-                        s = (s - mu) / max(sd, 1e-6) if sd > 1e-6 else 0.0
+                        s = (s - mu) / max(sd, eps) if sd > eps else 0.0
                     acc += np.float64(np.float32(s))
                 best = max(best, acc)
             out[c] = np.float32(best / L)
@@ -245,7 +245,7 @@ def candidate_rows(ids: np.ndarray, before: int, after: int, limit: int) -> tupl
     return _compiled()["cand_rows"](np.ascontiguousarray(ids, dtype=np.int64), int(before), int(after), int(limit))
 
 
-def candidate_scores(cand, rows, G, off, qc, qpad, half_window: int) -> np.ndarray:
+def candidate_scores(cand, rows, G, off, qc, qpad, half_window: int, eps: float) -> np.ndarray:
     """Best-trajectory scores (m,) float32 of the candidates cand (m,) of :func:`candidate_rows`.
 
     rows (r,): the stored rows of :func:`candidate_rows`; G (r, L) float64: their cosine with the
@@ -253,14 +253,15 @@ def candidate_scores(cand, rows, G, off, qc, qpad, half_window: int) -> np.ndarr
     offsets. qc (L,) int64: the rows each of those queries had (a point p counts when 0 <= p <
     qc[k]); qpad (L,) float64: the value of a point outside them. half_window h: each point's
     similarity is contrast-normalised over the rows p - h .. p + h within [0, qc[k]) (mean, then
-    population std; a std <= 1e-6 gives 0); h < 0: not normalised. Each point's value is rounded to
+    population std; a std <= eps gives 0: seqmatch's own floor); h < 0: not normalised. Each point's value is rounded to
     float32, summed over k in float64, maximised over v, divided by L, rounded to float32.
     """
     out = np.empty(len(cand), np.float32)
     return _compiled()["cand_scores"](cand, rows, np.ascontiguousarray(G, dtype=np.float64),
                                       np.ascontiguousarray(off, dtype=np.int64),
                                       np.ascontiguousarray(qc, dtype=np.int64),
-                                      np.ascontiguousarray(qpad, dtype=np.float64), int(half_window), out)
+                                      np.ascontiguousarray(qpad, dtype=np.float64), int(half_window),
+                                      float(eps), out)
 
 
 def conv_relu(X: np.ndarray, K: np.ndarray, bias: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
