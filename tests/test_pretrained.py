@@ -132,6 +132,24 @@ def test_descriptor_is_the_graphs_pooled_map(backbone, weights_env, images):
     assert X.std() > 0 and not np.allclose(X[0], X[1])
 
 
+@pytest.mark.parametrize("backbone", ["mobilenetv1", "mobilenetv2"])
+def test_layer_descriptors_read_the_graphs_own_maps(backbone, weights_env, images):
+    """features.layers on the TFLite graphs: the last map's average is extract's descriptor, the early
+    and mid maps have the sizes of LAYERS' table, and the 2 x 2 grid keeps the four quadrants."""
+    from greenloop.features import layers
+    x = _resized(images, T.INPUT_SIZE)
+    feats, info = layers.extract_layers(x, backbone, progress=False)
+    assert info["weights"] == F.TFLITE_LABEL and info["input"] == "224x224"        # fixed input, stretched
+    np.testing.assert_array_equal(feats[("last", "avg")], F.extract(x, backbone, progress=False))
+    interp, batch = T.load_interpreter(weights_env / T.GRAPHS[backbone].file, 1)
+    name = layers.LAYERS[backbone]["mid"][0]
+    fmap = T.run(interp, batch, x, [name])[name]
+    assert fmap.shape[1:3] == (14, 14) and feats[("mid", "avg")].shape == (2, fmap.shape[-1])
+    assert np.allclose(feats[("mid", "grid2")][:, :fmap.shape[-1]] * np.linalg.norm(fmap[:, :7, :7].mean((1, 2)), axis=1)[:, None],
+                       fmap[:, :7, :7].mean((1, 2)), atol=1e-5)
+    assert feats[("early", "avg")].shape[1] == {"mobilenetv1": 256, "mobilenetv2": 32}[backbone]
+
+
 def test_mobilenetv2_descriptor_through_its_classifier(weights_env, images):
     """The pooled v2 descriptor times the graph's own (dequantised) final 1x1 conv gives the graph's
     logits within 1.5 quantisation steps of the logits tensor (its output rounding plus the

@@ -84,7 +84,7 @@ shortcut on synthetic frames. For sift_bovw the time covers SIFT plus quantisati
 vocabulary fit.
 
 Package layout (one module per job; imports run downward: registry <- weights, frames <- the
-extractor families cnn / pixels / sift / spot <- extraction <- cache)::
+extractor families cnn / pixels / sift / spot <- layers <- extraction <- cache)::
 
     registry.py  Backbone records, BACKBONES, SEQUENCE_DESCRIPTORS, Options, ExtractInfo, split_spec
     weights.py   weight resolution: resolve(backbone, weights) -> Resolved(label, source), once per pair
@@ -92,6 +92,8 @@ extractor families cnn / pixels / sift / spot <- extraction <- cache)::
                  BGR channel order), depth_to_uint8
     cnn.py       Keras / port / TFLite extractor;  pixels.py  pixels, pixels-patchnorm, gradients
     sift.py      SIFT bag of words;  spot.py  the main paper's CNN
+    layers.py    CNN maps at an early, mid and last depth, pooled avg / 2x2 grid / GeM: the entries
+                 "backbone@depth-pooling" that extract_spec and extract_all read (one pass per network)
     extraction.py  extract, extract_spec, extract_rgbd, time_per_image; EXTRACTORS {kind: fn}
     cache.py     extract_all and its descriptor cache
 """

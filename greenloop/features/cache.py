@@ -16,6 +16,7 @@ from greenloop.backbones import mobilenet_tflite as _tflite
 from greenloop.backbones import shufflenet as _shufflenet
 from greenloop.backbones import torch_weights as _torch_weights
 from greenloop.datasets import sequence
+from greenloop.features import layers
 from greenloop.features.extraction import clear_cache, extract_spec
 from greenloop.features.registry import (BACKBONES, CNN_KINDS, DEFAULT_VOCAB_SIZE, ExtractInfo,
                                          split_spec)
@@ -63,14 +64,17 @@ def extract_all(folder, specs, weights="auto", input_size=None, step: int = 1,
     feats, infos = {}, {}
     for spec in specs:
         name, w = split_spec(spec, spot_model if spec == "spot_cnn" else weights)
-        resolved = resolve(name, w, warn=False)   # once per entry, passed on
+        layer = layers.split(name)                # "backbone@depth-pooling": one cached pass per network
+        resolved = resolve(layer[0] if layer else name, w, warn=False)   # once per entry, passed on
         kw = dict(return_info=True, progress=False, step=step, vocab_size=vocab_size,
                   resolved=resolved)
 
         def run(spec=spec, w=w, kw=kw):
             return extract_spec(folder, name, w, input_size, **kw)
         with random_init_reported(name, w, resolved):
-            if spec == "spot_cnn" or not cache:
+            if layer:
+                X, info = _layer_entry(folder, name, resolved, step, root if cache else False)
+            elif spec == "spot_cnn" or not cache:
                 X, info = run()
             else:
                 key = _descriptor_key(folder, name, resolved.source, input_size, step, vocab_size)
@@ -80,6 +84,29 @@ def extract_all(folder, specs, weights="auto", input_size=None, step: int = 1,
         print(f"{info.label:42s} D={info.dim:5d}  {info.seconds_per_image * 1e3:8.2f} ms/image")
     clear_cache()
     return feats, infos
+
+
+def _layer_entry(folder, name: str, resolved, step: int, root):
+    """(X, info) of layer descriptor ``name`` from one cached pass of its network over the folder
+    that keeps every depth and pooling of ``layers.extract_layers`` (root False: not cached)."""
+    backbone, _, _ = layers.split(name)
+    key = "layers-" + _descriptor_key(folder, backbone, resolved.source, None, step, 0)
+
+    def save(path: Path, result) -> None:
+        feats, li = result
+        np.savez(path / "layers.npz", **{f"{d}-{p}": X for (d, p), X in feats.items()})
+        (path / "info.json").write_text(json.dumps(li))
+
+    def load(path: Path):
+        with np.load(path / "layers.npz") as z:
+            feats = {tuple(k.split("-")): z[k] for k in z.files}
+        return feats, json.loads((path / "info.json").read_text())
+
+    feats, li = _cache.cached(key, root, lambda: layers.extract_layers(folder, backbone, progress=False, step=step,
+                                                                        resolved=resolved),
+                              save, load, marker="layers.npz")
+    X = feats[layers.split(name)[1:]]
+    return X, layers.info(name, li, X)
 
 
 def _descriptor_key(folder, name, source, input_size, step, vocab_size) -> str:

@@ -9,6 +9,7 @@ import warnings
 import numpy as np
 
 from greenloop.datasets import sequence
+from greenloop.features import layers
 from greenloop.features.cnn import clear_models, extract_cnn
 from greenloop.features.frames import depth_to_uint8
 from greenloop.features.pixels import extract_gradients, extract_patchnorm, extract_pixels
@@ -91,8 +92,12 @@ def extract(frames_or_folder, backbone: str, weights="auto", batch_size: int = 3
 def extract_spec(frames_or_folder, spec: str, weights="auto", input_size=None, **kw):
     """``extract`` for a backbone-list entry (:func:`split_spec`): ``input_size`` applies to the CNN
     backbones whose input is not fixed (the TFLite MobileNets always run at 224x224); ``kw`` go to
-    ``extract`` (``return_info``, ``step``, ``vocab_size``, ...). Returns what ``extract`` returns."""
+    ``extract`` (``return_info``, ``step``, ``vocab_size``, ...). A layer descriptor
+    (``"mobilenetv2@mid-grid2"``, greenloop.features.layers) goes to ``layers.extract_spec``.
+    Returns what ``extract`` returns."""
     name, w = split_spec(spec, weights)
+    if layers.split(name):                 # "backbone@depth-pooling": a layer descriptor
+        return layers.extract_spec(frames_or_folder, name, w, **kw)
     b = BACKBONES[name]
     size = input_size if b.kind in CNN_KINDS and not b.fixed_input else None
     return extract(frames_or_folder, name, weights=w, input_size=size, **kw)

@@ -187,11 +187,12 @@ def split_spec(spec: str, weights="auto"):
 
     ``"name"`` takes ``weights`` (the notebook's choice); ``"name:random"`` forces random
     initialisation (``weights=None``), the untrained control of the same architecture, so a table
-    can show a pretrained row beside it; ``"name:imagenet"`` forces ``"imagenet"``.
+    can show a pretrained row beside it; ``"name:imagenet"`` forces ``"imagenet"``. ``name`` may
+    be a layer descriptor ``"backbone@depth-pooling"`` (greenloop.features.layers), returned whole.
     Raises ValueError for another suffix or an unknown name.
     """
     name, _, tag = str(spec).partition(":")
-    get_backbone(name)
+    get_backbone(name.partition("@")[0])   # "backbone@depth-pooling": greenloop.features.layers
     if tag and tag not in ("random", "imagenet"):
         raise ValueError(f"backbone entry {spec!r}: the suffix must be ':random' or ':imagenet'")
     return name, {"": weights, "random": None, "imagenet": "imagenet"}[tag]
