@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from greenloop import seqmatch, seqslam
-from greenloop.detectors import dictionary, greenloop_seq, registry, single_frame
+from greenloop.detectors import cnn_layers, dictionary, greenloop_seq, registry, single_frame
 from greenloop.detectors import seqslam as slam_entry
 from greenloop.detectors.interface import Data
 from greenloop.experiments import leaderboard as experiment
@@ -40,7 +40,8 @@ def _data(descriptors: dict, GT, tune=None, **params) -> Data:
 
 
 def test_the_registry_holds_every_family_once_in_leaderboard_order():
-    assert list(registry.REGISTRY) == ["single-frame", "greenloop-seq", "seqslam", seqmatch.DEFAULT_NAME, "dictionary"]
+    assert list(registry.REGISTRY) == ["single-frame", "cnn-layers", "greenloop-seq", "seqslam", seqmatch.DEFAULT_NAME,
+                                       "dictionary"]
     assert registry.get("seqslam") is slam_entry.ENTRY and registry.REGISTRY["dictionary"].score is None
     with pytest.raises(ValueError, match="registered are"):
         registry.get("nope")
@@ -53,6 +54,8 @@ def test_projections_fit_the_given_frames_and_label_the_kept_dim(revisit):
     p = single_frame.projections({"cnn": X}, ["cnn"], fit, [4, 64])
     assert list(p["cnn"]) == ["none", "pca 4", "pca 9"]             # 64 clipped to the rank of 10 centred frames
     assert np.allclose(p["cnn"]["pca 4"].mean, seqmatch.fit_projection(X[:10], 4).mean)
+    flat = single_frame.projections({"flat": np.ones_like(X)}, ["flat"], fit, [4])   # nothing to whiten
+    assert flat == {"flat": {"none": None}}
 
 
 def test_untuned_records_and_knob_texts(revisit):
@@ -78,6 +81,25 @@ def test_tuning_picks_each_methods_best_row_on_the_tuning_queries(revisit):
     assert knobs["greenloop-seq-fast"]["descriptor"] == "pixels"
     rows, knobs, best = single_frame.tune_names(d, ["rev"], ["rev"])      # whitening offered, fitted on the tuning frames
     assert {r["whitening"] for r in rows} == {"none", "pca 4"} and list(d.cache["projections"]["rev"]) == ["none", "pca 4"]
+
+
+def test_a_layer_row_picks_its_networks_best_layer_on_the_tuning_queries(revisit):
+    """cnn-layers: one row per network, choosing among its nine layer descriptors (here two carry the
+    revisit's signal and the rest are noise) by tuning AUC-PR; without a split, last-avg untuned."""
+    X, GT = revisit
+    g = cnn_layers.groups({"layer_backbones": ["mobilenetv2", "efficientnetlite0:random"]})
+    assert list(g) == ["mobilenetv2, best layer (single frame)", "efficientnetlite0:random, best layer (single frame)"]
+    assert g["mobilenetv2, best layer (single frame)"][0] == "mobilenetv2@last-avg" and len(set(g["mobilenetv2, best layer (single frame)"])) == 9
+    assert g["efficientnetlite0:random, best layer (single frame)"][0] == "efficientnetlite0@last-avg:random"
+    noise = np.random.default_rng(3).normal(size=X.shape).astype(np.float32)
+    descs = {s: (X if s == "mobilenetv2@mid-grid2" else noise) for v in g.values() for s in v}
+    tune = np.arange(len(X)) < N0 + 20
+    rows, knobs, best = cnn_layers.tune(_data(descs, GT, tune, layer_backbones=["mobilenetv2", "efficientnetlite0:random"]))
+    assert knobs["mobilenetv2, best layer (single frame)"]["descriptor"] == "mobilenetv2@mid-grid2"
+    assert knobs["mobilenetv2, best layer (single frame)"]["seq_len"] == 1 and len(rows) == 18 * 2 * 2
+    _, untuned, _ = cnn_layers.tune(_data(descs, GT, None, layer_backbones=["mobilenetv2"]))
+    assert untuned["mobilenetv2, best layer (single frame)"]["descriptor"] == "mobilenetv2@last-avg"
+    assert cnn_layers.tune(_data({}, GT, tune)) == ([], {}, {}) and cnn_layers.describe(_data({}, GT)) == ({}, {})
 
 
 def test_entries_score_and_stream_are_the_stage_functions(revisit):
@@ -129,10 +151,11 @@ def test_the_named_default_is_untuned_and_keeps_its_fixed_threshold():
 def _records(entry, X, GT):
     """Every knob record an entry gives (tuned on the first half, and untuned), on X as its descriptor."""
     d = _data({}, GT, np.arange(len(X)) < N0 + 20, seq_descriptors=["pixels"], fast_descriptors=["pixels"],
-              cnn_backbones=[], random_control="pixels")
+              cnn_backbones=[], random_control="pixels", layer_backbones=["mobilenetv2"])
     names = {single_frame.ENTRY.name: "pixels", slam_entry.ENTRY.name: "seqslam",
              seqmatch.DEFAULT_NAME: seqmatch.DEFAULT_KNOBS["descriptor"]}
     d.descriptors.update({names.get(entry.name, "pixels"): X, "sift_bovw": X})
+    d.descriptors.update({s: X for s in cnn_layers.groups(d.params)["mobilenetv2, best layer (single frame)"]})
     return d, entry.tune(d)[1]
 
 

@@ -41,13 +41,17 @@ def projections(feats: dict, names, fit, dims) -> dict:
     """Whitening candidates of each CNN descriptor: {name: {"none": None, "pca k": Projection}}.
     feats: {name: (N, D)}; names: the entries that get whitening; fit: (N,) bool frames to fit
     on (the tuning part; None: every frame, no labels used); dims: requested dimensions (clipped
-    to the rank, the label says the kept one)."""
+    to the rank, the label says the kept one); a descriptor whose fitting frames are all alike
+    gets "none" only."""
     out = {}
     for s in names:
         X = feats[s] if fit is None else feats[s][np.asarray(fit, dtype=bool)]
         cands = {"none": None}
         for k in dims:
-            p = seqmatch.fit_projection(X, int(k))
+            try:
+                p = seqmatch.fit_projection(X, int(k))
+            except ValueError:            # every fitting frame alike (e.g. a GeM of all-negative maps)
+                break
             cands.setdefault(f"pca {p.output_dim}", p)
         out[s] = cands
     return out
@@ -58,17 +62,20 @@ def untuned(names) -> dict:
     return {row_name(s): {"descriptor": s, "whitening": "none", "seq_len": 1, "contrast_window": 0} for s in names}
 
 
-def tune_names(data: Data, names, whitened=()) -> tuple[list, dict, dict]:
+def tune_names(data: Data, names, whitened=(), groups=None) -> tuple[list, dict, dict]:
     """Tune the single-frame matchers of the given descriptors (``whitened``: those offered PCA
-    whitening, fitted on the tuning frames and kept in ``data.cache["projections"]``)."""
+    whitening, fitted on the tuning frames and kept in ``data.cache["projections"]``). groups:
+    {row name: [descriptors]} for rows that choose their descriptor too (default one row per
+    descriptor, :func:`row_name`); without a tuning part each row takes its list's first."""
+    groups = groups or {row_name(s): [s] for s in names}
     if data.tune is None:
-        return [], untuned(names), {}
+        return [], {r: untuned(g[:1])[row_name(g[0])] for r, g in groups.items()}, {}
     p = data.params
     proj = data.cache.setdefault("projections", {})
     proj.update(projections(data.descriptors, list(whitened), data.tune, p.get("whiten_dims", ())))
     rows = seqstream.tune_knobs({s: data.descriptors[s] for s in names}, data.GT, data.exclude, data.tune, [1],
                                p["contrast_windows"], p["velocities"], {s: proj[s] for s in whitened})
-    knobs, best = seqmatch.pick_knobs(rows, {row_name(s): ([s], [1]) for s in names})
+    knobs, best = seqmatch.pick_knobs(rows, {r: (g, [1]) for r, g in groups.items()})
     return rows, knobs, best
 
 

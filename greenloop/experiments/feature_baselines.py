@@ -17,13 +17,16 @@ from greenloop import evaluate, groundtruth, similarity
 from greenloop.speed import timing
 from greenloop.study import report
 
-__all__ = ["DECIMALS", "REFERENCE", "similarity_matrices", "table2", "ground_truth_sensitivity",
+__all__ = ["DECIMALS", "REFERENCE", "similarity_matrices", "table2", "layer_table", "chosen_layers",
+           "layer_summary", "figure_layers",
+           "ground_truth_sensitivity",
            "operating_points_table", "paper_rows", "figure_sensitivity", "figure_pr_curves",
            "figure_similarity_matrices"]
 
 # decimals the notebook shows and writes each column with (pandas DataFrame.round); the ground-truth
 # sensitivity table (one column per descriptor label) shows 2, the operating points 4
-DECIMALS = {"AP_%": 2, "R@100P_%": 2, "R@1_%": 2, "extract_s_per_image": 6, "match_s_MxM": 6, "R_a_%": 1, "R_t_%": 1}
+DECIMALS = {"AP_%": 2, "R@100P_%": 2, "R@1_%": 2, "extract_s_per_image": 6, "match_s_MxM": 6, "R_a_%": 1, "R_t_%": 1,
+            **{f"{m}_{p}_%": 2 for m in ("AP", "R@1", "AUC-PR") for p in ("tune", "eval", "all")}}
 REFERENCE = "sift_bovw"         # Table 2 takes its rates R_a, R_t relative to SIFT-BoVW
 
 
@@ -52,6 +55,60 @@ def table2(S: dict, infos: dict, match_s: dict, GT, exclude: int) -> pd.DataFram
         table["R_a_%"], table["R_t_%"] = evaluate.relative_rates(
             table["AP_%"], table["extract_s_per_image"], ref["AP_%"], ref["extract_s_per_image"])
     return table
+
+
+def layer_table(feats: dict, infos: dict, GT, exclude: int, tune=None, evalq=None) -> pd.DataFrame:
+    """The layer study: one row per layer descriptor of ``feats`` ({"backbone@depth-pooling" entry:
+    (M, D)}, greenloop.features.layers; infos: their ExtractInfo) with backbone, weights, depth,
+    layer, pooling, dim, input, extract_s_per_image (the network's pass over every depth), and per
+    query part the pair AP_%, the per-query R@1_% and AUC-PR_% (``evaluate.per_query``) of its
+    cosine matrix: ``_tune`` on the tuning queries and ``_eval`` on the evaluation queries (tune,
+    evalq: (M,) bool), or ``_all`` on every query where tune is None. chosen: each backbone's
+    row with the highest tuning AUC-PR (the first on a tie; False everywhere without a split).
+    Unrounded; GT (M, M) bool, exclude in steps."""
+    from greenloop.features import layers
+    parts = {"all": None} if tune is None else {"tune": tune, "eval": evalq}
+    rows = []
+    for spec, X in feats.items():
+        backbone, depth, pooling = layers.split(spec.partition(":")[0])
+        S, i = similarity.cosine_matrix(X), infos[spec]
+        row = {"spec": spec, "backbone": backbone + spec.partition(":")[1] + spec.partition(":")[2],
+               "weights": i.weights, "depth": depth, "layer": i.layer.rsplit(", ", 1)[0], "pooling": pooling,
+               "dim": i.dim, "input": "x".join(map(str, i.input_size)), "extract_s_per_image": i.seconds_per_image}
+        for part, q in parts.items():
+            m = evaluate.per_query(S, GT, exclude, queries=q, ks=(1,))
+            row.update({f"AP_{part}_%": 100 * evaluate.average_precision(S, GT, exclude, queries=q),
+                        f"R@1_{part}_%": 100 * m["R@1"], f"AUC-PR_{part}_%": 100 * m["AUC-PR"]})
+        rows.append(row)
+    t = pd.DataFrame(rows, columns=None if rows else ["spec", "backbone", "weights", "depth", "layer", "pooling", "dim"])
+    t["chosen"] = False
+    if tune is not None and len(t):
+        t.loc[t.groupby("backbone", sort=False)["AUC-PR_tune_%"].idxmax().values, "chosen"] = True
+    return t
+
+
+def chosen_layers(layers_table: pd.DataFrame, feats: dict, infos: dict) -> tuple[dict, dict]:
+    """The chosen rows of :func:`layer_table` as Table 2 entries: ({spec: (M, D)}, {spec: ExtractInfo})."""
+    chosen = list(layers_table.spec[layers_table.chosen])
+    return {s: feats[s] for s in chosen}, {s: infos[s] for s in chosen}
+
+
+def layer_summary(layers_table: pd.DataFrame) -> str:
+    """One line per network: the depth and pooling chosen on the tuning queries and its evaluation
+    AUC-PR and R@1 beside the last map's global average (Table 2's descriptor), in %; without a
+    split, the every-query figures of that last-map row and of the highest one (not a choice)."""
+    part = "eval" if "AUC-PR_eval_%" in layers_table else "all"
+    lines = [] if len(layers_table) else ["no network in layer_backbones: no layer study in this run"]
+    for net, t in layers_table.groupby("backbone", sort=False):
+        last = t[(t.depth == "last") & (t.pooling == "avg")]
+        base = (f"last-avg {last[f'AUC-PR_{part}_%'].iloc[0]:.1f} / {last[f'R@1_{part}_%'].iloc[0]:.1f}"
+                if len(last) else "no last-avg row")
+        pick = t[t.chosen] if t.chosen.any() else t.loc[[t[f"AUC-PR_{part}_%"].idxmax()]]
+        r = pick.iloc[0]
+        how = "chosen on the tuning queries" if t.chosen.any() else "highest on every query, no split to choose on"
+        lines.append(f"{net}: {r.depth}-{r.pooling} ({how}) AUC-PR / R@1 {r[f'AUC-PR_{part}_%']:.1f} / "
+                     f"{r[f'R@1_{part}_%']:.1f} % on the {'evaluation' if part == 'eval' else 'every'} queries; {base}")
+    return "\n".join(lines)
 
 
 def ground_truth_sensitivity(dataset, frames, S: dict, infos: dict, exclude: int, exclude_steps: int,
@@ -156,5 +213,36 @@ def figure_similarity_matrices(S: dict, infos: dict, GT, gt_name: str):
     for ax in axes[n:]:
         ax.axis("off")
     fig.suptitle("cosine similarity matrices beside the ground truth (row = earlier frame, column = query)", fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def figure_layers(layers_table: pd.DataFrame):
+    """One panel per network of the layer study: per-query AUC-PR (evaluation part, or every query
+    without a split) of each depth (x) and pooling (bars); the rows chosen on the tuning part
+    outlined. layers_table: :func:`layer_table`'s. Returns the figure."""
+    import matplotlib.pyplot as plt
+    part = "eval" if "AUC-PR_eval_%" in layers_table else "all"
+    nets = list(dict.fromkeys(layers_table.backbone))
+    if not nets:
+        fig, ax = plt.subplots(figsize=(4, 1.2))
+        ax.text(0.5, 0.5, "no network in layer_backbones", ha="center", va="center"); ax.axis("off")
+        return fig
+    fig, axes = plt.subplots(1, len(nets), figsize=(3.6 * len(nets), 3.4), squeeze=False, sharey=True)
+    for ax, net in zip(axes[0], nets):
+        t = layers_table[layers_table.backbone == net]
+        depths, pools = list(dict.fromkeys(t.depth)), list(dict.fromkeys(t.pooling))
+        w = 0.8 / len(pools)
+        for k, p in enumerate(pools):
+            r = t[t.pooling == p].set_index("depth").reindex(depths)
+            bars = ax.bar(np.arange(len(depths)) + (k - (len(pools) - 1) / 2) * w, r[f"AUC-PR_{part}_%"], w, label=p)
+            for bar, chosen in zip(bars, r.chosen.fillna(False)):
+                if chosen:
+                    bar.set_edgecolor("black"); bar.set_linewidth(2)
+        ax.set_xticks(range(len(depths)), depths)
+        ax.set_title(f"{net} ({t.weights.iloc[0]})", fontsize=9); ax.grid(axis="y", alpha=0.3)
+    axes[0][0].set_ylabel(f"per-query AUC-PR, {'evaluation queries' if part == 'eval' else 'every query'} (%)")
+    axes[0][-1].legend(title="pooling", fontsize=7)
+    fig.suptitle("Descriptors layer by layer (outlined: chosen on the tuning queries)", fontsize=10)
     fig.tight_layout()
     return fig
