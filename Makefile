@@ -188,8 +188,13 @@ else
 endif
 	@touch $@
 
+# one thread per numerical library in each pytest-xdist worker and the notebook kernels it starts:
+# two workers on two cores, no thread pools (OpenMP / oneDNN, OpenBLAS, TensorFlow's) spinning on the
+# other worker's core (a whole run took about 12 % less wall time and 15 % less CPU time than without)
+TEST_THREADS := OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 TF_NUM_INTRAOP_THREADS=1 TF_NUM_INTEROP_THREADS=1
+
 test: $(VENV)/.timm | $(STAMP) ## run the test suite (unit tests and every notebook on tiny parameters)
-	$(BIN)/python -m pytest -q -n auto --dist worksteal tests
+	$(TEST_THREADS) $(BIN)/python -m pytest -q -n auto --dist worksteal tests
 
 clean-results: ## remove executed notebooks and tables (keeps the model cache)
 	rm -rf $(EXECUTED) $(HTML) $(RESULTS)/tables.md
