@@ -314,8 +314,8 @@ def _check_07_table(folder):
     layers = pd.read_csv(folder / "layers.csv")
     chosen = layers[layers.chosen]
     # one row per backbone, in order, then each layer network's row chosen on the tuning queries
-    assert t.backbone.tolist() == _feature_backbones() + [f"{r.backbone.partition(':')[0]}@{r.depth}-{r.pooling}"
-                                                          f"{r.backbone.partition(':')[1]}{r.backbone.partition(':')[2]}"
+    from greenloop.features.layers import specs
+    assert t.backbone.tolist() == _feature_backbones() + [specs([r.backbone], [r.depth], [r.pooling])[0]
                                                           for r in chosen.itertuples()]
     assert {"weights", "label"} <= set(t.columns)
     assert (t.label == t.backbone.str.split(":").str[0] + " (" + t.weights + ")").all()
