@@ -99,7 +99,7 @@ DESCRIPTOR_DIM = 128           # fc7 units: the descriptor length D
 MARGIN = 1.0                   # contrastive margin m (Caffe's default; the paper gives none)
 LAMBDA = 1.0                   # multi-task weight of the contrastive term (the paper gives none)
 WEIGHT_DECAY = 5e-4            # Eq. 4's squared-norm terms (AlexNet's value)
-CACHE_VERSION = 1              # bump when training changes in a way the parameters do not show
+CACHE_VERSION = 2              # bump when training changes in a way the parameters do not show
 
 # (name, kind, filters, kernel, stride) of the trunk at width=1; then fc6 and fc7
 _TRUNK = (("conv1", "conv", 16, 5, 2), ("pool1", "pool", None, 3, 2),
@@ -446,12 +446,14 @@ def place_labels(train, gt, frames_per_spot: int) -> np.ndarray:
     return labels
 
 
-def make_pairs(labels, n_pairs: int, seed=0, positive_fraction: float = 0.5):
+def make_pairs(labels, n_pairs: int, seed=0, positive_fraction: float = 0.5, gt=None):
     """Training pairs drawn from the frames with a place label (labels >= 0) only.
 
     labels: (N,) int place labels, -1 = never in a pair (held-out frames and their neighbours).
     n_pairs: P. seed: int or numpy Generator. positive_fraction: share of pairs of the same place
-    (default 0.5: one positive per negative).
+    (default 0.5: one positive per negative). gt: optional (N, N) bool ground truth; a negative
+    pair is then also one the ground truth calls no loop (two frames at the border of two spots
+    show one place and never make a negative).
     Positives: an anchor drawn uniformly among frames whose place has >= 2 frames, and another
     frame of its place. Negatives: two frames drawn uniformly with different places.
     Returns (pairs (P, 2) int64 frame indices, same (P,) bool), in random order.
@@ -479,12 +481,49 @@ def make_pairs(labels, n_pairs: int, seed=0, positive_fraction: float = 0.5):
     q = start[g] + r + (start[g] + r >= p)                         # another member, never p
     pos = np.stack([order[p], order[q]], 1)
     a, b = rng.choice(valid, n_neg), rng.choice(valid, n_neg)
-    while (clash := labels[a] == labels[b]).any():
+    for _ in range(1000):
+        clash = labels[a] == labels[b]
+        if gt is not None:
+            clash |= np.asarray(gt, dtype=bool)[a, b]
+        if not clash.any():
+            break
         b[clash] = rng.choice(valid, int(clash.sum()))
+    else:
+        raise ValueError("no negative pair found in 1000 draws: the ground truth calls almost every "
+                         "pair of labelled frames a loop")
     pairs = np.concatenate([pos, np.stack([a, b], 1)]).astype(np.int64)
     same = np.r_[np.ones(n_pos, bool), np.zeros(n_neg, bool)]
     perm = rng.permutation(len(pairs))
     return pairs[perm], same[perm]
+
+
+def hard_negatives(F, labels, gt, n: int, seed=0, k: int = 10) -> np.ndarray:
+    """Negative pairs of frames that look alike: for each of n anchors, one of its k nearest frames
+    (by L2 distance of the descriptors F) among those of another place that the ground truth calls
+    no loop.
+
+    F: (N, D) descriptors of every frame (the network being trained); labels: (N,) int place
+    labels (-1: never in a pair); gt: (N, N) bool ground truth; n: pairs; seed: int or Generator;
+    k: the nearest candidates one is drawn from (uniformly). Returns (n, 2) int64 frame indices.
+    """
+    labels = np.asarray(labels, dtype=np.int64)
+    rng = np.random.default_rng(seed)
+    valid = np.flatnonzero(labels >= 0)
+    Fv = np.asarray(F, dtype=np.float32)[valid]
+    sq = (Fv * Fv).sum(1)
+    D = sq[:, None] + sq[None, :] - 2 * Fv @ Fv.T                 # squared L2, (V, V)
+    bad = (labels[valid][:, None] == labels[valid][None, :]) | np.asarray(gt, dtype=bool)[np.ix_(valid, valid)]
+    D[bad] = np.inf
+    ok = np.flatnonzero(np.isfinite(D).any(1))
+    if not len(ok):
+        raise ValueError("no frame has a negative partner: every labelled pair is one place or a loop")
+    a = rng.choice(ok, int(n))
+    kk = min(int(k), D.shape[1])
+    near = np.argpartition(D[a], kk - 1, axis=1)[:, :kk]           # the k nearest of each anchor
+    finite = np.isfinite(np.take_along_axis(D[a], near, 1))
+    pick = np.array([rng.choice(np.flatnonzero(f)) for f in finite])
+    b = near[np.arange(len(a)), pick]
+    return np.stack([valid[a], valid[b]], 1).astype(np.int64)
 
 
 def near_heldout(heldout, gap: int = 0) -> np.ndarray:
@@ -514,9 +553,44 @@ def _output_keys(supervision, fusion):
     return [p + n for p in prefixes for n in names]
 
 
-def _fit(X, labels, progress, *, seed, supervision, fusion, fusion_layer, epochs, n_pairs,
-         batch_size, positive_fraction, margin, lam, width, merge, optimizer, learning_rate,
-         weight_decay, **_):
+def augment(frames, rng, shift: float = 0.125, photometric: float = 0.2) -> np.ndarray:
+    """Each frame moved and relit at random (training only), so a network cannot learn the
+    training part's frames by heart.
+
+    frames: (B, H, W, C) float32 in [0, 1], RGB first (a 4th channel, depth, is moved with them
+    and never relit). shift: the largest move, a fraction of the height and of the width (edge
+    pixels repeated). photometric: RGB scaled by a gain in [1 - p, 1 + p] and offset by one in
+    [-p/2, p/2], per frame, clipped to [0, 1]. rng: numpy Generator. Returns (B, H, W, C) float32.
+    """
+    X = np.asarray(frames, dtype=np.float32)
+    B, H, W, C = X.shape
+    dy = rng.integers(-int(shift * H), int(shift * H) + 1, B)
+    dx = rng.integers(-int(shift * W), int(shift * W) + 1, B)
+    rows = np.clip(np.arange(H)[None, :] - dy[:, None], 0, H - 1)              # (B, H)
+    cols = np.clip(np.arange(W)[None, :] - dx[:, None], 0, W - 1)              # (B, W)
+    out = X[np.arange(B)[:, None, None], rows[:, :, None], cols[:, None, :]]
+    gain = rng.uniform(1 - photometric, 1 + photometric, (B, 1, 1, 1))
+    offset = rng.uniform(-photometric / 2, photometric / 2, (B, 1, 1, 1))
+    out[..., :3] = np.clip(out[..., :3] * gain + offset, 0, 1)
+    return out.astype(np.float32)
+
+
+def _epoch_pairs(labels, n, rng, positive_fraction, gt, hard_fraction, hard_k, descriptor, X):
+    """One epoch's pairs: ``make_pairs``, then a ``hard_fraction`` of its negatives replaced by
+    ``hard_negatives`` mined with the network as it stands (every labelled frame described)."""
+    pairs, same = make_pairs(labels, n, rng, positive_fraction, gt)
+    n_hard = int(round(hard_fraction * (~same).sum()))
+    if n_hard:
+        F = np.zeros((len(X), DESCRIPTOR_DIM), np.float32)
+        lab = np.flatnonzero(labels >= 0)
+        F[lab] = describe(descriptor, X[lab])
+        pairs[np.flatnonzero(~same)[:n_hard]] = hard_negatives(F, labels, gt, n_hard, rng, hard_k)
+    return pairs, same
+
+
+def _fit(X, labels, progress, gt=None, monitor=None, *, seed, supervision, fusion, fusion_layer, epochs,
+         n_pairs, batch_size, positive_fraction, hard_fraction, hard_k, augment_shift, augment_light, margin, lam,
+         width, merge, optimizer, learning_rate, weight_decay, **_):
     import keras
 
     keras.utils.set_random_seed(seed)
@@ -526,12 +600,13 @@ def _fit(X, labels, progress, *, seed, supervision, fusion, fusion_layer, epochs
     keys = _output_keys(supervision, fusion)
     rng = np.random.default_rng(seed)
     steps = -(-int(n_pairs) // batch_size)
-    history = {"loss": [], "epoch_seconds": []}
+    history = {"loss": [], "epoch_seconds": [], "monitor": []}
     all_pairs, all_same = [], []
     t0, c0 = time.perf_counter(), time.process_time()
     for _ in tqdm(range(epochs), desc=descriptor.name, unit="epoch", leave=False, disable=not progress):
         t_epoch = time.perf_counter()
-        pairs, same = make_pairs(labels, steps * batch_size, rng, positive_fraction)
+        pairs, same = _epoch_pairs(labels, steps * batch_size, rng, positive_fraction, gt, hard_fraction, hard_k,
+                                   descriptor, X)
         all_pairs.append(pairs)
         all_same.append(same)
         losses = []
@@ -540,11 +615,15 @@ def _fit(X, labels, progress, *, seed, supervision, fusion, fusion_layer, epochs
             target = {"distance": same[s:s + batch_size].astype(np.float32),
                       "logits_a": labels[i].astype(np.int32), "logits_b": labels[j].astype(np.int32)}
             y = {k: target[k.split("_", 1)[1] if k.startswith(("rgb_", "depth_")) else k] for k in keys}
-            logs = siamese.train_on_batch(_inputs(descriptor, X[i]) + _inputs(descriptor, X[j]), y,
-                                          return_dict=True)
+            Xa, Xb = X[i], X[j]
+            if augment_shift or augment_light:
+                Xa, Xb = (augment(Xa, rng, augment_shift, augment_light), augment(Xb, rng, augment_shift, augment_light))
+            logs = siamese.train_on_batch(_inputs(descriptor, Xa) + _inputs(descriptor, Xb), y, return_dict=True)
             losses.append(float(logs["loss"]))
         history["loss"].append(float(np.mean(losses)))
         history["epoch_seconds"].append(time.perf_counter() - t_epoch)
+        if monitor is not None:                 # watched, never acted on: the budget is fixed
+            history["monitor"].append(float(monitor(descriptor)))
     history["seconds"] = time.perf_counter() - t0
     history["cpu_seconds"] = time.process_time() - c0     # all threads of this process
     history["n_classes"] = n_classes
@@ -557,7 +636,8 @@ def train(X, labels, seed: int = 0, supervision: str = "multitask", fusion: str 
           batch_size: int = 100, positive_fraction: float = 0.5, margin: float = MARGIN,
           lam: float = LAMBDA, width: float = 1.0, merge: str = "sum",
           optimizer: str = "adam", learning_rate: float | None = None,
-          weight_decay: float = WEIGHT_DECAY, cache=True, progress: bool = False, was_cached=None):
+          weight_decay: float = WEIGHT_DECAY, gt=None, hard_fraction: float = 0.0, hard_k: int = 10,
+          augment_shift: float = 0.0, augment_light: float = 0.0, monitor=None, cache=True, progress: bool = False, was_cached=None):
     """Train a Siamese network on pairs of the labelled frames (cached on disk).
 
     X: (N, H, W, C) float32 in [0, 1], every frame of the sequence (C = 3 RGB, 1 depth, 4 RGB-D).
@@ -565,14 +645,21 @@ def train(X, labels, seed: int = 0, supervision: str = "multitask", fusion: str 
     seed: seeds the initial weights and the pairs. supervision, fusion, fusion_layer, margin,
     lam, width, merge, optimizer, learning_rate, weight_decay: see ``build``.
     epochs: passes; each draws n_pairs new pairs (``make_pairs``, rounded up to whole batches of
-    ``batch_size`` pairs). cache: as ``greenloop.cnn.train`` (results/models/ or
-    $GREENLOOP_CACHE, keyed by ``util.cache.cache_key`` of the data, labels and every parameter).
-    progress: a tqdm bar on stderr. was_cached: optional list; True is appended when the network
-    is read from the cache, False when it is trained here.
+    ``batch_size`` pairs). gt: optional (N, N) bool ground truth: negatives are then pairs it calls
+    no loop, and a ``hard_fraction`` (0..1) of each epoch's negatives are mined among the
+    ``hard_k`` nearest such frames by the network as it stands (``hard_negatives``; needs gt).
+    augment_shift, augment_light: ``augment``'s shift and photometric range for every training
+    image (0, 0: the frames as they are).
+    monitor: optional (key, fn): fn(descriptor model) -> float is recorded after every epoch in
+    history["monitor"] (e.g. the held-out AP, watched and never used to stop or choose); key (a
+    string) names what fn measures in the cache key. cache: as ``greenloop.cnn.train``
+    (results/models/ or $GREENLOOP_CACHE, keyed by ``util.cache.cache_key`` of the data, labels,
+    ground truth and every parameter). progress: a tqdm bar on stderr. was_cached: optional list;
+    True is appended when the network is read from the cache, False when it is trained here.
     Returns (descriptor, history, pairs): the descriptor model (frames -> (N, DESCRIPTOR_DIM));
-    history with per-epoch 'loss' and 'epoch_seconds', 'seconds' (training wall time),
-    'cpu_seconds' (CPU time of all threads), 'n_classes', 'n_train_frames'; pairs = {'pairs': (epochs*P, 2) int64, 'same': bool}, every
-    pair trained on.
+    history with per-epoch 'loss', 'epoch_seconds' and 'monitor', 'seconds' (training wall time),
+    'cpu_seconds' (CPU time of all threads), 'n_classes', 'n_train_frames'; pairs =
+    {'pairs': (epochs*P, 2) int64, 'same': bool}, every pair trained on.
     """
     X = np.asarray(X, dtype=np.float32)
     labels = np.asarray(labels, dtype=np.int64)
@@ -581,14 +668,22 @@ def train(X, labels, seed: int = 0, supervision: str = "multitask", fusion: str 
     positive_int("epochs", epochs, whole_floats=True)
     positive_int("batch_size", batch_size, whole_floats=True)
     _check(supervision, fusion, fusion_layer, merge, X.shape[-1])
+    if not 0 <= hard_fraction <= 1 or (hard_fraction and gt is None):
+        raise ValueError(f"hard_fraction must be in [0, 1] and needs gt, got {hard_fraction} (gt given: {gt is not None})")
+    gt = None if gt is None else np.asarray(gt, dtype=bool)
     params = dict(model="xu2022_siamese", version=CACHE_VERSION, seed=int(seed),
                   supervision=supervision, fusion=fusion, fusion_layer=fusion_layer,
                   epochs=int(epochs), n_pairs=int(n_pairs), batch_size=int(batch_size),
                   positive_fraction=float(positive_fraction), margin=float(margin), lam=float(lam),
                   width=float(width), merge=merge if fusion == "mid" else None,
-                  optimizer=optimizer, learning_rate=learning_rate, weight_decay=float(weight_decay))
+                  optimizer=optimizer, learning_rate=learning_rate, weight_decay=float(weight_decay),
+                  hard_fraction=float(hard_fraction), hard_k=int(hard_k), augment_shift=float(augment_shift),
+                  augment_light=float(augment_light),
+                  gt_key=None if gt is None else cache_key(gt, labels),
+                  monitor_key=None if monitor is None else monitor[0])
     key = cache_key(X, labels, **params)
     if was_cached is not None:
         was_cached.append(is_cached(key, cache))
-    return cached_model(key, cache, lambda: _fit(X, labels, progress, **params), params, "pairs.npz",
+    fn = None if monitor is None else monitor[1]
+    return cached_model(key, cache, lambda: _fit(X, labels, progress, gt, fn, **params), params, "pairs.npz",
                         compile=False)

@@ -238,3 +238,75 @@ def test_near_heldout_marks_the_heldout_frames_and_their_neighbours():
     held = np.zeros(10, bool); held[4] = True
     assert np.flatnonzero(sm.near_heldout(held, 2)).tolist() == [2, 3, 4, 5, 6]
     assert np.flatnonzero(sm.near_heldout(held, 0)).tolist() == [4]
+
+
+# ---------------------------------------------------------- hard negatives, augmentation, learning
+def test_negatives_avoid_ground_truth_loops_and_hard_ones_are_the_nearest():
+    labels = np.array([0, 0, 1, 1, 2, 2, -1])
+    gt = np.zeros((7, 7), bool)
+    gt[1, 2] = gt[2, 1] = True                      # frames 1 and 2: two spots, one place by the poses
+    pairs, same = sm.make_pairs(labels, 400, seed=0, gt=gt)
+    neg = {tuple(sorted(p)) for p in pairs[~same]}
+    assert (1, 2) not in neg and (0, 2) in neg and not (pairs == 6).any()
+    F = np.array([[0.0], [0.1], [0.2], [5.0], [0.3], [9.0], [0.05]])
+    hard = sm.hard_negatives(F, labels, gt, 300, seed=0, k=1)
+    # the nearest other-place, non-loop frame of each anchor (frame 6 is unlabelled, 1-2 a loop)
+    want = {0: 2, 1: 4, 2: 4, 3: 5, 4: 2, 5: 3}
+    assert all(want[a] == b for a, b in hard), hard[:10]
+    two = sm.hard_negatives(F, labels, gt, 300, seed=0, k=2)
+    assert {(0, 2), (0, 4)} <= {tuple(p) for p in two}               # k = 2: either of the two nearest
+    assert all(labels[a] != labels[b] and not gt[a, b] for a, b in two)
+
+
+def test_augment_moves_and_relights_rgb_and_only_moves_depth():
+    rng = np.random.default_rng(0)
+    X = _frames(8, 4)
+    same = sm.augment(X, rng, shift=0.0, photometric=0.0)
+    assert np.array_equal(same, X)
+    out = sm.augment(X, np.random.default_rng(1), shift=0.25, photometric=0.0)
+    assert out.shape == X.shape and not np.array_equal(out, X)
+    for b in range(8):                               # each frame is its own copy moved by a whole number of pixels
+        found = any(np.array_equal(out[b, 8:24, 8:24], X[b, 8 - dy:24 - dy, 8 - dx:24 - dx])
+                    for dy in range(-8, 9) for dx in range(-8, 9))
+        assert found, b
+    lit = sm.augment(X, np.random.default_rng(2), shift=0.0, photometric=0.3)
+    assert np.array_equal(lit[..., 3], X[..., 3]) and not np.array_equal(lit[..., :3], X[..., :3])
+    assert lit.min() >= 0 and lit.max() <= 1
+
+
+def _revisit_sequence(n_places=8, per_place=10, revisits=6, size=S, seed=0):
+    """Places of smooth random colour patterns, then a second pass over the first ``revisits``
+    places at half the brightness: raw pixels and an untrained network match the dark second pass
+    to each other, a network trained on pairs across the two passes can learn to ignore brightness."""
+    import cv2
+
+    rng = np.random.default_rng(seed)
+    pats = [cv2.resize(rng.random((4, 4, 3)).astype(np.float32), (size, size), interpolation=cv2.INTER_CUBIC)
+            for _ in range(n_places)]
+    def frame(p, dark):
+        x = np.clip(pats[p] + rng.normal(0, 0.05, pats[p].shape), 0, 1)
+        return (0.5 * x if dark else x).astype(np.float32)
+    first = [(p, False) for p in range(n_places) for _ in range(per_place)]
+    second = [(p, True) for p in range(revisits) for _ in range(per_place)]
+    order = first + second
+    X = np.stack([frame(p, d) for p, d in order])
+    place = np.array([p for p, _ in order])
+    gt = (place[:, None] == place[None, :]) & (np.abs(np.arange(len(order))[:, None] - np.arange(len(order))) > per_place * 2)
+    return X, gt
+
+
+def test_a_tiny_siamese_training_learns_what_the_untrained_network_does_not(tmp_path):
+    from greenloop.experiments import siamese_rgbd as sr
+
+    X, gt = _revisit_sequence()
+    exclude = 20
+    train, held, _ = sm.training_split(len(X), 0.5, gt, 5, 10)
+    labels = sm.place_labels(train, gt, 10)
+    key, monitor = sr.heldout_monitor(X, gt, exclude, held)
+    model, hist, _ = sm.train(X, labels, seed=0, supervision="contrastive", epochs=8, n_pairs=200, batch_size=20,
+                              width=0.5, gt=gt, hard_fraction=0.5, monitor=(key, monitor), cache=tmp_path)
+    rows, _ = sr.reference_scores(X, gt, exclude, held, seeds=[0], width=0.5)
+    untrained_ap = rows[0]["AP_%"]
+    assert hist["loss"][-1] < 0.7 * hist["loss"][0], hist["loss"]
+    assert len(hist["monitor"]) == 8 and hist["monitor"][-1] == pytest.approx(monitor(model))
+    assert hist["monitor"][-1] > untrained_ap + 10, (hist["monitor"], untrained_ap)
