@@ -1,7 +1,9 @@
 """Notebook 10's protocol (greenloop.experiments.siamese_rgbd): every table equals the stage
-functions it composes, scored on the held-out part only; nothing is named best with one seed."""
+functions it composes, scored on the held-out part only; nothing is named best unless its seed
+range lies above every other's."""
 import matplotlib
 import numpy as np
+import pandas as pd
 import pytest
 
 from greenloop import evaluate, features, groundtruth, siamese as sm
@@ -10,6 +12,7 @@ from greenloop.experiments import siamese_rgbd as sr
 matplotlib.use("Agg")
 W = 0.25            # small networks: the tests check structure and numbers, not accuracy
 STEP = 2            # every 2nd frame of the tests' 200-frame sequence: 100 frames
+SEEDS = [0, 1]
 
 
 def _loop_gt(n=120, shift=90, length=30):
@@ -43,11 +46,13 @@ def test_fit_and_score_row_and_the_references(tmp_path):
     _, ap, r100 = sr.score_descriptors(sm.describe(model, X), gt, 0, held)
     # unrounded: the row holds the scores themselves
     assert S.shape == (120, 120) and row["AP_%"] == ap and row["R@100P_%"] == r100 and row["train_s"] == hist["seconds"]
-    assert not row["loaded_from_cache"]
+    assert not row["loaded_from_cache"] and row["seed"] == 0
+    assert hist["monitor"][-1] == pytest.approx(ap)        # the held-out AP watched after the last epoch
     again, *_ = sr.fit_and_score("scnn softmax, RGB", X, labels, held, gap, gt, 0, kw, supervision="softmax")
     assert again["loaded_from_cache"] and again["AP_%"] == row["AP_%"]
-    rows, sims = sr.reference_scores(X, gt, 0, held, seed=0, width=W)
-    assert [r["descriptor"] for r in rows] == ["scnn untrained, RGB", "pixels (32x32 gray)"] and list(sims) == ["untrained", "pixels"]
+    rows, sims = sr.reference_scores(X, gt, 0, held, seeds=[0], width=W)
+    assert [r["descriptor"] for r in rows] == ["scnn untrained, RGB", "pixels (32x32 gray)"]
+    assert list(sims) == [("untrained", 0), ("pixels", None)]
     assert list(rows[0]) == list(row) and rows[0]["weights"] == "random init" and rows[0]["train_pairs"] == 0
     _, ap, _ = sr.score_descriptors(features.extract(np.rint(X * 255).astype(np.uint8), "pixels", progress=False), gt, 0, held)
     assert rows[1]["AP_%"] == ap
@@ -74,59 +79,98 @@ def test_setup_composes_the_stage_functions(setup, tiny_sequence):
 
 @pytest.fixture(scope="module")
 def trained(setup, tmp_path_factory):
-    """One supervision and the four fusions (one mid-level layer), one epoch of 20 pairs each."""
-    kw = dict(seed=0, epochs=1, n_pairs=20, batch_size=10, width=W, cache=tmp_path_factory.mktemp("models"))
-    sup = sr.supervisions(setup, ["softmax"], kw)
-    fus = sr.fusions(setup, sup, "softmax", ["conv2"], "sum", kw)
+    """One supervision and the four fusions (one mid-level layer), two seeds, one epoch of 20 pairs each."""
+    kw = dict(epochs=1, n_pairs=20, batch_size=10, width=W, hard_fraction=0.5, cache=tmp_path_factory.mktemp("models"))
+    sup = sr.supervisions(setup, ["softmax"], kw, SEEDS)
+    fus = sr.fusions(setup, sup, "softmax", ["conv2"], "sum", kw, SEEDS)
     return sup, fus
 
 
 def test_supervisions_table_is_each_network_scored_on_the_heldout_part(setup, trained):
     s, (sup, _) = setup, trained
     t = sup.table
-    assert t.descriptor.tolist() == ["scnn softmax, RGB", "scnn untrained, RGB", "pixels (32x32 gray)"]
-    assert t.weights.tolist() == ["trained here", "random init", "none"] and list(sup.sims) == ["softmax", "untrained", "pixels"]
-    _, ap, r100 = sr.score_descriptors(sm.describe(sup.models["softmax"], s.X[..., :3]), s.GT, s.exclude_steps, s.held)
-    assert t.loc[0, "AP_%"] == ap and t.loc[0, "R@100P_%"] == r100 and t.loc[0, "train_pairs"] == 20
-    assert [name for name, *_ in sup.trained] == ["scnn softmax, RGB"] and list(sup.hists) == ["softmax"]
+    assert t.descriptor.tolist() == ["scnn softmax, RGB"] * 2 + ["scnn untrained, RGB"] * 2 + ["pixels (32x32 gray)"]
+    assert t.seed.tolist()[:4] == SEEDS * 2 and np.isnan(t.seed.iloc[4])
+    assert t.weights.tolist() == ["trained here"] * 2 + ["random init"] * 2 + ["none"]
+    assert list(sup.sims) == [("softmax", 0), ("softmax", 1), ("untrained", 0), ("untrained", 1), ("pixels", None)]
+    for k, seed in enumerate(SEEDS):
+        _, ap, r100 = sr.score_descriptors(sm.describe(sup.models["softmax", seed], s.X[..., :3]), s.GT, s.exclude_steps, s.held)
+        assert t.loc[k, "AP_%"] == ap and t.loc[k, "R@100P_%"] == r100 and t.loc[k, "train_pairs"] == 20
+    assert t.loc[0, "AP_%"] != t.loc[1, "AP_%"]                      # two seeds, two networks
+    assert [name for name, *_ in sup.trained] == ["scnn softmax, RGB, seed 0", "scnn softmax, RGB, seed 1"]
+    summ = sr.seed_summary(t).set_index("descriptor")
+    assert summ.seeds.tolist() == [2, 2, 1]
+    assert summ.loc["scnn softmax, RGB", "AP_mean"] == pytest.approx(t["AP_%"][:2].mean())
+    assert summ.loc["scnn softmax, RGB", "AP_std"] == pytest.approx(t["AP_%"][:2].std(ddof=1))
+    assert summ.loc["scnn softmax, RGB", "AP_min"] == t["AP_%"][:2].min() and summ.loc["scnn softmax, RGB", "AP_max"] == t["AP_%"][:2].max()
+
+
+def test_best_of_needs_separated_seed_ranges():
+    t = pd.DataFrame({"descriptor": list("aabbcc"), "supervision": "x", "fusion": "none", "layer": "",
+                      "AP_%": [50, 60, 40, 45, 30, 61], "R@100P_%": 0.0, "train_s": 1.0})
+    summ = sr.seed_summary(t)
+    assert sr.best_of(summ, ["a", "b"])[0] == "a"                  # [50, 60] above [40, 45]
+    best, text = sr.best_of(summ, ["a", "b", "c"])                 # c's 61 reaches into a's range
+    assert best is None and "a 55.00 [50.00, 60.00]" in text and "c 45.50 [30.00, 61.00]" in text
+    assert sr.best_of(summ, ["a"])[0] is None                      # nothing to be best against
 
 
 def test_fusions_table_rgb_only_each_fusion_and_each_late_stream(setup, trained):
     s, (sup, fus) = setup, trained
     t = fus.table
-    assert t.fusion.tolist() == ["RGB only", "early", "mid", "late", "late (rgb stream)", "late (depth stream)"]
-    assert t.layer.tolist()[2] == "conv2" and t.descriptor.tolist()[0] == "RGB only (softmax)"
+    assert t.fusion.tolist() == [f for f in ["RGB only", "early", "mid", "late", "late (rgb stream)", "late (depth stream)"]
+                                 for _ in SEEDS]
+    assert t.seed.tolist() == SEEDS * 6 and t.layer.tolist()[4] == "conv2" and t.descriptor.tolist()[0] == "RGB only (softmax)"
     rgb = t.iloc[0].drop(["descriptor", "fusion"])
     assert rgb.equals(sup.table.iloc[0].drop(["descriptor", "fusion"]))          # the softmax RGB row, unchanged
     for stream in ("rgb", "depth"):
-        _, ap, r100 = sr.score_descriptors(sm.describe(fus.models["late"], s.X, stream=stream), s.GT, s.exclude_steps, s.held)
-        row = t[t.fusion == f"late ({stream} stream)"].iloc[0]
-        assert row["AP_%"] == ap and row["R@100P_%"] == r100 and row.label == f"scnn late fusion, {stream} stream alone (trained here)"
-    _, ap, _ = sr.score_descriptors(sm.describe(fus.models["mid conv2"], s.X), s.GT, s.exclude_steps, s.held)
-    assert t.loc[2, "AP_%"] == ap
-    assert [n for n, *_ in fus.trained] == ["scnn early fusion", "scnn mid-level fusion at conv2", "scnn late fusion"]
-    skipped = sr.fusions(s._replace(has_depth=False), sup, "softmax", ["conv2"], "sum", {})
+        for seed in SEEDS:
+            _, ap, r100 = sr.score_descriptors(sm.describe(fus.models["late", seed], s.X, stream=stream), s.GT,
+                                               s.exclude_steps, s.held)
+            row = t[(t.fusion == f"late ({stream} stream)") & (t.seed == seed)].iloc[0]
+            assert row["AP_%"] == ap and row["R@100P_%"] == r100
+            assert row.label == f"scnn late fusion, {stream} stream alone (trained here)"
+    _, ap, _ = sr.score_descriptors(sm.describe(fus.models["mid conv2", 1], s.X), s.GT, s.exclude_steps, s.held)
+    assert t.loc[5, "AP_%"] == ap
+    assert [n for n, *_ in fus.trained] == [f"{n}, seed {k}" for n in ("scnn early fusion", "scnn mid-level fusion at conv2",
+                                                                      "scnn late fusion") for k in SEEDS]
+    skipped = sr.fusions(s._replace(has_depth=False), sup, "softmax", ["conv2"], "sum", {}, SEEDS)
     assert skipped.table.status.str.startswith("skipped").all() and len(skipped.table) == 3 and not skipped.trained
+    assert sr.seed_summary(skipped.table) is skipped.table
 
 
-def test_timing_paper_vs_run_and_summary(setup, trained, tiny_sequence):
+def test_timing_paper_vs_run_findings_and_summary(setup, trained, tiny_sequence):
     s, (sup, fus) = setup, trained
     tim, n_native = sr.timing(s, sup, fus, tiny_sequence, "softmax", ["conv2"], 4)
     assert tim.descriptor.tolist() == ["scnn softmax, RGB", "scnn early fusion", "scnn mid-level fusion at conv2",
                                        "scnn late fusion", "sift_bovw (SIFT + 500-word quantisation)"]
     assert (tim.s_per_image_batched > 0).all() and (tim.s_per_image_one_at_a_time > 0).all() and n_native == 64
     cmp, t2, t3 = sr.paper_vs_run(s, sup, fus, tim, ["softmax"], ["conv2"], "sum", tiny_sequence)
-    run = cmp.set_index("quantity")["this run"]
-    for q in ("best supervision", "best mid-level layer (Table 2)", "best fusion"):
+    run, notes = cmp.set_index("quantity")["this run"], cmp.set_index("quantity")["note"]
+    for q in ("best supervision", "best mid-level layer (Table 2)"):      # one candidate is never "best"
         assert run[q] == sr.UNRESOLVED
-    ap = sup.table.set_index("descriptor")["AP_%"]
-    assert run["AP of each supervision, RGB (%)"] == f"softmax {ap['scnn softmax, RGB']:.2f}"
-    p = evaluate.precision_at_recall(fus.sims["late"], s.GT, 0.82, s.exclude_steps, queries=s.held)
-    assert run["precision at 82 % recall, late fusion"] == f"{p:.3f}"
-    assert t2["this run"].tolist() == [round(fus.table.loc[2, "AP_%"] / 100, 4)] and t2.paper.tolist() == [0.8111]
+    fsum = sr.seed_summary(fus.table)
+    best, text = sr.best_of(fsum, ["scnn early fusion", "scnn mid-level fusion at conv2", "scnn late fusion"])
+    assert run["best fusion"] == (best or sr.UNRESOLVED) and text in notes["best fusion"]
+    ssum = sr.seed_summary(sup.table).set_index("descriptor")
+    above = ssum.loc["scnn softmax, RGB", "AP_min"] > ssum.loc[["scnn untrained, RGB", "pixels (32x32 gray)"], "AP_max"].max()
+    assert run["each supervision above the untrained network and raw pixels"] == (
+        f"softmax: {'above both' if above else 'not separated'}")
+    p = [evaluate.precision_at_recall(fus.sims["late", k], s.GT, 0.82, s.exclude_steps, queries=s.held) for k in SEEDS]
+    assert run["precision at 82 % recall, late fusion"] == f"{np.mean(p):.3f} [{min(p):.3f}, {max(p):.3f}]"
+    mid = fus.table[fus.table.fusion == "mid"]["AP_%"]
+    assert t2["this run"].tolist() == [round(mid.mean() / 100, 4)] and t2.paper.tolist() == [0.8111]
     assert len(t3) == len(tim) + 3
+    text = sr.findings(cmp, tim)
+    lines = text.split("\n")
+    assert len(lines) == 6 and lines[0].startswith("- *Multi-task supervision is best*") and "*Late fusion is best*" in lines[2]
+    assert "**not resolved**" in lines[0] and "**not resolved**" in lines[3]              # one candidate: unresolved
+    assert ("**not resolved**" in lines[2]) == (best is None) and run["each supervision above the untrained network and raw pixels"] in lines[1]
+    assert ("**holds**" in lines[5]) == (tim.s_per_image_one_at_a_time.iloc[0] < tim.s_per_image_one_at_a_time.iloc[-1])
+    nodepth = sr.paper_vs_run(s._replace(has_depth=False), sup, fus, tim.iloc[[0, -1]], ["softmax"], ["conv2"], "sum", "x")[0]
+    assert "**not tested**" in sr.findings(nodepth, tim.iloc[[0, -1]])
     summary = sr.summary(s, sup.table, fus.table, tim, STEP, sup.trained + fus.trained)
-    assert summary["networks_trained"] == 4 and summary["labelled_frames_near_heldout"] == 0
+    assert summary["networks_trained"] == 4 * len(SEEDS) and summary["labelled_frames_near_heldout"] == 0
     assert summary["last_train_frame"] < summary["first_heldout_frame"] and summary["frames"] == 100
     assert summary["training_seconds_total"] == pytest.approx(sum(t[1] for t in sup.trained + fus.trained))
 
@@ -138,5 +182,6 @@ def test_figures_draw_every_curve(setup, trained, tiny_sequence):
     fig, name = sr.figure_fusions(s, fus, ["conv2"], "sum", "softmax", tiny_sequence)
     assert name == "figure9_fusions" and len(fig.axes[0].lines) == 5 + 1 and len(fig.axes[1].lines) == 1 + 1
     assert sr.figure_fusions(s._replace(has_depth=False), fus, ["conv2"], "sum", "softmax", tiny_sequence)[1] == "figure9_skipped"
-    fig = sr.figure_training_loss(sup, fus, "softmax", True)
-    assert [len(ax.lines) for ax in fig.axes] == [1, 3]
+    fig = sr.figure_convergence(sup, fus, ["conv2"], True)
+    # per seed: the loss and the held-out AP of the supervision (+ untrained, pixels), and of 3 fusions
+    assert [len(ax.lines) for ax in fig.axes] == [len(SEEDS), len(SEEDS) + 2, 3 * len(SEEDS)]

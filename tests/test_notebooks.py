@@ -9,6 +9,8 @@ import pandas as pd
 import pytest
 import yaml
 
+from greenloop.experiments import siamese_rgbd
+
 ROOT = Path(__file__).resolve().parents[1]
 NOTEBOOKS = sorted((ROOT / "notebooks").glob("[0-9][0-9]_*.ipynb"))
 TINY = yaml.safe_load((ROOT / "params" / "tiny.yaml").read_text())
@@ -418,18 +420,27 @@ def _check_11(folder):
 
 
 def _check_10(folder):
-    sup = pd.read_csv(folder / "supervisions.csv")
-    trained = sup[sup.train_pairs > 0]
-    assert trained.supervision.tolist() == ["softmax", "contrastive", "multitask"]
+    seeds = TINY["siamese_seeds"]
+    per_seed = pd.read_csv(folder / "supervisions_per_seed.csv")
+    trained = per_seed[per_seed.train_pairs > 0]
+    assert trained.supervision.tolist() == [x for x in ("softmax", "contrastive", "multitask") for _ in seeds]
+    assert trained.seed.tolist() == seeds * 3
     assert (trained.weights == "trained here").all() and (trained.label.str.endswith("(trained here)")).all()
     assert (trained.train_pairs == TINY["siamese_epochs"] * TINY["siamese_pairs"]).all()
     assert (trained.dim == 128).all() and (trained.train_s > 0).all()
-    assert set(sup.weights) == {"trained here", "random init", "none"}      # + untrained and pixels rows
-    assert sup["AP_%"].between(0, 100).all() and sup["R@100P_%"].between(0, 100).all()
-    fus = pd.read_csv(folder / "fusions.csv")
-    assert fus[fus.fusion == "mid"].layer.tolist() == TINY["mid_layers"]
+    assert set(per_seed.weights) == {"trained here", "random init", "none"}      # + untrained and pixels rows
+    assert per_seed["AP_%"].between(0, 100).all() and per_seed["R@100P_%"].between(0, 100).all()
+    assert (per_seed["AP_%"] == per_seed["AP_%"].round(2)).all()              # rounded where the table is written
+    sup = pd.read_csv(folder / "supervisions.csv").set_index("descriptor")        # the summary over seeds
+    g = per_seed.groupby("descriptor", sort=False)["AP_%"]
+    assert list(sup.index) == list(g.mean().index) and (sup.seeds == g.size()).all()
+    assert np.allclose(sup.AP_mean, g.mean(), atol=0.006) and (sup.AP_min == g.min()).all() and (sup.AP_max == g.max()).all()
+    fus = pd.read_csv(folder / "fusions_per_seed.csv")
+    assert fus[fus.fusion == "mid"].layer.tolist() == [x for x in TINY["mid_layers"] for _ in seeds]
     assert {"early", "late", "RGB only", "late (rgb stream)", "late (depth stream)"} <= set(fus.fusion)
     assert (fus.weights == "trained here").all() and fus["AP_%"].between(0, 100).all()
+    fsum = pd.read_csv(folder / "fusions.csv")
+    assert (fsum.seeds == len(seeds)).all() and len(fsum) == len(fus) // len(seeds)
     t2 = pd.read_csv(folder / "table2_mid_level_layers.csv")
     assert t2.quantity.str.endswith(tuple(TINY["mid_layers"])).all() and len(t2) == len(TINY["mid_layers"])
     assert pd.to_numeric(t2["this run"]).between(0, 1).all() and t2.paper.notna().all()
@@ -441,11 +452,12 @@ def _check_10(folder):
             f"{r.s_per_image_one_at_a_time:.5f} one at a time; {r.s_per_image_batched:.5f} batched"), r.descriptor
     s = json.loads((folder / "summary.json").read_text())
     assert s["labelled_frames_near_heldout"] == 0 and s["last_train_frame"] < s["first_heldout_frame"]
-    assert s["networks_trained"] == 3 + 2 + len(TINY["mid_layers"])
+    assert s["networks_trained"] == (3 + 2 + len(TINY["mid_layers"])) * len(seeds)
     best = pd.read_csv(folder / "paper_vs_run.csv").set_index("quantity")["this run"]
-    for q in ("best supervision", "best mid-level layer (Table 2)", "best fusion"):     # one seed ranks nothing
-        assert best[q] == "not resolved with one seed", q
-    assert (sup["AP_%"] == sup["AP_%"].round(2)).all()                  # rounded where the table is written
+    name, _ = siamese_rgbd.best_of(sup.reset_index(), [f"scnn {x}, RGB" for x in ("softmax", "contrastive", "multitask")])
+    assert best["best supervision"] == (name or siamese_rgbd.UNRESOLVED)
+    assert best["best mid-level layer (Table 2)"] == siamese_rgbd.UNRESOLVED        # one layer is never best
+    assert (folder / "convergence.png").is_file()
 
 
 def _check_12(folder):
@@ -586,10 +598,11 @@ def _check_10_without_depth(folder):
     assert (folder / "figure8_supervisions.png").is_file() and (folder / "figure9_skipped.png").is_file()
     assert pd.read_csv(folder / "fusions.csv").status.str.startswith("skipped").all()
     assert (pd.read_csv(folder / "table2_mid_level_layers.csv")["this run"] == "skipped").all()
-    sup = pd.read_csv(folder / "supervisions.csv")
-    assert sup[sup.train_pairs > 0].supervision.tolist() == ["softmax", "contrastive", "multitask"]
+    sup = pd.read_csv(folder / "supervisions_per_seed.csv")
+    assert sup[sup.train_pairs > 0].supervision.tolist() == [x for x in ("softmax", "contrastive", "multitask")
+                                                             for _ in TINY["siamese_seeds"]]
     assert sup["AP_%"].between(0, 100).all()
-    assert json.loads((folder / "summary.json").read_text())["networks_trained"] == 3
+    assert json.loads((folder / "summary.json").read_text())["networks_trained"] == 3 * len(TINY["siamese_seeds"])
 
 
 PAIR_CHECKS = {"00_dataset": _check_00_pairs, "03_confusion_matrix": _check_03_pairs,

@@ -19,11 +19,13 @@ import pandas as pd
 from greenloop import evaluate, features, groundtruth, siamese, similarity
 from greenloop.datasets import sequence
 from greenloop.study import report
+from greenloop.util.cache import cache_key
 
 # decimals of the written tables' columns (rounded only where the notebook writes them)
-DECIMALS = {"AP_%": 2, "R@100P_%": 2, "extract_ms_per_image": 3, "train_s": 1, "train_cpu_s": 1,
+DECIMALS = {"AP_%": 2, "R@100P_%": 2, "AP_mean": 2, "AP_std": 2, "AP_min": 2, "AP_max": 2, "R100P_mean": 2,
+            "R100P_min": 2, "R100P_max": 2, "train_s_mean": 1, "extract_ms_per_image": 3, "train_s": 1, "train_cpu_s": 1,
             "s_per_image_batched": 5, "s_per_image_one_at_a_time": 5}
-UNRESOLVED = "not resolved with one seed"
+UNRESOLVED = "not resolved: the seed ranges overlap"
 # the paper's numbers, a reference column only: Table 2 (NYU, AP of mid-level fusion per layer)
 # and Table 3 (seconds per image: SCNN CPU and GPU, CNN CPU and GPU, GIST, BoVW)
 PAPER_T2 = dict(zip(siamese.LAYERS, [0.7444, 0.7644, 0.8111, 0.7778, 0.7222, 0.7444, 0.6667, 0.6333]))
@@ -112,13 +114,21 @@ def score_descriptors(F, GT, exclude: int, queries=None):
 
 
 def _row(descriptor, label, inf, ap, r100, supervision="none", fusion="none", layer="", train_pairs=0,
-         epochs=0, train_s=0.0, train_cpu_s=0.0, loaded_from_cache=False) -> dict:
+         epochs=0, train_s=0.0, train_cpu_s=0.0, loaded_from_cache=False, seed=None) -> dict:
     """One row of notebook 10's tables (AP, R@100P in %; ms per image), unrounded."""
-    return {"descriptor": descriptor, "weights": inf.weights, "label": label, "dim": inf.dim,
+    return {"descriptor": descriptor, "seed": seed, "weights": inf.weights, "label": label, "dim": inf.dim,
             "supervision": supervision, "fusion": fusion, "layer": layer, "train_pairs": train_pairs,
             "epochs": epochs, "train_s": train_s, "train_cpu_s": train_cpu_s,
             "loaded_from_cache": loaded_from_cache, "AP_%": ap, "R@100P_%": r100,
             "extract_ms_per_image": 1e3 * inf.seconds_per_image}
+
+
+def heldout_monitor(X, GT, exclude: int, heldout):
+    """``siamese.train``'s monitor: (key, fn) with fn(model) = the held-out AP in % of the
+    network as it stands (:func:`score_descriptors` on X); watched after every epoch, never used
+    to stop or to choose. key names the ground truth, queries and exclusion band in the cache key."""
+    key = f"held-out AP %, {cache_key(np.asarray(GT), np.asarray(heldout))}, exclude {int(exclude)}"
+    return key, lambda model: score_descriptors(siamese.describe(model, X), GT, exclude, heldout)[1]
 
 
 def fit_and_score(name: str, X, labels, heldout, gap: int, GT, exclude: int, train_kw: dict, **kw):
@@ -127,67 +137,76 @@ def fit_and_score(name: str, X, labels, heldout, gap: int, GT, exclude: int, tra
     name: the row's descriptor name. X: (N, H, W, C) float32 inputs in [0, 1]; labels: (N,) place
     labels of the training part (-1 elsewhere, ``siamese.place_labels``). heldout: (N,) bool
     queries scored; gap: frames around them no training pair may touch (``siamese.check_pairs``
-    raises otherwise). GT, exclude: as :func:`score_descriptors`. train_kw: ``siamese.train``'s
-    shared arguments (seed, epochs, ...); kw: this network's (supervision, fusion, fusion_layer, merge).
+    raises otherwise). GT, exclude: as :func:`score_descriptors` (GT also keeps negative pairs
+    off ground-truth loops and finds the hard negatives). train_kw: ``siamese.train``'s shared
+    arguments (seed, epochs, hard_fraction, ...); kw: this network's (supervision, fusion,
+    fusion_layer, merge). The held-out AP after every epoch is recorded (:func:`heldout_monitor`).
     Returns (row, S, model, history): row = one dict of notebook 10's tables (AP and R@100P on
     the held-out queries, in %; training seconds; loaded_from_cache = the model came from the
     cache, ``util.cache.cached_model``), S (N, N) its similarity matrix, the descriptor model, history.
     """
     loaded = []
-    model, hist, pairs = siamese.train(X, labels, **train_kw, **kw, was_cached=loaded)
+    model, hist, pairs = siamese.train(X, labels, **train_kw, **kw, gt=GT, monitor=heldout_monitor(X, GT, exclude, heldout),
+                                       was_cached=loaded)
     siamese.check_pairs(pairs["pairs"], heldout, gap)   # no held-out frame nor a neighbour within gap
     F, inf = siamese.describe(model, X, return_info=True)
     S, ap, r100 = score_descriptors(F, GT, exclude, heldout)
     row = _row(name, f"{name} ({inf.weights})", inf, ap, r100, kw.get("supervision", "multitask"),
                kw.get("fusion", "none"), kw.get("fusion_layer") or "", len(pairs["pairs"]), train_kw["epochs"],
-               hist["seconds"], hist.get("cpu_seconds", float("nan")), loaded[0])
+               hist["seconds"], hist.get("cpu_seconds", float("nan")), loaded[0], train_kw.get("seed"))
     return row, S, model, hist
 
 
-def reference_scores(X_rgb, GT, exclude: int, heldout, seed: int = 0, width: float = 1.0):
-    """The untrained network and raw pixels on the same held-out queries (Figure 8's references).
+def reference_scores(X_rgb, GT, exclude: int, heldout, seeds=(0,), width: float = 1.0):
+    """The untrained network (one per seed) and raw pixels on the same held-out queries (Figure 8's
+    references).
 
     X_rgb: (N, H, W, 3) float32 in [0, 1]; GT, exclude, heldout: as :func:`score_descriptors`.
-    seed, width: the untrained ``siamese.embedding``'s initial weights and width (as the trained ones).
-    Returns (rows, sims): two rows of notebook 10's supervision table ("scnn untrained, RGB",
-    "pixels (32x32 gray)") and {"untrained": S, "pixels": S}, (N, N) similarity matrices.
+    seeds, width: the untrained ``siamese.embedding``'s initial weights and width (as the trained ones).
+    Returns (rows, sims): rows of notebook 10's supervision table ("scnn untrained, RGB" per seed,
+    then "pixels (32x32 gray)", seed None) and {("untrained", seed): S, ("pixels", None): S}, (N, N).
     """
     import keras
 
-    keras.utils.set_random_seed(seed)
-    untrained, _ = siamese.embedding(X_rgb.shape[1:], width=width)
-    F, inf = siamese.describe(untrained, X_rgb, return_info=True, weights="random init")
-    S_u, ap, r100 = score_descriptors(F, GT, exclude, heldout)
-    rows = [_row("scnn untrained, RGB", f"scnn untrained, RGB ({inf.weights})", inf, ap, r100)]
+    rows, sims = [], {}
+    for seed in seeds:
+        keras.utils.set_random_seed(seed)
+        untrained, _ = siamese.embedding(X_rgb.shape[1:], width=width)
+        F, inf = siamese.describe(untrained, X_rgb, return_info=True, weights="random init")
+        sims["untrained", seed], ap, r100 = score_descriptors(F, GT, exclude, heldout)
+        rows.append(_row("scnn untrained, RGB", f"scnn untrained, RGB ({inf.weights})", inf, ap, r100, seed=seed))
     F, inf = features.extract(np.rint(X_rgb * 255).astype(np.uint8), "pixels", progress=False, return_info=True)
-    S_p, ap, r100 = score_descriptors(F, GT, exclude, heldout)
+    sims["pixels", None], ap, r100 = score_descriptors(F, GT, exclude, heldout)
     rows.append(_row("pixels (32x32 gray)", inf.label, inf, ap, r100))
-    return rows, {"untrained": S_u, "pixels": S_p}
+    return rows, sims
 
 
-def _fit_all(s: Setup, specs, train_kw: dict, X) -> Runs:
-    """fit_and_score for each (key, name, kw) of specs on inputs X; the table of their rows."""
+def _fit_all(s: Setup, specs, train_kw: dict, X, seeds) -> Runs:
+    """fit_and_score for each (key, name, kw) of specs and each seed on inputs X; the table of their
+    rows (seed by seed within each spec); sims, models and hists keyed (key, seed)."""
     rows, runs = [], Runs(None, {}, {}, {}, [])
     for key, name, kw in specs:
-        row, runs.sims[key], runs.models[key], hist = fit_and_score(name, X, s.labels, s.held, s.gap, s.GT, s.exclude_steps,
-                                                                    train_kw, **kw)
-        runs.hists[key] = hist
-        runs.trained.append((name, hist["seconds"], hist.get("cpu_seconds", float("nan"))))
-        rows.append(row)
+        for seed in seeds:
+            row, S, model, hist = fit_and_score(name, X, s.labels, s.held, s.gap, s.GT, s.exclude_steps,
+                                                dict(train_kw, seed=seed), **kw)
+            runs.sims[key, seed], runs.models[key, seed], runs.hists[key, seed] = S, model, hist
+            runs.trained.append((f"{name}, seed {seed}", hist["seconds"], hist.get("cpu_seconds", float("nan"))))
+            rows.append(row)
     return runs._replace(table=pd.DataFrame(rows))
 
 
 # ------------------------------------------------------------------------------------ tables
-def supervisions(s: Setup, supervisions, train_kw: dict) -> Runs:
-    """Figure 8's table: one network per supervision on RGB, then the untrained network and pixels.
+def supervisions(s: Setup, supervisions, train_kw: dict, seeds) -> Runs:
+    """Figure 8's table: each supervision on RGB over seeds, then the untrained network (each seed)
+    and pixels.
 
     s: :func:`setup`. supervisions: names of ``siamese.SUPERVISIONS``. train_kw: ``siamese.train``'s
-    shared arguments (seed and width also seed and size the untrained reference).
-    Returns Runs keyed by supervision, "untrained" and "pixels" (those two are not trained).
+    shared arguments but the seed (width also sizes the untrained reference). seeds: ints.
+    Returns Runs keyed (supervision, seed), ("untrained", seed) and ("pixels", None).
     """
     X_rgb = s.X[..., :3]
-    runs = _fit_all(s, [(sup, f"scnn {sup}, RGB", {"supervision": sup}) for sup in supervisions], train_kw, X_rgb)
-    rows, sims = reference_scores(X_rgb, s.GT, s.exclude_steps, s.held, train_kw.get("seed", 0), train_kw.get("width", 1.0))
+    runs = _fit_all(s, [(sup, f"scnn {sup}, RGB", {"supervision": sup}) for sup in supervisions], train_kw, X_rgb, seeds)
+    rows, sims = reference_scores(X_rgb, s.GT, s.exclude_steps, s.held, seeds, train_kw.get("width", 1.0))
     runs.sims.update(sims)
     return runs._replace(table=pd.concat([runs.table, pd.DataFrame(rows)], ignore_index=True))
 
@@ -198,13 +217,13 @@ def _paper_layer(mid_layers) -> str:
     return "conv2" if "conv2" in mid_layers else mid_layers[0]
 
 
-def fusions(s: Setup, sup: Runs, fusion_supervision: str, mid_layers, merge: str, train_kw: dict) -> Runs:
-    """Figure 9's and Table 2's table: RGB only, early, mid-level at each layer, late, and each
-    stream of the late network alone; all with ``fusion_supervision``.
+def fusions(s: Setup, sup: Runs, fusion_supervision: str, mid_layers, merge: str, train_kw: dict, seeds) -> Runs:
+    """Figure 9's and Table 2's table over seeds: RGB only, early, mid-level at each layer, late,
+    and each stream of the late network alone; all with ``fusion_supervision``.
 
-    s: :func:`setup`; sup: :func:`supervisions` (its row of the same supervision is "RGB only").
-    mid_layers: layers of ``siamese.LAYERS``; merge: "sum" or "concat"; train_kw: as supervisions.
-    Without depth the table is three "skipped" rows and nothing is trained.
+    s: :func:`setup`; sup: :func:`supervisions` (its rows of the same supervision are "RGB only").
+    mid_layers: layers of ``siamese.LAYERS``; merge: "sum" or "concat"; train_kw, seeds: as
+    supervisions. Without depth the table is three "skipped" rows and nothing is trained.
     """
     if not s.has_depth:
         rows = [{"descriptor": f, "weights": "trained here", "label": f"scnn {f} fusion (trained here)",
@@ -215,37 +234,66 @@ def fusions(s: Setup, sup: Runs, fusion_supervision: str, mid_layers, merge: str
              dict(kw, fusion="mid", fusion_layer=layer, merge=merge)) for layer in mid_layers]
     specs = ([("early", "scnn early fusion", dict(kw, fusion="early"))] + mids
              + [("late", "scnn late fusion", dict(kw, fusion="late"))])
-    runs = _fit_all(s, specs, train_kw, s.X)
+    runs = _fit_all(s, specs, train_kw, s.X, seeds)
     rows = runs.table.to_dict("records")
-    ref = sup.table[sup.table.supervision == fusion_supervision]
-    if len(ref):                             # the RGB network of the same supervision, for reference
-        rows.insert(0, dict(ref.iloc[0], descriptor=f"RGB only ({fusion_supervision})", fusion="RGB only"))
-        runs.sims["RGB only"] = sup.sims[fusion_supervision]
-    late = rows[-1]
-    for stream in ("rgb", "depth"):          # each stream of the late-fusion network alone
+    ref = sup.table[(sup.table.supervision == fusion_supervision) & sup.table.seed.isin(list(seeds))]
+    for k, r in enumerate(ref.to_dict("records")):   # the RGB networks of the same supervision, for reference
+        rows.insert(k, dict(r, descriptor=f"RGB only ({fusion_supervision})", fusion="RGB only"))
+        runs.sims["RGB only", r["seed"]] = sup.sims[fusion_supervision, r["seed"]]
+    lates = [r for r in rows if r["fusion"] == "late"]
+    for stream in ("rgb", "depth"):          # each stream of the late-fusion networks alone
         key = f"late ({stream} stream)"
-        runs.sims[key], ap, r100 = score_descriptors(siamese.describe(runs.models["late"], s.X, stream=stream),
-                                                     s.GT, s.exclude_steps, s.held)
-        name = f"scnn late fusion, {stream} stream alone"
-        rows.append(dict(late, descriptor=name, label=f"{name} ({late['weights']})", fusion=key,
-                         **{"AP_%": ap, "R@100P_%": r100}))
+        for late in lates:
+            seed = late["seed"]
+            F = siamese.describe(runs.models["late", seed], s.X, stream=stream)
+            runs.sims[key, seed], ap, r100 = score_descriptors(F, s.GT, s.exclude_steps, s.held)
+            name = f"scnn late fusion, {stream} stream alone"
+            rows.append(dict(late, descriptor=name, label=f"{name} ({late['weights']})", fusion=key,
+                             **{"AP_%": ap, "R@100P_%": r100}))
     return runs._replace(table=pd.DataFrame(rows))
+
+
+def seed_summary(table: pd.DataFrame) -> pd.DataFrame:
+    """One row per descriptor of a per-seed table (:func:`supervisions` or :func:`fusions`), in
+    order: descriptor, supervision, fusion, layer, seeds, and the mean, standard deviation (ddof 1;
+    NaN for one run), min and max over seeds of AP_% and R@100P_% (AP_mean, AP_std, AP_min,
+    AP_max, R100P_mean, R100P_min, R100P_max), and the mean train_s. A skipped table (no depth:
+    nothing trained) is returned as it is."""
+    if "AP_%" not in table:
+        return table
+    g = table.groupby("descriptor", sort=False)
+    return g.agg(supervision=("supervision", "first"), fusion=("fusion", "first"), layer=("layer", "first"),
+                 seeds=("AP_%", "size"), AP_mean=("AP_%", "mean"), AP_std=("AP_%", "std"), AP_min=("AP_%", "min"),
+                 AP_max=("AP_%", "max"), R100P_mean=("R@100P_%", "mean"), R100P_min=("R@100P_%", "min"),
+                 R100P_max=("R@100P_%", "max"), train_s_mean=("train_s", "mean")).reset_index()
+
+
+def best_of(summary: pd.DataFrame, names) -> tuple[str | None, str]:
+    """The descriptor among ``names`` (rows of :func:`seed_summary`) with the highest mean AP, if
+    its lowest seed is above every other's highest (the seed ranges separate); else None.
+    Returns (name or None, text): text gives each mean and [min, max] over seeds."""
+    t = summary.set_index("descriptor").loc[list(names)]
+    top = t.AP_mean.idxmax()
+    others = t.drop(index=top)
+    text = "; ".join(f"{d} {r.AP_mean:.2f} [{r.AP_min:.2f}, {r.AP_max:.2f}]" for d, r in t.iterrows())
+    separated = len(others) > 0 and t.loc[top, "AP_min"] > others.AP_max.max()
+    return (top if separated else None), text
 
 
 def timing(s: Setup, sup: Runs, fus: Runs, dataset, fusion_supervision: str, mid_layers,
            timing_frames: int) -> tuple[pd.DataFrame, int]:
     """Table 3's measurements on this CPU: seconds per image of the networks (batched, and one at
     a time on timing_frames frames) and of SIFT-BoVW on up to 64 native frames spread over the
-    sequence. Returns (table, number of native frames SIFT was timed on)."""
+    sequence; each network's first seed. Returns (table, number of native frames SIFT was timed on)."""
     import warnings
 
-    timed = [(f"scnn {fusion_supervision}, RGB", sup.models.get(fusion_supervision, list(sup.models.values())[-1]),
-              s.X[..., :3])]
+    first = {key: m for (key, _), m in reversed(list(sup.models.items()) + list(fus.models.items()))}  # first seed's
+    timed = [(f"scnn {fusion_supervision}, RGB", first.get(fusion_supervision, list(first.values())[-1]), s.X[..., :3])]
     if s.has_depth:
         layer = _paper_layer(mid_layers)
-        timed += [("scnn early fusion", fus.models["early"], s.X),
-                  (f"scnn mid-level fusion at {layer}", fus.models[f"mid {layer}"], s.X),
-                  ("scnn late fusion", fus.models["late"], s.X)]
+        timed += [("scnn early fusion", first["early"], s.X),
+                  (f"scnn mid-level fusion at {layer}", first[f"mid {layer}"], s.X),
+                  ("scnn late fusion", first["late"], s.X)]
     rows = []
     for name, model, Xin in timed:
         _, batched = siamese.describe(model, Xin, batch_size=256, return_info=True)
@@ -266,18 +314,36 @@ def timing(s: Setup, sup: Runs, fus: Runs, dataset, fusion_supervision: str, mid
     return pd.DataFrame(rows), len(native)
 
 
+def _range(values, fmt=".2f") -> str:
+    """'mean [min, max]' of a 1-D array of per-seed values."""
+    v = np.asarray(values, dtype=float)
+    return f"{v.mean():{fmt}} [{v.min():{fmt}}, {v.max():{fmt}}]"
+
+
+def _precision_at(runs: Runs, key, recall: float, s: Setup) -> str:
+    """The precision at ``recall`` of each seed's network ``key``, as 'mean [min, max]'."""
+    return _range([evaluate.precision_at_recall(S, s.GT, recall, s.exclude_steps, queries=s.held)
+                   for (k, _), S in runs.sims.items() if k == key], ".3f")
+
+
 def _supervision_rows(s: Setup, sup: Runs, supervisions) -> list:
-    ap = sup.table.set_index("descriptor")["AP_%"]
-    rows = [("best supervision", "multi-task (New College)", UNRESOLVED,
-             "three supervisions on RGB, same budget, one seed each (no spread over seeds); held-out part"),
-            ("AP of each supervision, RGB (%)", "single-task similar to a standard CNN, multi-task best",
-             "; ".join(f"{x} {ap[f'scnn {x}, RGB']:.2f}" for x in supervisions),
-             f"no pretrained CNN here; untrained network {ap['scnn untrained, RGB']:.2f} %, "
-             f"pixels {ap['pixels (32x32 gray)']:.2f} %, chance {100 * s.chance:.2f} %")]
-    if "multitask" in sup.sims:
-        rows.append(("precision at 83 % recall, multi-task", "> 0.90",
-                     f"{evaluate.precision_at_recall(sup.sims['multitask'], s.GT, 0.83, s.exclude_steps, queries=s.held):.3f}",
-                     "New College vs the held-out part here"))
+    summ = seed_summary(sup.table).set_index("descriptor")
+    names = [f"scnn {x}, RGB" for x in supervisions]
+    best, text = best_of(summ.reset_index(), names)
+    refs = summ.loc[["scnn untrained, RGB", "pixels (32x32 gray)"]]
+    ceiling = refs.AP_max.max()
+    beats = [f"{x}: {'above both' if summ.loc[n, 'AP_min'] > ceiling else 'not separated'}"
+             for x, n in zip(supervisions, names)]
+    seeds = int(summ.loc[names, "seeds"].min())
+    rows = [("best supervision", "multi-task (New College)", best or UNRESOLVED,
+             f"AP % over {seeds} seeds, mean [min, max]: {text}; held-out part"),
+            ("each supervision above the untrained network and raw pixels", "(the paper pretrains; no such control)",
+             "; ".join(beats), f"a supervision's lowest seed above the highest of untrained "
+             f"{_range(sup.table[sup.table.descriptor == 'scnn untrained, RGB']['AP_%'])} % and pixels "
+             f"{summ.loc['pixels (32x32 gray)', 'AP_mean']:.2f} %; chance {100 * s.chance:.2f} %")]
+    if any(k == "multitask" for k, _ in sup.sims):
+        rows.append(("precision at 83 % recall, multi-task", "> 0.90", _precision_at(sup, "multitask", 0.83, s),
+                     "mean [min, max] over seeds; New College vs the held-out part here"))
     return rows
 
 
@@ -286,23 +352,27 @@ def _fusion_rows(s: Setup, fus: Runs, mid_layers, merge: str, dataset) -> tuple[
         why = f"{dataset} has no depth/ folder"
         return ([("RGB-D fusion (Figure 9, Table 2)", "late fusion best", "skipped", why)],
                 [(f"AP, mid-level fusion at {layer}", PAPER_T2.get(layer), "skipped", why) for layer in mid_layers])
-    t = fus.table
-    mid = t[t.fusion == "mid"].set_index("layer")
-    t2 = [(f"AP, mid-level fusion at {layer}", PAPER_T2.get(layer), float(mid.loc[layer, "AP_%"] / 100),
-           f"{mid.loc[layer, 'label']}; {merge}; paper: NYU, Places-pretrained", 4) for layer in mid_layers]
-    top = mid["AP_%"].idxmax()
-    fz = t.set_index("fusion")
-    rgb = f"{fz.loc['RGB only', 'AP_%']:.2f}" if "RGB only" in fz.index else "n/a"
-    cmp = [("best mid-level layer (Table 2)", "conv2 (AP 0.8111)", UNRESOLVED,
-            f"highest AP of this one run at {top} ({mid.loc[top, 'AP_%'] / 100:.4f}); no spread over seeds; not tuned"),
-           ("best fusion", "late", UNRESOLVED,
-            f"early {fz.loc['early', 'AP_%']:.2f} %, highest mid {mid.loc[top, 'AP_%']:.2f} %, "
-            f"late {fz.loc['late', 'AP_%']:.2f} %; one seed each"),
-           ("precision at 82 % recall, late fusion", 0.92,
-            f"{evaluate.precision_at_recall(fus.sims['late'], s.GT, 0.82, s.exclude_steps, queries=s.held):.3f}",
-            "NYU vs the held-out part here"),
-           ("late fusion vs RGB only: AP (%)", None, f"{rgb} -> {fz.loc['late', 'AP_%']:.2f}",
-            f"depth stream alone {fz.loc['late (depth stream)', 'AP_%']:.2f} %")]
+    summ = seed_summary(fus.table)
+    by = summ.set_index("descriptor")
+    mids = [f"scnn mid-level fusion at {layer}" for layer in mid_layers]
+    t2 = [(f"AP, mid-level fusion at {layer}", PAPER_T2.get(layer), float(by.loc[m, "AP_mean"] / 100),
+           f"mean of {int(by.loc[m, 'seeds'])} seeds, [min, max] = [{by.loc[m, 'AP_min'] / 100:.4f}, "
+           f"{by.loc[m, 'AP_max'] / 100:.4f}]; {merge}; paper: NYU, Places-pretrained", 4)
+          for layer, m in zip(mid_layers, mids)]
+    layer_best, layer_text = best_of(summ, mids)
+    paper_mid = f"scnn mid-level fusion at {_paper_layer(mid_layers)}"
+    fusion_best, fusion_text = best_of(summ, ["scnn early fusion", paper_mid, "scnn late fusion"])
+    rgb = f"RGB only ({summ.supervision.iloc[0]})"
+    depth_best, depth_text = best_of(summ, [rgb, "scnn late fusion"]) if rgb in by.index else (None, "n/a")
+    cmp = [("best mid-level layer (Table 2)", "conv2 (AP 0.8111)",
+            layer_best.rsplit(" ", 1)[-1] if layer_best else UNRESOLVED, f"AP % mean [min, max]: {layer_text}"),
+           ("best fusion", "late", fusion_best or UNRESOLVED,
+            f"AP % mean [min, max]: {fusion_text} (mid-level at the paper's layer, fixed in advance)"),
+           ("precision at 82 % recall, late fusion", 0.92, _precision_at(fus, "late", 0.82, s),
+            "mean [min, max] over seeds; NYU vs the held-out part here"),
+           ("late fusion vs RGB only", "depth helps", depth_best or UNRESOLVED,
+            f"AP % mean [min, max]: {depth_text}; depth stream alone "
+            f"{by.loc['scnn late fusion, depth stream alone', 'AP_mean']:.2f} %")]
     return cmp, t2
 
 
@@ -327,11 +397,47 @@ def _timing_rows(tim: pd.DataFrame) -> list:
 def paper_vs_run(s: Setup, sup: Runs, fus: Runs, tim: pd.DataFrame, supervisions, mid_layers, merge: str,
                  dataset) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame]:
     """The paper's numbers beside this run's: (paper_vs_run, Table 2, Table 3) as
-    ``report.paper_vs_run`` tables. With one seed per network no supervision, layer or fusion is
-    named best ("not resolved with one seed"); the measured APs stand beside it."""
+    ``report.paper_vs_run`` tables. A supervision, layer or fusion is named best only where its
+    seed range lies above every other's (:func:`best_of`), else :data:`UNRESOLVED`; the means and
+    ranges stand beside it."""
     cmp, t2 = _fusion_rows(s, fus, mid_layers, merge, dataset)
     return (report.paper_vs_run(_supervision_rows(s, sup, supervisions) + cmp), report.paper_vs_run(t2),
             report.paper_vs_run(_timing_rows(tim)))
+
+
+def findings(cmp: pd.DataFrame, tim: pd.DataFrame) -> str:
+    """Whether each of Xu 2022's findings holds here: one Markdown bullet each, read from
+    :func:`paper_vs_run`'s first table (cmp; its notes give the per-seed means and ranges) and
+    :func:`timing`'s table (tim)."""
+    run = cmp.set_index("quantity")
+
+    def verdict(q, want):
+        got = run.loc[q, report.RUN]
+        if got == UNRESOLVED:
+            return "**not resolved** here: the seed ranges overlap"
+        return "**holds** here" if got == want else f"**does not hold** here: {got} is ahead, its seed range above the others'"
+
+    out = [f"- *Multi-task supervision is best* (Figure 8): {verdict('best supervision', 'scnn multitask, RGB')}. "
+           f"{run.loc['best supervision', 'note']}.",
+           f"- *Training buys something* (not the paper's claim, the condition for reading the others): "
+           f"{run.loc['each supervision above the untrained network and raw pixels', report.RUN]} "
+           f"({run.loc['each supervision above the untrained network and raw pixels', 'note']})."]
+    if "best fusion" in run.index:
+        out += [f"- *Late fusion is best* (Figure 9): {verdict('best fusion', 'scnn late fusion')}. {run.loc['best fusion', 'note']}.",
+                f"- *conv2 is the best mid-level layer* (Table 2): {verdict('best mid-level layer (Table 2)', 'conv2')}. "
+                f"{run.loc['best mid-level layer (Table 2)', 'note']}.",
+                f"- *Depth helps* (late fusion over RGB only): {verdict('late fusion vs RGB only', 'scnn late fusion')}. "
+                f"{run.loc['late fusion vs RGB only', 'note']}."]
+    else:
+        out.append("- *Late fusion is best*, *conv2 is the best mid-level layer*, *depth helps*: **not tested** on this "
+                   "dataset (no depth/ folder).")
+    t = tim.set_index("descriptor")
+    net, sift = t.index[0], t.index[-1]
+    a_, b_ = t.loc[net, "s_per_image_one_at_a_time"], t.loc[sift, "s_per_image_one_at_a_time"]
+    out.append(f"- *An SCNN descriptor is faster than SIFT-BoVW* (Table 3): {'**holds**' if a_ < b_ else '**does not hold**'} "
+               f"on this CPU: {a_:.5f} s against {b_:.5f} s per image, one at a time (one timing each, a "
+               f"{max(a_, b_) / min(a_, b_):.0f}x ratio; the network here is about a hundredth of the paper's).")
+    return "\n".join(out)
 
 
 def note(s: Setup, frame_step: int, dataset) -> str:
@@ -366,28 +472,38 @@ def _pr_axes(ax, chance, label=None):
     ax.set_xlabel("recall"); ax.set_ylabel("precision"); ax.set_xlim(0, 1); ax.set_ylim(0, 1.02); ax.grid(alpha=0.3)
 
 
+def _first_seed(runs: Runs, key):
+    """(seed, S) of the first seed of ``key`` in runs.sims (pixels: seed None)."""
+    return next((seed, S) for (k, seed), S in runs.sims.items() if k == key)
+
+
 def figure_supervisions(s: Setup, sup: Runs, supervisions, dataset):
-    """Figure 8's layout: PR curves of each supervision, the untrained network and pixels."""
+    """Figure 8's layout: PR curves of each supervision (first seed), the untrained network and
+    pixels; the legend gives each one's AP over seeds as mean [min, max]."""
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(9, 5.5))
-    t = sup.table
+    summ = seed_summary(sup.table).set_index("descriptor")
     styles = {"softmax": ":", "contrastive": "--", "multitask": "-"}
-    curves = [(x, styles.get(x, "-"), "C3", 1.8 - 0.3 * k) for k, x in enumerate(supervisions)]
-    curves += [("untrained", "-", "0.5", 1), ("pixels", "-", "C2", 1)]
-    for k, (key, ls, colour, lw) in enumerate(curves):
-        p, r, _ = evaluate.pr_curve(sup.sims[key], s.GT, s.exclude_steps, queries=s.held)
-        ax.plot(r, p, ls, color=colour, lw=lw, label=f"{t.loc[k, 'label']}: AP {t.loc[k, 'AP_%']:.1f} %")
+    curves = [(x, f"scnn {x}, RGB", styles.get(x, "-"), "C3", 1.8 - 0.3 * k) for k, x in enumerate(supervisions)]
+    curves += [("untrained", "scnn untrained, RGB", "-", "0.5", 1), ("pixels", "pixels (32x32 gray)", "-", "C2", 1)]
+    for key, name, ls, colour, lw in curves:
+        seed, S = _first_seed(sup, key)
+        p, r, _ = evaluate.pr_curve(S, s.GT, s.exclude_steps, queries=s.held)
+        r_ = summ.loc[name]
+        spread = f" [{r_.AP_min:.1f}, {r_.AP_max:.1f}] over {int(r_.seeds)} seeds" if r_.seeds > 1 else ""
+        ax.plot(r, p, ls, color=colour, lw=lw, label=f"{name}: AP {r_.AP_mean:.1f} %{spread}")
     _pr_axes(ax, s.chance, f"chance ({100 * s.chance:.1f} %)")
     ax.set_title(f"Figure 8 layout: supervisions, RGB, held-out part of {Path(dataset).name} "
-                 f"({int(s.held.sum())} query frames)", fontsize=10)
+                 f"({int(s.held.sum())} query frames; curves of the first seed)", fontsize=10)
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0)
     return fig
 
 
 def figure_fusions(s: Setup, fus: Runs, mid_layers, merge: str, fusion_supervision: str, dataset):
-    """Figure 9's layout (left) and mid-level fusion at each layer (right); a note without depth.
-    Returns (figure, file stem): "figure9_fusions" or "figure9_skipped"."""
+    """Figure 9's layout (left) and mid-level fusion at each layer (right), first seed's curves,
+    AP over seeds in the legends; a note without depth. Returns (figure, file stem):
+    "figure9_fusions" or "figure9_skipped"."""
     import matplotlib.pyplot as plt
 
     if not s.has_depth:
@@ -395,21 +511,23 @@ def figure_fusions(s: Setup, fus: Runs, mid_layers, merge: str, fusion_supervisi
         ax.text(0.5, 0.5, f"RGB-D fusion skipped:\n{dataset} has no depth/ folder", ha="center", va="center")
         return fig, "figure9_skipped"
     fig, axes = plt.subplots(1, 2, figsize=(14, 5.2))
-    t = fus.table
-    mid, by_fusion = t[t.fusion == "mid"].set_index("layer"), t.set_index("fusion")
-    row = {k: mid.loc[k[4:]] if k.startswith("mid ") else by_fusion.loc[k] for k in fus.sims}
+    summ = seed_summary(fus.table)
+    row = {r.fusion if r.fusion != "mid" else f"mid {r.layer}": r for r in summ.itertuples()}
     show = [("RGB only", "C0", ":"), ("late (depth stream)", "C2", ":"), ("early", "C1", "--"),
             (f"mid {_paper_layer(mid_layers)}", "C4", "-."), ("late", "C3", "-")]
-    for key, colour, ls in [x for x in show if x[0] in fus.sims]:
-        p, r, _ = evaluate.pr_curve(fus.sims[key], s.GT, s.exclude_steps, queries=s.held)
-        axes[0].plot(r, p, ls, color=colour, lw=1.6, label=f"{row[key]['label']}: AP {row[key]['AP_%']:.1f} %")
-    axes[0].set_title(f"Figure 9 layout: fusions ({fusion_supervision}), held-out part", fontsize=10)
+    for key, colour, ls in [x for x in show if x[0] in row]:
+        p, r, _ = evaluate.pr_curve(_first_seed(fus, key)[1], s.GT, s.exclude_steps, queries=s.held)
+        x = row[key]
+        axes[0].plot(r, p, ls, color=colour, lw=1.6,
+                     label=f"{x.descriptor}: AP {x.AP_mean:.1f} % [{x.AP_min:.1f}, {x.AP_max:.1f}]")
+    axes[0].set_title(f"Figure 9 layout: fusions ({fusion_supervision}), held-out part, first seed's curves", fontsize=10)
     axes[0].legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=1, borderaxespad=0)
     cmap = plt.get_cmap("viridis")
     for k, layer in enumerate(mid_layers):
-        p, r, _ = evaluate.pr_curve(fus.sims[f"mid {layer}"], s.GT, s.exclude_steps, queries=s.held)
+        p, r, _ = evaluate.pr_curve(_first_seed(fus, f"mid {layer}")[1], s.GT, s.exclude_steps, queries=s.held)
+        x = row[f"mid {layer}"]
         axes[1].plot(r, p, color=cmap(k / max(1, len(mid_layers) - 1)), lw=1.2,
-                     label=f"at {layer}: AP {row[f'mid {layer}']['AP_%']:.1f} %")
+                     label=f"at {layer}: AP {x.AP_mean:.1f} % [{x.AP_min:.1f}, {x.AP_max:.1f}]")
     axes[1].set_title(f"mid-level fusion at each layer ({merge}), held-out part", fontsize=10)
     axes[1].legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=4, borderaxespad=0)
     for ax in axes:
@@ -418,22 +536,36 @@ def figure_fusions(s: Setup, fus: Runs, mid_layers, merge: str, fusion_supervisi
     return fig, "figure9_fusions"
 
 
-def figure_training_loss(sup: Runs, fus: Runs, fusion_supervision: str, has_depth: bool):
-    """Training loss per epoch of every network: RGB (left), RGB-D (right)."""
+def figure_convergence(sup: Runs, fus: Runs, mid_layers, has_depth: bool):
+    """Did the budget converge? Per epoch and seed: the training loss of each supervision (left),
+    its held-out AP (middle, with the untrained networks' and raw pixels' AP as lines), and the
+    held-out AP of the early, paper-layer mid-level and late fusions (right). The held-out AP is
+    watched only: the budget is fixed in advance."""
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 2, figsize=(12, 3.6))
-    for key, h in sup.hists.items():
-        axes[0].plot(np.arange(1, len(h["loss"]) + 1), h["loss"], "-o", ms=3, label=key)
-    axes[0].set_title("RGB networks: training loss per epoch", fontsize=10)
-    for key, h in fus.hists.items():
-        axes[1].plot(np.arange(1, len(h["loss"]) + 1), h["loss"], "-", lw=1, label=key)
-    axes[1].set_title(f"RGB-D networks ({fusion_supervision}): training loss per epoch" if has_depth
-                      else "RGB-D networks: skipped (no depth/)", fontsize=10)
-    for ax in axes:
-        ax.set_xlabel("epoch"); ax.set_ylabel("loss (its own supervision's units)")
-        ax.set_yscale("log"); ax.grid(alpha=0.3)
+    fig, axes = plt.subplots(1, 3, figsize=(16, 4))
+    colours = {}
+    for (key, seed), h in sup.hists.items():
+        c = colours.setdefault(key, f"C{len(colours)}")
+        ep = np.arange(1, len(h["loss"]) + 1)
+        label = key if seed == next(sd for k, sd in sup.hists if k == key) else None
+        axes[0].plot(ep, h["loss"], color=c, lw=1, label=label)
+        axes[1].plot(ep, h["monitor"], color=c, lw=1, label=label)
+    t = sup.table.set_index("descriptor")
+    axes[1].axhline(t.loc[["scnn untrained, RGB"], "AP_%"].max(), color="0.5", ls="--", lw=1, label="untrained (best seed)")
+    axes[1].axhline(t.loc["pixels (32x32 gray)", "AP_%"], color="k", ls=":", lw=1, label="pixels")
+    keys = ["early", f"mid {_paper_layer(mid_layers)}", "late"] if has_depth else []
+    for k, key in enumerate(keys):
+        for n, ((kk, seed), h) in enumerate((x for x in fus.hists.items() if x[0][0] == key)):
+            axes[2].plot(np.arange(1, len(h["monitor"]) + 1), h["monitor"], color=f"C{k + 3}", lw=1,
+                         label=key if n == 0 else None)
+    titles = ["training loss (each supervision's own units)", "held-out AP % per epoch, RGB",
+              "held-out AP % per epoch, RGB-D" if has_depth else "RGB-D: skipped (no depth/)"]
+    for ax, title in zip(axes, titles):
+        ax.set_title(title + " (one line per seed)" * bool(ax.lines), fontsize=10)
+        ax.set_xlabel("epoch"); ax.grid(alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
-            ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0)
+            ax.legend(fontsize=7)
+    axes[0].set_yscale("log")
     fig.tight_layout()
     return fig
