@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from greenloop import seqmatch, seqslam
-from greenloop.detectors import cnn_layers, dictionary, greenloop_seq, registry, single_frame
+from greenloop.detectors import cnn_layers, dictionary, greenloop_seq, registry, scnn, single_frame
 from greenloop.detectors import seqslam as slam_entry
 from greenloop.detectors.interface import Data
 from greenloop.experiments import leaderboard as experiment
@@ -40,8 +40,8 @@ def _data(descriptors: dict, GT, tune=None, **params) -> Data:
 
 
 def test_the_registry_holds_every_family_once_in_leaderboard_order():
-    assert list(registry.REGISTRY) == ["single-frame", "cnn-layers", "greenloop-seq", "seqslam", seqmatch.DEFAULT_NAME,
-                                       "dictionary"]
+    assert list(registry.REGISTRY) == ["single-frame", "cnn-layers", "siamese", "greenloop-seq", "seqslam",
+                                       seqmatch.DEFAULT_NAME, "dictionary"]
     assert registry.get("seqslam") is slam_entry.ENTRY and registry.REGISTRY["dictionary"].score is None
     with pytest.raises(ValueError, match="registered are"):
         registry.get("nope")
@@ -151,10 +151,10 @@ def test_the_named_default_is_untuned_and_keeps_its_fixed_threshold():
 def _records(entry, X, GT):
     """Every knob record an entry gives (tuned on the first half, and untuned), on X as its descriptor."""
     d = _data({}, GT, np.arange(len(X)) < N0 + 20, seq_descriptors=["pixels"], fast_descriptors=["pixels"],
-              cnn_backbones=[], random_control="pixels", layer_backbones=["mobilenetv2"])
+              cnn_backbones=[], random_control="pixels", layer_backbones=["mobilenetv2"], siamese_rows=["multitask"])
     names = {single_frame.ENTRY.name: "pixels", slam_entry.ENTRY.name: "seqslam",
              seqmatch.DEFAULT_NAME: seqmatch.DEFAULT_KNOBS["descriptor"]}
-    d.descriptors.update({names.get(entry.name, "pixels"): X, "sift_bovw": X})
+    d.descriptors.update({names.get(entry.name, "pixels"): X, "sift_bovw": X, scnn.descriptor_name("multitask"): X})
     d.descriptors.update({s: X for s in cnn_layers.groups(d.params)["mobilenetv2, best layer (single frame)"]})
     return d, entry.tune(d)[1]
 
@@ -208,6 +208,37 @@ def _walk_folder(folder: Path) -> Path:
         cv2.imwrite(str(folder / "rgb" / f"{i}.png"), f)
     (folder / "ground_truth.csv").write_text("i,j,tolerance\n" + "".join(f"{i},{40 + i},1\n" for i in range(20)))
     return folder
+
+
+SIAMESE = dict(siamese_rows=["contrastive"], siamese_input_size=32, siamese_width=0.25, siamese_epochs=2,
+               siamese_pairs=40, siamese_batch=20, siamese_seeds=[0], hard_fraction=0.5, augment_shift=0.125,
+               augment_light=0.2, frames_per_spot=10)
+
+
+def test_the_siamese_row_trains_only_before_the_evaluation_part_and_streams_its_descriptors(tmp_path, monkeypatch):
+    from greenloop import siamese
+    from greenloop.util import cache
+
+    monkeypatch.setattr(cache, "CACHE_DIR", tmp_path / "models")
+    folder = _walk_folder(tmp_path / "walk")
+    data, _ = experiment.prepare(folder, 1, 0.5, 10, 0.5, None, dict(seq_lens=[3], fps_frames=5, contrast_windows=[0, 4],
+                                                                      velocities=(1.0,), whiten_dims=[4], **SIAMESE))
+    train = scnn.training_frames(data)
+    assert not (train & siamese.near_heldout(data.evalq, 3)).any() and train[:40].all()
+    X, info = scnn.describe(data)
+    name = scnn.descriptor_name("contrastive")
+    assert list(X) == [name] and X[name].shape == (60, siamese.DESCRIPTOR_DIM) and info[name].dim == 128
+    labels = siamese.place_labels(train, data.GT, 10)
+    _, hist, pairs = siamese.train(siamese.load_inputs(folder, (32, 32), depth=False), labels, supervision="contrastive",
+                                   gt=data.GT, **scnn.train_kw(data.params))
+    assert len(hist["loss"]) == 2                      # read back from the cache describe filled
+    siamese.check_pairs(pairs["pairs"], data.evalq, 3)
+    data.descriptors.update(X)
+    rows, knobs, best = scnn.tune(data)
+    assert list(knobs) == [f"{name} (single frame)"] and knobs[f"{name} (single frame)"]["seq_len"] == 1 and rows
+    frame = cv2.imread(str(folder / "rgb" / "7.png"), cv2.IMREAD_COLOR)
+    assert np.allclose(scnn.describer(knobs[f"{name} (single frame)"], data)(frame), X[name][7], atol=1e-5)
+    assert scnn.describe(data._replace(tune=None)) == ({}, {})           # no honest split: nothing to train on
 
 
 def test_the_documented_example_appears_on_the_leaderboard_and_in_detect(tmp_path, monkeypatch, capsys):

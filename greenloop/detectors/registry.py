@@ -7,11 +7,12 @@ detector: its module in ``greenloop/detectors/`` and one line in ``ENTRIES``.
 """
 from __future__ import annotations
 
-from greenloop.detectors import cnn_layers, dictionary, greenloop_seq, seqslam, single_frame
+from greenloop.detectors import cnn_layers, dictionary, greenloop_seq, scnn, seqslam, single_frame
 
 ENTRIES = (
     single_frame.ENTRY,            # "single-frame": CNNs, SIFT-BoVW, pixels
     cnn_layers.ENTRY,              # "cnn-layers": each network's layer and pooling chosen on the tuning part
+    scnn.ENTRY,                    # "siamese": Xu 2022's Siamese CNN, trained before the evaluation part
     greenloop_seq.ENTRY,           # "greenloop-seq": greenloop-seq, greenloop-seq-fast
     seqslam.ENTRY,                 # "seqslam": SeqSLAM (tuned), SeqSLAM (published)
     greenloop_seq.DEFAULT_ENTRY,   # "greenloop-seq-grad": the named default, untuned
