@@ -228,12 +228,15 @@ def test_operating_points_table_and_the_dictionary_row_of_07():
     ops = fb.operating_points_table(points, {"spot_cnn": Info("spot_cnn", "model:x")})
     assert list(ops.columns) == ["detector", "tau", "flagged_frames", "precision", "recall", "tp", "fp", "fn", "ignored"]
     assert ops.detector[0] == "dictionary, spot_cnn (model:x)" and ops.tp.tolist() == [1, 0]
-    table = pd.DataFrame([{"backbone": "ghostnet", "weights": "imagenet", "label": "ghostnet (imagenet)", "input": "64x64",
-                           "AP_%": 40.0, "extract_s_per_image": 0.01, "R_a_%": np.nan, "R_t_%": np.nan}])
+    table = pd.DataFrame([{"backbone": b, "weights": "imagenet", "label": f"{b} (imagenet)", "input": "64x64",
+                           "AP_%": ap, "extract_s_per_image": 0.01, "R_a_%": np.nan, "R_t_%": np.nan}
+                          for b, ap in (("ghostnet", 40.0), ("ghostnet@mid-grid2", 45.0), ("mobilenetv2", 30.0))])
     cmp = fb.paper_rows(table, ops, {"ghostnet": (53.1, 0.036, 40.5, 29.4)}, frames_per_spot=2).set_index("quantity")
     assert cmp.loc["AP / average accuracy rate, ghostnet (%)", "this run"] == 40.0
     assert cmp.loc["R_a vs SIFT-BoVW, ghostnet (%)", "this run"] == "no sift_bovw row"
-    assert cmp.loc["best pretrained CNN descriptor by AP", "this run"] == "ghostnet (imagenet): 40.0 %"
+    # the papers' descriptors, ranked with the runner-up beside; the tuned layer row is left out
+    assert cmp.loc["highest AP among the pretrained CNN descriptors", "this run"] == (
+        "ghostnet (imagenet): 40.0 %; next: mobilenetv2 (imagenet): 30.0 %")
     assert cmp.loc["dictionary detector at τ = 12: precision / recall", "this run"] == "0.500 / 0.250"   # τ nearest L + 10
 
 

@@ -25,8 +25,7 @@ def groups(params: dict) -> dict:
     """{row: the network's layer descriptors, last-avg first (the untuned choice)}."""
     out = {}
     for net in params.get("layer_backbones", ()):
-        name, colon, tag = str(net).partition(":")
-        first = layers.spec(name, "last", "avg") + colon + tag
+        first = layers.specs([net], ["last"], ["avg"])[0]
         out[row_name(net)] = [first] + [s for s in layers.specs([net]) if s != first]
     return out
 
