@@ -156,6 +156,8 @@ def test_timing_paper_vs_run_findings_and_summary(setup, trained, tiny_sequence)
     above = ssum.loc["scnn softmax, RGB", "AP_min"] > ssum.loc[["scnn untrained, RGB", "pixels (32x32 gray)"], "AP_max"].max()
     assert run["each supervision above the untrained network and raw pixels"] == (
         f"softmax: {'above both' if above else 'not separated'}")
+    first, last = (np.mean([sup.hists["softmax", k]["monitor"][e] for k in SEEDS]) for e in (0, -1))
+    assert run["held-out AP after the first -> the last epoch, per supervision (%)"].startswith(f"softmax {first:.2f} -> {last:.2f} (loss ")
     p = [evaluate.precision_at_recall(fus.sims["late", k], s.GT, 0.82, s.exclude_steps, queries=s.held) for k in SEEDS]
     assert run["precision at 82 % recall, late fusion"] == f"{np.mean(p):.3f} [{min(p):.3f}, {max(p):.3f}]"
     mid = fus.table[fus.table.fusion == "mid"]["AP_%"]

@@ -326,6 +326,17 @@ def _precision_at(runs: Runs, key, recall: float, s: Setup) -> str:
                    for (k, _), S in runs.sims.items() if k == key], ".3f")
 
 
+def _learning(runs: Runs, keys) -> str:
+    """'key a -> b (loss c -> d)' per key: the held-out AP after the first and the last epoch and the
+    training loss of the first and the last epoch, each a mean over the seeds of runs.hists."""
+    out = []
+    for key in keys:
+        hs = [h for (k, _), h in runs.hists.items() if k == key]
+        m, loss = np.array([h["monitor"] for h in hs]), np.array([h["loss"] for h in hs])
+        out.append(f"{key} {m[:, 0].mean():.2f} -> {m[:, -1].mean():.2f} (loss {loss[:, 0].mean():.3g} -> {loss[:, -1].mean():.3g})")
+    return "; ".join(out)
+
+
 def _supervision_rows(s: Setup, sup: Runs, supervisions) -> list:
     summ = seed_summary(sup.table).set_index("descriptor")
     names = [f"scnn {x}, RGB" for x in supervisions]
@@ -341,6 +352,8 @@ def _supervision_rows(s: Setup, sup: Runs, supervisions) -> list:
              "; ".join(beats), f"a supervision's lowest seed above the highest of untrained "
              f"{_range(sup.table[sup.table.descriptor == 'scnn untrained, RGB']['AP_%'])} % and pixels "
              f"{summ.loc['pixels (32x32 gray)', 'AP_mean']:.2f} %; chance {100 * s.chance:.2f} %")]
+    rows.append(("held-out AP after the first -> the last epoch, per supervision (%)", None, _learning(sup, supervisions),
+                 "mean over seeds (convergence figure); the training loss, first -> last epoch, in brackets"))
     if any(k == "multitask" for k, _ in sup.sims):
         rows.append(("precision at 83 % recall, multi-task", "> 0.90", _precision_at(sup, "multitask", 0.83, s),
                      "mean [min, max] over seeds; New College vs the held-out part here"))
@@ -421,7 +434,8 @@ def findings(cmp: pd.DataFrame, tim: pd.DataFrame) -> str:
            f"{run.loc['best supervision', 'note']}.",
            f"- *Training buys something* (not the paper's claim, the condition for reading the others): "
            f"{run.loc['each supervision above the untrained network and raw pixels', report.RUN]} "
-           f"({run.loc['each supervision above the untrained network and raw pixels', 'note']})."]
+           f"({run.loc['each supervision above the untrained network and raw pixels', 'note']}). Held-out AP after "
+           f"the first -> the last epoch: {run.loc['held-out AP after the first -> the last epoch, per supervision (%)', report.RUN]}."]
     if "best fusion" in run.index:
         out += [f"- *Late fusion is best* (Figure 9): {verdict('best fusion', 'scnn late fusion')}. {run.loc['best fusion', 'note']}.",
                 f"- *conv2 is the best mid-level layer* (Table 2): {verdict('best mid-level layer (Table 2)', 'conv2')}. "
