@@ -28,7 +28,7 @@ scaled down while the layer sequence, and with it Table 2's fusion points, is ke
 
 Why these sizes: 64x64 keeps the rows of plants, posts and pipes of a 640x480 frame legible, and
 the whole branch costs about 8 M multiply-adds per image (AlexNet: about 700 M), which is what
-lets the notebook train 13 networks on two CPU cores within its budget. conv1 keeps AlexNet's
+lets the notebook train 13 networks over three seeds on two CPU cores within its budget. conv1 keeps AlexNet's
 role (a large kernel whose stride, with pool1, quarters the resolution: 5x5 stride 2 on 64
 pixels is about 11x11 stride 4 on 227), the spatial sizes after each stage are about half of
 AlexNet's (32, 16, 8, 4 against 55, 27, 13, 6) and the channel counts about an eighth
@@ -53,8 +53,15 @@ Supervision (``SUPERVISIONS``; each pair k = two images with place labels l1, l2
 Training (``train``): ``epochs`` passes of ``n_pairs`` freshly drawn pairs in batches of
 ``batch_size`` (the paper: 100). The optimiser defaults to Adam (AdamW, learning rate 1e-3,
 weight decay ``WEIGHT_DECAY``): the paper's SGD (momentum 0.9, learning rate 0.01,
-``optimizer="sgd"``) barely lowered the softmax loss within this budget. The paper trains until
-the validation accuracy stalls for 10 epochs; a fixed budget is what fits ``make all`` here.
+``optimizer="sgd"``) barely lowered the softmax loss within this budget. Given the ground truth,
+a negative pair is one it calls no loop (two frames on either side of a spot border show one
+place), and a ``hard_fraction`` of each epoch's negatives are hard ones (``hard_negatives``:
+frames of other places the network being trained finds closest, re-mined every epoch). Each
+training image can be moved and relit at random (``augment``): on the synthetic sequence the
+held-out AP of networks trained without it rose for about ten epochs and then fell while the loss
+kept falling. The paper trains until the validation accuracy stalls for 10 epochs; a fixed
+budget is what fits ``make all`` here, and ``monitor`` records the held-out AP per epoch to show
+whether it levelled off (watched, never used to stop).
 
 RGB-D fusion (``FUSIONS``; RGB-D input is one (N, H, W, 4) array: RGB, then depth, in [0, 1])
 ------------------------------------------------------------------------------------------
