@@ -184,3 +184,9 @@ def test_targets_table_says_when_a_dataset_is_not_one_of_its_own():
     t = lb.targets_table(board, "data/nordland", 8)
     step = t[t.target.str.startswith("frame step")].iloc[0]
     assert step.measured == 8 and step.met is False or step.met == False   # noqa: E712 (numpy bool)
+
+
+def test_weights_kind_names_each_kind_of_weights():
+    assert lb.weights_kind("imagenet, tflite uint8") == "imagenet" and lb.weights_kind("random init") == "random init"
+    assert lb.weights_kind("trained here") == "trained here"              # the Siamese row's network
+    assert lb.weights_kind("none") == "none" and lb.weights_kind(None) == "none"

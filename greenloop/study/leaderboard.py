@@ -28,9 +28,11 @@ COLUMNS = (["method", "mode", "weights", "knobs"] + METRICS + SPREADS +
 
 
 def weights_kind(label) -> str:
-    """An ExtractInfo weights label -> "imagenet" | "random init" | "none"."""
+    """An ExtractInfo weights label -> "imagenet" | "random init" | "trained here" | "none"."""
     label = str(label)
-    return "imagenet" if label.startswith("imagenet") else ("random init" if label == "random init" else "none")
+    if label.startswith("imagenet"):
+        return "imagenet"
+    return label if label in ("random init", "trained here") else "none"
 
 
 def reference_mask(frames, reference_frames) -> np.ndarray | None:
