@@ -58,9 +58,9 @@ class Setup(NamedTuple):
 
 
 class Runs(NamedTuple):
-    """One table's networks: table (DataFrame, one row per descriptor), sims {key: (M, M) S},
-    models {key: descriptor model}, hists {key: training history}, trained [(descriptor name,
-    training seconds, CPU seconds)] in training order."""
+    """One table's networks: table (DataFrame, one row per descriptor and seed), sims {(key, seed):
+    (M, M) S}, models {(key, seed): descriptor model}, hists {(key, seed): training history},
+    trained [(descriptor name with its seed, training seconds, CPU seconds)] in training order."""
     table: pd.DataFrame
     sims: dict
     models: dict
