@@ -57,9 +57,8 @@ weight decay ``WEIGHT_DECAY``): the paper's SGD (momentum 0.9, learning rate 0.0
 a negative pair is one it calls no loop (two frames on either side of a spot border show one
 place), and a ``hard_fraction`` of each epoch's negatives are hard ones (``hard_negatives``:
 frames of other places the network being trained finds closest, re-mined every epoch). Each
-training image can be moved and relit at random (``augment``): on the synthetic sequence the
-held-out AP of networks trained without it rose for about ten epochs and then fell while the loss
-kept falling. The paper trains until the validation accuracy stalls for 10 epochs; a fixed
+training image can be moved and relit at random (``augment``), so that a network cannot learn the
+few hundred frames of a training part by heart. The paper trains until the validation accuracy stalls for 10 epochs; a fixed
 budget is what fits ``make all`` here, and ``monitor`` records the held-out AP per epoch to show
 whether it levelled off (watched, never used to stop).
 
