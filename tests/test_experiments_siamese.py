@@ -115,6 +115,14 @@ def test_best_of_needs_separated_seed_ranges():
     assert sr.best_of(summ, ["a"])[0] is None                      # nothing to be best against
 
 
+def test_levelling_gives_the_gain_per_third_of_the_epochs_over_distinct_networks():
+    a = {"monitor": [10, 20, 30, 40, 50, 60]}              # thirds 15, 35, 55: +20 then +20
+    b = {"monitor": [10, 40, 50, 50, 50, 40]}              # thirds 25, 50, 45: +25 then -5
+    text = sr._levelling([a, b, dict(a), {"monitor": [1, 2]}])   # a twice (two tables) counts once; 2 epochs: ignored
+    assert text == "+22.5 then +7.5 points over 2 networks (1 still gaining in the last third)"
+    assert sr._levelling([{"monitor": [1.0]}]).startswith("n/a")
+
+
 def test_fusions_table_rgb_only_each_fusion_and_each_late_stream(setup, trained):
     s, (sup, fus) = setup, trained
     t = fus.table

@@ -26,6 +26,7 @@ DECIMALS = {"AP_%": 2, "R@100P_%": 2, "AP_mean": 2, "AP_std": 2, "AP_min": 2, "A
             "R100P_min": 2, "R100P_max": 2, "train_s_mean": 1, "extract_ms_per_image": 3, "train_s": 1, "train_cpu_s": 1,
             "s_per_image_batched": 5, "s_per_image_one_at_a_time": 5}
 UNRESOLVED = "not resolved: the seed ranges overlap"
+LEVELLING = "held-out AP gain, first -> second -> last third of the epochs"
 # the paper's numbers, a reference column only: Table 2 (NYU, AP of mid-level fusion per layer)
 # and Table 3 (seconds per image: SCNN CPU and GPU, CNN CPU and GPU, GIST, BoVW)
 PAPER_T2 = dict(zip(siamese.LAYERS, [0.7444, 0.7644, 0.8111, 0.7778, 0.7222, 0.7444, 0.6667, 0.6333]))
@@ -337,6 +338,20 @@ def _learning(runs: Runs, keys) -> str:
     return "; ".join(out)
 
 
+def _levelling(hists) -> str:
+    """How far the held-out AP levels off: each network's AP after every epoch (history["monitor"],
+    %) averaged over the first, second and last third of its epochs; the gains from the first to
+    the second third and from the second to the last, in points, each a mean over the networks
+    (one network trained for two tables counts once), and how many still gain in the last third."""
+    ms = {tuple(h["monitor"]) for h in hists if len(h.get("monitor", ())) >= 3}
+    if not ms:
+        return "n/a (fewer than 3 epochs watched)"
+    thirds = np.array([[np.mean(p) for p in np.array_split(np.array(m), 3)] for m in ms])   # (networks, 3)
+    d = np.diff(thirds, axis=1)
+    return (f"{d[:, 0].mean():+.1f} then {d[:, 1].mean():+.1f} points over {len(ms)} networks "
+            f"({int((d[:, 1] > 0).sum())} still gaining in the last third)")
+
+
 def _supervision_rows(s: Setup, sup: Runs, supervisions) -> list:
     summ = seed_summary(sup.table).set_index("descriptor")
     names = [f"scnn {x}, RGB" for x in supervisions]
@@ -414,7 +429,9 @@ def paper_vs_run(s: Setup, sup: Runs, fus: Runs, tim: pd.DataFrame, supervisions
     seed range lies above every other's (:func:`best_of`), else :data:`UNRESOLVED`; the means and
     ranges stand beside it."""
     cmp, t2 = _fusion_rows(s, fus, mid_layers, merge, dataset)
-    return (report.paper_vs_run(_supervision_rows(s, sup, supervisions) + cmp), report.paper_vs_run(t2),
+    level = [(LEVELLING, None, _levelling(list(sup.hists.values()) + list(fus.hists.values())),
+              "every network trained here, its held-out AP averaged per third of its epochs (convergence figure)")]
+    return (report.paper_vs_run(_supervision_rows(s, sup, supervisions) + level + cmp), report.paper_vs_run(t2),
             report.paper_vs_run(_timing_rows(tim)))
 
 
@@ -435,7 +452,9 @@ def findings(cmp: pd.DataFrame, tim: pd.DataFrame) -> str:
            f"- *Training buys something* (not the paper's claim, the condition for reading the others): "
            f"{run.loc['each supervision above the untrained network and raw pixels', report.RUN]} "
            f"({run.loc['each supervision above the untrained network and raw pixels', 'note']}). Held-out AP after "
-           f"the first -> the last epoch: {run.loc['held-out AP after the first -> the last epoch, per supervision (%)', report.RUN]}."]
+           f"the first -> the last epoch: {run.loc['held-out AP after the first -> the last epoch, per supervision (%)', report.RUN]}. "
+           f"How far the budget levels off, the held-out AP gained from the first to the second third of the "
+           f"epochs and from the second to the last: {run.loc[LEVELLING, report.RUN]}."]
     if "best fusion" in run.index:
         out += [f"- *Late fusion is best* (Figure 9): {verdict('best fusion', 'scnn late fusion')}. {run.loc['best fusion', 'note']}.",
                 f"- *conv2 is the best mid-level layer* (Table 2): {verdict('best mid-level layer (Table 2)', 'conv2')}. "
