@@ -136,8 +136,9 @@ readme-coverage: results/coverage.md ## refresh the README's coverage table from
 $(RESULTS)/%.ipynb: notebooks/%.ipynb $(SOURCES) $(DATA_DEP) $(wildcard $(DATASET)/sequence.yaml) | $(STAMP)
 	@mkdir -p $(@D)
 	@echo "== $*"
-	@# the notebook's folder holds only what this run writes: no table or figure of an older version survives
-	@rm -rf $(@D)/.tmp-$*.ipynb $(RESULTS)/$*
+	@# the notebook's folder holds only what this run writes: no table or figure of an older version survives;
+	@# the old executed notebook goes too, so that a run that fails is run again by the next make
+	@rm -rf $@ $(@D)/.tmp-$*.ipynb $(RESULTS)/$*
 	$(BIN)/python -m greenloop.study.params $< $(DATASET) $(RESULTS) --out $(@D)/.tmp-$*.ipynb -- \
 	    $(DATASET_PARAMS:%=-f %) $(PARAMS)
 	@test -f $(@D)/.tmp-$*.ipynb || $(BIN)/papermill -k $(KERNEL) --execution-timeout $(TIMEOUT) --log-output --progress-bar \
