@@ -360,6 +360,8 @@ def test_make_skips_a_notebook_without_counted_loops_and_carries_on(tiny_near_lo
     if not (venv / ".installed").is_file():
         pytest.skip(f"{venv} was not set up by make venv")
     res = tmp_path / "res"
+    (res / "07_feature_baselines").mkdir(parents=True)
+    (res / "07_feature_baselines" / "older_version.png").write_bytes(b"")   # what an older notebook wrote
     r = subprocess.run(["make", f"{res}/07_feature_baselines.html", f"DATASET={tiny_near_loop_sequence}",
                         f"RESULTS={res}", f"VENV={venv}", "PARAMS=-p exclude 120"], cwd=ROOT,
                        capture_output=True, text=True, timeout=300)
@@ -367,4 +369,5 @@ def test_make_skips_a_notebook_without_counted_loops_and_carries_on(tiny_near_lo
     assert "closest loop is 99 frames apart" in r.stdout and "PARAMS='-p exclude 49'" in r.stdout
     assert "skipped" in (res / "07_feature_baselines.html").read_text()
     assert json.loads((res / "07_feature_baselines" / "manifest.json").read_text())["skipped"].startswith("07")
+    assert not (res / "07_feature_baselines" / "older_version.png").exists()      # the folder holds this run's files only
     assert not list(res.glob(".tmp-*"))
