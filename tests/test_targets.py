@@ -53,3 +53,14 @@ def test_synthetic_highest_of_every_method_ignores_chance():
 def test_unknown_dataset_names_the_accepted_ones():
     with pytest.raises(ValueError, match="nordland"):
         dataset_kind("kitti")
+
+
+def test_nordland_judges_every_seqslam_row_named():
+    rows = [{"method": "greenloop-seq", "mode": "loop closure", "R@1_%": 90.0},
+            {"method": "SeqSLAM (published)", "mode": "loop closure", "R@1_%": 70.0},
+            {"method": "SeqSLAM (tuned)", "mode": "loop closure", "R@1_%": 91.0}]
+    m = {r["target"]: r["met"] for r in detector_targets(rows, "nordland", seqslam=("SeqSLAM (published)", "SeqSLAM (tuned)"))}
+    assert m["R@1 above SeqSLAM (published) (70.0 %)"] is True
+    assert m["R@1 above SeqSLAM (tuned) (91.0 %)"] is False                # the stronger baseline is not beaten
+    absent = {r["target"]: r["met"] for r in detector_targets(rows[:1], "nordland", seqslam=("SeqSLAM (tuned)",))}
+    assert absent["R@1 above SeqSLAM (tuned) (not measured %)"] is None

@@ -97,6 +97,14 @@ def alignment_pairs(n: int, tolerance: int) -> np.ndarray:
     return sequence.aligned_pairs([(0, n), (n, 2 * n)], tolerance)
 
 
+def traversals(folder) -> list:
+    """The two seasons of a built Nordland folder as ``sequence.Traversal(name, start, stop)``, in
+    stream order, from its nordland.json (summer [0, n), winter [n, 2n))."""
+    meta = json.loads((Path(folder) / "nordland.json").read_text())
+    return sorted((sequence.Traversal(k, int(a), int(b)) for k, (a, b) in meta["traversals"].items()),
+                  key=lambda t: t.start)
+
+
 def _write(tmp: Path, summer, winter, tolerance: int, meta: dict, progress: bool) -> None:
     """Copy the frames (summer then winter) and write ground_truth.csv and nordland.json."""
     (tmp / "rgb").mkdir(parents=True)

@@ -23,6 +23,14 @@ def describe(data: Data) -> tuple[dict, dict]:
     return ({} if "seqslam" in data.descriptors else {"seqslam": slam.describe(data.dataset, step=data.frame_step)}), {}
 
 
+def _similarity(data: Data) -> np.ndarray:
+    """``seqslam.similarity_matrix`` of the run's SeqSLAM descriptors, computed once per Data
+    (``data.cache["seqslam_similarity"]``): every row of the grid and both rows reuse it."""
+    if "seqslam_similarity" not in data.cache:
+        data.cache["seqslam_similarity"] = slam.similarity_matrix(data.descriptors["seqslam"])
+    return data.cache["seqslam_similarity"]
+
+
 def tune(data: Data) -> tuple[list, dict, dict]:
     """The tuned row (grid seq_lens x contrast_windows, per-query AUC-PR on the tuning queries),
     then the published one; only the published one without a tuning part."""
@@ -30,7 +38,7 @@ def tune(data: Data) -> tuple[list, dict, dict]:
         return [], {PUBLISHED: dict(SEQSLAM_PUBLISHED)}, {}
     p = data.params
     rows = seqslam_stream.tune_knobs(data.descriptors["seqslam"], data.GT, data.exclude, data.tune, p["seq_lens"],
-                           p["contrast_windows"])
+                           p["contrast_windows"], _similarity(data))
     knobs, best = seqmatch.pick_knobs(rows, {TUNED: (["seqslam"], list(p["seq_lens"]))})
     knobs[PUBLISHED] = dict(SEQSLAM_PUBLISHED)
     return rows, knobs, best
@@ -38,7 +46,8 @@ def tune(data: Data) -> tuple[list, dict, dict]:
 
 def score(k: dict, data: Data) -> np.ndarray:
     """(M, M) float32 ``speed.seqslam_stream.score_matrix`` of a knob record."""
-    return seqslam_stream.score_matrix(data.descriptors["seqslam"], data.exclude, k["seq_len"] - 1, k["contrast_window"])
+    return seqslam_stream.score_matrix(data.descriptors["seqslam"], data.exclude, k["seq_len"] - 1, k["contrast_window"],
+                                       S0=_similarity(data))
 
 
 def stream(k: dict, threshold, data: Data) -> seqslam_stream.Detector:

@@ -23,6 +23,7 @@ import numpy as np
 import pandas as pd
 
 from greenloop import evaluate, groundtruth, seqmatch
+from greenloop.datasets import nordland, sequence
 from greenloop.datasets.sequence import list_frames
 from greenloop.detectors import single_frame
 from greenloop.detectors.interface import Data
@@ -30,8 +31,12 @@ from greenloop.detectors.registry import REGISTRY
 from greenloop.speed import timing
 from greenloop.study import leaderboard as lb
 from greenloop.study import report
+from greenloop.study import targets as goals
 
 SEQ_ROWS = ("greenloop-seq", "greenloop-seq-fast", seqmatch.DEFAULT_NAME)   # the rows the targets judge
+TARGET_ENTRIES = (seqmatch.DEFAULT_NAME, "seqslam")    # what a target protocol runs: the default and SeqSLAM's rows
+TARGET_TOLERANCE = 2       # frames: the targets' ground truth, frame k of each traversal +- 2 (issue 28)
+GP_PAIRS = (("day_right", "night_right"), ("day_left", "night_right"))   # Gardens Point's named pairs
 NO_SPLIT_DROPPED = "greenloop-seq, the tuned SeqSLAM, every tuned knob and threshold and so every closure count"
 NO_SPLIT_KEPT = ("the single-frame methods (untuned), SeqSLAM at its published parameters and the "
                  "dictionary at its fixed τ are scored on every query instead")
@@ -88,17 +93,23 @@ def prepare(dataset, frame_step: int, loop_threshold: float, exclude: int, tune_
     evaluation frames). exclude: ORIGINAL frames. Returns (Data, Split); without an honest split
     Data.tune is None and every query is an evaluation query."""
     frames, exclude_steps, GT, summary = groundtruth.described_frames(dataset, frame_step, loop_threshold, exclude)
-    M, gap = len(frames), max(params["seq_lens"])
-    ref = lb.reference_mask(frames, reference_frames)
-    tune_q, evalq, no_split = evaluate.honest_split(M, tune_fraction, GT, gap, frames, NO_SPLIT_DROPPED, NO_SPLIT_KEPT)
+    return _with_split(Data(dataset, frame_step, frames, GT, exclude_steps, None, None, dict(params, exclude=exclude),
+                            {}, {}, {}), tune_fraction, lb.reference_mask(frames, reference_frames), summary)
+
+
+def _with_split(data: Data, tune_fraction: float, reference, summary: str) -> tuple[Data, Split]:
+    """``data`` (its tune and evalq not yet set) with the honest split of its ground truth (a gap of
+    the longest of ``params["seq_lens"]``) and the timed window; its Split (reference as given)."""
+    M, gap = len(data.frames), max(data.params["seq_lens"])
+    tune_q, evalq, no_split = evaluate.honest_split(M, tune_fraction, data.GT, gap, data.frames, NO_SPLIT_DROPPED,
+                                                    NO_SPLIT_KEPT)
     if no_split is None:
-        scored_on = "evaluation queries; " + evaluate.split_summary(tune_q, evalq, GT, gap)
+        scored_on = "evaluation queries; " + evaluate.split_summary(tune_q, evalq, data.GT, gap)
     else:
         evalq, scored_on = np.ones(M, dtype=bool), f"every query (frames 0..{M - 1} of {M}; no honest split)"
-    window = lb.timing_window(evalq, params["fps_frames"])
-    data = Data(dataset, frame_step, frames, GT, exclude_steps, tune_q, evalq,
-                dict(params, exclude=exclude, timing_window=window), {}, {}, {})
-    return data, Split(ref, gap, no_split, scored_on, summary)
+    window = lb.timing_window(evalq, data.params["fps_frames"])
+    data = data._replace(tune=tune_q, evalq=evalq, params=dict(data.params, timing_window=window))
+    return data, Split(reference, gap, no_split, scored_on, summary)
 
 
 def tune(data: Data, registry=None) -> Tuned:
@@ -129,21 +140,23 @@ def decide(data: Data, registry=None) -> list[dict]:
     return [e.decide(data) for e in reg.values() if e.score is None]
 
 
-def stream_and_time(data: Data, tuned: Tuned, decisions=(), registry=None) -> Timed:
+def stream_and_time(data: Data, tuned: Tuned, decisions=(), registry=None, only=None) -> Timed:
     """Thresholds on the tuning queries (rule ``params["threshold_rule"]``; a record's
     ``fixed_threshold`` kept), each method's streaming detector, the stream-vs-matrix check of the
     ``checked`` entries over the whole stream, and the one timing definition (``speed.timing``)
-    over the timed window, every method (the decisions' too) interleaved."""
+    over the timed window, every method (the decisions' too) interleaved. only: the methods to
+    check and time where given (the others get no timing row); None: every method."""
     reg, p = (REGISTRY if registry is None else registry), data.params
     fixed = {m: k["fixed_threshold"] for m, k in tuned.knobs.items() if "fixed_threshold" in k}
     thr = lb.thresholds(tuned.S, data.GT, data.exclude, data.tune, p["threshold_rule"], fixed)
     dets = {m: reg[tuned.owner[m]].stream(k, thr.get(m), data) for m, k in tuned.knobs.items()}
-    checked = [m for m in tuned.knobs if reg[tuned.owner[m]].checked]
+    checked = [m for m in tuned.knobs if reg[tuned.owner[m]].checked and (only is None or m in only)]
     agree = lb.stream_checks(checked, dets, tuned.knobs, data.descriptors, tuned.S, data.GT)
     describers = {m: reg[tuned.owner[m]].describer(k, data) for m, k in tuned.knobs.items()}
     start, stop = p["timing_window"]
     raw, paths = lb.decode_window(list_frames(data.dataset), data.frames, start, stop)
-    methods, preload = lb.timing_methods(tuned.knobs, dets, describers, data.descriptors, start)
+    knobs = {m: k for m, k in tuned.knobs.items() if only is None or m in only}
+    methods, preload = lb.timing_methods(knobs, dets, describers, data.descriptors, start)
     methods += [d["method"] for d in decisions]
     preload.update({d["name"]: d["preload"] for d in decisions})
     speed = pd.DataFrame(timing.time_methods(methods, raw, preload, p["timing_repeats"])).set_index("method")
@@ -165,7 +178,87 @@ def board(data: Data, split: Split, tuned: Tuned, timed: Timed, decisions=()) ->
     table = lb.table(rows)
     written = lb.rounded(table)
     return Board(table, lb.targets(written, list(SEQ_ROWS)), lb.targets_table(written, data.dataset, data.frame_step),
-                 lb.statement(written))
+                 lb.statement(written, SEQ_ROWS))
+
+
+def _every_frame(data: Data, registry: dict) -> Data:
+    """``data`` at frame_step 1 (every frame of the dataset) with the descriptors the registry's
+    entries need: data itself when it already describes every frame, else described here."""
+    n = len(list_frames(data.dataset))
+    full = data if data.frame_step == 1 and len(data.frames) == n else data._replace(
+        frame_step=1, frames=np.arange(n), descriptors={}, infos={}, cache={})
+    for e in registry.values():
+        X, info = e.describe(full)
+        full.descriptors.update(X)
+        full.infos.update(info)
+    return full
+
+
+def _protocol(full: Data, traversals, tune_fraction: float) -> tuple[Data, Split]:
+    """The stream of the given traversals of ``full`` (``sequence.Traversal``s, in stream order), their
+    frames aligned +- TARGET_TOLERANCE, the first traversal the place-recognition database."""
+    idx = np.concatenate([np.arange(t.start, t.stop) for t in traversals])
+    bounds = np.cumsum([0] + [t.stop - t.start for t in traversals])
+    ex = int(full.params["exclude"])                       # frame_step 1: steps are original frames
+    GT = groundtruth.pair_matrix(sequence.aligned_pairs(list(zip(bounds[:-1], bounds[1:])), TARGET_TOLERANCE),
+                                 len(idx), None, ex)
+    d = Data(full.dataset, 1, idx, GT, ex, None, None, dict(full.params), {k: v[idx] for k, v in full.descriptors.items()},
+             dict(full.infos), {})
+    names = " then ".join(f"{t.name} (frames {t.start}..{t.stop - 1})" for t in traversals)
+    summary = (f"{len(idx)} frames (every frame) of {names}; ground truth: frame k of each traversal is frame k of the "
+               f"others +- {TARGET_TOLERANCE} frames, pairs within {ex} frames excluded: {int(GT.sum()) // 2} loop pairs")
+    return _with_split(d, tune_fraction, np.arange(len(idx)) < bounds[1], summary)
+
+
+def target_protocols(data: Data, tune_fraction: float) -> dict:
+    """{label: (Data, Split)}: the streams on which the detector's targets are defined where this
+    leaderboard's own differ (issue 28), for the named default and SeqSLAM (TARGET_ENTRIES).
+
+    Nordland: all its frames at the full rate (frame_step 1), summer then winter, correct within
+    +- TARGET_TOLERANCE frames (the leaderboard: every frame_step-th frame, the dataset's own
+    tolerance). Gardens Point: the pairs GP_PAIRS, each a stream of two traversals whose first is
+    the database (the leaderboard: day_left the database of both later walks). Any other
+    dataset: {} (its targets are judged on the leaderboard itself). Each is split as the
+    leaderboard is (``tune_fraction``, a gap of the longest sequence)."""
+    try:
+        kind = goals.dataset_kind(data.dataset)
+    except ValueError:
+        return {}
+    reg = {k: REGISTRY[k] for k in TARGET_ENTRIES}
+    if kind == "nordland":
+        full = _every_frame(data, reg)
+        return {f"every frame, +- {TARGET_TOLERANCE} frames": _protocol(full, nordland.traversals(data.dataset),
+                                                                      tune_fraction)}
+    if kind == "gardenspoint":
+        full, ts = _every_frame(data, reg), {t.name: t for t in sequence.traversals(data.dataset)}
+        return {f"{a} -> {b}": _protocol(full, [ts[a], ts[b]], tune_fraction) for a, b in GP_PAIRS}
+    return {}
+
+
+def run_protocol(data: Data, split: Split) -> tuple[Board, dict]:
+    """The named default and SeqSLAM (TARGET_ENTRIES) on one target protocol, as the leaderboard's
+    rows are: tuned (SeqSLAM's grid on its tuning queries) and thresholded; the stream-vs-matrix
+    check and the timing for the named default only: the leaderboard checks and times SeqSLAM,
+    and at Nordland's full rate each timing repeat would first stream some 5000 frames through
+    each SeqSLAM row at under 100 frames/s. Returns (Board, the stream check {method:
+    ``seqstream.stream_check``})."""
+    reg = {k: REGISTRY[k] for k in TARGET_ENTRIES}
+    tuned = tune(data, reg)
+    timed = stream_and_time(data, tuned, (), reg, only=(seqmatch.DEFAULT_NAME,))
+    return board(data, split, tuned, timed), timed.stream_check
+
+
+def protocol_tables(result: Board, runs: dict) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(targets, rows): the targets table of the leaderboard and of every protocol run ({label:
+    Board}), with a ``protocol`` column ("leaderboard" for this run's own rows), and the protocol
+    runs' rounded leaderboard rows with the same column. runs: {label: Board} (the first item of
+    :func:`run_protocol`)."""
+    targets = pd.concat([t.assign(protocol=label) for label, t in
+                         [("leaderboard", result.targets)] + [(k, b.targets) for k, b in runs.items()]], ignore_index=True)
+    rows = [lb.rounded(b.board).assign(protocol=k) for k, b in runs.items()]
+    cols = ["protocol"] + [c for c in lb.COLUMNS]
+    return (targets[["protocol"] + [c for c in targets.columns if c != "protocol"]],
+            pd.concat(rows, ignore_index=True)[cols] if rows else pd.DataFrame(columns=cols))
 
 
 def figure_pr(data: Data, tuned: Tuned):

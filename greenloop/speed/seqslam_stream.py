@@ -67,13 +67,14 @@ class Detector(seqstream.Detector):
 
 
 def score_matrix(X, exclude: int = 150, ds: int = DS, contrast_window: int = R_WINDOW,
-                 vs=None) -> np.ndarray:
+                 vs=None, S0=None) -> np.ndarray:
     """The (N, N) score matrix the streaming :class:`Detector` thresholds, for greenloop.evaluate.
 
     X: (N, 2048) SeqSLAM descriptors in stream order (:func:`describe`). Other arguments as the
-    Detector's. S[i, j] (j - i > exclude) = the best trajectory score of database frame i at query
-    j, column j computed from frames 0..j only; non-candidates hold the smallest filled score.
-    Returns (N, N) float32.
+    Detector's. S0: ``seqslam.similarity_matrix(X)`` where the caller already has it (it is the
+    costly part: one SAD per pair of frames). S[i, j] (j - i > exclude) = the best trajectory score
+    of database frame i at query j, column j computed from frames 0..j only; non-candidates hold
+    the smallest filled score. Returns (N, N) float32.
     """
     X = np.asarray(X, dtype=np.float32)
     if X.ndim != 2 or not np.all(np.isfinite(X)):
@@ -81,19 +82,19 @@ def score_matrix(X, exclude: int = 150, ds: int = DS, contrast_window: int = R_W
     det = Detector(None, exclude, ds, contrast_window, vs)
     if not len(X):
         return np.zeros((0, 0), np.float32)
-    return seqmatch.columns_to_scores(det, X, similarity_matrix(X))
+    return seqmatch.columns_to_scores(det, X, similarity_matrix(X) if S0 is None else S0)
 
 
-def tune_knobs(X, GT, exclude: int, tune, seq_lens, contrast_windows) -> list[dict]:
+def tune_knobs(X, GT, exclude: int, tune, seq_lens, contrast_windows, S0=None) -> list[dict]:
     """SeqSLAM on the tuning grid of ``speed.seqstream.tune_knobs`` (the same criterion, the same rows).
 
     X: (N, 2048) SeqSLAM descriptors; GT, exclude, tune as ``speed.seqstream.tune_knobs``. seq_lens:
-    frames per trajectory L (ds = L - 1); contrast_windows: R_window candidates (0 = off).
-    Returns one dict per (seq_len, contrast_window): descriptor "seqslam", whitening "none",
+    frames per trajectory L (ds = L - 1); contrast_windows: R_window candidates (0 = off); S0: as
+    :func:`score_matrix`. Returns one dict per (seq_len, contrast_window): descriptor "seqslam", whitening "none",
     seq_len, contrast_window, AUC-PR_tune_% and R@1_tune_% (``evaluate.per_query`` on the tuning
     queries, in %, 2 decimals), for ``seqmatch.pick_knobs``.
     """
-    S0 = similarity_matrix(X)
+    S0 = similarity_matrix(X) if S0 is None else S0
     rows = []
     for L in seq_lens:
         for cw in contrast_windows:

@@ -325,9 +325,9 @@ def dictionary_row(name: str, tau: int, n_train: int, closures: dict, op: dict, 
 def targets_table(board: pd.DataFrame, dataset, frame_step: int) -> pd.DataFrame:
     """The detector's targets for the named default (``seqmatch.DEFAULT_NAME``) on this board, one row
     each: target, measured, required, met (``study.targets.detector_targets``; SeqSLAM = the
-    published row). A dataset that is none of the targets' gives one row saying so."""
+    published and the tuned row, each judged). A dataset that is none of the targets' gives one row saying so."""
     try:
-        rows = goals.detector_targets(board, str(dataset), seqmatch.DEFAULT_NAME, "SeqSLAM (published)",
+        rows = goals.detector_targets(board, str(dataset), seqmatch.DEFAULT_NAME, ("SeqSLAM (published)", "SeqSLAM (tuned)"),
                                      seq_len=seqmatch.DEFAULT_KNOBS["seq_len"], frame_step=frame_step)
     except ValueError as e:
         rows = [{"target": "the detector's targets", "measured": None, "required": None, "met": None,

@@ -79,21 +79,22 @@ def detector_targets(rows, dataset: str, method: str = "greenloop-seq", seqslam:
     """Each issue-28 target of ``dataset`` for ``method``: a list of dicts target (text), measured
     (float, % or frames/s; None when the rows do not hold it), required (text) and met (bool; None
     when not measured). rows: the dataset's leaderboard rows (list of dicts or a DataFrame).
+    seqslam: the SeqSLAM row's method name, or several (each judged: Nordland's R@1 above it).
     seq_len: the method's frames of sequence (needed for Nordland's "<= 10 frames"); frame_step:
     the rows' frame step (Nordland's targets are at its full rate, frame_step 1)."""
     rows, kind = _rows(rows), dataset_kind(dataset)
     lc, pr = _find(rows, method, "loop closure"), _find(rows, method, "place recognition")
     if kind == "nordland":
-        ref = _find(rows, seqslam, "loop closure")
         r1 = _value(lc, "R@1_%")
         out = [_judge("frame step of the rows (1 = Nordland's full rate)", None if frame_step is None else float(frame_step),
                       "== 1", lambda v: v == 1),
                _judge("R@1 (%), loop closure", r1, ">= 95", lambda v: v >= 95.0),
                _judge("frames of sequence", None if seq_len is None else float(seq_len), "<= 10", lambda v: v <= 10),
                _judge("R@100P (%), loop closure", _value(lc, "R@100P_%"), ">= 60", lambda v: v >= 60.0)]
-        sr = _value(ref, "R@1_%")
-        out.append(_judge(f"R@1 above {seqslam} ({sr if sr is not None else 'not measured'} %)",
-                          None if sr is None else r1, f"> {sr}", lambda v: v > sr))
+        for name in ([seqslam] if isinstance(seqslam, str) else list(seqslam)):
+            sr = _value(_find(rows, name, "loop closure"), "R@1_%")
+            out.append(_judge(f"R@1 above {name} ({sr if sr is not None else 'not measured'} %)",
+                              None if sr is None else r1, f"> {sr}", lambda v, sr=sr: v > sr))
         return out + _common(lc, seq_len)
     if kind == "gardenspoint":
         return [_judge("R@1 (%), place recognition", _value(pr, "R@1_%"), ">= 90", lambda v: v >= 90.0),

@@ -1,0 +1,98 @@
+"""The streams the detector's targets name (experiments.leaderboard.target_protocols): Nordland at
+every frame with +- 2 frames, Gardens Point's two named pairs; on tiny textured fakes."""
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from greenloop import seqmatch
+from greenloop.datasets import gardenspoint, nordland
+from greenloop.experiments import leaderboard as ex
+from greenloop.speed import seqstream
+
+N = 40                                     # places per traversal
+PARAMS = dict(seq_lens=[3, 5], contrast_windows=[0, 5], velocities=[0.8, 1.0, 1.25], threshold_rule="f1",
+              fps_frames=8, timing_repeats=3, weights="auto", input_size=32)
+
+
+def _place(k: int, t: int, size=(64, 32)) -> np.ndarray:
+    """Place k's texture (the same in every traversal), darker and a little noisy in traversal t."""
+    base = np.random.default_rng(k).integers(0, 256, (size[1] // 4, size[0] // 4), dtype=np.uint8)
+    img = cv2.resize(base, size, interpolation=cv2.INTER_NEAREST).astype(np.float32) * (1.0 - 0.3 * t)
+    img += np.random.default_rng(1000 * t + k).normal(0, 4, img.shape)
+    return np.repeat(np.clip(img, 0, 255).astype(np.uint8)[..., None], 3, axis=2)
+
+
+def _fake_gp(root: Path) -> Path:
+    for t, name in enumerate(gardenspoint.TRAVERSALS):
+        (root / name).mkdir(parents=True)
+        for k in range(N):
+            cv2.imwrite(str(root / name / f"Image{k:03d}.png"), _place(k, t))
+    return root
+
+
+def _fake_nordland(root: Path) -> Path:
+    for t, season in enumerate(nordland.SEASONS):
+        (root / season).mkdir(parents=True)
+        for k in range(N):
+            cv2.imwrite(str(root / season / f"images-{10 * (k + 1):05d}.png"), _place(k, t))
+    return root
+
+
+@pytest.fixture(scope="module")
+def gp(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("gp")
+    out = gardenspoint.build(tmp / "gardenspoint", _fake_gp(tmp / "src"), size=(64, 32), tolerance=2, progress=False)
+    return ex.prepare(str(out), 1, 0.5, 10, 0.5, N, PARAMS)
+
+
+def _band(n: int, tol: int = 2) -> np.ndarray:
+    k = np.arange(n)
+    return np.abs(k[:, None] - k[None, :]) <= tol
+
+
+def test_gardenspoint_pairs_are_the_named_traversals_aligned(gp):
+    data, _ = gp
+    protos = ex.target_protocols(data, 0.5)
+    assert list(protos) == ["day_right -> night_right", "day_left -> night_right"]
+    d, s = protos["day_left -> night_right"]
+    assert d.frames.tolist() == list(range(N)) + list(range(2 * N, 3 * N))   # day_left, then night_right
+    assert (d.GT[:N, N:] == _band(N)).all() and not d.GT[:N, :N].any() and not d.GT[N:, N:].any()
+    assert s.reference.tolist() == [True] * N + [False] * N
+    assert np.array_equal(d.descriptors["gradients"], data.descriptors["gradients"][d.frames])
+    assert d.tune is not None and not (d.tune & d.evalq).any() and d.evalq[N:].any() and not d.evalq[:N].any()
+
+
+def test_a_pair_run_is_the_default_streamed_over_the_pair_alone(gp):
+    data, _ = gp
+    d, s = ex.target_protocols(data, 0.5)["day_right -> night_right"]
+    result, check = ex.run_protocol(d, s)
+    k = seqmatch.DEFAULT_KNOBS
+    X = np.concatenate([data.descriptors["gradients"][N:2 * N], data.descriptors["gradients"][2 * N:]])
+    S = seqstream.score_matrix(X, d.exclude, k["seq_len"], k["velocities"], 0, None, center_window=k["center_window"],
+                               calibrate=True, repeat_cos=k["repeat_cos"])
+    rows = result.board.set_index(["method", "mode"])
+    pr = rows.loc[(seqmatch.DEFAULT_NAME, "place recognition")]
+    assert pr["R@1_%"] == pytest.approx(100 * ex.evaluate.per_query(S, d.GT, d.exclude, d.evalq, s.reference)["R@1"])
+    assert pr["R@1_%"] == 100.0                                            # the textures repeat exactly
+    assert check[seqmatch.DEFAULT_NAME]["equal"]
+    assert np.isnan(rows.loc[("SeqSLAM (published)", "loop closure"), "fps_min"])   # timed in the leaderboard only
+    targets = dict(zip(result.targets.target, result.targets.met))
+    assert targets["R@1 (%), place recognition"] is True
+    table, board_rows = ex.protocol_tables(result, {"day_right -> night_right": result})
+    assert set(table.protocol) == {"leaderboard", "day_right -> night_right"} and len(board_rows) == len(result.board)
+
+
+def test_nordland_is_every_frame_at_two_frames_whatever_its_own_tolerance(tmp_path):
+    out = nordland.build(tmp_path / "nordland", _fake_nordland(tmp_path / "src"), tolerance=0, progress=False)
+    data, _ = ex.prepare(str(out), 4, 0.5, 10, 0.5, N, PARAMS)
+    (label, (d, s)), = ex.target_protocols(data, 0.5).items()
+    assert label == "every frame, +- 2 frames" and d.frame_step == 1 and d.frames.tolist() == list(range(2 * N))
+    assert (d.GT[:N, N:] == _band(N)).all()                               # +- 2, not the folder's 0
+    assert len(d.descriptors["seqslam"]) == 2 * N and s.reference[:N].all() and not s.reference[N:].any()
+
+
+def test_other_datasets_have_no_protocol_of_their_own(tiny_sequence):
+    data, _ = ex.prepare(str(tiny_sequence), 2, 0.5, 10, 0.5, None, PARAMS)
+    assert ex.target_protocols(data, 0.5) == {}
