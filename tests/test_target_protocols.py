@@ -77,7 +77,9 @@ def test_a_pair_run_is_the_default_streamed_over_the_pair_alone(gp):
     assert pr["R@1_%"] == pytest.approx(100 * ex.evaluate.per_query(S, d.GT, d.exclude, d.evalq, s.reference)["R@1"])
     assert pr["R@1_%"] == 100.0                                            # the textures repeat exactly
     assert check[seqmatch.DEFAULT_NAME]["equal"]
-    assert np.isnan(rows.loc[("SeqSLAM (published)", "loop closure"), "fps_min"])   # timed in the leaderboard only
+    seqslam = rows.loc[("SeqSLAM (published)", "loop closure")]
+    assert np.isnan(seqslam["fps_min"]) and np.isnan(seqslam["bytes_per_stored_frame"])   # measured in the leaderboard only
+    assert rows.loc[(seqmatch.DEFAULT_NAME, "loop closure"), "bytes_per_stored_frame"] == 256 * 4 + 4 * k["seq_len"]
     targets = dict(zip(result.targets.target, result.targets.met))
     assert targets["R@1 (%), place recognition"] is True
     table, board_rows = ex.protocol_tables(result, {"day_right -> night_right": result})

@@ -298,9 +298,10 @@ def targets(board: pd.DataFrame, names) -> dict:
 def meta(knobs: dict, dets: dict, infos: dict, texts: dict) -> dict:
     """{method: dict(weights, knobs, bytes_per_stored_frame)} for :func:`method_rows`. infos:
     {descriptor: ExtractInfo} (SeqSLAM and the raw pixels: weights "none"); texts: {method: knob
-    text}. Read the bytes after the detectors have stored a frame (after timing)."""
+    text}. Read the bytes after the detectors have stored a frame (after timing): a detector that
+    stored none (one left out of the timing) gets None, not measured, rather than its 0."""
     return {k: {"weights": weights_kind(infos[kn["descriptor"]].weights) if kn["descriptor"] in infos else "none",
-                "knobs": texts[k], "bytes_per_stored_frame": dets[k].bytes_per_frame} for k, kn in knobs.items()}
+                "knobs": texts[k], "bytes_per_stored_frame": dets[k].bytes_per_frame or None} for k, kn in knobs.items()}
 
 
 def knob_table(knobs: dict, score: dict, texts: dict) -> pd.DataFrame:
