@@ -35,7 +35,7 @@ from greenloop.study import targets as goals
 
 SEQ_ROWS = ("greenloop-seq", "greenloop-seq-fast", seqmatch.DEFAULT_NAME)   # the rows the targets judge
 TARGET_ENTRIES = (seqmatch.DEFAULT_NAME, "seqslam")    # what a target protocol runs: the default and SeqSLAM's rows
-TARGET_TOLERANCE = 2       # frames: the targets' ground truth, frame k of each traversal +- 2 (issue 28)
+TARGET_TOLERANCE = 2       # frames: the targets' ground truth, frame k of each traversal +- 2
 GP_PAIRS = (("day_right", "night_right"), ("day_left", "night_right"))   # Gardens Point's named pairs
 NO_SPLIT_DROPPED = "greenloop-seq, the tuned SeqSLAM, every tuned knob and threshold and so every closure count"
 NO_SPLIT_KEPT = ("the single-frame methods (untuned), SeqSLAM at its published parameters and the "
@@ -212,7 +212,7 @@ def _protocol(full: Data, traversals, tune_fraction: float) -> tuple[Data, Split
 
 def target_protocols(data: Data, tune_fraction: float) -> dict:
     """{label: (Data, Split)}: the streams on which the detector's targets are defined where this
-    leaderboard's own differ (issue 28), for the named default and SeqSLAM (TARGET_ENTRIES).
+    leaderboard's own differ, for the named default and SeqSLAM (TARGET_ENTRIES).
 
     Nordland: all its frames at the full rate (frame_step 1), summer then winter, correct within
     +- TARGET_TOLERANCE frames (the leaderboard: every frame_step-th frame, the dataset's own
@@ -239,8 +239,8 @@ def run_protocol(data: Data, split: Split) -> tuple[Board, dict]:
     """The named default and SeqSLAM (TARGET_ENTRIES) on one target protocol, as the leaderboard's
     rows are: tuned (SeqSLAM's grid on its tuning queries) and thresholded; the stream-vs-matrix
     check and the timing for the named default only: the leaderboard checks and times SeqSLAM,
-    and at Nordland's full rate each timing repeat would first stream some 5000 frames through
-    each SeqSLAM row at under 100 frames/s. Returns (Board, the stream check {method:
+    and at Nordland's full rate each timing repeat would first stream every earlier frame through
+    each SeqSLAM row, one SAD against every stored frame each. Returns (Board, the stream check {method:
     ``seqstream.stream_check``})."""
     reg = {k: REGISTRY[k] for k in TARGET_ENTRIES}
     tuned = tune(data, reg)
@@ -256,7 +256,7 @@ def protocol_tables(result: Board, runs: dict) -> tuple[pd.DataFrame, pd.DataFra
     targets = pd.concat([t.assign(protocol=label) for label, t in
                          [("leaderboard", result.targets)] + [(k, b.targets) for k, b in runs.items()]], ignore_index=True)
     rows = [lb.rounded(b.board).assign(protocol=k) for k, b in runs.items()]
-    cols = ["protocol"] + [c for c in lb.COLUMNS]
+    cols = ["protocol"] + list(lb.COLUMNS)
     return (targets[["protocol"] + [c for c in targets.columns if c != "protocol"]],
             pd.concat(rows, ignore_index=True)[cols] if rows else pd.DataFrame(columns=cols))
 

@@ -76,7 +76,7 @@ def _common(row, seq_len) -> list[dict]:
 
 def detector_targets(rows, dataset: str, method: str = "greenloop-seq", seqslam: str = "SeqSLAM",
                     seq_len=None, frame_step=None) -> list[dict]:
-    """Each issue-28 target of ``dataset`` for ``method``: a list of dicts target (text), measured
+    """Each of the detector's targets (module doc) of ``dataset`` for ``method``: a list of dicts target (text), measured
     (float, % or frames/s; None when the rows do not hold it), required (text) and met (bool; None
     when not measured). rows: the dataset's leaderboard rows (list of dicts or a DataFrame).
     seqslam: the SeqSLAM row's method name, or several (each judged: Nordland's R@1 above it).
