@@ -17,7 +17,7 @@ import numpy as np
 
 from greenloop import evaluate, retrieval
 from greenloop.seqmatch import (_EPS, COLORS, DEFAULT_VELOCITIES, STORE_DTYPES, _check_descriptor,
-                                calibrate_scores, center, columns_to_scores, contrast_normalise,
+                                calibrate_scores, center, center_stored, columns_to_scores, contrast_normalise,
                                 describe_frames, matrix_events, normalise, threshold_range)
 from greenloop.util import numba_kernels
 from greenloop.util.checks import positive_int
@@ -84,6 +84,8 @@ class Detector:
     Options (off by default, the behaviour before them):
     center_window: W > 0 subtracts from each raw descriptor the mean of the last W raw descriptors
         (itself included, :func:`center`) before normalising: a buffer of W x D float32, fixed.
+        While the window fills, the stored frames are centred again on every frame so far
+        (:func:`center_stored`), so the start of the recording can be recognised.
     calibrate: score each candidate as a z-score against the query's own candidates
         (:func:`calibrate_scores`); the threshold is then a z-score (any finite float).
     repeat_cos: a query whose normalised descriptor has cosine >= repeat_cos with the previous
@@ -209,6 +211,7 @@ class Detector:
         if x.shape[1] == 0 or not np.all(np.isfinite(x)):
             raise ValueError(f"descriptor {self.frame_index} is empty or has NaN/inf values")
         y = normalise(self._centered(x), self.projection)[0]
+        self._recenter_stored()
         j, c = self.frame_index, max(self.frame_index - self.exclude, 0)
         if self._db is not None and y.size != self._db.shape[1]:
             raise ValueError(f"descriptor {j} has {y.size} dims, the stream's first had {self._db.shape[1]}")
@@ -234,6 +237,21 @@ class Detector:
         self._recent[-1] = x[0]
         self._n_recent = min(self._n_recent + 1, W)
         return x - self._recent[W - self._n_recent:].mean(axis=0)
+
+    def _recenter_stored(self) -> None:
+        """While the centring window fills (frame j < center_window), centre the stored frames 0..j-1
+        again on the mean of frames 0..j, the mean frame j was centred on (:func:`center_stored`);
+        in candidate mode the index (at most center_window rows) is rebuilt from them."""
+        W, j = self.center_window, self.frame_index
+        if not W or not 0 < j < W or self._db is None:
+            return
+        raw = self._recent[W - self._n_recent:]           # frames 0..j, oldest first
+        self._db[:j] = normalise(raw[:-1] - raw.mean(axis=0), self.projection)
+        if self._index is not None and self._index.n_stored:
+            n_in = self._index.n_stored
+            self._index = retrieval.make_index(self.index_kind, self._db.shape[1], **self.index_options)
+            self._index.add(self._db[:n_in].astype(np.float32))
+            self._sum = self._db[:n_in].astype(np.float32).sum(0, dtype=np.float64)
 
     def _is_repeat(self, y: np.ndarray) -> bool:
         prev, self._previous = self._previous, y.copy()
@@ -372,9 +390,9 @@ class Detector:
                              f"(NaN/inf: fix the descriptors first)")
         self.reset()
         n, d, L, W = len(X), X.shape[1], self.seq_len, self.center_window
-        Y = normalise(center(X, W), self.projection)
+        Y = normalise(center(X, W), self.projection)           # each frame as a query
         self._db = np.empty((256 * 2 ** max(math.ceil(math.log2(n / 256)), 0), Y.shape[1]), self.store_dtype)
-        self._db[:n] = Y
+        self._db[:n] = normalise(center_stored(X, W), self.projection) if W else Y
         c = max(n - 1 - self.exclude, 0)                   # rows indexed before query n - 1
         self._index = retrieval.make_index(self.index_kind, Y.shape[1], **self.index_options)
         if c:
@@ -453,8 +471,14 @@ def score_matrix(X, exclude: int = 150, seq_len: int = 10, velocities=DEFAULT_VE
         return np.zeros((0, 0), np.float32)
     if not np.all(np.isfinite(X)):
         raise ValueError("X has NaN or inf values")
-    Y = normalise(center(X, det.center_window), projection)
-    G = Y.astype(det.store_dtype).astype(np.float32) @ Y.T    # stored rows x queries, one product
+    W, f32 = det.center_window, np.float32
+    Y = normalise(center(X, W), projection)                   # each frame as a query
+    stored = normalise(center_stored(X, W), projection) if W else Y
+    G = stored.astype(det.store_dtype).astype(f32) @ Y.T      # stored rows x queries, one product
+    for j in range(det.exclude + 1, min(W - 1, n)):           # the window still filling: rows centred on 0..j
+        c = j - det.exclude
+        rows = normalise(X[:j] - X[:j + 1].mean(axis=0), projection)[:c]
+        G[:c, j] = rows.astype(det.store_dtype).astype(f32) @ Y[j]
     return columns_to_scores(det, Y, G)
 
 def tune_knobs(descriptors: dict, GT, exclude: int, tune, seq_lens, contrast_windows,
