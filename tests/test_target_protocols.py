@@ -67,7 +67,7 @@ def test_gardenspoint_pairs_are_the_named_traversals_aligned(gp):
 def test_a_pair_run_is_the_default_streamed_over_the_pair_alone(gp):
     data, _ = gp
     d, s = ex.target_protocols(data, 0.5)["day_right -> night_right"]
-    result, check = ex.run_protocol(d, s)
+    result, check, carry = ex.run_protocol(d, s)
     k = seqmatch.DEFAULT_KNOBS
     X = np.concatenate([data.descriptors["gradients"][N:2 * N], data.descriptors["gradients"][2 * N:]])
     S = seqstream.score_matrix(X, d.exclude, k["seq_len"], k["velocities"], 0, None, center_window=k["center_window"],
@@ -84,6 +84,12 @@ def test_a_pair_run_is_the_default_streamed_over_the_pair_alone(gp):
     assert targets["R@1 (%), place recognition"] is True
     table, board_rows = ex.protocol_tables(result, {"day_right -> night_right": result})
     assert set(table.protocol) == {"leaderboard", "day_right -> night_right"} and len(board_rows) == len(result.board)
+    lc = rows.loc[(seqmatch.DEFAULT_NAME, "loop closure")]                 # the carry row: the board's closures at
+    assert carry["threshold_fixed"] == seqmatch.DEFAULT_THRESHOLD          # the fixed threshold, and the p95 rule's
+    assert carry["declared_at_fixed"] == lc["closures_declared"]           # own pick on this tuning part
+    own = seqmatch.choose_threshold(S, d.GT, d.exclude, d.tune, rule="p95")
+    assert carry["threshold_tuning_p95"] == pytest.approx(own, abs=1e-4)
+    assert carry["declared_at_tuning_p95"] == seqmatch.closures(S, d.GT, own, d.exclude, d.evalq)["declared"]
 
 
 def test_nordland_is_every_frame_at_two_frames_whatever_its_own_tolerance(tmp_path):

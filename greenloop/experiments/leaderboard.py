@@ -235,17 +235,35 @@ def target_protocols(data: Data, tune_fraction: float) -> dict:
     return {}
 
 
-def run_protocol(data: Data, split: Split) -> tuple[Board, dict]:
+def threshold_check(data: Data, tuned: Tuned, label: str) -> dict:
+    """Does the named default's one threshold carry to this stream? Its closures on the evaluation
+    queries (loop closure) at the fixed ``seqmatch.DEFAULT_THRESHOLD``, beside those at the
+    threshold the rule the fixed one was chosen by ("p95": the lowest score with >= 95 % closure
+    precision, ``seqmatch.choose_threshold``) picks on this stream's own tuning queries.
+    Returns one row (dict): protocol (label), the thresholds (calibrated scores; the tuning part's
+    NaN without an honest split), closures declared and their precision (%, NaN when none) at each."""
+    S, GT, ex = tuned.S[seqmatch.DEFAULT_NAME], data.GT, data.exclude
+    own = np.nan if data.tune is None else seqmatch.choose_threshold(S, GT, ex, data.tune, rule="p95")
+    row = {"protocol": label}
+    for name, thr in (("fixed", seqmatch.DEFAULT_THRESHOLD), ("tuning_p95", own)):
+        c = seqmatch.closures(S, GT, thr, ex, data.evalq) if np.isfinite(thr) else {"declared": np.nan}
+        row.update({f"threshold_{name}": round(float(thr), 4), f"declared_at_{name}": c["declared"],
+                    f"precision_at_{name}_%": round(100 * c["precision"], 2) if c["declared"] else np.nan})
+    return row
+
+
+def run_protocol(data: Data, split: Split) -> tuple[Board, dict, dict]:
     """The named default and SeqSLAM (TARGET_ENTRIES) on one target protocol, as the leaderboard's
     rows are: tuned (SeqSLAM's grid on its tuning queries) and thresholded; the stream-vs-matrix
     check and the timing for the named default only: the leaderboard checks and times SeqSLAM,
     and at Nordland's full rate each timing repeat would first stream every earlier frame through
     each SeqSLAM row, one SAD against every stored frame each. Returns (Board, the stream check {method:
-    ``seqstream.stream_check``})."""
+    ``seqstream.stream_check``}, :func:`threshold_check`'s row without its protocol label)."""
     reg = {k: REGISTRY[k] for k in TARGET_ENTRIES}
     tuned = tune(data, reg)
     timed = stream_and_time(data, tuned, (), reg, only=(seqmatch.DEFAULT_NAME,))
-    return board(data, split, tuned, timed), timed.stream_check
+    carry = {k: v for k, v in threshold_check(data, tuned, "").items() if k != "protocol"}
+    return board(data, split, tuned, timed), timed.stream_check, carry
 
 
 def protocol_tables(result: Board, runs: dict) -> tuple[pd.DataFrame, pd.DataFrame]:
