@@ -70,10 +70,9 @@ DEFAULT_NAME = "greenloop-seq-grad"
 DEFAULT_KNOBS = dict(descriptor="gradients", seq_len=10, contrast_window=0, center_window=50,
                      velocities=(0.8, 1.0, 1.25, 1.5, 2.0, -0.8, -1.0, -1.25), calibrate=True,
                      repeat_cos=0.995)
-# A calibrated score (calibrate_scores), set by hand when the default was named: it is not what the
-# "p95" rule picks on Nordland's tuning part (13_leaderboard's threshold_carry table prints that pick
-# beside it on every stream), which is lower and not silent on a drive that never comes back
-# (tests/test_seqspeed.py). So no tuning part chose it.
+# A calibrated score (calibrate_scores), set by hand when the default was named, above the scores of
+# a drive that never comes back (tests/test_seqspeed.py keeps it silent there). No rule on a tuning
+# part chose it: 13_leaderboard's threshold_carry table prints the "p95" rule's pick beside it.
 DEFAULT_THRESHOLD = 1.8
 
 __all__ = ["DESCRIPTORS", "DEFAULT_NAME", "DEFAULT_KNOBS", "DEFAULT_THRESHOLD", "center", "center_stored",
