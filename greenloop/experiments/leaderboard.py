@@ -238,8 +238,8 @@ def target_protocols(data: Data, tune_fraction: float) -> dict:
 def threshold_check(data: Data, tuned: Tuned, label: str) -> dict:
     """Does the named default's one threshold carry to this stream? Its closures on the evaluation
     queries (loop closure) at the fixed ``seqmatch.DEFAULT_THRESHOLD``, beside those at the
-    threshold the rule the fixed one was chosen by ("p95": the lowest score with >= 95 % closure
-    precision, ``seqmatch.choose_threshold``) picks on this stream's own tuning queries.
+    threshold the "p95" rule (the lowest score with >= 95 % closure precision,
+    ``seqmatch.choose_threshold``) picks on this stream's own tuning queries.
     Returns one row (dict): protocol (label), the thresholds (calibrated scores; the tuning part's
     NaN without an honest split), closures declared and their precision (%, NaN when none) at each."""
     S, GT, ex = tuned.S[seqmatch.DEFAULT_NAME], data.GT, data.exclude
