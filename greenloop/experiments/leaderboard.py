@@ -235,16 +235,16 @@ def target_protocols(data: Data, tune_fraction: float) -> dict:
     return {}
 
 
-def threshold_check(data: Data, tuned: Tuned, label: str) -> dict:
+def threshold_check(data: Data, tuned: Tuned) -> dict:
     """Does the named default's one threshold carry to this stream? Its closures on the evaluation
     queries (loop closure) at the fixed ``seqmatch.DEFAULT_THRESHOLD``, beside those at the
     threshold the "p95" rule (the lowest score with >= 95 % closure precision,
     ``seqmatch.choose_threshold``) picks on this stream's own tuning queries.
-    Returns one row (dict): protocol (label), the thresholds (calibrated scores; the tuning part's
+    Returns one row (dict): the thresholds (calibrated scores; the tuning part's
     NaN without an honest split), closures declared and their precision (%, NaN when none) at each."""
     S, GT, ex = tuned.S[seqmatch.DEFAULT_NAME], data.GT, data.exclude
     own = np.nan if data.tune is None else seqmatch.choose_threshold(S, GT, ex, data.tune, rule="p95")
-    row = {"protocol": label}
+    row = {}
     for name, thr in (("fixed", seqmatch.DEFAULT_THRESHOLD), ("tuning_p95", own)):
         c = seqmatch.closures(S, GT, thr, ex, data.evalq) if np.isfinite(thr) else {"declared": np.nan}
         row.update({f"threshold_{name}": round(float(thr), 4), f"declared_at_{name}": c["declared"],
@@ -258,12 +258,11 @@ def run_protocol(data: Data, split: Split) -> tuple[Board, dict, dict]:
     check and the timing for the named default only: the leaderboard checks and times SeqSLAM,
     and at Nordland's full rate each timing repeat would first stream every earlier frame through
     each SeqSLAM row, one SAD against every stored frame each. Returns (Board, the stream check {method:
-    ``seqstream.stream_check``}, :func:`threshold_check`'s row without its protocol label)."""
+    ``seqstream.stream_check``}, :func:`threshold_check`'s row)."""
     reg = {k: REGISTRY[k] for k in TARGET_ENTRIES}
     tuned = tune(data, reg)
     timed = stream_and_time(data, tuned, (), reg, only=(seqmatch.DEFAULT_NAME,))
-    carry = {k: v for k, v in threshold_check(data, tuned, "").items() if k != "protocol"}
-    return board(data, split, tuned, timed), timed.stream_check, carry
+    return board(data, split, tuned, timed), timed.stream_check, threshold_check(data, tuned)
 
 
 def protocol_tables(result: Board, runs: dict) -> tuple[pd.DataFrame, pd.DataFrame]:
