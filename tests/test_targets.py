@@ -13,14 +13,15 @@ def _met(out):
 
 def test_nordland_targets_met_and_not_met():
     rows = [{"method": "greenloop-seq", "mode": "loop closure", "R@1_%": 96.0, "R@100P_%": 59.9, "fps_min": 919.0,
-             "closures_declared": 100, "closures_false": 10},
-            {"method": "SeqSLAM", "mode": "loop closure", "R@1_%": 96.5, "R@100P_%": 10.0}]
+             "closures_declared": 100, "closures_false": 10, "R@1_lo_%": 93.0, "R@1_hi_%": 98.0},
+            {"method": "SeqSLAM", "mode": "loop closure", "R@1_%": 96.5, "R@100P_%": 10.0, "R@1_lo_%": 94.0, "R@1_hi_%": 99.0}]
     out = detector_targets(rows, "data/nordland", seq_len=10)
     m = {r["target"]: r for r in out}
     assert m["R@1 (%), loop closure"]["met"] is True and m["R@1 (%), loop closure"]["measured"] == 96.0
     assert m["frames of sequence"]["met"] is True
     assert m["R@100P (%), loop closure"]["met"] is False                   # 59.9 < 60
-    assert m["R@1 above SeqSLAM (96.5 %)"]["met"] is False                 # 96.0 is not above 96.5
+    above = m["R@1 above SeqSLAM (96.5 %): the low end of its interval"]
+    assert above["met"] is False and above["measured"] == 93.0 and above["required"] == "> 99.0"
     assert m["frames/s (slowest repeat)"]["met"] is False                  # 919 < 920
     assert m["closure precision at the threshold (%)"]["measured"] == 90.0
     assert m["closure precision at the threshold (%)"]["met"] is True      # 90 of 100 right: exactly 90 %
@@ -39,13 +40,23 @@ def test_gardenspoint_reads_place_recognition_and_absent_values_are_not_measured
     assert m["frames/s"] is None and m["closure precision at the threshold"] is None
 
 
-def test_synthetic_highest_of_every_method_ignores_chance():
-    rows = [{"method": "greenloop-seq", "mode": "loop closure", "R@1_%": 80.0, "AUC-PR_%": 70.0},
-            {"method": "SeqSLAM", "mode": "loop closure", "R@1_%": 79.0, "AUC-PR_%": 71.0},
+def _spread(v, half):
+    return {"R@1_%": v, "R@1_lo_%": v - half, "R@1_hi_%": v + half,
+            "AUC-PR_%": v - 10, "AUC-PR_lo_%": v - 10 - half, "AUC-PR_hi_%": v - 10 + half}
+
+
+def test_synthetic_highest_of_every_method_ignores_chance_and_needs_separate_intervals():
+    rows = [{"method": "greenloop-seq", "mode": "loop closure", **_spread(80.0, 2.0)},
+            {"method": "SeqSLAM", "mode": "loop closure", **_spread(70.0, 3.0)},
+            {"method": "pixels (single frame)", "mode": "loop closure", **_spread(60.0, 5.0)},
             {"method": "chance (random scores)", "mode": "loop closure", "R@1_%": 99.0, "AUC-PR_%": 99.0}]
     out = detector_targets(rows, "data/synthetic-greenhouse")
-    assert [r["met"] for r in out[:2]] == [True, False]
-    assert out[1]["required"] == "> 71.0"
+    assert [r["met"] for r in out[:2]] == [True, True]
+    assert out[0]["measured"] == 78.0 and out[0]["required"] == "> 73.0"  # its low end above SeqSLAM's high end
+    rows[1].update(_spread(75.0, 3.0))                                      # 80 > 75, but [78, 82] meets [72, 78]
+    assert [r["met"] for r in detector_targets(rows, "synthetic")[:2]] == [False, False]
+    rows[1].pop("R@1_hi_%")                                                 # no interval: not measured
+    assert detector_targets(rows, "synthetic")[0]["met"] is None
     missing = detector_targets(rows[1:], "synthetic")                       # no greenloop-seq row
     assert all(r["met"] is None for r in missing)
 
@@ -56,11 +67,12 @@ def test_unknown_dataset_names_the_accepted_ones():
 
 
 def test_nordland_judges_every_seqslam_row_named():
-    rows = [{"method": "greenloop-seq", "mode": "loop closure", "R@1_%": 90.0},
-            {"method": "SeqSLAM (published)", "mode": "loop closure", "R@1_%": 70.0},
-            {"method": "SeqSLAM (tuned)", "mode": "loop closure", "R@1_%": 91.0}]
-    m = {r["target"]: r["met"] for r in detector_targets(rows, "nordland", seqslam=("SeqSLAM (published)", "SeqSLAM (tuned)"))}
+    rows = [{"method": "greenloop-seq", "mode": "loop closure", **_spread(90.0, 4.0)},
+            {"method": "SeqSLAM (published)", "mode": "loop closure", **_spread(70.0, 4.0)},
+            {"method": "SeqSLAM (tuned)", "mode": "loop closure", **_spread(88.0, 4.0)}]
+    m = {r["target"].split(":")[0]: r["met"] for r in
+         detector_targets(rows, "nordland", seqslam=("SeqSLAM (published)", "SeqSLAM (tuned)"))}
     assert m["R@1 above SeqSLAM (published) (70.0 %)"] is True
-    assert m["R@1 above SeqSLAM (tuned) (91.0 %)"] is False                # the stronger baseline is not beaten
-    absent = {r["target"]: r["met"] for r in detector_targets(rows[:1], "nordland", seqslam=("SeqSLAM (tuned)",))}
+    assert m["R@1 above SeqSLAM (tuned) (88.0 %)"] is False                # 90 > 88, but the intervals overlap
+    absent = {r["target"].split(":")[0]: r["met"] for r in detector_targets(rows[:1], "nordland", seqslam=("SeqSLAM (tuned)",))}
     assert absent["R@1 above SeqSLAM (tuned) (not measured %)"] is None

@@ -12,12 +12,17 @@ The targets (evaluation part only, one configuration of greenloop-seq):
     gardenspoint  R@1 >= 90 %, R@100P >= 50 % (place recognition: reference = the day traversal)
     synthetic     the highest R@1 and the highest AUC-PR of every method (loop closure, chance excluded)
     every dataset >= 920 frames/s (slowest repeat); closure precision >= 90 % at the threshold used
+
+"Above" and "highest" compare rows by their 95 % intervals (``R@1_lo_%`` / ``R@1_hi_%``, the same for
+AUC-PR, as notebook 13 writes them; :func:`separated`): met only where the method's interval lies
+wholly above the other rows', so a point estimate inside another row's spread is never called ahead.
+A comparison whose intervals are absent is not measured.
 """
 from __future__ import annotations
 
 import math
 
-__all__ = ["FPS_TARGET", "PRECISION_TARGET", "dataset_kind", "detector_targets"]
+__all__ = ["FPS_TARGET", "PRECISION_TARGET", "dataset_kind", "detector_targets", "separated"]
 
 FPS_TARGET = 920.0            # frames/s per stream on 2 cores, descriptor included (the main paper's)
 PRECISION_TARGET = 90.0       # % closure precision at the one threshold
@@ -57,11 +62,28 @@ def _find(rows, method: str, mode: str):
     return hit[0] if hit else None
 
 
-def _best_other(rows, method: str, mode: str, key: str):
-    vals = [_value(r, key) for r in rows if r.get("mode") == mode and r.get("method") != method
-            and not str(r.get("method", "")).startswith("chance")]
-    vals = [v for v in vals if v is not None]
-    return max(vals) if vals else None
+def _others(rows, method: str, mode: str, key: str) -> list:
+    """The rows of ``mode`` other than ``method`` and chance that hold ``key``."""
+    return [r for r in rows if r.get("mode") == mode and r.get("method") != method
+            and not str(r.get("method", "")).startswith("chance") and _value(r, key) is not None]
+
+
+def separated(row, others, key: str):
+    """(low end of ``row``'s interval of ``key``, the highest high end among ``others``): ``row`` is
+    above them all where the first exceeds the second. key: a metric column such as "R@1_%", whose
+    interval is ``<key without %>lo_%`` / ``hi_%``. Rows are dicts; either value None where an
+    interval is absent (or no other row is given)."""
+    lo, hi = key[:-1] + "lo_%", key[:-1] + "hi_%"
+    highs = [_value(r, hi) for r in others]
+    top = None if not highs or any(h is None for h in highs) else max(highs)
+    return _value(row, lo), top
+
+
+def _above(target: str, row, others, key: str) -> dict:
+    """A target met where ``row``'s interval of ``key`` lies wholly above every one of ``others``'
+    (:func:`separated`); measured = its low end, required = "> the others' highest high end"."""
+    lo, top = separated(row, others, key)
+    return _judge(target, None if top is None else lo, f"> {top}", lambda v: v > top)
 
 
 def _common(row, seq_len) -> list[dict]:
@@ -92,9 +114,10 @@ def detector_targets(rows, dataset: str, method: str = "greenloop-seq", seqslam:
                _judge("frames of sequence", None if seq_len is None else float(seq_len), "<= 10", lambda v: v <= 10),
                _judge("R@100P (%), loop closure", _value(lc, "R@100P_%"), ">= 60", lambda v: v >= 60.0)]
         for name in ([seqslam] if isinstance(seqslam, str) else list(seqslam)):
-            sr = _value(_find(rows, name, "loop closure"), "R@1_%")
-            out.append(_judge(f"R@1 above {name} ({sr if sr is not None else 'not measured'} %)",
-                              None if sr is None else r1, f"> {sr}", lambda v, sr=sr: v > sr))
+            other = _find(rows, name, "loop closure")
+            sr = _value(other, "R@1_%")
+            out.append(_above(f"R@1 above {name} ({sr if sr is not None else 'not measured'} %): "
+                              "the low end of its interval", lc, [] if other is None else [other], "R@1_%"))
         return out + _common(lc, seq_len)
     if kind == "gardenspoint":
         return [_judge("R@1 (%), place recognition", _value(pr, "R@1_%"), ">= 90", lambda v: v >= 90.0),
@@ -102,8 +125,6 @@ def detector_targets(rows, dataset: str, method: str = "greenloop-seq", seqslam:
             + _common(lc if lc is not None else pr, seq_len)
     out = []
     for key in ("R@1_%", "AUC-PR_%"):
-        best = _best_other(rows, method, "loop closure", key)
-        mine = _value(lc, key)
-        out.append(_judge(f"highest {key[:-2]} of every method (%), loop closure", None if best is None else mine,
-                          f"> {best}", lambda v, b=best: v > b))
+        out.append(_above(f"highest {key[:-2]} of every method (%), loop closure: the low end of its interval", lc,
+                          _others(rows, method, "loop closure", key), key))
     return out + _common(lc, seq_len)
