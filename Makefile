@@ -43,7 +43,7 @@ GARDENSPOINT := data/gardenspoint
 GARDENSPOINT_SRC ?= $(if $(wildcard ../shared/real/gardenspoint/night_right),../shared/real/gardenspoint,)
 GARDENSPOINT_URL ?= https://github.com/aghagol/loop-detection
 
-.PHONY: all help venv synthetic data nordland gardenspoint test quick sweep bench bench-scale clean-results readme-coverage
+.PHONY: all help venv synthetic data nordland gardenspoint test quick sweep bench bench-scale clean-results readme-coverage default-choice
 .DEFAULT_GOAL := help
 
 help: ## this list
@@ -123,6 +123,10 @@ results/datasets.md: $(wildcard $(DATASET_RESULTS:%=%/*/summary.json)) $(RESULTS
 # Which table and figure of the papers the results reproduce (greenloop.study.coverage), read from them.
 results/coverage.md: $(wildcard $(DATASET_RESULTS:%=%/*/manifest.json)) greenloop/study/coverage.py
 	$(BIN)/python -m greenloop.study.report --coverage $@ $(DATASET_RESULTS)
+
+default-choice: | $(STAMP) ## the named default's centring windows and threshold, chosen on tuning queries -> results/default_choice/
+	$(BIN)/python -m greenloop.study.default_choice --nordland $(NORDLAND) --gardenspoint $(GARDENSPOINT) \
+		--synthetic $(SYNTHETIC) --out results/default_choice
 
 readme-coverage: results/coverage.md ## refresh the README's coverage table from the results folders
 	$(BIN)/python -m greenloop.study.coverage README.md $(DATASET_RESULTS)

@@ -67,15 +67,18 @@ _EPS = 1e-6
 # The named default configuration: what `python -m greenloop detect --method
 # greenloop-seq` runs without --tuned, and what the leaderboard's greenloop-seq row reports.
 DEFAULT_NAME = "greenloop-seq-grad"
-DEFAULT_KNOBS = dict(descriptor="gradients", seq_len=10, contrast_window=0, center_window=50,
+DEFAULT_KNOBS = dict(descriptor="gradients", seq_len=10, contrast_window=0, center_window=(3, 15),
                      velocities=(0.8, 1.0, 1.25, 1.5, 2.0, -0.8, -1.0, -1.25), calibrate=True,
-                     repeat_cos=0.995)
-# A calibrated score (calibrate_scores), set by hand when the default was named, above the scores of
-# a drive that never comes back (tests/test_seqspeed.py keeps it silent there). No rule on a tuning
-# part chose it: 13_leaderboard's threshold_carry table prints the "p95" rule's pick beside it.
-DEFAULT_THRESHOLD = 1.8
+                     repeat_cos=0.999)
+# center_window and the threshold were chosen by ``greenloop.study.default_choice`` (its table:
+# results/default_choice/windows.md): the centring windows with the highest mean per-query AUC-PR over the
+# tuning queries of the four streams the detector's targets name, then the threshold the "p95" rule
+# (choose_threshold) picks on the tuning part of the largest of them, Nordland at its full rate,
+# rounded to one decimal: a calibrated score (calibrate_scores). tests/test_seqspeed.py keeps it
+# silent on a drive that never comes back.
+DEFAULT_THRESHOLD = 3.0
 
-__all__ = ["DESCRIPTORS", "DEFAULT_NAME", "DEFAULT_KNOBS", "DEFAULT_THRESHOLD", "center", "center_stored",
+__all__ = ["DESCRIPTORS", "DEFAULT_NAME", "DEFAULT_KNOBS", "DEFAULT_THRESHOLD", "center", "center_stored", "center_windows",
            "calibrate_scores", "describe", "describe_frames", "normalise", "fit_projection", "contrast_normalise", "columns_to_scores",
            "closures", "choose_threshold", "threshold_range", "pick_knobs", "matrix_events"]
 
@@ -162,39 +165,71 @@ def contrast_normalise(s, window: int) -> np.ndarray:
     return np.where(sd > _EPS, (s - mu) / np.maximum(sd, _EPS), 0.0).astype(np.float32)
 
 
-def center(X, window: int) -> np.ndarray:
-    """Causal standardisation of a descriptor stream: row j minus the mean of rows
-    max(0, j - window + 1)..j (its own recent past, itself included); window 0 returns X.
+def center_windows(window) -> tuple[int, ...]:
+    """A centring window as the tuple of its windows in frames: an int W >= 0 -> (W,) (0 -> (), no
+    centring); a list or tuple of ints >= 1 -> that tuple (several time scales, :func:`center`).
+    ValueError for anything else."""
+    def whole(w):
+        return isinstance(w, (int, np.integer)) and not isinstance(w, bool)
+    if whole(window) and window >= 0:
+        return (int(window),) if window else ()
+    if isinstance(window, (list, tuple)) and window and all(whole(w) and w >= 1 for w in window):
+        return tuple(int(w) for w in window)
+    raise ValueError(f"center_window must be an int >= 0 or a non-empty list of ints >= 1 (frames), got {window!r}")
 
-    X: (N, D) float raw descriptors in stream order. Removes what the recent frames share (the
-    season's snow, the night's dark sky) so that the cosine compares what differs between places.
-    Returns (N, D) float32; row j is bit-identical to what ``speed.seqstream.Detector`` computes at frame j.
-    """
-    X = np.asarray(X, dtype=np.float32)
-    if window == 0:
-        return X
+
+def _center_one(X, window: int) -> np.ndarray:
     out = np.empty_like(X)
     for j in range(len(X)):
         out[j] = X[j] - X[max(0, j - window + 1):j + 1].mean(axis=0)
     return out
 
 
-def center_stored(X, window: int) -> np.ndarray:
-    """The stored (database) side of :func:`center`: (N, D) float32, rows as :func:`center` except
-    the first m - 1 (m = min(window, N)), which are centred on the mean of rows 0..m-1.
-
-    A frame stored before a full window existed was centred on fewer frames (frame 0 on itself
-    alone, the zero vector), so the start of a recording, the place a robot most often comes back
-    to, could not be recognised. ``speed.seqstream.Detector`` centres its stored frames again on
-    every frame so far while the window fills (frames 0..m-1; causal: frames 0..j at frame j), and
-    then keeps them: once frame m - 1 has arrived it holds these rows. window 0 returns X.
-    """
-    X = np.asarray(X, dtype=np.float32)
-    out = center(X, window)
+def _stored_one(X, window: int) -> np.ndarray:
+    out = _center_one(X, window)
     m = min(window, len(X))
     if m > 1:
         out[:m - 1] = X[:m - 1] - X[:m].mean(axis=0)
     return out
+
+
+def _join(parts: list) -> np.ndarray:
+    """One window: its centred rows; several: each part L2-normalised, side by side (so that the
+    cosine of two joined rows, after :func:`normalise`, is the mean of the windows' cosines)."""
+    return parts[0] if len(parts) == 1 else np.hstack([l2_normalise(p).astype(np.float32) for p in parts])
+
+
+def center(X, window) -> np.ndarray:
+    """Causal standardisation of a descriptor stream: row j minus the mean of rows
+    max(0, j - window + 1)..j (its own recent past, itself included); window 0 returns X.
+
+    X: (N, D) float raw descriptors in stream order. Removes what the recent frames share (the
+    season's snow, the night's dark sky) so that the cosine compares what differs between places.
+    window: an int, or several windows (:func:`center_windows`): then row j is the K windows'
+    centred rows, each L2-normalised, side by side (N, K * D): a short window removes the lighting of
+    the last seconds, a longer one keeps what a stretch of the route shares.
+    Returns (N, D) or (N, K * D) float32; row j is bit-identical to what ``speed.seqstream.Detector``
+    computes at frame j.
+    """
+    X = np.asarray(X, dtype=np.float32)
+    ws = center_windows(window)
+    return _join([_center_one(X, w) for w in ws]) if ws else X
+
+
+def center_stored(X, window) -> np.ndarray:
+    """The stored (database) side of :func:`center`: rows as :func:`center` except, per window W,
+    the first m - 1 (m = min(W, N)), which are centred on the mean of rows 0..m-1.
+
+    A frame stored before a full window existed was centred on fewer frames (frame 0 on itself
+    alone, the zero vector), so the start of a recording, the place a robot most often comes back
+    to, could not be recognised. ``speed.seqstream.Detector`` centres its stored frames again on
+    every frame so far while the longest window fills (frames 0..m-1; causal: frames 0..j at frame
+    j), and then keeps them: once frame m - 1 has arrived it holds these rows. window 0 returns X.
+    Returns (N, D) or (N, K * D) float32 as :func:`center`.
+    """
+    X = np.asarray(X, dtype=np.float32)
+    ws = center_windows(window)
+    return _join([_stored_one(X, w) for w in ws]) if ws else X
 
 
 def calibrate_scores(scores) -> np.ndarray:
@@ -224,20 +259,21 @@ def threshold_range(contrast_window: int) -> tuple[float, float]:
 
 
 # ------------------------------------------------------------------------------ batch scores
-def columns_to_scores(det, Y, G) -> np.ndarray:
+def columns_to_scores(det, Y, G, gate=None) -> np.ndarray:
     """The (N, N) score matrix of a detector fed, column by column, a precomputed similarity.
 
     det: a fresh ``greenloop.speed.seqstream.Detector`` (or a subclass, e.g. ``speed.seqslam_stream``'s) whose stages after
     the similarity (contrast normalisation, trajectory search) make the scores. Y: (N, D) stored
     descriptors in stream order; G: (N, N) similarity, G[i, j] = what the stream computes between
     stored frame i and query j. Query j sees only G[:j - exclude, j], so every column is causal.
+    gate: (N, D') what the repeat gate compares, row j for query j (None: Y's rows).
     Returns S (N, N) float32 as ``seqstream.score_matrix`` (non-candidates: the smallest filled score).
     """
     n = len(G)
     S = np.full((n, n), np.nan, np.float32)
     for j in range(n):
         c = max(j - det.exclude, 0)
-        det._match(Y[j], np.asarray(G[:c, j], dtype=np.float32))
+        det._match(Y[j], np.asarray(G[:c, j], dtype=np.float32), None if gate is None else gate[j])
         S[:c, j] = det.last_scores
     filled = np.isfinite(S)
     S[~filled] = S[filled].min() if filled.any() else 0.0

@@ -33,8 +33,13 @@ def _walk(n, seed, a=0.9):
 
 @pytest.fixture(scope="module")
 def route():
-    """(route (N0, D), the revisit's frames at 1x (REVISIT, D): place k observed with noise)."""
-    w = _walk(N0, 0)
+    """(route (N0, D), the revisit's frames at 1x (REVISIT, D): place k observed with noise).
+    Place k looks like its neighbours (the random walk) plus a detail of its own as large (std 1,
+    the walk's): consecutive camera frames differ in more than a smooth drift. Without the detail a
+    short centring window (``seqmatch.center``) would turn each frame into the walk's local slope,
+    which flips sign when the route is driven the other way; on real frames it does not
+    (results/default_choice/windows.md: R@1 of the reversed tuning queries)."""
+    w = _walk(N0, 0) + np.random.default_rng(2).normal(size=(N0, D))
     return w, w[:REVISIT] + np.random.default_rng(1).normal(scale=1.3, size=(REVISIT, D))
 
 
@@ -182,3 +187,47 @@ def test_the_start_of_the_recording_is_recognised(route):
     r1 = {L: evaluate.per_query(seqstream.score_matrix(X, EXCLUDE, **dict(DEFAULT, seq_len=L)), GT | GT.T, EXCLUDE,
                                 queries=q)["R@1"] for L in (1, DEFAULT["seq_len"])}
     assert r1[1] >= 0.8 and r1[DEFAULT["seq_len"]] >= 0.3, r1
+
+
+def test_center_windows_join_each_window_normalised():
+    """Two windows: each row is the two centred rows, each L2-normalised, side by side; a bad
+    window is refused."""
+    X = np.array([[1, 0], [3, 0], [3, 4], [0, 4]], np.float32)
+    J = seqmatch.center(X, [1, 2])
+    assert J.shape == (4, 4) and not J[:, :2].any()                     # window 1: every row minus itself
+    np.testing.assert_allclose(J[:, 2:], [[0, 0], [1, 0], [0, 1], [-1, 0]], atol=1e-6)   # window 2, L2
+    np.testing.assert_allclose(seqmatch.center_stored(X, [1, 2])[0, 2:], [-1, 0], atol=1e-6)  # frame 0 on 0..1
+    assert seqmatch.center_windows(0) == () and seqmatch.center_windows(7) == (7,) and seqmatch.center_windows([3, 15]) == (3, 15)
+    for bad in (-1, [], [0, 5], 2.5, True):
+        with pytest.raises(ValueError, match="center_window"):
+            seqmatch.center_windows(bad)
+
+
+def test_two_windows_stream_equals_matrix_while_the_windows_fill(route):
+    """The stream re-centres its stored frames while the longer window fills: its columns equal
+    the score matrix's from the first frame with candidates on."""
+    w, r = route
+    X = np.concatenate([w[:120], r[:40]])
+    k = dict(DEFAULT, center_window=[3, 60])
+    S = seqstream.score_matrix(X, 10, **k)
+    det = seqstream.Detector(None, exclude=10, **k)
+    for j, x in enumerate(X):
+        det.update_descriptor(x)
+        if j > 10:
+            np.testing.assert_allclose(det.last_scores, S[:j - 10, j], rtol=1e-4, atol=1e-4)
+    assert det.bytes_per_frame == 2 * D * 4 + 4 * k["seq_len"]
+
+
+def test_repeat_gate_reads_raw_frames():
+    """A standing camera is a repeat whatever the centring does to it: exact copies of one raw
+    frame pass the gate although their centred rows change as the window fills."""
+    rng = np.random.default_rng(3)
+    X = np.concatenate([rng.normal(size=(20, D)), np.repeat(rng.normal(size=(1, D)), 10, axis=0)])
+    det = seqstream.Detector(None, exclude=5, seq_len=3, velocities=(1.0,), contrast_window=0, center_window=[3, 15],
+                             repeat_cos=0.999)
+    held = []
+    for x in X:
+        before = det._empty.copy(), det._newest
+        det.update_descriptor(x)
+        held.append(det._newest == before[1])            # the ring did not move: the frame was held out
+    assert held[21:] == [True] * 9 and not any(held[:21])

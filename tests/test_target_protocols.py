@@ -79,7 +79,8 @@ def test_a_pair_run_is_the_default_streamed_over_the_pair_alone(gp):
     assert check[seqmatch.DEFAULT_NAME]["equal"]
     seqslam = rows.loc[("SeqSLAM (published)", "loop closure")]
     assert np.isnan(seqslam["fps_min"]) and np.isnan(seqslam["bytes_per_stored_frame"])   # measured in the leaderboard only
-    assert rows.loc[(seqmatch.DEFAULT_NAME, "loop closure"), "bytes_per_stored_frame"] == 256 * 4 + 4 * k["seq_len"]
+    assert rows.loc[(seqmatch.DEFAULT_NAME, "loop closure"), "bytes_per_stored_frame"] == (
+        256 * 4 * len(seqmatch.center_windows(k["center_window"])) + 4 * k["seq_len"])   # one 256-d part per window
     targets = dict(zip(result.targets.target, result.targets.met))
     assert targets["R@1 (%), place recognition"] is True
     table, board_rows = ex.protocol_tables(result, {"day_right -> night_right": result})

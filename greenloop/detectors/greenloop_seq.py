@@ -25,7 +25,9 @@ def named_default() -> dict:
     """greenloop-seq's named default (``seqmatch.DEFAULT_NAME``) as a knob record: the CLI's
     configuration, never tuned here, scored at the fixed ``seqmatch.DEFAULT_THRESHOLD``."""
     k = dict(seqmatch.DEFAULT_KNOBS)
-    return dict(k, whitening="none", velocities=list(k["velocities"]), fixed_threshold=seqmatch.DEFAULT_THRESHOLD)
+    cw = seqmatch.center_windows(k["center_window"])
+    return dict(k, whitening="none", velocities=list(k["velocities"]), center_window=cw[0] if len(cw) == 1 else list(cw),
+                fixed_threshold=seqmatch.DEFAULT_THRESHOLD)
 
 
 def _extra(k: dict, velocities) -> dict:

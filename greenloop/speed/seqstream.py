@@ -16,8 +16,8 @@ import math
 import numpy as np
 
 from greenloop import evaluate, retrieval
-from greenloop.seqmatch import (_EPS, COLORS, DEFAULT_VELOCITIES, STORE_DTYPES, _check_descriptor,
-                                calibrate_scores, center, center_stored, columns_to_scores, contrast_normalise,
+from greenloop.seqmatch import (_EPS, COLORS, DEFAULT_VELOCITIES, STORE_DTYPES, _check_descriptor, _join,
+                                calibrate_scores, center, center_stored, center_windows, columns_to_scores, contrast_normalise,
                                 describe_frames, matrix_events, normalise, threshold_range)
 from greenloop.util import numba_kernels
 from greenloop.util.checks import positive_int
@@ -84,12 +84,14 @@ class Detector:
     Options (off by default, the behaviour before them):
     center_window: W > 0 subtracts from each raw descriptor the mean of the last W raw descriptors
         (itself included, :func:`center`) before normalising: a buffer of W x D float32, fixed.
-        While the window fills, the stored frames are centred again on every frame so far
-        (:func:`center_stored`), so the start of the recording can be recognised.
+        A list of windows centres on each and joins the L2-normalised parts (K windows: K * D
+        stored dims, a buffer of the longest window). While the longest window fills, the stored
+        frames are centred again on every frame so far (:func:`center_stored`), so the start of the
+        recording can be recognised.
     calibrate: score each candidate as a z-score against the query's own candidates
         (:func:`calibrate_scores`); the threshold is then a z-score (any finite float).
-    repeat_cos: a query whose normalised descriptor has cosine >= repeat_cos with the previous
-        frame's is a repeat (the camera stopped, or a frame duplicated by a slower replay): it is
+    repeat_cos: a query whose raw descriptor (L2-normalised, before centring) has cosine >=
+        repeat_cos with the previous frame's is a repeat (the camera stopped, or a frame duplicated by a slower replay): it is
         matched and stored, but its column does not enter the trajectory ring, so a stop or a
         half-speed replay keeps the trajectories' velocities. None: off.
     Negative velocities search revisits driven the opposite way (database rows increasing while
@@ -104,7 +106,7 @@ class Detector:
                  velocities=DEFAULT_VELOCITIES, exclude: int = 150, contrast_window: int = 10,
                  projection=None, store_dtype: str = "float32", color: str = "bgr", weights="auto",
                  index: str | None = None, k: int = 20, index_options: dict | None = None,
-                 center_window: int = 0, calibrate: bool = False, repeat_cos=None):
+                 center_window: int | list = 0, calibrate: bool = False, repeat_cos=None):
         if index is not None and index not in retrieval.KINDS:
             raise ValueError(f"index must be None (score every stored frame) or one of "
                              f"{retrieval.KINDS}, got {index!r}")
@@ -114,7 +116,9 @@ class Detector:
         self.seq_len = positive_int("seq_len", seq_len, 1, whole_floats=True)
         self.exclude = positive_int("exclude", exclude, 0, whole_floats=True)
         self.contrast_window = positive_int("contrast_window", contrast_window, 0, whole_floats=True)
-        self.center_window = positive_int("center_window", center_window, 0, whole_floats=True)
+        self.center_window = center_window if isinstance(center_window, int) else list(center_windows(center_window))
+        self._windows = center_windows(center_window)
+        self._W = max(self._windows, default=0)        # the centring buffer's length: the longest window
         self.calibrate = bool(calibrate)
         self.threshold = _check_threshold(threshold, self.contrast_window, self.calibrate)
         if repeat_cos is not None and not (math.isfinite(float(repeat_cos)) and -1 <= float(repeat_cos) <= 1):
@@ -217,15 +221,17 @@ class Detector:
             raise ValueError(f"descriptor {j} has {y.size} dims, the stream's first had {self._db.shape[1]}")
         if self.index_kind is not None:
             return self._match_candidates(y)
+        gate = normalise(x)[0] if self.repeat_cos is not None else y
         if not c:
-            return self._match(y, np.zeros(0, np.float32))
+            return self._match(y, np.zeros(0, np.float32), gate)
         with one_blas_thread():   # a 2-thread gemv stalls on a loaded 2-core machine
             s = self._db[:c].astype(np.float32, copy=False) @ y
-        return self._match(y, s)
+        return self._match(y, s, gate)
 
     def _centered(self, x: np.ndarray) -> np.ndarray:
-        """x (1, D) minus the mean of the last center_window raw descriptors, x included (:func:`center`)."""
-        W = self.center_window
+        """x (1, D) minus the mean of the last center_window raw descriptors, x included (:func:`center`);
+        several windows: (1, K * D), the parts joined as :func:`center` joins them."""
+        W = self._W
         if not W:
             return x
         if self._recent is None or self._recent.shape[1] != x.shape[1]:
@@ -236,17 +242,17 @@ class Detector:
         self._recent[:-1] = self._recent[1:].copy()
         self._recent[-1] = x[0]
         self._n_recent = min(self._n_recent + 1, W)
-        return x - self._recent[W - self._n_recent:].mean(axis=0)
+        return _join([x - self._recent[W - min(w, self._n_recent):].mean(axis=0) for w in self._windows])
 
     def _recenter_stored(self) -> None:
         """While the centring window fills (frame j < center_window), centre the stored frames 0..j-1
         again on the mean of frames 0..j, the mean frame j was centred on (:func:`center_stored`);
         in candidate mode the index (at most center_window rows) is rebuilt from them."""
-        W, j = self.center_window, self.frame_index
+        W, j = self._W, self.frame_index
         if not W or not 0 < j < W or self._db is None:
             return
         raw = self._recent[W - self._n_recent:]           # frames 0..j, oldest first
-        self._db[:j] = normalise(raw[:-1] - raw.mean(axis=0), self.projection)
+        self._db[:j] = normalise(center_stored(raw, self.center_window), self.projection)[:j]
         if self._index is not None and self._index.n_stored:
             n_in = self._index.n_stored
             self._index = retrieval.make_index(self.index_kind, self._db.shape[1], **self.index_options)
@@ -257,11 +263,13 @@ class Detector:
         prev, self._previous = self._previous, y.copy()
         return self.repeat_cos is not None and prev is not None and float(prev @ y) >= self.repeat_cos
 
-    def _match(self, y: np.ndarray, s: np.ndarray) -> dict | None:
-        """The stages after the similarity: s (C,) cosine to the C candidates of query j = frame_index."""
+    def _match(self, y: np.ndarray, s: np.ndarray, gate=None) -> dict | None:
+        """The stages after the similarity: s (C,) cosine to the C candidates of query j = frame_index.
+        gate: what the repeat gate compares with the previous frame's (default y): the L2-normalised
+        raw descriptor, so that a standing camera is a repeat however its centring window fills."""
         j, c = self.frame_index, s.size
         s = contrast_normalise(s, self.contrast_window)
-        if not self._is_repeat(y):
+        if not self._is_repeat(y if gate is None else gate):
             self._push_column(s)
         if c:
             self._ensure_width(c)
@@ -389,10 +397,10 @@ class Detector:
             raise ValueError(f"X must be (N, D) finite descriptors with N, D >= 1, got shape {X.shape} "
                              f"(NaN/inf: fix the descriptors first)")
         self.reset()
-        n, d, L, W = len(X), X.shape[1], self.seq_len, self.center_window
-        Y = normalise(center(X, W), self.projection)           # each frame as a query
+        n, d, L, W = len(X), X.shape[1], self.seq_len, self._W
+        Y = normalise(center(X, self.center_window), self.projection)           # each frame as a query
         self._db = np.empty((256 * 2 ** max(math.ceil(math.log2(n / 256)), 0), Y.shape[1]), self.store_dtype)
-        self._db[:n] = normalise(center_stored(X, W), self.projection) if W else Y
+        self._db[:n] = normalise(center_stored(X, self.center_window), self.projection) if W else Y
         c = max(n - 1 - self.exclude, 0)                   # rows indexed before query n - 1
         self._index = retrieval.make_index(self.index_kind, Y.shape[1], **self.index_options)
         if c:
@@ -450,7 +458,7 @@ def _running_sums(R, first: int, chunk: int = 65536) -> np.ndarray:
 
 def score_matrix(X, exclude: int = 150, seq_len: int = 10, velocities=DEFAULT_VELOCITIES,
                  contrast_window: int = 10, projection=None, store_dtype: str = "float32",
-                 center_window: int = 0, calibrate: bool = False, repeat_cos=None) -> np.ndarray:
+                 center_window: int | list = 0, calibrate: bool = False, repeat_cos=None) -> np.ndarray:
     """The (N, N) score matrix the streaming detector thresholds, for ``greenloop.evaluate``.
 
     X: (N, D) raw descriptors in stream order (:func:`describe`). The other arguments are those
@@ -471,15 +479,15 @@ def score_matrix(X, exclude: int = 150, seq_len: int = 10, velocities=DEFAULT_VE
         return np.zeros((0, 0), np.float32)
     if not np.all(np.isfinite(X)):
         raise ValueError("X has NaN or inf values")
-    W, f32 = det.center_window, np.float32
-    Y = normalise(center(X, W), projection)                   # each frame as a query
-    stored = normalise(center_stored(X, W), projection) if W else Y
+    W, cw, f32 = det._W, det.center_window, np.float32
+    Y = normalise(center(X, cw), projection)                  # each frame as a query
+    stored = normalise(center_stored(X, cw), projection) if W else Y
     G = stored.astype(det.store_dtype).astype(f32) @ Y.T      # stored rows x queries, one product
     for j in range(det.exclude + 1, min(W - 1, n)):           # the window still filling: rows centred on 0..j
         c = j - det.exclude
-        rows = normalise(X[:j] - X[:j + 1].mean(axis=0), projection)[:c]
+        rows = normalise(center_stored(X[:j + 1], cw), projection)[:c]
         G[:c, j] = rows.astype(det.store_dtype).astype(f32) @ Y[j]
-    return columns_to_scores(det, Y, G)
+    return columns_to_scores(det, Y, G, normalise(X) if det.repeat_cos is not None else None)
 
 def tune_knobs(descriptors: dict, GT, exclude: int, tune, seq_lens, contrast_windows,
                velocities=DEFAULT_VELOCITIES, projections=None) -> list[dict]:

@@ -1,0 +1,57 @@
+"""greenloop.study.default_choice on a small stream the test makes: its ranking reads only tuning
+queries, the reversed stream is the revisit driven the other way, the repeat gate counts copies."""
+import numpy as np
+import pytest
+
+from greenloop import seqmatch
+from greenloop.study import default_choice as dc
+
+D, N0, REV, EX = 32, 300, 120, 40
+
+
+@pytest.fixture(scope="module")
+def stream():
+    """A route of N0 places (a random walk plus each place's own detail), then a noisy revisit of
+    its first REV places; the revisit's first half are the tuning queries."""
+    rng = np.random.default_rng(0)
+    w = np.cumsum(rng.normal(size=(N0, D)), 0) * 0.3 + rng.normal(size=(N0, D))
+    X = np.concatenate([w, w[:REV] + rng.normal(scale=0.8, size=(REV, D))]).astype(np.float32)
+    n = len(X)
+    GT = np.zeros((n, n), bool)
+    for k in range(REV):
+        GT[max(k - 2, 0):k + 3, N0 + k] = True
+    GT |= GT.T
+    tune = np.zeros(n, bool)
+    tune[N0:N0 + REV // 2] = True
+    return X, GT, EX, tune
+
+
+def test_reversed_stream_is_the_tuning_revisit_backwards(stream):
+    X, GT, ex, tune = stream
+    Xr, Gr, exr, q = dc.reversed_stream(stream)
+    assert len(Xr) == N0 + REV // 2 and exr == ex and q.sum() == REV // 2 and not q[:N0].any()
+    np.testing.assert_array_equal(Xr[N0], X[N0 + REV // 2 - 1])          # the last tuning query comes first
+    assert Gr[REV // 2 - 1, N0] and not Gr[0, N0] and Gr[0, -1]          # ...its partner is its place
+
+
+def test_rank_reads_tuning_queries_only_and_sorts(stream):
+    X, GT, ex, tune = stream
+    t1 = dc.rank({"s": stream}, grid=[50, [3, 15]], reverse=["s"])
+    broken = GT.copy()
+    later = np.arange(len(GT)) >= N0 + REV // 2                        # the revisit's untuned queries
+    broken[:, later] = broken[later, :] = False                        # lose their labels
+    t2 = dc.rank({"s": (X, broken, ex, tune)}, grid=[50, [3, 15]], reverse=["s"])
+    assert list(t1.columns) == ["center_window", "AUC-PR_tune_% s", "R@1_tune_% s", "R@1_tune_% s, reversed",
+                                "mean_AUC-PR_tune_%"]
+    np.testing.assert_allclose(t1["AUC-PR_tune_% s"], t2["AUC-PR_tune_% s"])
+    assert t1["mean_AUC-PR_tune_%"].is_monotonic_decreasing and set(t1.center_window) == {"50", "[3, 15]"}
+    assert (t1["R@1_tune_% s"] > 80).all() and (t1["R@1_tune_% s, reversed"] > 50).all()
+
+
+def test_repeat_gate_counts_copies(stream):
+    X, GT, ex, tune = stream
+    Xs = np.concatenate([X[:100], np.repeat(X[100:101], 11, axis=0)])   # a stop: 10 copies of one frame
+    g = dc.repeat_gate({"s": (Xs, None, ex, None)}, levels=(0.999,))
+    assert g["gated_%_at_0.999"][0] == pytest.approx(100 * 10 / (len(Xs) - 1))
+    assert dc.threshold(stream, [3, 15]) == pytest.approx(
+        seqmatch.choose_threshold(dc._scores(stream, [3, 15]), GT, ex, tune, rule="p95"))
