@@ -55,3 +55,18 @@ def test_repeat_gate_counts_copies(stream):
     assert g["gated_%_at_0.999"][0] == pytest.approx(100 * 10 / (len(Xs) - 1))
     assert dc.threshold(stream, [3, 15]) == pytest.approx(
         seqmatch.choose_threshold(dc._scores(stream, [3, 15]), GT, ex, tune, rule="p95"))
+
+
+def test_the_committed_choice_is_the_code_default():
+    """The committed table's winner is seqmatch.DEFAULT_KNOBS' center_window and its p95 pick,
+    rounded to one decimal, is DEFAULT_THRESHOLD: a default changed without `make default-choice`
+    fails here."""
+    import json
+    from pathlib import Path
+    import pandas as pd
+    folder = Path(__file__).resolve().parents[1] / "results" / "default_choice"
+    table = pd.read_csv(folder / "windows.csv")
+    params = json.loads((folder / "manifest.json").read_text())["parameters"]
+    assert table["center_window"][0] == params["winner"] == str(list(seqmatch.center_windows(seqmatch.DEFAULT_KNOBS["center_window"])))
+    assert round(params["p95_threshold"], 1) == seqmatch.DEFAULT_THRESHOLD
+    assert params["repeat_levels"] and seqmatch.DEFAULT_KNOBS["repeat_cos"] in params["repeat_levels"]

@@ -2,7 +2,7 @@
 
 The named default (``seqmatch.DEFAULT_NAME``) is one configuration for every recording, so its
 knobs are chosen once, on the tuning queries of the streams the detector's targets name (notebook
-13, ``experiments.leaderboard.target_protocols``): Nordland's 7152 frames at their full rate, the
+13, ``experiments.leaderboard.target_protocols``): every Nordland frame at the full rate, the
 two Gardens Point pairs, and the synthetic sequence's leaderboard stream (every 4th frame, notebook
 13's default). The evaluation queries are never read.
 
@@ -10,19 +10,21 @@ two Gardens Point pairs, and the synthetic sequence's leaderboard stream (every 
    scored by the per-query AUC-PR on each stream's tuning queries; the candidate with the highest
    mean over the streams wins. Beside it, R@1 of the Nordland and Gardens Point tuning queries
    driven the other way (:func:`reversed_stream`): a short window centres a frame on the frames
-   before it, which a reverse drive replaces by those after it. Two windows at most: a third makes the stored descriptor 768-d, and
-   at Nordland's full rate the stream's match against every stored frame would then cost several
-   times the 920 frames/s budget of the targets.
+   before it, which a reverse drive replaces by those after it. Two windows at most: each window
+   adds a part as long as the descriptor to every stored frame, and the match against every stored
+   frame grows with it; at Nordland's full rate the two-window default's slowest timing repeat is
+   already near the frames/s target (``13_leaderboard/target_protocols``).
 2. The threshold: the "p95" rule (``seqmatch.choose_threshold``: the lowest score with >= 95 %
    closure precision) on the tuning queries of the largest stream, Nordland at its full rate, for
    the winner; ``seqmatch.DEFAULT_THRESHOLD`` is it rounded to one decimal. Every other stream then
    gets that threshold unchanged (notebook 13's threshold_carry table).
+3. The repeat gate's level (``repeat_cos``) is shown, not ranked: :func:`repeat_gate` gives the
+   share of each stream's frames it would hold out of the trajectories. Raw gradient histograms
+   share a large positive part, so a level that suits centred descriptors also holds out moving
+   frames.
 
-3. The repeat gate's level (``repeat_cos``) is shown, not ranked: :func:`repeat_gate` gives the share of
-   each stream's frames it would hold out of the trajectories. Raw gradient histograms share a
-   large positive part, so a level that suits centred descriptors also holds out moving frames.
-
-Everything else of ``seqmatch.DEFAULT_KNOBS`` (descriptor, seq_len, velocities) is kept. CLI: ``python -m greenloop.study.default_choice [--nordland DIR] [--gardenspoint DIR]
+Everything else of ``seqmatch.DEFAULT_KNOBS`` (descriptor, seq_len, velocities) is kept.
+CLI: ``python -m greenloop.study.default_choice [--nordland DIR] [--gardenspoint DIR]
 [--synthetic DIR] [--out results/default_choice]`` writes ``<out>/windows`` and ``<out>/repeat_gate``
 (.md and .csv) and ``<out>/manifest.json``.
 """
@@ -37,18 +39,19 @@ import pandas as pd
 from greenloop import evaluate, seqmatch
 from greenloop.experiments import leaderboard as ex
 from greenloop.speed import seqstream
-from greenloop.study import report
+from greenloop.study import report, targets
 
 GRID = [5, 10, 20, 30, 50] + [[a, b] for a in (3, 5, 10) for b in (15, 20, 30)]
 SYNTHETIC_STEP = 4                       # notebook 13's frame_step on the synthetic sequence
 REPEAT_LEVELS = (0.995, 0.999)
-THRESHOLD_STREAM = "every frame, +- 2 frames"   # Nordland at its full rate: the largest tuning part
+THRESHOLD_STREAM = "nordland: every frame, +- 2 frames"   # Nordland at its full rate: the largest tuning part
+SYNTHETIC_STREAM = "synthetic: leaderboard"
 
 __all__ = ["GRID", "REPEAT_LEVELS", "streams", "reversed_stream", "rank", "repeat_gate", "threshold", "main"]
 
 
 def streams(nordland=None, gardenspoint=None, synthetic=None) -> dict:
-    """{label: (X (N, 256) gradient descriptors, GT (N, N) bool, exclude (frames of the stream),
+    """{"<dataset kind>: <protocol>": (X (N, 256) gradient descriptors, GT (N, N) bool, exclude (frames of the stream),
     tune (N,) bool tuning queries)}: the target streams of the given dataset folders (None: left
     out), split as notebook 13 splits them (tune_fraction 0.5, exclude 150 original frames)."""
     params = dict(seq_lens=[5, 10, 20], fps_frames=300, weights="auto")
@@ -56,11 +59,11 @@ def streams(nordland=None, gardenspoint=None, synthetic=None) -> dict:
     for folder in (f for f in (nordland, gardenspoint) if f is not None):
         data, _ = ex.prepare(str(folder), 1, 0.5, 150, 0.5, None, params)
         for label, (d, _) in ex.target_protocols(data, 0.5).items():
-            out[label] = (d.descriptors["gradients"], d.GT, d.exclude, d.tune)
+            out[f"{targets.dataset_kind(folder)}: {label}"] = (d.descriptors["gradients"], d.GT, d.exclude, d.tune)
     if synthetic is not None:
         d, _ = ex.prepare(str(synthetic), SYNTHETIC_STEP, 0.5, 150, 0.5, None, params)
         X = seqmatch.describe(str(synthetic), "gradients", step=SYNTHETIC_STEP)
-        out["synthetic leaderboard"] = (X, d.GT, d.exclude, d.tune)
+        out[SYNTHETIC_STREAM] = (X, d.GT, d.exclude, d.tune)
     return out
 
 
@@ -133,7 +136,7 @@ def main(argv=None) -> None:
         if not Path(f).is_dir():
             raise SystemExit(f"dataset folder {f} not found: build it first (make nordland gardenspoint synthetic)")
     s = streams(a.nordland, a.gardenspoint, a.synthetic)
-    table = rank(s, reverse=[k for k in s if k != "synthetic leaderboard"])
+    table = rank(s, reverse=[k for k in s if k != SYNTHETIC_STREAM])
     best = table["center_window"][0]
     cw = {str(c): c for c in GRID}[best]
     t = threshold(s[THRESHOLD_STREAM], cw)
@@ -141,7 +144,7 @@ def main(argv=None) -> None:
     report.write_table(table, out / "windows", decimals=2,
                        title="The named default's center_window: per-query AUC-PR on the tuning queries of the target streams",
                        note=(f"greenloop.study.default_choice: the first row wins (highest mean). The 'p95' rule on "
-                             f"{THRESHOLD_STREAM} (Nordland) picks the threshold {t:.4f} for it. In the code: "
+                             f"{THRESHOLD_STREAM} picks the threshold {t:.4f} for it. In the code: "
                              f"seqmatch.DEFAULT_KNOBS center_window {list(seqmatch.center_windows(seqmatch.DEFAULT_KNOBS['center_window']))}, "
                              f"seqmatch.DEFAULT_THRESHOLD {seqmatch.DEFAULT_THRESHOLD}."))
     gate = repeat_gate(s)
