@@ -227,7 +227,7 @@ def test_repeat_gate_reads_raw_frames():
                              repeat_cos=0.999)
     held = []
     for x in X:
-        before = det._empty.copy(), det._newest
+        before = det._newest
         det.update_descriptor(x)
-        held.append(det._newest == before[1])            # the ring did not move: the frame was held out
+        held.append(det._newest == before)               # the ring did not move: the frame was held out
     assert held[21:] == [True] * 9 and not any(held[:21])
