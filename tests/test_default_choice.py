@@ -1,6 +1,10 @@
 """greenloop.study.default_choice on a small stream the test makes: its ranking reads only tuning
 queries, the reversed stream is the revisit driven the other way, the repeat gate counts copies."""
+import json
+from pathlib import Path
+
 import numpy as np
+import pandas as pd
 import pytest
 
 from greenloop import seqmatch
@@ -61,9 +65,6 @@ def test_the_committed_choice_is_the_code_default():
     """The committed table's winner is seqmatch.DEFAULT_KNOBS' center_window and its p95 pick,
     rounded to one decimal, is DEFAULT_THRESHOLD: a default changed without `make default-choice`
     fails here."""
-    import json
-    from pathlib import Path
-    import pandas as pd
     folder = Path(__file__).resolve().parents[1] / "results" / "default_choice"
     table = pd.read_csv(folder / "windows.csv")
     params = json.loads((folder / "manifest.json").read_text())["parameters"]

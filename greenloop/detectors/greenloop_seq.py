@@ -25,8 +25,8 @@ def named_default() -> dict:
     """greenloop-seq's named default (``seqmatch.DEFAULT_NAME``) as a knob record: the CLI's
     configuration, never tuned here, scored at the fixed ``seqmatch.DEFAULT_THRESHOLD``."""
     k = dict(seqmatch.DEFAULT_KNOBS)
-    cw = seqmatch.center_windows(k["center_window"])
-    return dict(k, whitening="none", velocities=list(k["velocities"]), center_window=cw[0] if len(cw) == 1 else list(cw),
+    cw = k["center_window"]
+    return dict(k, whitening="none", velocities=list(k["velocities"]), center_window=list(cw) if isinstance(cw, tuple) else cw,
                 fixed_threshold=seqmatch.DEFAULT_THRESHOLD)
 
 

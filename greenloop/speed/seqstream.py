@@ -116,8 +116,8 @@ class Detector:
         self.seq_len = positive_int("seq_len", seq_len, 1, whole_floats=True)
         self.exclude = positive_int("exclude", exclude, 0, whole_floats=True)
         self.contrast_window = positive_int("contrast_window", contrast_window, 0, whole_floats=True)
-        self.center_window = center_window if isinstance(center_window, int) else list(center_windows(center_window))
-        self._windows = center_windows(center_window)
+        self._windows = center_windows(center_window)  # validates; center_window stays as given
+        self.center_window = list(center_window) if isinstance(center_window, tuple) else center_window
         self._W = max(self._windows, default=0)        # the centring buffer's length: the longest window
         self.calibrate = bool(calibrate)
         self.threshold = _check_threshold(threshold, self.contrast_window, self.calibrate)

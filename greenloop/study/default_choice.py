@@ -69,7 +69,7 @@ def streams(nordland=None, gardenspoint=None, synthetic=None) -> dict:
 
 def _scores(stream, center_window) -> np.ndarray:
     X, _, exclude, _ = stream
-    k = dict(seqmatch.DEFAULT_KNOBS, center_window=center_window)
+    k = seqmatch.DEFAULT_KNOBS
     return seqstream.score_matrix(X, exclude, k["seq_len"], k["velocities"], k["contrast_window"], None,
                                   center_window=center_window, calibrate=k["calibrate"], repeat_cos=k["repeat_cos"])
 
