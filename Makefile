@@ -124,7 +124,7 @@ results/datasets.md: $(wildcard $(DATASET_RESULTS:%=%/*/summary.json)) $(RESULTS
 results/coverage.md: $(wildcard $(DATASET_RESULTS:%=%/*/manifest.json)) greenloop/study/coverage.py
 	$(BIN)/python -m greenloop.study.report --coverage $@ $(DATASET_RESULTS)
 
-default-choice: | $(STAMP) ## the named default's centring windows and threshold, chosen on tuning queries -> results/default_choice/
+default-choice: | $(STAMP) ## the named default's centring windows, cell shift and threshold, chosen on tuning queries -> results/default_choice/
 	$(BIN)/python -m greenloop.study.default_choice --nordland $(NORDLAND) --gardenspoint $(GARDENSPOINT) \
 		--synthetic $(SYNTHETIC) --out results/default_choice
 

@@ -197,7 +197,7 @@ def _seq_detector(args, kn: dict, paths) -> seqstream.Detector:
         return saved["detector"]
     if args.index is not None:
         retrieval.one_thread()
-    extra = {k: kn[k] for k in ("velocities", "center_window", "calibrate", "repeat_cos") if k in kn}
+    extra = {k: kn[k] for k in ("velocities", "center_window", "calibrate", "repeat_cos", "cell_shift") if k in kn}
     return seqstream.Detector(kn["threshold"], descriptor=kn["descriptor"], seq_len=kn["seq_len"],
                              exclude=kn["exclude"], contrast_window=kn["contrast_window"],
                              index=args.index, k=args.candidates, **extra)

@@ -10,7 +10,7 @@ import pytest
 from greenloop import seqmatch
 from greenloop.study import default_choice as dc
 
-D, N0, REV, EX = 32, 300, 120, 40
+D, N0, REV, EX = int(np.prod(seqmatch.CELL_GRID)), 300, 120, 40     # the gradients layout (cell shifts)
 
 
 @pytest.fixture(scope="module")
@@ -40,15 +40,16 @@ def test_reversed_stream_is_the_tuning_revisit_backwards(stream):
 
 def test_rank_reads_tuning_queries_only_and_sorts(stream):
     X, GT, ex, tune = stream
-    t1 = dc.rank({"s": stream}, grid=[50, [3, 15]], reverse=["s"])
+    t1 = dc.rank({"s": stream}, grid=[50, [3, 15]], reverse=["s"], shifts=(0, 1))
     broken = GT.copy()
     later = np.arange(len(GT)) >= N0 + REV // 2                        # the revisit's untuned queries
     broken[:, later] = broken[later, :] = False                        # lose their labels
-    t2 = dc.rank({"s": (X, broken, ex, tune)}, grid=[50, [3, 15]], reverse=["s"])
-    assert list(t1.columns) == ["center_window", "AUC-PR_tune_% s", "R@1_tune_% s", "R@1_tune_% s, reversed",
+    t2 = dc.rank({"s": (X, broken, ex, tune)}, grid=[50, [3, 15]], reverse=["s"], shifts=(0, 1))
+    assert list(t1.columns) == ["center_window", "cell_shift", "AUC-PR_tune_% s", "R@1_tune_% s", "R@1_tune_% s, reversed",
                                 "mean_AUC-PR_tune_%"]
+    assert sorted(zip(t1.center_window, t1.cell_shift)) == [("50", 0), ("50", 1), ("[3, 15]", 0), ("[3, 15]", 1)]
     np.testing.assert_allclose(t1["AUC-PR_tune_% s"], t2["AUC-PR_tune_% s"])
-    assert t1["mean_AUC-PR_tune_%"].is_monotonic_decreasing and set(t1.center_window) == {"50", "[3, 15]"}
+    assert t1["mean_AUC-PR_tune_%"].is_monotonic_decreasing
     assert (t1["R@1_tune_% s"] > 80).all() and (t1["R@1_tune_% s, reversed"] > 50).all()
 
 
@@ -62,12 +63,13 @@ def test_repeat_gate_counts_copies(stream):
 
 
 def test_the_committed_choice_is_the_code_default():
-    """The committed table's winner is seqmatch.DEFAULT_KNOBS' center_window and its p95 pick,
+    """The committed table's winner is seqmatch.DEFAULT_KNOBS' center_window and cell_shift and its p95 pick,
     rounded to one decimal, is DEFAULT_THRESHOLD: a default changed without `make default-choice`
     fails here."""
     folder = Path(__file__).resolve().parents[1] / "results" / "default_choice"
     table = pd.read_csv(folder / "windows.csv")
     params = json.loads((folder / "manifest.json").read_text())["parameters"]
     assert table["center_window"][0] == params["winner"] == str(list(seqmatch.center_windows(seqmatch.DEFAULT_KNOBS["center_window"])))
+    assert table["cell_shift"][0] == params["winner_cell_shift"] == seqmatch.DEFAULT_KNOBS["cell_shift"]
     assert round(params["p95_threshold"], 1) == seqmatch.DEFAULT_THRESHOLD
     assert params["repeat_levels"] and seqmatch.DEFAULT_KNOBS["repeat_cos"] in params["repeat_levels"]

@@ -245,3 +245,33 @@ def test_candidate_kernel_equals_the_numpy_verification(contrast_window, velocit
         assert not det.last_scores.any() and found < 0.5 * (200 - seq_len)
     else:
         assert found >= 0.9 * (200 - seq_len)
+
+
+def test_max_dot_equals_the_best_of_the_products():
+    """max_dot's compiled pass (three queries) and its BLAS path (any other count) are the best
+    product per stored row, to float rounding."""
+    rng = np.random.default_rng(5)
+    A = rng.normal(size=(1003, 512)).astype(np.float32)
+    for m in (1, 3, 5):
+        Q = rng.normal(size=(m, 512)).astype(np.float32)
+        ref = (A.astype(np.float64) @ Q.T.astype(np.float64)).max(1)
+        out = kernels.max_dot(A, Q)
+        assert out.shape == (1003,) and out.dtype == np.float32
+        np.testing.assert_allclose(out, ref, rtol=1e-4, atol=1e-3)
+        assert (np.argmax(A @ Q.T, 1) == np.argmax(A.astype(np.float64) @ Q.T.astype(np.float64), 1)).mean() > 0.99
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_ring_best_is_the_numpy_trajectory_search_bit_for_bit(dtype):
+    from greenloop.speed import seqstream
+    rng = np.random.default_rng(6)
+    R = rng.normal(size=(10, 900)).astype(np.float32)
+    base = rng.integers(0, 40, (8, 10))
+    rows = rng.permutation(10)
+    compiled = seqstream._ring_scores(R, rows, 800, base, dtype)
+    Rd = R[rows, :int(base.max()) + 800].astype(dtype)
+    acc = np.zeros((8, 800), dtype)
+    for v in range(8):
+        for k in range(10):
+            acc[v] += Rd[k, base[v, k]:base[v, k] + 800]
+    assert np.array_equal(compiled, (acc.max(0) / 10).astype(np.float32))

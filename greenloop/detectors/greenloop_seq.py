@@ -4,7 +4,7 @@ the named default (``seqmatch.DEFAULT_NAME``, the CLI's configuration, never tun
 Also the seqmatch-based pieces the single-frame matchers share (a single-frame matcher is
 greenloop-seq's search at seq_len 1): :func:`score`, :func:`stream`, :func:`frame_describer`,
 :func:`knob_text`. Knob records: descriptor, whitening (label, "none"), seq_len, contrast_window
-and optionally velocities, center_window, calibrate, repeat_cos, fixed_threshold.
+and optionally velocities, center_window, calibrate, repeat_cos, cell_shift, fixed_threshold.
 
 params read (``Data.params``): seq_descriptors, fast_descriptors, seq_lens, contrast_windows,
 velocities, weights, input_size.
@@ -33,7 +33,7 @@ def named_default() -> dict:
 def _extra(k: dict, velocities) -> dict:
     """The seqmatch keyword arguments of a knob record beyond descriptor/seq_len/contrast window."""
     return dict(velocities=tuple(k.get("velocities", velocities)), center_window=k.get("center_window", 0),
-                calibrate=k.get("calibrate", False), repeat_cos=k.get("repeat_cos"))
+                calibrate=k.get("calibrate", False), repeat_cos=k.get("repeat_cos"), cell_shift=k.get("cell_shift", 0))
 
 
 def projection(k: dict, data: Data):
@@ -88,7 +88,8 @@ def knob_text(k: dict) -> str:
     seq = "" if k["seq_len"] == 1 else f", seq_len {k['seq_len']}"
     text = f"{k['descriptor']}, whitening {k['whitening']}, contrast window {k['contrast_window']}{seq}"
     if "fixed_threshold" in k:
-        text += (f", centring {k['center_window']}, velocities {k['velocities']}, repeat gate {k['repeat_cos']}, "
+        text += (f", centring {k['center_window']}, cell shift {k.get('cell_shift', 0)}, velocities {k['velocities']}, "
+                 f"repeat gate {k['repeat_cos']}, "
                  f"calibrated, fixed threshold {k['fixed_threshold']} (the CLI default, untuned)")
     return text
 

@@ -17,8 +17,9 @@ import numpy as np
 
 from greenloop import evaluate, retrieval
 from greenloop.seqmatch import (_EPS, COLORS, DEFAULT_VELOCITIES, STORE_DTYPES, _check_descriptor, _join,
-                                calibrate_scores, center, center_stored, center_windows, columns_to_scores, contrast_normalise,
-                                describe_frames, matrix_events, normalise, threshold_range)
+                                CELL_GRID, calibrate_scores, cell_shifts, center, center_stored, center_windows, columns_to_scores,
+                                contrast_normalise, describe_frames, matrix_events, normalise, shift_cells, threshold_range)
+from greenloop.similarity import l2_normalise
 from greenloop.util import numba_kernels
 from greenloop.util.checks import positive_int
 from greenloop.util.threads import one_blas_thread
@@ -43,6 +44,9 @@ def _ring_scores(R, rows, c: int, base, dtype=np.float64) -> np.ndarray:
     option existed, bit for bit; float32: 4x faster, for calibrated scores), one slice per point.
     """
     Rd = R[rows, :int(base.max()) + c].astype(dtype)             # one cast; the same values
+    best = numba_kernels.ring_best(Rd, base, c)                  # the same sums in one compiled pass
+    if best is not None:
+        return (best / R.shape[0]).astype(np.float32)
     acc = np.zeros((base.shape[0], c), dtype)
     for v in range(base.shape[0]):
         a = acc[v]
@@ -94,6 +98,13 @@ class Detector:
         repeat_cos with the previous frame's is a repeat (the camera stopped, or a frame duplicated by a slower replay): it is
         matched and stored, but its column does not enter the trajectory ring, so a stop or a
         half-speed replay keeps the trajectories' velocities. None: off.
+    cell_shift: s > 0 matches the query's "gradients" grid moved sideways by -s..s cell columns
+        (:func:`greenloop.seqmatch.shift_cells`, after centring) against each stored frame as it
+        was stored, keeping the best cosine: a revisit seen from a little to the left or right
+        (another aisle side, a camera mounted elsewhere). The stored frames are not shifted, so
+        memory is unchanged; the match reads every stored frame once for s = 1
+        (``numba_kernels.max_dot``), 2s + 1 times otherwise. Needs the gradients layout
+        (``seqmatch.CELL_GRID``) and no projection.
     Negative velocities search revisits driven the opposite way (database rows increasing while
     the query goes back in time); a trajectory point on a row not yet a candidate counts as the
     column's mean, as one before the first stored frame.
@@ -106,7 +117,7 @@ class Detector:
                  velocities=DEFAULT_VELOCITIES, exclude: int = 150, contrast_window: int = 10,
                  projection=None, store_dtype: str = "float32", color: str = "bgr", weights="auto",
                  index: str | None = None, k: int = 20, index_options: dict | None = None,
-                 center_window: int | list = 0, calibrate: bool = False, repeat_cos=None):
+                 center_window: int | list = 0, calibrate: bool = False, repeat_cos=None, cell_shift: int = 0):
         if index is not None and index not in retrieval.KINDS:
             raise ValueError(f"index must be None (score every stored frame) or one of "
                              f"{retrieval.KINDS}, got {index!r}")
@@ -120,6 +131,10 @@ class Detector:
         self.center_window = list(center_window) if isinstance(center_window, tuple) else center_window
         self._W = max(self._windows, default=0)        # the centring buffer's length: the longest window
         self.calibrate = bool(calibrate)
+        self._shifts = cell_shifts(cell_shift)
+        self.cell_shift = len(self._shifts) // 2
+        if self.cell_shift and projection is not None:
+            raise ValueError("cell_shift moves the cells of the gradients grid, which a projection mixes: pass one or the other")
         self.threshold = _check_threshold(threshold, self.contrast_window, self.calibrate)
         if repeat_cos is not None and not (math.isfinite(float(repeat_cos)) and -1 <= float(repeat_cos) <= 1):
             raise ValueError(f"repeat_cos must be a cosine in [-1, 1] or None, got {repeat_cos!r}")
@@ -131,9 +146,9 @@ class Detector:
             raise ValueError(f"store_dtype must be one of {STORE_DTYPES}, got {store_dtype!r}")
         if color not in COLORS:
             raise ValueError(f"color must be one of {COLORS}, got {color!r}")
-        if index is not None and (calibrate or repeat_cos is not None or min(v) < 0):
+        if index is not None and (calibrate or repeat_cos is not None or min(v) < 0 or self.cell_shift):
             raise ValueError("candidate mode (index=...) scores the retrieved frames only and does not yet "
-                             "support calibrate, repeat_cos or negative (reverse) velocities: pass index=None, "
+                             "support calibrate, repeat_cos, cell_shift or negative (reverse) velocities: pass index=None, "
                              "or knobs without them (e.g. the CLI's --threshold with --index)")
         self.velocities, self.projection, self.color, self.weights = tuple(v), projection, color, weights
         self.store_dtype = np.dtype(store_dtype)
@@ -214,7 +229,12 @@ class Detector:
         x = np.asarray(x, dtype=np.float32).reshape(1, -1)
         if x.shape[1] == 0 or not np.all(np.isfinite(x)):
             raise ValueError(f"descriptor {self.frame_index} is empty or has NaN/inf values")
-        y = normalise(self._centered(x), self.projection)[0]
+        if self.cell_shift and x.shape[1] != int(np.prod(CELL_GRID)):
+            raise ValueError(f"cell_shift needs the 'gradients' descriptor ({np.prod(CELL_GRID)}-d, seqmatch.CELL_GRID), "
+                             f"got {x.shape[1]} dims")
+        parts = self._centered(x)
+        Q = self._shifted(parts) if self.cell_shift else None      # (S, K * D) the query under each shift
+        y = Q[0] if self.cell_shift else normalise(_join(parts), self.projection)[0]
         self._recenter_stored()
         j, c = self.frame_index, max(self.frame_index - self.exclude, 0)
         if self._db is not None and y.size != self._db.shape[1]:
@@ -225,15 +245,28 @@ class Detector:
         if not c:
             return self._match(y, np.zeros(0, np.float32), gate)
         with one_blas_thread():   # a 2-thread gemv stalls on a loaded 2-core machine
-            s = self._db[:c].astype(np.float32, copy=False) @ y
+            if self.cell_shift:
+                s = numba_kernels.max_dot(self._db[:c].astype(np.float32, copy=False), Q)
+            else:
+                s = self._db[:c].astype(np.float32, copy=False) @ y
         return self._match(y, s, gate)
 
-    def _centered(self, x: np.ndarray) -> np.ndarray:
-        """x (1, D) minus the mean of the last center_window raw descriptors, x included (:func:`center`);
-        several windows: (1, K * D), the parts joined as :func:`center` joins them."""
+    def _shifted(self, parts: list) -> np.ndarray:
+        """The query under each of its cell shifts (``_shifts``, 0 first), (S, K * D) float32: row t is
+        what ``normalise(center(shift_cells(X, t)))`` gives for this frame (the same operations row
+        by row, so row 0 is the unshifted query bit for bit), for all shifts and parts at once."""
+        joined = np.hstack(parts)                                             # (1, K * D)
+        Q = np.vstack([shift_cells(joined, t) for t in self._shifts])       # (S, K * D)
+        if len(parts) > 1:                                                  # _join: each part L2-normalised
+            Q = l2_normalise(Q.reshape(-1, parts[0].shape[1])).reshape(len(Q), -1)
+        return normalise(Q)
+
+    def _centered(self, x: np.ndarray) -> list:
+        """The parts of x (1, D) centred (:func:`center`): per window, x minus the mean of the last
+        window raw descriptors, x included, each (1, D), before ``_join`` joins them; [x] without centring."""
         W = self._W
         if not W:
-            return x
+            return [x]
         if self._recent is None or self._recent.shape[1] != x.shape[1]:
             if self._recent is not None:
                 raise ValueError(f"descriptor {self.frame_index} has {x.shape[1]} dims, the stream's "
@@ -242,7 +275,7 @@ class Detector:
         self._recent[:-1] = self._recent[1:].copy()
         self._recent[-1] = x[0]
         self._n_recent = min(self._n_recent + 1, W)
-        return _join([x - self._recent[W - min(w, self._n_recent):].mean(axis=0) for w in self._windows])
+        return [x - self._recent[W - min(w, self._n_recent):].mean(axis=0) for w in self._windows]
 
     def _recenter_stored(self) -> None:
         """While the centring window fills (frame j < center_window), centre the stored frames 0..j-1
@@ -458,7 +491,8 @@ def _running_sums(R, first: int, chunk: int = 65536) -> np.ndarray:
 
 def score_matrix(X, exclude: int = 150, seq_len: int = 10, velocities=DEFAULT_VELOCITIES,
                  contrast_window: int = 10, projection=None, store_dtype: str = "float32",
-                 center_window: int | list = 0, calibrate: bool = False, repeat_cos=None) -> np.ndarray:
+                 center_window: int | list = 0, calibrate: bool = False, repeat_cos=None,
+                 cell_shift: int = 0) -> np.ndarray:
     """The (N, N) score matrix the streaming detector thresholds, for ``greenloop.evaluate``.
 
     X: (N, D) raw descriptors in stream order (:func:`describe`). The other arguments are those
@@ -474,20 +508,23 @@ def score_matrix(X, exclude: int = 150, seq_len: int = 10, velocities=DEFAULT_VE
     n = len(X)
     det = Detector(None, seq_len=seq_len, velocities=velocities, exclude=exclude,
                    contrast_window=contrast_window, projection=projection, store_dtype=store_dtype,
-                   center_window=center_window, calibrate=calibrate, repeat_cos=repeat_cos)
+                   center_window=center_window, calibrate=calibrate, repeat_cos=repeat_cos, cell_shift=cell_shift)
     if n == 0:
         return np.zeros((0, 0), np.float32)
     if not np.all(np.isfinite(X)):
         raise ValueError("X has NaN or inf values")
     W, cw, f32 = det._W, det.center_window, np.float32
-    Y = normalise(center(X, cw), projection)                  # each frame as a query
-    stored = normalise(center_stored(X, cw), projection) if W else Y
-    G = stored.astype(det.store_dtype).astype(f32) @ Y.T      # stored rows x queries, one product
+    Ys = [normalise(center(shift_cells(X, t) if t else X, cw), projection) for t in det._shifts]   # the queries
+    stored = normalise(center_stored(X, cw), projection) if W else Ys[0]
+    stored = stored.astype(det.store_dtype).astype(f32)
+    G = stored @ Ys[0].T                                     # stored rows x queries, one product per shift
+    for Y in Ys[1:]:
+        np.maximum(G, stored @ Y.T, out=G)
     for j in range(det.exclude + 1, min(W - 1, n)):           # the window still filling: rows centred on 0..j
         c = j - det.exclude
-        rows = normalise(center_stored(X[:j + 1], cw), projection)[:c]
-        G[:c, j] = rows.astype(det.store_dtype).astype(f32) @ Y[j]
-    return columns_to_scores(det, Y, G, normalise(X) if det.repeat_cos is not None else None)
+        rows = normalise(center_stored(X[:j + 1], cw), projection)[:c].astype(det.store_dtype).astype(f32)
+        G[:c, j] = np.max([rows @ Y[j] for Y in Ys], axis=0)
+    return columns_to_scores(det, Ys[0], G, normalise(X) if det.repeat_cos is not None else None)
 
 def tune_knobs(descriptors: dict, GT, exclude: int, tune, seq_lens, contrast_windows,
                velocities=DEFAULT_VELOCITIES, projections=None) -> list[dict]:

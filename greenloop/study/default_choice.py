@@ -6,14 +6,17 @@ knobs are chosen once, on the tuning queries of the streams the detector's targe
 two Gardens Point pairs, and the synthetic sequence's leaderboard stream (every 4th frame, notebook
 13's default). The evaluation queries are never read.
 
-1. ``center_window``: every candidate of GRID (one window, or two joined, ``seqmatch.center``) is
-   scored by the per-query AUC-PR on each stream's tuning queries; the candidate with the highest
-   mean over the streams wins. Beside it, R@1 of the Nordland and Gardens Point tuning queries
+1. ``center_window`` and ``cell_shift``: every candidate of GRID (one window, or two joined,
+   ``seqmatch.center``) with every cell shift of SHIFTS (0: the query as it is; 1: also moved one
+   cell column left and right, ``seqmatch.shift_cells``) is scored by the per-query AUC-PR on each
+   stream's tuning queries; the candidate with the highest mean over the streams wins. Beside it, R@1 of the Nordland and Gardens Point tuning queries
    driven the other way (:func:`reversed_stream`): a short window centres a frame on the frames
    before it, which a reverse drive replaces by those after it. Two windows at most: each window
    adds a part as long as the descriptor to every stored frame, and the match against every stored
    frame grows with it; at Nordland's full rate the two-window default's slowest timing repeat is
-   already near the frames/s target (``13_leaderboard/target_protocols``).
+   already near the frames/s target (``13_leaderboard/target_protocols``). For the same reason
+   SHIFTS stops at one cell: a shift of one reads each stored row once for its three products
+   (``util.numba_kernels.max_dot``), a shift of two would need five.
 2. The threshold: the "p95" rule (``seqmatch.choose_threshold``: the lowest score with >= 95 %
    closure precision) on the tuning queries of the largest stream, Nordland at its full rate, for
    the winner; ``seqmatch.DEFAULT_THRESHOLD`` is it rounded to one decimal. Every other stream then
@@ -42,12 +45,13 @@ from greenloop.speed import seqstream
 from greenloop.study import report, targets
 
 GRID = [5, 10, 20, 30, 50] + [[a, b] for a in (3, 5, 10) for b in (15, 20, 30)]
+SHIFTS = (0, 1)
 SYNTHETIC_STEP = 4                       # notebook 13's frame_step on the synthetic sequence
 REPEAT_LEVELS = (0.995, 0.999)
 THRESHOLD_STREAM = "nordland: every frame, +- 2 frames"   # Nordland at its full rate: the largest tuning part
 SYNTHETIC_STREAM = "synthetic: leaderboard"
 
-__all__ = ["GRID", "REPEAT_LEVELS", "streams", "reversed_stream", "rank", "repeat_gate", "threshold", "main"]
+__all__ = ["GRID", "SHIFTS", "REPEAT_LEVELS", "streams", "reversed_stream", "rank", "repeat_gate", "threshold", "main"]
 
 
 def streams(nordland=None, gardenspoint=None, synthetic=None) -> dict:
@@ -67,11 +71,12 @@ def streams(nordland=None, gardenspoint=None, synthetic=None) -> dict:
     return out
 
 
-def _scores(stream, center_window) -> np.ndarray:
+def _scores(stream, center_window, cell_shift: int = 0) -> np.ndarray:
     X, _, exclude, _ = stream
     k = seqmatch.DEFAULT_KNOBS
     return seqstream.score_matrix(X, exclude, k["seq_len"], k["velocities"], k["contrast_window"], None,
-                                  center_window=center_window, calibrate=k["calibrate"], repeat_cos=k["repeat_cos"])
+                                  center_window=center_window, calibrate=k["calibrate"], repeat_cos=k["repeat_cos"],
+                                  cell_shift=cell_shift)
 
 
 def reversed_stream(stream):
@@ -85,22 +90,23 @@ def reversed_stream(stream):
     return X[idx], np.asarray(GT)[np.ix_(idx, idx)], exclude, np.arange(len(idx)) >= q.min()
 
 
-def rank(streams: dict, grid=GRID, reverse=()) -> pd.DataFrame:
-    """One row per candidate center_window: per-query AUC-PR (%) on each stream's tuning queries
-    and their mean, best first (ties: grid order); for the streams named in ``reverse``, R@1 (%)
-    of the tuning queries as they are and driven the other way (:func:`reversed_stream`), shown
-    beside it, not ranked on. streams: as :func:`streams` returns."""
+def rank(streams: dict, grid=GRID, reverse=(), shifts=SHIFTS) -> pd.DataFrame:
+    """One row per candidate (center_window, cell_shift): per-query AUC-PR (%) on each stream's
+    tuning queries and their mean, best first (ties: grid order, windows outer); for the streams
+    named in ``reverse``, R@1 (%) of the tuning queries as they are and driven the other way
+    (:func:`reversed_stream`), shown beside it, not ranked on. streams: as :func:`streams`
+    returns (a cell shift needs the gradients layout, ``seqmatch.CELL_GRID``)."""
     rows = []
-    for cw in grid:
-        row = {"center_window": str(cw)}
+    for cw, cs in ((cw, cs) for cw in grid for cs in shifts):
+        row = {"center_window": str(cw), "cell_shift": int(cs)}
         for label, s in streams.items():
             _, GT, exclude, tune = s
-            m = evaluate.per_query(_scores(s, cw), GT, exclude, tune)
+            m = evaluate.per_query(_scores(s, cw, cs), GT, exclude, tune)
             row[f"AUC-PR_tune_% {label}"] = 100 * m["AUC-PR"]
             if label in reverse:
                 r = reversed_stream(s)
                 row[f"R@1_tune_% {label}"] = 100 * m["R@1"]
-                row[f"R@1_tune_% {label}, reversed"] = 100 * evaluate.per_query(_scores(r, cw), r[1], r[2], r[3])["R@1"]
+                row[f"R@1_tune_% {label}, reversed"] = 100 * evaluate.per_query(_scores(r, cw, cs), r[1], r[2], r[3])["R@1"]
         row["mean_AUC-PR_tune_%"] = float(np.mean([v for k, v in row.items() if k.startswith("AUC-PR")]))
         rows.append(row)
     return pd.DataFrame(rows).sort_values("mean_AUC-PR_tune_%", ascending=False, kind="stable").reset_index(drop=True)
@@ -119,10 +125,10 @@ def repeat_gate(streams: dict, levels=REPEAT_LEVELS) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def threshold(stream, center_window) -> float:
+def threshold(stream, center_window, cell_shift: int = 0) -> float:
     """The "p95" rule's threshold (a calibrated score) on one stream's tuning queries."""
     _, GT, exclude, tune = stream
-    return seqmatch.choose_threshold(_scores(stream, center_window), GT, exclude, tune, rule="p95")
+    return seqmatch.choose_threshold(_scores(stream, center_window, cell_shift), GT, exclude, tune, rule="p95")
 
 
 def main(argv=None) -> None:
@@ -137,27 +143,28 @@ def main(argv=None) -> None:
             raise SystemExit(f"dataset folder {f} not found: build it first (make nordland gardenspoint synthetic)")
     s = streams(a.nordland, a.gardenspoint, a.synthetic)
     table = rank(s, reverse=[k for k in s if k != SYNTHETIC_STREAM])
-    best = table["center_window"][0]
+    best, shift = table["center_window"][0], int(table["cell_shift"][0])
     cw = {str(c): c for c in GRID}[best]
-    t = threshold(s[THRESHOLD_STREAM], cw)
+    t = threshold(s[THRESHOLD_STREAM], cw, shift)
     out = Path(a.out)
     report.write_table(table, out / "windows", decimals=2,
-                       title="The named default's center_window: per-query AUC-PR on the tuning queries of the target streams",
+                       title="The named default's center_window and cell_shift: per-query AUC-PR on the tuning queries of the target streams",
                        note=(f"greenloop.study.default_choice: the first row wins (highest mean). The 'p95' rule on "
                              f"{THRESHOLD_STREAM} picks the threshold {t:.4f} for it. In the code: "
                              f"seqmatch.DEFAULT_KNOBS center_window {list(seqmatch.center_windows(seqmatch.DEFAULT_KNOBS['center_window']))}, "
+                             f"cell_shift {seqmatch.DEFAULT_KNOBS['cell_shift']}, "
                              f"seqmatch.DEFAULT_THRESHOLD {seqmatch.DEFAULT_THRESHOLD}."))
     gate = repeat_gate(s)
     report.write_table(gate, out / "repeat_gate", decimals=2,
                        title="Frames the repeat gate holds out of the trajectories, by its level (raw descriptors)",
                        note=f"greenloop.study.default_choice.repeat_gate; seqmatch.DEFAULT_KNOBS repeat_cos "
                             f"{seqmatch.DEFAULT_KNOBS['repeat_cos']}.")
-    report.manifest(out, dict(grid=[str(c) for c in GRID], repeat_levels=list(REPEAT_LEVELS), synthetic_step=SYNTHETIC_STEP,
-                              threshold_stream=THRESHOLD_STREAM, winner=best, p95_threshold=round(t, 4)),
+    report.manifest(out, dict(grid=[str(c) for c in GRID], shifts=list(SHIFTS), repeat_levels=list(REPEAT_LEVELS), synthetic_step=SYNTHETIC_STEP,
+                              threshold_stream=THRESHOLD_STREAM, winner=best, winner_cell_shift=shift, p95_threshold=round(t, 4)),
                     datasets=[a.nordland, a.gardenspoint, a.synthetic])
     print(table.round(2).to_string(index=False))
     print(gate.round(2).to_string(index=False))
-    print(f"winner {best}; p95 threshold on {THRESHOLD_STREAM}: {t:.4f}")
+    print(f"winner {best}, cell_shift {shift}; p95 threshold on {THRESHOLD_STREAM}: {t:.4f}")
 
 
 if __name__ == "__main__":

@@ -14,6 +14,9 @@
   mode (``speed.seqstream.Detector``): the stored rows its candidates' trajectories and contrast
   windows need, and the best-trajectory score of each candidate from those rows' similarities to
   the last seq_len queries, in one compiled pass instead of some thirty small NumPy calls.
+* ``ring_best``: greenloop-seq's search over straight trajectories in its ring of columns.
+* ``max_dot``: greenloop-seq's similarity under a cell shift (``seqmatch.shift_cells``): each
+  stored row's best cosine with the query's shifted copies, reading the stored rows once.
 
 Each kernel is checked against the library it replaces in tests/test_kernels.py. numba is imported
 lazily; ``available()`` says whether it is installed, and callers fall back to plain
@@ -45,7 +48,8 @@ def available() -> bool:
 def _compiled():
     """The numba kernels, compiled (or loaded from numba's disk cache) once per process.
 
-    Returns {'conv3_relu', 'conv3_grad', 'adam1d', 'area_u8', 'cand_rows', 'cand_scores'}:
+    Returns {'conv3_relu', 'conv3_grad', 'adam1d', 'area_u8', 'cand_rows', 'cand_scores', 'max_dot3',
+    'ring_best'}:
     serial kernels that release the
     GIL; ``run_slices`` spreads them over the cores, so numba's own thread pool is never started
     (its spinning workers would compete with the BLAS calls on the other cores).
@@ -61,7 +65,46 @@ def _compiled():
     opts = dict(fastmath={"reassoc", "contract"}, error_model="numpy", cache=True, nogil=True)
     return {"conv3_relu": _compile_conv_relu(njit, opts), "conv3_grad": _compile_conv_grad(njit, opts),
             "adam1d": _compile_adam(njit, opts), "area_u8": _compile_area(njit),
-            **_compile_candidates(njit)}
+            **_compile_candidates(njit), "max_dot3": _compile_max_dot3(njit, opts), "ring_best": _compile_ring_best(njit)}
+
+
+def _compile_ring_best(njit):
+    """ring_best(R, base, c, out): see :func:`ring_best` (no fastmath: each sum in the order written)."""
+    @njit(cache=True, nogil=True)
+    def ring_best(R, base, c, out):
+        nv, L = base.shape
+        acc = np.empty(c, R.dtype)
+        for v in range(nv):
+            acc[:] = 0
+            for k in range(L):
+                seg = R[k, base[v, k]:base[v, k] + c]      # a view: plain indices vectorise
+                for i in range(c):
+                    acc[i] += seg[i]
+            if v == 0:
+                out[:] = acc
+            else:
+                for i in range(c):
+                    out[i] = max(out[i], acc[i])
+        return out
+    return ring_best
+
+
+def _compile_max_dot3(njit, opts: dict):
+    """max_dot3(A, Q, out): out[i] = max over the 3 rows q of Q of <A[i], q>, one pass over A."""
+    @njit(**opts)
+    def max_dot3(A, Q, out):
+        q0, q1, q2 = Q[0], Q[1], Q[2]
+        for i in range(A.shape[0]):
+            a = A[i]
+            t0, t1, t2 = np.float32(0.0), np.float32(0.0), np.float32(0.0)
+            for k in range(A.shape[1]):
+                x = a[k]
+                t0 += x * q0[k]
+                t1 += x * q1[k]
+                t2 += x * q2[k]
+            out[i] = max(t0, max(t1, t2))
+        return out
+    return max_dot3
 
 
 def _compile_conv_relu(njit, opts: dict):
@@ -231,6 +274,37 @@ def _compile_candidates(njit) -> dict:
         return out
 
     return {"cand_rows": cand_rows, "cand_scores": cand_scores}
+
+
+def ring_best(R: np.ndarray, base: np.ndarray, c: int) -> np.ndarray | None:
+    """greenloop-seq's trajectory search (``speed.seqstream._ring_scores`` without the division):
+    out[i] = max over v of sum over k = 0..L-1 (in that order) of R[k, base[v, k] + i], i < c.
+
+    R: (L, W) float32 or float64 ring rows, oldest last; base: (V, L) int64 column offsets. Returns
+    (c,) in R's dtype, the same bits as the NumPy loop (the same additions in the same order); None
+    without numba.
+    """
+    if not available():
+        return None
+    return _compiled()["ring_best"](np.ascontiguousarray(R), np.ascontiguousarray(base, dtype=np.int64), int(c),
+                                    np.empty(int(c), R.dtype))
+
+
+def max_dot(A: np.ndarray, Q: np.ndarray) -> np.ndarray:
+    """The best of several queries for every stored row: (C,) float32, out[i] = max_s <A[i], Q[s]>.
+
+    A: (C, D) float32 stored rows (C-contiguous); Q: (m, D) float32 queries. m = 3 (a cell shift
+    of one, greenloop-seq's default) runs one compiled pass over A that reads each row once (about
+    1.6x one matrix-vector product instead of 3x; needs numba); any other m, or without numba, is
+    m BLAS matrix-vector products and their maximum. Sums may be reordered as any BLAS does.
+    """
+    A, Q = np.ascontiguousarray(A, dtype=np.float32), np.ascontiguousarray(Q, dtype=np.float32)
+    if len(Q) == 3 and available() and len(A):
+        return _compiled()["max_dot3"](A, Q, np.empty(len(A), np.float32))
+    out = A @ Q[0]
+    for q in Q[1:]:
+        np.maximum(out, A @ q, out=out)
+    return out
 
 
 def candidate_rows(ids: np.ndarray, before: int, after: int, limit: int) -> tuple[np.ndarray, np.ndarray]:
