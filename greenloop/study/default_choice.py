@@ -9,14 +9,14 @@ two Gardens Point pairs, and the synthetic sequence's leaderboard stream (every 
 1. ``center_window`` and ``cell_shift``: every candidate of GRID (one window, or two joined,
    ``seqmatch.center``) with every cell shift of SHIFTS (0: the query as it is; 1: also moved one
    cell column left and right, ``seqmatch.shift_cells``) is scored by the per-query AUC-PR on each
-   stream's tuning queries; the candidate with the highest mean over the streams wins. Beside it, R@1 of the Nordland and Gardens Point tuning queries
-   driven the other way (:func:`reversed_stream`): a short window centres a frame on the frames
-   before it, which a reverse drive replaces by those after it. Two windows at most: each window
-   adds a part as long as the descriptor to every stored frame, and the match against every stored
-   frame grows with it; at Nordland's full rate the two-window default's slowest timing repeat is
-   already near the frames/s target (``13_leaderboard/target_protocols``). For the same reason
-   SHIFTS stops at one cell: a shift of one reads each stored row once for its three products
-   (``util.numba_kernels.max_dot``), a shift of two would need five.
+   stream's tuning queries; the candidate with the highest mean over the streams wins. Beside it,
+   R@1 of the Nordland and Gardens Point tuning queries driven the other way
+   (:func:`reversed_stream`): a short window centres a frame on the frames before it, which a
+   reverse drive replaces by those after it. The grid stops at two windows and a shift of one
+   cell, for speed: each window adds a part as long as the descriptor to every stored frame, and a
+   shift of one reads each stored row once for its three products (``util.numba_kernels.max_dot``)
+   where a shift of two would need five; the match against every stored frame is what limits the
+   frames/s at Nordland's full rate (``13_leaderboard/target_protocols``).
 2. The threshold: the "p95" rule (``seqmatch.choose_threshold``: the lowest score with >= 95 %
    closure precision) on the tuning queries of the largest stream, Nordland at its full rate, for
    the winner; ``seqmatch.DEFAULT_THRESHOLD`` is it rounded to one decimal. Every other stream then
