@@ -135,6 +135,20 @@ def test_cli_default_is_silent_without_revisit_and_finds_one(tmp_path):
     assert all(int(r[0]) >= 350 and abs(int(r[1]) - (int(r[0]) - 350)) <= 2 for r in rows)
 
 
+def test_a_shift_of_two_goes_silent_on_a_pan(tmp_path):
+    """Why default_choice's grid stops at a cell shift of one: on the same pan (a side-looking
+    camera), with the default's other knobs and threshold, a shift of two declares none of the
+    revisit, a shift of one most of it, and every declared match is at its place."""
+    X = seqmatch.describe(str(_drive(tmp_path / "back", list(range(350)) + list(range(150)))), "gradients")
+    declared = {}
+    for shift in (1, 2):
+        S = seqstream.score_matrix(X, 150, **dict(DEFAULT, cell_shift=shift))
+        js = seqmatch.matrix_events(S, seqmatch.DEFAULT_THRESHOLD, 150, len(X))
+        assert all(abs(int(S[:j - 150, j].argmax()) - (j - 350)) <= 2 for j in js)
+        declared[shift] = len(js)
+    assert declared[2] == 0 and declared[1] >= 75, declared
+
+
 def test_gradient_histograms_by_hand():
     """A bright vertical bar: only the cells its two edges cross have gradients, all horizontal
     (unsigned orientation: the rising and the falling edge both 0 degrees, bin 0), each such cell

@@ -294,9 +294,9 @@ def max_dot(A: np.ndarray, Q: np.ndarray) -> np.ndarray:
     """The best of several queries for every stored row: (C,) float32, out[i] = max_s <A[i], Q[s]>.
 
     A: (C, D) float32 stored rows (C-contiguous); Q: (m, D) float32 queries. m = 3 (a cell shift
-    of one, greenloop-seq's default) runs one compiled pass over A that reads each row once (about
-    1.6x one matrix-vector product instead of 3x; needs numba); any other m, or without numba, is
-    m BLAS matrix-vector products and their maximum. Sums may be reordered as any BLAS does.
+    of one, greenloop-seq's default) runs one compiled pass that reads each row of A once instead
+    of three times (needs numba); any other m, or without numba, is m BLAS matrix-vector products
+    and their maximum. Sums may be reordered as any BLAS does.
     """
     A, Q = np.ascontiguousarray(A, dtype=np.float32), np.ascontiguousarray(Q, dtype=np.float32)
     if len(Q) == 3 and available() and len(A):
