@@ -233,8 +233,11 @@ class Detector:
             raise ValueError(f"cell_shift needs the 'gradients' descriptor ({np.prod(CELL_GRID)}-d, seqmatch.CELL_GRID), "
                              f"got {x.shape[1]} dims")
         parts = self._centered(x)
-        Q = self._shifted(parts) if self.cell_shift else None      # (S, K * D) the query under each shift
-        y = Q[0] if self.cell_shift else normalise(_join(parts), self.projection)[0]
+        if self.cell_shift:
+            Q = self._shifted(parts)                         # (S, K * D) the query under each shift
+            y = Q[0]
+        else:
+            y = normalise(_join(parts), self.projection)[0]
         self._recenter_stored()
         j, c = self.frame_index, max(self.frame_index - self.exclude, 0)
         if self._db is not None and y.size != self._db.shape[1]:
