@@ -80,12 +80,25 @@ DEFAULT_KNOBS = dict(descriptor="gradients", seq_len=10, contrast_window=0, cent
 # silent on a drive that never comes back.
 DEFAULT_THRESHOLD = 2.8
 
+# The second named configuration, accuracy before speed: the named default's knobs on
+# "gradients+efficientnetlite0", the gradients beside an ImageNet CNN's mid-level map (which keeps
+# the image's layout, Sünderhauf et al. 2015), each part L2-normalised. A CNN forward pass per frame,
+# so not for the frame rate the named default keeps (13_leaderboard's timing). Its threshold comes
+# from the same "p95" rule on the same tuning part (``greenloop.study.default_choice``, rounded to
+# one decimal); `python -m greenloop detect FOLDER --method greenloop-seq-cnn` streams it.
+CNN_NAME = "greenloop-seq-cnn"
+CNN_KNOBS = dict(DEFAULT_KNOBS, descriptor="gradients+efficientnetlite0")
+CNN_THRESHOLD = 3.1
+
 # The "gradients" descriptor's layout (``features.gradient_histograms``): (rows, columns, bins) of its
 # cell grid, cells row-major and bins innermost; what ``shift_cells`` moves.
 CELL_GRID = (features.GRADIENT_SIZE[1] // features.GRADIENT_CELL, features.GRADIENT_SIZE[0] // features.GRADIENT_CELL,
              features.GRADIENT_BINS)
+# The raw descriptor widths whose parts begin with that grid, so that a cell shift applies:
+# "gradients" and "gradients+efficientnetlite0".
+SHIFTABLE_DIMS = (features.GRADIENT_DIM, features.FUSED_DIM)
 
-__all__ = ["DESCRIPTORS", "DEFAULT_NAME", "DEFAULT_KNOBS", "DEFAULT_THRESHOLD", "CELL_GRID", "shift_cells", "cell_shifts",
+__all__ = ["DESCRIPTORS", "DEFAULT_NAME", "DEFAULT_KNOBS", "DEFAULT_THRESHOLD", "CNN_NAME", "CNN_KNOBS", "CNN_THRESHOLD", "CELL_GRID", "SHIFTABLE_DIMS", "shift_cells", "cell_shifts",
            "center", "center_stored", "center_windows",
            "calibrate_scores", "describe", "describe_frames", "normalise", "fit_projection", "contrast_normalise", "columns_to_scores",
            "closures", "choose_threshold", "threshold_range", "pick_knobs", "matrix_events"]
@@ -250,28 +263,34 @@ def cell_shifts(cell_shift) -> tuple[int, ...]:
     return (0,) + tuple(t for t in range(-s, s + 1) if t)
 
 
-def shift_cells(X, shift: int) -> np.ndarray:
+def shift_cells(X, shift: int, part: int | None = None) -> np.ndarray:
     """Gradient-grid descriptors with every cell moved ``shift`` cell columns sideways.
 
-    X: (N, K * D) float, K joined parts (:func:`center`'s windows, or K = 1) of the "gradients"
-    layout, D = rows x columns x bins (``CELL_GRID``: cells row-major, bins innermost). shift > 0
-    moves the cells right (the view of a camera standing a little to the left), < 0 left; the cells
-    moved in are 0 (nothing seen there). Shifting commutes with centring and is exact: the kept
-    values are copied. Returns (N, K * D) float32; shift 0 returns X.
+    X: (N, K * P) float, K joined parts (:func:`center`'s windows, or K = 1) of P = ``part`` dims
+    each (None: P = D = rows x columns x bins, the "gradients" layout); each part begins with the
+    gradient grid, D = ``CELL_GRID``'s dims (cells row-major, bins innermost), and whatever follows
+    it in the part (the CNN part of "gradients+efficientnetlite0") is kept as it is. shift > 0 moves
+    the cells right (the view of a camera standing a little to the left), < 0 left; the cells moved
+    in are 0 (nothing seen there). Shifting commutes with centring and is exact: the kept values are
+    copied. Returns (N, K * P) float32; shift 0 returns X.
     """
     X = np.asarray(X, dtype=np.float32)
     r, c, b = CELL_GRID
-    if X.ndim != 2 or X.shape[1] % (r * c * b):
-        raise ValueError(f"shift_cells needs (N, K * {r * c * b}) 'gradients' descriptors ({r} x {c} cells x {b} bins), "
-                         f"got shape {X.shape}")
+    d = r * c * b
+    p = d if part is None else int(part)
+    if X.ndim != 2 or p < d or X.shape[1] % p:
+        raise ValueError(f"shift_cells needs (N, K * {p}) descriptors whose parts begin with the 'gradients' grid "
+                         f"({r} x {c} cells x {b} bins), got shape {X.shape}")
     if shift == 0:
         return X
-    H = X.reshape(len(X), -1, r, c, b)
-    out = np.zeros_like(H)
+    H = X.reshape(len(X), -1, p)
+    grid = H[:, :, :d].reshape(len(X), -1, r, c, b)
+    out, moved = H.copy(), np.zeros_like(grid)
     if 0 < shift < c:
-        out[:, :, :, shift:] = H[:, :, :, :-shift]
+        moved[:, :, :, shift:] = grid[:, :, :, :-shift]
     elif -c < shift < 0:
-        out[:, :, :, :shift] = H[:, :, :, -shift:]
+        moved[:, :, :, :shift] = grid[:, :, :, -shift:]
+    out[:, :, :d] = moved.reshape(len(X), -1, d)
     return out.reshape(len(X), -1)
 
 

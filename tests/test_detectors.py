@@ -41,7 +41,7 @@ def _data(descriptors: dict, GT, tune=None, **params) -> Data:
 
 def test_the_registry_holds_every_family_once_in_leaderboard_order():
     assert list(registry.REGISTRY) == ["single-frame", "cnn-layers", "siamese", "greenloop-seq", "seqslam",
-                                       seqmatch.DEFAULT_NAME, "dictionary"]
+                                       seqmatch.DEFAULT_NAME, seqmatch.CNN_NAME, "dictionary"]
     assert registry.get("seqslam") is slam_entry.ENTRY and registry.REGISTRY["dictionary"].score is None
     with pytest.raises(ValueError, match="registered are"):
         registry.get("nope")
@@ -139,7 +139,7 @@ def test_the_named_default_is_untuned_and_keeps_its_fixed_threshold():
     assert k["descriptor"] == seqmatch.DEFAULT_KNOBS["descriptor"] and k["calibrate"] is True
     X = np.random.default_rng(0).normal(size=(60, int(np.prod(seqmatch.CELL_GRID)))).astype(np.float32)   # gradients-sized
     d = _data({k["descriptor"]: X}, np.zeros((60, 60), bool), np.ones(60, bool))
-    assert greenloop_seq.tune_default(d) == ([], {seqmatch.DEFAULT_NAME: k}, {})
+    assert greenloop_seq.DEFAULT_ENTRY.tune(d) == ([], {seqmatch.DEFAULT_NAME: k}, {})
     direct = seqstream.score_matrix(X, EX, k["seq_len"], tuple(k["velocities"]), 0, None, center_window=k["center_window"],
                                    calibrate=True, repeat_cos=k["repeat_cos"], cell_shift=k["cell_shift"])
     assert k["cell_shift"] == seqmatch.DEFAULT_KNOBS["cell_shift"]
@@ -156,6 +156,8 @@ def _records(entry, X, GT):
     names = {single_frame.ENTRY.name: "pixels", slam_entry.ENTRY.name: "seqslam",
              seqmatch.DEFAULT_NAME: seqmatch.DEFAULT_KNOBS["descriptor"]}
     d.descriptors.update({names.get(entry.name, "pixels"): X, "sift_bovw": X, scnn.descriptor_name("multitask"): X})
+    wide = np.hstack([X, np.tile(X, 2)[:, :seqmatch.SHIFTABLE_DIMS[1] - X.shape[1]]])   # the fused layout's width
+    d.descriptors[seqmatch.CNN_KNOBS["descriptor"]] = wide
     d.descriptors.update({s: X for s in cnn_layers.groups(d.params)["mobilenetv2, best layer (single frame)"]})
     return d, entry.tune(d)[1]
 

@@ -77,13 +77,14 @@ def write_sequence(folder, rgb, depth_m=None):
 
 def test_backbone_table():
     assert set(F.BACKBONES) == set(DIMS) | {"sift_bovw", "pixels", "spot_cnn", "pixels-patchnorm",
-                                            "gradients"}
+                                            "gradients", "gradients+efficientnetlite0"}
     for name, d in DIMS.items():
         assert F.BACKBONES[name].dim == d
         assert F.BACKBONES[name].input_size == (224, 224)
         assert F.BACKBONES[name].weights_file or name == "shufflenetv2"   # no weights exist offline
     assert F.BACKBONES["pixels"].dim == F.BACKBONES["pixels-patchnorm"].dim == 1024
     assert F.BACKBONES["gradients"].dim == (128 // 16) * (64 // 16) * 8 == 256
+    assert F.BACKBONES["gradients+efficientnetlite0"].dim == 256 + 4 * 112    # block 10: 112 channels, 2 x 2 cells
 
 
 def test_unknown_backbone_lists_valid_names(frames):
@@ -423,7 +424,7 @@ def test_sequence_descriptors_are_registry_entries():
     extractor, and seqmatch's tuple is that same object (no second list)."""
     from greenloop import seqmatch
     assert seqmatch.DESCRIPTORS is F.SEQUENCE_DESCRIPTORS
-    assert seqmatch.DESCRIPTORS == ("pixels", "pixels-patchnorm", "mobilenetv2", "gradients")
+    assert seqmatch.DESCRIPTORS == ("pixels", "pixels-patchnorm", "mobilenetv2", "gradients", "gradients+efficientnetlite0")
     for name in seqmatch.DESCRIPTORS:
         assert F.BACKBONES[name].kind in F.EXTRACTORS
     assert set(F.EXTRACTORS) == {b.kind for b in F.BACKBONES.values()}

@@ -9,6 +9,7 @@ import pandas as pd
 import pytest
 import yaml
 
+from greenloop import seqmatch
 from greenloop.experiments import siamese_rgbd
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -535,6 +536,9 @@ def _check_13(folder):
     assert start > 0 and s["dictionary_trained_on_frames"] < 200                  # trained before the evaluation part
     for n in ("greenloop-seq", "SeqSLAM (published)"):                          # the check over the revisit
         assert s["stream_matches_matrix"][n]["equal"] and s["stream_matches_matrix"][n]["correct_events"] > 0
+    cnn = lc.loc[seqmatch.CNN_NAME]                  # the named CNN configuration: ImageNet weights even in a tiny run
+    assert cnn["weights"] == "imagenet" and cnn["knobs"].startswith(seqmatch.CNN_KNOBS["descriptor"] + ",")
+    assert s["stream_matches_matrix"][seqmatch.CNN_NAME]["equal"]
     tuning = pd.read_csv(folder / "tuning.csv")
     cw = len(TINY["contrast_windows"])
     assert (tuning.descriptor == "seqslam").sum() == len(TINY["seq_lens"]) * cw

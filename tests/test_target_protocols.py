@@ -67,7 +67,11 @@ def test_gardenspoint_pairs_are_the_named_traversals_aligned(gp):
 def test_a_pair_run_is_the_default_streamed_over_the_pair_alone(gp):
     data, _ = gp
     d, s = ex.target_protocols(data, 0.5)["day_right -> night_right"]
-    result, check, carry = ex.run_protocol(d, s)
+    result, check, carries = ex.run_protocol(d, s)
+    carry = {c["configuration"]: c for c in carries}
+    assert list(carry) == [seqmatch.DEFAULT_NAME, seqmatch.CNN_NAME]      # both named configurations run here
+    assert carry[seqmatch.CNN_NAME]["threshold_fixed"] == seqmatch.CNN_THRESHOLD and check[seqmatch.CNN_NAME]["equal"]
+    carry = carry[seqmatch.DEFAULT_NAME]
     k = seqmatch.DEFAULT_KNOBS
     X = np.concatenate([data.descriptors["gradients"][N:2 * N], data.descriptors["gradients"][2 * N:]])
     S = seqstream.score_matrix(X, d.exclude, k["seq_len"], k["velocities"], 0, None, center_window=k["center_window"],
@@ -81,7 +85,9 @@ def test_a_pair_run_is_the_default_streamed_over_the_pair_alone(gp):
     assert np.isnan(seqslam["fps_min"]) and np.isnan(seqslam["bytes_per_stored_frame"])   # measured in the leaderboard only
     assert rows.loc[(seqmatch.DEFAULT_NAME, "loop closure"), "bytes_per_stored_frame"] == (
         256 * 4 * len(seqmatch.center_windows(k["center_window"])) + 4 * k["seq_len"])   # one 256-d part per window
-    targets = dict(zip(result.targets.target, result.targets.met))
+    assert set(result.targets.configuration) == {seqmatch.DEFAULT_NAME, seqmatch.CNN_NAME}
+    mine = result.targets[result.targets.configuration == seqmatch.DEFAULT_NAME]
+    targets = dict(zip(mine.target, mine.met))
     assert targets["R@1 (%), place recognition"] is True
     table, board_rows = ex.protocol_tables(result, {"day_right -> night_right": result})
     assert set(table.protocol) == {"leaderboard", "day_right -> night_right"} and len(board_rows) == len(result.board)

@@ -1,5 +1,6 @@
 """greenloop-seq as a registered detector: the tuned greenloop-seq and greenloop-seq-fast rows and
-the named default (``seqmatch.DEFAULT_NAME``, the CLI's configuration, never tuned).
+the two named configurations, never tuned: the named default (``seqmatch.DEFAULT_NAME``, the CLI's
+configuration) and the CNN one (``seqmatch.CNN_NAME``).
 
 Also the seqmatch-based pieces the single-frame matchers share (a single-frame matcher is
 greenloop-seq's search at seq_len 1): :func:`score`, :func:`stream`, :func:`frame_describer`,
@@ -19,15 +20,19 @@ from greenloop.detectors.interface import Data, Entry
 from greenloop.speed import seqstream
 
 NAME, FAST = "greenloop-seq", "greenloop-seq-fast"
+# the named configurations: {name: (knobs, fixed threshold)}
+NAMED = {seqmatch.DEFAULT_NAME: (seqmatch.DEFAULT_KNOBS, seqmatch.DEFAULT_THRESHOLD),
+         seqmatch.CNN_NAME: (seqmatch.CNN_KNOBS, seqmatch.CNN_THRESHOLD)}
 
 
-def named_default() -> dict:
-    """greenloop-seq's named default (``seqmatch.DEFAULT_NAME``) as a knob record: the CLI's
-    configuration, never tuned here, scored at the fixed ``seqmatch.DEFAULT_THRESHOLD``."""
-    k = dict(seqmatch.DEFAULT_KNOBS)
+def named_default(name: str = seqmatch.DEFAULT_NAME) -> dict:
+    """A named configuration of greenloop-seq as a knob record, never tuned here, scored at its
+    fixed threshold: the named default (``seqmatch.DEFAULT_NAME``, the CLI's configuration) or the
+    CNN one (``seqmatch.CNN_NAME``)."""
+    k, t = NAMED[name]
     cw = k["center_window"]
     return dict(k, whitening="none", velocities=list(k["velocities"]), center_window=list(cw) if isinstance(cw, tuple) else cw,
-                fixed_threshold=seqmatch.DEFAULT_THRESHOLD)
+                fixed_threshold=t)
 
 
 def _extra(k: dict, velocities) -> dict:
@@ -56,13 +61,20 @@ def score(k: dict, data: Data) -> np.ndarray:
                                  k["contrast_window"], projection(k, data), **e)
 
 
+def _weights(k: dict, data: Data):
+    """The CNN weights of a knob record's descriptor: the run's ``weights`` parameter, except for
+    "gradients+efficientnetlite0", whose ImageNet weights are part of the named CNN configuration
+    (it refuses a random-init network, ``features.resolve``)."""
+    return "auto" if k["descriptor"] == seqmatch.CNN_KNOBS["descriptor"] else data.params.get("weights", "auto")
+
+
 def stream(k: dict, threshold, data: Data) -> seqstream.Detector:
     """The streaming ``seqstream.Detector`` of a knob record (threshold None or NaN: scores only)."""
     t = None if threshold is None or not np.isfinite(threshold) else float(threshold)
     desc = k["descriptor"] if k["descriptor"] in seqmatch.DESCRIPTORS else "pixels"
     return seqstream.Detector(t, descriptor=desc, seq_len=k["seq_len"], exclude=data.exclude,
                              contrast_window=k["contrast_window"], projection=projection(k, data),
-                             weights=data.params.get("weights", "auto"), **_extra(k, data.params["velocities"]))
+                             weights=_weights(k, data), **_extra(k, data.params["velocities"]))
 
 
 def frame_describer(descriptor: str, weights="auto", input_size=None, vocabulary=None):
@@ -80,7 +92,7 @@ def describer(k: dict, data: Data):
     """:func:`frame_describer` of a knob record's descriptor (SIFT-BoVW: the run's vocabulary)."""
     info = data.infos.get("sift_bovw")
     vocab = info.extra.get("vocabulary") if k["descriptor"] == "sift_bovw" and info is not None else None
-    return frame_describer(k["descriptor"], data.params.get("weights", "auto"), data.params.get("input_size"), vocab)
+    return frame_describer(k["descriptor"], _weights(k, data), data.params.get("input_size"), vocab)
 
 
 def knob_text(k: dict) -> str:
@@ -120,18 +132,23 @@ def tune(data: Data) -> tuple[list, dict, dict]:
     return rows, knobs, best
 
 
-def describe_default(data: Data) -> tuple[dict, dict]:
-    """The named default's descriptor (``seqmatch.DEFAULT_KNOBS``) where ``data`` lacks it."""
-    d = seqmatch.DEFAULT_KNOBS["descriptor"]
-    return ({} if d in data.descriptors else {d: seqmatch.describe(data.dataset, d, step=data.frame_step)}), {}
+def _describe_named(name: str):
+    """(Data) -> the named configuration's descriptor where ``data`` lacks it (``Entry.describe``)."""
+    def describe_named(data: Data) -> tuple[dict, dict]:
+        d = NAMED[name][0]["descriptor"]
+        if d in data.descriptors:
+            return {}, {}
+        X, info = seqmatch.describe(data.dataset, d, step=data.frame_step, return_info=True)
+        return {d: X}, {d: info}
+    return describe_named
 
 
-def tune_default(data: Data) -> tuple[list, dict, dict]:
-    """The named default is never tuned: its record, no tuning rows."""
-    return [], {seqmatch.DEFAULT_NAME: named_default()}, {}
+def _tune_named(name: str):
+    """(Data) -> a named configuration's record and no tuning rows: it is never tuned (``Entry.tune``)."""
+    return lambda data: ([], {name: named_default(name)}, {})
 
 
 ENTRY = Entry(NAME, describe, tune, score, stream, describer, knob_text, checked=True,
               cli_knobs=dict(descriptor="pixels-patchnorm", whitening="none", seq_len=10, contrast_window=10))
-DEFAULT_ENTRY = Entry(seqmatch.DEFAULT_NAME, describe_default, tune_default, score, stream, describer, knob_text,
-                      checked=True, cli_knobs=named_default())
+DEFAULT_ENTRY, CNN_ENTRY = (Entry(n, _describe_named(n), _tune_named(n), score, stream, describer, knob_text,
+                                    checked=True, cli_knobs=named_default(n)) for n in NAMED)

@@ -16,6 +16,7 @@ ENTRIES = (
     greenloop_seq.ENTRY,           # "greenloop-seq": greenloop-seq, greenloop-seq-fast
     seqslam.ENTRY,                 # "seqslam": SeqSLAM (tuned), SeqSLAM (published)
     greenloop_seq.DEFAULT_ENTRY,   # "greenloop-seq-grad": the named default, untuned
+    greenloop_seq.CNN_ENTRY,       # "greenloop-seq-cnn": the named CNN configuration, untuned
     dictionary.ENTRY,              # "dictionary": the main paper's CNN + dictionary
 )
 REGISTRY = {e.name: e for e in ENTRIES}

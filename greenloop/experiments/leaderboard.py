@@ -33,8 +33,9 @@ from greenloop.study import leaderboard as lb
 from greenloop.study import report
 from greenloop.study import targets as goals
 
-SEQ_ROWS = ("greenloop-seq", "greenloop-seq-fast", seqmatch.DEFAULT_NAME)   # the rows the targets judge
-TARGET_ENTRIES = (seqmatch.DEFAULT_NAME, "seqslam")    # what a target protocol runs: the default and SeqSLAM's rows
+SEQ_ROWS = ("greenloop-seq", "greenloop-seq-fast", seqmatch.DEFAULT_NAME, seqmatch.CNN_NAME)   # the rows the targets judge
+NAMED = (seqmatch.DEFAULT_NAME, seqmatch.CNN_NAME)      # the named configurations (untuned, fixed thresholds)
+TARGET_ENTRIES = NAMED + ("seqslam",)    # what a target protocol runs: the named configurations and SeqSLAM's rows
 TARGET_TOLERANCE = 2       # frames: the targets' ground truth, frame k of each traversal +- 2
 GP_PAIRS = (("day_right", "night_right"), ("day_left", "night_right"))   # Gardens Point's named pairs
 NO_SPLIT_DROPPED = "greenloop-seq, the tuned SeqSLAM, every tuned knob and threshold and so every closure count"
@@ -235,33 +236,37 @@ def target_protocols(data: Data, tune_fraction: float) -> dict:
     return {}
 
 
-def threshold_check(data: Data, tuned: Tuned) -> dict:
-    """Does the named default's one threshold carry to this stream? Its closures on the evaluation
-    queries (loop closure) at the fixed ``seqmatch.DEFAULT_THRESHOLD``, beside those at the
-    threshold the "p95" rule (the lowest score with >= 95 % closure precision,
+def threshold_check(data: Data, tuned: Tuned) -> list[dict]:
+    """Does each named configuration's one threshold carry to this stream? Its closures on the
+    evaluation queries (loop closure) at its fixed threshold (the record's ``fixed_threshold``),
+    beside those at the threshold the "p95" rule (the lowest score with >= 95 % closure precision,
     ``seqmatch.choose_threshold``) picks on this stream's own tuning queries.
-    Returns one row (dict): the thresholds (calibrated scores; the tuning part's
-    NaN without an honest split), closures declared and their precision (%, NaN when none) at each."""
-    S, GT, ex = tuned.S[seqmatch.DEFAULT_NAME], data.GT, data.exclude
-    own = np.nan if data.tune is None else seqmatch.choose_threshold(S, GT, ex, data.tune, rule="p95")
-    row = {}
-    for name, thr in (("fixed", seqmatch.DEFAULT_THRESHOLD), ("tuning_p95", own)):
-        c = seqmatch.closures(S, GT, thr, ex, data.evalq) if np.isfinite(thr) else {"declared": np.nan}
-        row.update({f"threshold_{name}": round(float(thr), 4), f"declared_at_{name}": c["declared"],
-                    f"precision_at_{name}_%": round(100 * c["precision"], 2) if c["declared"] else np.nan})
-    return row
+    Returns one row (dict) per named configuration (NAMED) scored here: its name ("configuration"),
+    the thresholds (calibrated scores; the tuning part's NaN without an honest split), closures
+    declared and their precision (%, NaN when none) at each."""
+    GT, ex, rows = data.GT, data.exclude, []
+    for m in (m for m in NAMED if m in tuned.S):
+        S = tuned.S[m]
+        own = np.nan if data.tune is None else seqmatch.choose_threshold(S, GT, ex, data.tune, rule="p95")
+        row = {"configuration": m}
+        for name, thr in (("fixed", tuned.knobs[m]["fixed_threshold"]), ("tuning_p95", own)):
+            c = seqmatch.closures(S, GT, thr, ex, data.evalq) if np.isfinite(thr) else {"declared": np.nan}
+            row.update({f"threshold_{name}": round(float(thr), 4), f"declared_at_{name}": c["declared"],
+                        f"precision_at_{name}_%": round(100 * c["precision"], 2) if c["declared"] else np.nan})
+        rows.append(row)
+    return rows
 
 
 def run_protocol(data: Data, split: Split) -> tuple[Board, dict, dict]:
-    """The named default and SeqSLAM (TARGET_ENTRIES) on one target protocol, as the leaderboard's
+    """The named configurations and SeqSLAM (TARGET_ENTRIES) on one target protocol, as the leaderboard's
     rows are: tuned (SeqSLAM's grid on its tuning queries) and thresholded; the stream-vs-matrix
-    check and the timing for the named default only: the leaderboard checks and times SeqSLAM,
+    check and the timing for the named configurations only: the leaderboard checks and times SeqSLAM,
     and at Nordland's full rate each timing repeat would first stream every earlier frame through
     each SeqSLAM row, one SAD against every stored frame each. Returns (Board, the stream check {method:
-    ``seqstream.stream_check``}, :func:`threshold_check`'s row)."""
+    ``seqstream.stream_check``}, :func:`threshold_check`'s rows)."""
     reg = {k: REGISTRY[k] for k in TARGET_ENTRIES}
     tuned = tune(data, reg)
-    timed = stream_and_time(data, tuned, (), reg, only=(seqmatch.DEFAULT_NAME,))
+    timed = stream_and_time(data, tuned, (), reg, only=NAMED)
     return board(data, split, tuned, timed), timed.stream_check, threshold_check(data, tuned)
 
 

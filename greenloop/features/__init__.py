@@ -106,8 +106,9 @@ from greenloop.features.extraction import (EXTRACTORS, clear_cache, extract, ext
 from greenloop.features.frames import depth_to_uint8, stack_frames
 from greenloop.features.pixels import gradient_histograms, patch_normalise
 from greenloop.features.registry import (BACKBONES, CNN_BACKBONES, CNN_KINDS, DEFAULT_VOCAB_SIZE,
-                                         DEPTH_MAX_M, GRADIENT_BINS, GRADIENT_CELL, GRADIENT_SIZE,
-                                         PATCH, PIXELS_SIZE, RANDOM_INIT_SEED, SEQUENCE_DESCRIPTORS,
+                                         DEPTH_MAX_M, FUSED_CNN, FUSED_DIM, FUSED_WIDTH, GRADIENT_BINS,
+                                         GRADIENT_CELL, GRADIENT_DIM, GRADIENT_SIZE, PATCH, PIXELS_SIZE,
+                                         RANDOM_INIT_SEED, SEQUENCE_DESCRIPTORS,
                                          Backbone, ExtractInfo, Options, get_backbone, split_spec)
 from greenloop.features.sift import fit_vocabulary
 from greenloop.features.spot import spot_feature_model
@@ -115,8 +116,8 @@ from greenloop.features.weights import (TFLITE_LABEL, WEIGHTS_ENV, Resolved, Wei
                                         imagenet_weights_path, resolve, weights_search_path,
                                         weights_used)
 
-__all__ = ["BACKBONES", "CNN_BACKBONES", "CNN_KINDS", "DEFAULT_VOCAB_SIZE", "DEPTH_MAX_M", "EXTRACTORS",
-           "GRADIENT_BINS", "GRADIENT_CELL", "GRADIENT_SIZE", "PATCH", "PIXELS_SIZE",
+__all__ = ["BACKBONES", "CNN_BACKBONES", "CNN_KINDS", "DEFAULT_VOCAB_SIZE", "DEPTH_MAX_M", "FUSED_CNN", "FUSED_DIM", "FUSED_WIDTH", "EXTRACTORS",
+           "GRADIENT_BINS", "GRADIENT_CELL", "GRADIENT_DIM", "GRADIENT_SIZE", "PATCH", "PIXELS_SIZE",
            "RANDOM_INIT_SEED", "SEQUENCE_DESCRIPTORS", "TFLITE_LABEL", "WEIGHTS_ENV", "Backbone",
            "ExtractInfo", "Options", "Resolved", "WeightsNotFoundError", "clear_cache", "clear_models",
            "depth_to_uint8", "extract", "extract_all", "extract_rgbd", "extract_spec", "fit_vocabulary",

@@ -22,7 +22,7 @@ from greenloop.features.weights import Resolved, resolve
 
 EXTRACTORS = {**{kind: extract_cnn for kind in CNN_KINDS}, "pixels": extract_pixels,
               "pixels-patchnorm": extract_patchnorm, "gradients": extract_gradients,
-              "sift_bovw": extract_sift, "spot_cnn": extract_spot}
+              "sift_bovw": extract_sift, "spot_cnn": extract_spot, "fused": layers.extract_fused}
 
 
 def extract(frames_or_folder, backbone: str, weights="auto", batch_size: int = 32,

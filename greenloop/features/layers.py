@@ -27,10 +27,16 @@ Input: the TFLite MobileNets take only 224 x 224, so their frames are stretched 
 ``features.extract``). EfficientNet-Lite0 takes any size: with ``aspect=True`` frames keep their
 aspect ratio, 224 pixels wide and a multiple of 16 high (:func:`aspect_size`; Nordland's 64 x 32
 frames become 224 x 112, not 224 x 224).
+
+``extract_fused`` is the descriptor of greenloop-seq's named CNN configuration,
+"gradients+efficientnetlite0": the gradient histograms beside EfficientNet-Lite0's mid map pooled
+over the 2 x 2 grid, from frames ``registry.FUSED_WIDTH`` pixels wide (aspect kept).
 """
 from __future__ import annotations
 
 import functools
+import os
+import time
 
 import numpy as np
 
@@ -38,8 +44,11 @@ from greenloop.backbones import mobilenet_tflite as _tflite
 from greenloop.datasets import sequence
 from greenloop.features.cnn import _cnn_model, _preprocess_fn, _tflite_interpreter, run_model
 from greenloop.features.frames import load, rgb_batch
-from greenloop.features.registry import ExtractInfo, get_backbone
-from greenloop.features.weights import resolve, source_key
+from greenloop.features.pixels import extract_gradients
+from greenloop.features.registry import (BACKBONES, FUSED_CNN, FUSED_WIDTH, GRADIENT_SIZE, ExtractInfo, Options,
+                                         get_backbone)
+from greenloop.features.weights import Resolved, resolve, source_key
+from greenloop.similarity import l2_normalise
 
 DEPTHS = ("early", "mid", "last")
 POOLINGS = ("avg", "grid2", "gem")
@@ -129,14 +138,14 @@ def _pooled(maps: list, poolings) -> np.ndarray:
 
 def extract_layers(frames_or_folder, backbone: str, weights="auto", depths=DEPTHS, poolings=POOLINGS,
                    aspect: bool = True, batch_size: int = 32, progress: bool = True, step: int = 1,
-                   limit: int | None = None, resolved=None) -> tuple[dict, dict]:
+                   limit: int | None = None, resolved=None, width: int = 224) -> tuple[dict, dict]:
     """Descriptors of every frame at several depths of one network, one forward pass.
 
     frames_or_folder: a sequence folder or (N, H, W, 3) RGB frames (as ``features.extract``).
     backbone: a key of ``LAYERS``; weights: as ``features.extract`` (the TFLite graphs for the
     ImageNet MobileNets, their Keras architecture with weights=None). depths: keys of
     LAYERS[backbone]; poolings: of ``POOLINGS``. aspect: keep the frames' aspect ratio where the
-    network allows it (:func:`aspect_size`). step, limit, resolved: as ``features.extract``.
+    network allows it (:func:`aspect_size`, ``width`` pixels wide). step, limit, resolved: as ``features.extract``.
     Returns (feats, info): feats {(depth, pooling): (N, D) float32}; info {'weights': label,
     'input': 'WxH', 'layers': {depth: layer name}, 'seconds_per_image': wall s per frame of the
     whole forward pass and pooling}.
@@ -157,7 +166,7 @@ def extract_layers(frames_or_folder, backbone: str, weights="auto", depths=DEPTH
             w, h = meta["width"], meta["height"]
         else:
             h, w = np.asarray(frames_or_folder).shape[1:3]
-        size = aspect_size(w, h)
+        size = aspect_size(w, h, width)
     frames = load(frames_or_folder, size, gray=False, limit=limit, step=step)
     names = [LAYERS[backbone][d][0 if tflite else 1] for d in depths]
     predict, batch_fn = _predictor(b, key, size, tflite, names, poolings)
@@ -218,3 +227,26 @@ def info(name: str, layer_info: dict, X: np.ndarray):
     return ExtractInfo(backbone=name, weights=layer_info["weights"], dim=int(X.shape[1]), n_images=len(X),
                        input_size=(w, h), layer=f"{layer_info['layers'][depth]}, {pooling} pooling",
                        seconds_per_image=float(layer_info["seconds_per_image"]))
+
+
+def extract_fused(b, frames_or_folder, source, size, opt: Options):
+    """'gradients+efficientnetlite0' (``features.extract``'s extractor protocol): each frame's
+    gradients (``pixels.gradient_histograms``, 256-d) beside EfficientNet-Lite0's block-10 map pooled
+    over 2 x 2 cells (:func:`extract_layers` at ``FUSED_WIDTH`` pixels wide, aspect kept, 448-d),
+    each part L2-normalised: (N, 704) float32, so that the cosine of two frames weighs both parts
+    alike, and ``seqmatch.shift_cells`` finds the gradient grid in the first 256 dims.
+    source: the CNN part's ImageNet weights (``weights.resolve`` refuses a random-init fallback).
+    Returns (X, seconds per image of both parts, {})."""
+    if source is None:
+        raise ValueError(f"{b.name} needs ImageNet weights for its CNN part, not a random-init network")
+    t0 = time.perf_counter()
+    G, _, _ = extract_gradients(BACKBONES["gradients"], frames_or_folder, None, GRADIENT_SIZE, opt)
+    rgb = frames_or_folder
+    if opt.color == "bgr" and not isinstance(frames_or_folder, (str, bytes, os.PathLike)):
+        rgb = np.asarray(frames_or_folder)[..., ::-1]
+    backbone, depth, pooling = FUSED_CNN
+    feats, _ = extract_layers(rgb, backbone, depths=(depth,), poolings=(pooling,), batch_size=opt.batch_size,
+                              progress=opt.progress, step=opt.step, limit=opt.limit,
+                              resolved=Resolved("imagenet", source), width=FUSED_WIDTH)
+    X = np.hstack([l2_normalise(G), l2_normalise(feats[(depth, pooling)])]).astype(np.float32)
+    return X, (time.perf_counter() - t0) / max(len(X), 1), {}

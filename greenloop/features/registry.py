@@ -23,6 +23,13 @@ RANDOM_INIT_SEED = 0           # seed of the weights=None / "auto"-fallback rand
 PATCH = 8                      # SeqSLAM patch-normalisation size (pixels), pixels-patchnorm
 GRADIENT_SIZE = (128, 64)      # "gradients": gray frame (width, height), 2:1 like SeqSLAM
 GRADIENT_CELL, GRADIENT_BINS = 16, 8   # 16x16-pixel cells (4 x 8 of them), 8 unsigned bins -> 256-d
+GRADIENT_DIM = (GRADIENT_SIZE[0] // GRADIENT_CELL) * (GRADIENT_SIZE[1] // GRADIENT_CELL) * GRADIENT_BINS
+# "gradients+efficientnetlite0": the gradients beside EfficientNet-Lite0's block-10 map (112 channels)
+# pooled over 2 x 2 cells (``features.layers``), the network fed frames FUSED_WIDTH pixels wide with
+# their aspect ratio kept (``layers.aspect_size``): Nordland's 64 x 32 frames become 160 x 80.
+FUSED_CNN = ("efficientnetlite0", "mid", "grid2")
+FUSED_WIDTH = 160
+FUSED_DIM = GRADIENT_DIM + 4 * 112
 
 
 @dataclass(frozen=True)
@@ -30,7 +37,8 @@ class Backbone:
     """What ``extract`` knows about a backbone.
 
     name: the key in BACKBONES. kind: 'keras' | 'ghostnet' | 'efficientnet_lite' | 'tflite' |
-    'sift_bovw' | 'pixels' | 'spot_cnn' | 'pixels-patchnorm' | 'gradients'. dim: descriptor length D (None: depends on the vocabulary or
+    'sift_bovw' | 'pixels' | 'spot_cnn' | 'pixels-patchnorm' | 'gradients' | 'fused' (gradients beside a
+    CNN layer, ``layers.extract_fused``). dim: descriptor length D (None: depends on the vocabulary or
     the model). input_size: default (width, height) fed to the extractor (None: native frame size).
     layer: which layer/feature the descriptor is. weights_file: name of the ImageNet weights file
     looked for by ``weights_search_path`` (None for weight-free backbones). app / module: the
@@ -106,14 +114,16 @@ BACKBONES: dict[str, Backbone] = {b.name: b for b in (
     Backbone("pixels-patchnorm", "pixels-patchnorm", PIXELS_SIZE[0] * PIXELS_SIZE[1], PIXELS_SIZE,
              f"32x32 grayscale frame in [0, 1], SeqSLAM patch-normalised ({PATCH}x{PATCH} blocks "
              f"to zero mean, unit std), flattened"),
-    Backbone("gradients", "gradients",
-             (GRADIENT_SIZE[0] // GRADIENT_CELL) * (GRADIENT_SIZE[1] // GRADIENT_CELL) * GRADIENT_BINS,
+    Backbone("gradients", "gradients", GRADIENT_DIM,
              GRADIENT_SIZE, f"{GRADIENT_CELL}x{GRADIENT_CELL}-cell orientation histograms"),
+    Backbone("gradients+efficientnetlite0", "fused", FUSED_DIM, None,
+             f"[gradients | efficientnetlite0@mid-grid2 at {FUSED_WIDTH} pixels wide, aspect kept], each part "
+             f"L2-normalised; ImageNet weights only"),
 )}
 CNN_KINDS = ("keras", "ghostnet", "efficientnet_lite", "tflite", "shufflenet")
 CNN_BACKBONES = tuple(n for n, b in BACKBONES.items() if b.kind in CNN_KINDS)
 # greenloop-seq's per-frame descriptors (seqmatch.DESCRIPTORS), in its order; each a BACKBONES key
-SEQUENCE_DESCRIPTORS = ("pixels", "pixels-patchnorm", "mobilenetv2", "gradients")
+SEQUENCE_DESCRIPTORS = ("pixels", "pixels-patchnorm", "mobilenetv2", "gradients", "gradients+efficientnetlite0")
 
 
 @dataclass

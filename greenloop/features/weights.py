@@ -14,7 +14,7 @@ from typing import Any, NamedTuple
 from greenloop.backbones import efficientnet_lite as _lite
 from greenloop.backbones import ghostnet as _ghostnet
 from greenloop.backbones import mobilenet_tflite as _tflite
-from greenloop.features.registry import Backbone, get_backbone
+from greenloop.features.registry import FUSED_CNN, Backbone, get_backbone
 
 WEIGHTS_ENV = "GREENLOOP_WEIGHTS"   # folder(s) of ImageNet weight files, searched first
 TFLITE_LABEL = "imagenet, tflite uint8"
@@ -96,6 +96,11 @@ def resolve(backbone: str, weights, warn: bool = True) -> Resolved:
     """The ``Resolved`` (label, source) of a backbone/weights pair; with ``warn``, a UserWarning
     when weights='auto' falls back to a random-initialised network."""
     b = get_backbone(backbone)
+    if b.kind == "fused":   # its CNN part: ImageNet weights or a file, never a random-init fallback
+        if weights is None or not (isinstance(weights, (str, os.PathLike))):
+            raise ValueError(f"{b.name} needs ImageNet weights for its CNN part: weights 'auto', 'imagenet' or a "
+                             f"file, got {weights!r}")
+        return resolve(FUSED_CNN[0], "imagenet" if weights == "auto" else weights, warn)
     if b.kind in WEIGHT_FREE_KINDS:
         if weights not in ("auto", None):
             raise ValueError(f"{b.name} has no weights; leave weights='auto' (got {weights!r})")

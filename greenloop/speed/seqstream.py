@@ -17,7 +17,7 @@ import numpy as np
 
 from greenloop import evaluate, retrieval
 from greenloop.seqmatch import (_EPS, COLORS, DEFAULT_VELOCITIES, STORE_DTYPES, _check_descriptor, _join,
-                                CELL_GRID, calibrate_scores, cell_shifts, center, center_stored, center_windows, columns_to_scores,
+                                CELL_GRID, SHIFTABLE_DIMS, calibrate_scores, cell_shifts, center, center_stored, center_windows, columns_to_scores,
                                 contrast_normalise, describe_frames, matrix_events, normalise, shift_cells, threshold_range)
 from greenloop.similarity import l2_normalise
 from greenloop.util import numba_kernels
@@ -103,8 +103,9 @@ class Detector:
         was stored, keeping the best cosine: a revisit seen from a little to the left or right
         (another aisle side, a camera mounted elsewhere). The stored frames are not shifted, so
         memory is unchanged; the match reads every stored frame once for s = 1
-        (``numba_kernels.max_dot``), 2s + 1 times otherwise. Needs the gradients layout
-        (``seqmatch.CELL_GRID``) and no projection.
+        (``numba_kernels.max_dot``), 2s + 1 times otherwise. Needs a descriptor that begins with
+        the gradients grid (``seqmatch.SHIFTABLE_DIMS``; the fused descriptor's CNN part is not
+        shifted) and no projection.
     Negative velocities search revisits driven the opposite way (database rows increasing while
     the query goes back in time); a trajectory point on a row not yet a candidate counts as the
     column's mean, as one before the first stored frame.
@@ -229,9 +230,7 @@ class Detector:
         x = np.asarray(x, dtype=np.float32).reshape(1, -1)
         if x.shape[1] == 0 or not np.all(np.isfinite(x)):
             raise ValueError(f"descriptor {self.frame_index} is empty or has NaN/inf values")
-        if self.cell_shift and x.shape[1] != int(np.prod(CELL_GRID)):
-            raise ValueError(f"cell_shift needs the 'gradients' descriptor ({np.prod(CELL_GRID)}-d, seqmatch.CELL_GRID), "
-                             f"got {x.shape[1]} dims")
+        self._check_shiftable(x.shape[1])
         parts = self._centered(x)
         if self.cell_shift:
             Q = self._shifted(parts)                         # (S, K * D) the query under each shift
@@ -254,12 +253,20 @@ class Detector:
                 s = self._db[:c].astype(np.float32, copy=False) @ y
         return self._match(y, s, gate)
 
+    def _check_shiftable(self, dims: int) -> None:
+        """ValueError when a cell shift is asked of raw descriptors of ``dims`` dims that do not begin
+        with the gradients grid (``seqmatch.SHIFTABLE_DIMS``)."""
+        if self.cell_shift and dims not in SHIFTABLE_DIMS:
+            raise ValueError(f"cell_shift needs a descriptor that begins with the 'gradients' grid (seqmatch.CELL_GRID): "
+                             f"'gradients' or 'gradients+efficientnetlite0' ({' or '.join(map(str, SHIFTABLE_DIMS))} "
+                             f"dims), got {dims} dims")
+
     def _shifted(self, parts: list) -> np.ndarray:
         """The query under each of its cell shifts (``_shifts``, 0 first), (S, K * D) float32: row t is
         what ``normalise(center(shift_cells(X, t)))`` gives for this frame (the same operations row
         by row, so row 0 is the unshifted query bit for bit), for all shifts and parts at once."""
         joined = np.hstack(parts)                                             # (1, K * D)
-        Q = np.vstack([shift_cells(joined, t) for t in self._shifts])       # (S, K * D)
+        Q = np.vstack([shift_cells(joined, t, parts[0].shape[1]) for t in self._shifts])   # (S, K * D)
         if len(parts) > 1:                                                  # _join: each part L2-normalised
             Q = l2_normalise(Q.reshape(-1, parts[0].shape[1])).reshape(len(Q), -1)
         return normalise(Q)
@@ -516,8 +523,9 @@ def score_matrix(X, exclude: int = 150, seq_len: int = 10, velocities=DEFAULT_VE
         return np.zeros((0, 0), np.float32)
     if not np.all(np.isfinite(X)):
         raise ValueError("X has NaN or inf values")
+    det._check_shiftable(X.shape[1])
     W, cw, f32 = det._W, det.center_window, np.float32
-    Ys = [normalise(center(shift_cells(X, t) if t else X, cw), projection) for t in det._shifts]   # the queries
+    Ys = [normalise(center(shift_cells(X, t, X.shape[1]) if t else X, cw), projection) for t in det._shifts]   # the queries
     stored = normalise(center_stored(X, cw), projection) if W else Ys[0]
     stored = stored.astype(det.store_dtype).astype(f32)
     G = stored @ Ys[0].T                                     # stored rows x queries, one product per shift

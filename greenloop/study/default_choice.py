@@ -26,7 +26,10 @@ two Gardens Point pairs, and the synthetic sequence's leaderboard stream (every 
 2. The threshold: the "p95" rule (``seqmatch.choose_threshold``: the lowest score with >= 95 %
    closure precision) on the tuning queries of the largest stream, Nordland at its full rate, for
    the winner; ``seqmatch.DEFAULT_THRESHOLD`` is it rounded to one decimal. Every other stream then
-   gets that threshold unchanged (notebook 13's threshold_carry table).
+   gets that threshold unchanged (notebook 13's threshold_carry table). The named CNN
+   configuration (``seqmatch.CNN_KNOBS``: the default's knobs on another descriptor, not ranked
+   here) gets its threshold by the same rule on the same stream: ``seqmatch.CNN_THRESHOLD``
+   (:func:`cnn_threshold`).
 3. The repeat gate's level (``repeat_cos``) is shown, not ranked: :func:`repeat_gate` gives the
    share of each stream's frames it would hold out of the trajectories. Raw gradient histograms
    share a large positive part, so a level that suits centred descriptors also holds out moving
@@ -57,22 +60,24 @@ REPEAT_LEVELS = (0.995, 0.999)
 THRESHOLD_STREAM = "nordland: every frame, +- 2 frames"   # Nordland at its full rate: the largest tuning part
 SYNTHETIC_STREAM = "synthetic: leaderboard"
 
-__all__ = ["GRID", "SHIFTS", "REPEAT_LEVELS", "streams", "reversed_stream", "rank", "repeat_gate", "threshold", "main"]
+__all__ = ["GRID", "SHIFTS", "REPEAT_LEVELS", "streams", "reversed_stream", "rank", "repeat_gate", "threshold",
+           "cnn_threshold", "main"]
 
 
-def streams(nordland=None, gardenspoint=None, synthetic=None) -> dict:
-    """{"<dataset kind>: <protocol>": (X (N, 256) gradient descriptors, GT (N, N) bool, exclude (frames of the stream),
+def streams(nordland=None, gardenspoint=None, synthetic=None, descriptor: str = "gradients") -> dict:
+    """{"<dataset kind>: <protocol>": (X (N, D) descriptors, GT (N, N) bool, exclude (frames of the stream),
     tune (N,) bool tuning queries)}: the target streams of the given dataset folders (None: left
-    out), split as notebook 13 splits them (tune_fraction 0.5, exclude 150 original frames)."""
+    out), split as notebook 13 splits them (tune_fraction 0.5, exclude 150 original frames).
+    descriptor: the named default's "gradients" (256-d) or the CNN configuration's (``seqmatch.CNN_KNOBS``)."""
     params = dict(seq_lens=[5, 10, 20], fps_frames=300, weights="auto")
     out = {}
     for folder in (f for f in (nordland, gardenspoint) if f is not None):
         data, _ = ex.prepare(str(folder), 1, 0.5, 150, 0.5, None, params)
         for label, (d, _) in ex.target_protocols(data, 0.5).items():
-            out[f"{targets.dataset_kind(folder)}: {label}"] = (d.descriptors["gradients"], d.GT, d.exclude, d.tune)
+            out[f"{targets.dataset_kind(folder)}: {label}"] = (d.descriptors[descriptor], d.GT, d.exclude, d.tune)
     if synthetic is not None:
         d, _ = ex.prepare(str(synthetic), SYNTHETIC_STEP, 0.5, 150, 0.5, None, params)
-        X = seqmatch.describe(str(synthetic), "gradients", step=SYNTHETIC_STEP)
+        X = seqmatch.describe(str(synthetic), descriptor, step=SYNTHETIC_STEP)
         out[SYNTHETIC_STREAM] = (X, d.GT, d.exclude, d.tune)
     return out
 
@@ -137,6 +142,15 @@ def threshold(stream, center_window, cell_shift: int = 0) -> float:
     return seqmatch.choose_threshold(_scores(stream, center_window, cell_shift), GT, exclude, tune, rule="p95")
 
 
+def cnn_threshold(nordland) -> float:
+    """The "p95" rule's threshold for the named CNN configuration (``seqmatch.CNN_KNOBS``, its
+    windows and cell shift as they are) on the tuning queries of Nordland at its full rate
+    (THRESHOLD_STREAM of ``nordland``, a Nordland folder)."""
+    k = seqmatch.CNN_KNOBS
+    s = streams(nordland, descriptor=k["descriptor"])[THRESHOLD_STREAM]
+    return threshold(s, k["center_window"], k["cell_shift"])
+
+
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(prog="python -m greenloop.study.default_choice", description=__doc__.splitlines()[0])
     p.add_argument("--nordland", default="data/nordland")
@@ -152,6 +166,7 @@ def main(argv=None) -> None:
     best, shift = table["center_window"][0], int(table["cell_shift"][0])
     cw = {str(c): c for c in GRID}[best]
     t = threshold(s[THRESHOLD_STREAM], cw, shift)
+    t_cnn = cnn_threshold(a.nordland)
     out = Path(a.out)
     report.write_table(table, out / "windows", decimals=2,
                        title="The named default's center_window and cell_shift: per-query AUC-PR on the tuning queries of the target streams",
@@ -159,18 +174,22 @@ def main(argv=None) -> None:
                              f"{THRESHOLD_STREAM} picks the threshold {t:.4f} for it. In the code: "
                              f"seqmatch.DEFAULT_KNOBS center_window {list(seqmatch.center_windows(seqmatch.DEFAULT_KNOBS['center_window']))}, "
                              f"cell_shift {seqmatch.DEFAULT_KNOBS['cell_shift']}, "
-                             f"seqmatch.DEFAULT_THRESHOLD {seqmatch.DEFAULT_THRESHOLD}."))
+                             f"seqmatch.DEFAULT_THRESHOLD {seqmatch.DEFAULT_THRESHOLD}. The same rule picks {t_cnn:.4f} "
+                             f"for the named CNN configuration ({seqmatch.CNN_NAME}, not ranked here): "
+                             f"seqmatch.CNN_THRESHOLD {seqmatch.CNN_THRESHOLD}."))
     gate = repeat_gate(s)
     report.write_table(gate, out / "repeat_gate", decimals=2,
                        title="Frames the repeat gate holds out of the trajectories, by its level (raw descriptors)",
                        note=f"greenloop.study.default_choice.repeat_gate; seqmatch.DEFAULT_KNOBS repeat_cos "
                             f"{seqmatch.DEFAULT_KNOBS['repeat_cos']}.")
     report.manifest(out, dict(grid=[str(c) for c in GRID], shifts=list(SHIFTS), repeat_levels=list(REPEAT_LEVELS), synthetic_step=SYNTHETIC_STEP,
-                              threshold_stream=THRESHOLD_STREAM, winner=best, winner_cell_shift=shift, p95_threshold=round(t, 4)),
+                              threshold_stream=THRESHOLD_STREAM, winner=best, winner_cell_shift=shift, p95_threshold=round(t, 4),
+                              cnn_configuration=seqmatch.CNN_NAME, cnn_p95_threshold=round(t_cnn, 4)),
                     datasets=[a.nordland, a.gardenspoint, a.synthetic])
     print(table.round(2).to_string(index=False))
     print(gate.round(2).to_string(index=False))
-    print(f"winner {best}, cell_shift {shift}; p95 threshold on {THRESHOLD_STREAM}: {t:.4f}")
+    print(f"winner {best}, cell_shift {shift}; p95 threshold on {THRESHOLD_STREAM}: {t:.4f}; "
+          f"{seqmatch.CNN_NAME}: {t_cnn:.4f}")
 
 
 if __name__ == "__main__":

@@ -325,14 +325,18 @@ def dictionary_row(name: str, tau: int, n_train: int, closures: dict, op: dict, 
 
 
 def targets_table(board: pd.DataFrame, dataset, frame_step: int) -> pd.DataFrame:
-    """The detector's targets for the named default (``seqmatch.DEFAULT_NAME``) on this board, one row
-    each: target, measured, required, met (``study.targets.detector_targets``; SeqSLAM = the
-    published and the tuned row, each judged). A dataset that is none of the targets' gives one row saying so."""
+    """The detector's targets for each named configuration on this board (the named default,
+    ``seqmatch.DEFAULT_NAME``, and the CNN one, ``seqmatch.CNN_NAME``, where the board has its row),
+    one row each: configuration, target, measured, required, met (``study.targets.detector_targets``;
+    SeqSLAM = the published and the tuned row, each judged). A dataset that is none of the targets'
+    gives one row saying so."""
+    names = [seqmatch.DEFAULT_NAME] + [seqmatch.CNN_NAME] * (seqmatch.CNN_NAME in set(board["method"]))
     try:
-        rows = goals.detector_targets(board, str(dataset), seqmatch.DEFAULT_NAME, ("SeqSLAM (published)", "SeqSLAM (tuned)"),
-                                     seq_len=seqmatch.DEFAULT_KNOBS["seq_len"], frame_step=frame_step)
+        rows = [dict(configuration=n, **r) for n in names
+                for r in goals.detector_targets(board, str(dataset), n, ("SeqSLAM (published)", "SeqSLAM (tuned)"),
+                                                seq_len=seqmatch.DEFAULT_KNOBS["seq_len"], frame_step=frame_step)]
     except ValueError as e:
-        rows = [{"target": "the detector's targets", "measured": None, "required": None, "met": None,
-                 "note": f"not judged: {e}"}]
+        rows = [{"configuration": None, "target": "the detector's targets", "measured": None, "required": None,
+                 "met": None, "note": f"not judged: {e}"}]
     return pd.DataFrame(rows)
 

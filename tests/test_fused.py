@@ -1,0 +1,102 @@
+"""The fused descriptor "gradients+efficientnetlite0" (features.layers.extract_fused) and the cell
+shift of its gradient part (seqmatch.shift_cells with part=): what the named CNN configuration
+(seqmatch.CNN_KNOBS) streams."""
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from greenloop import features, seqmatch
+from greenloop.features import layers
+from greenloop.similarity import l2_normalise
+from greenloop.speed import seqstream
+from test_seqspeed import _drive  # noqa: E402  (the pan drive of the CLI tests)
+
+ROOT = Path(__file__).resolve().parents[1]
+FUSED = seqmatch.CNN_KNOBS["descriptor"]
+
+
+@pytest.fixture(scope="module")
+def frames():
+    """Six smooth random colour frames, 64 x 32 RGB (Nordland's size)."""
+    rng = np.random.default_rng(3)
+    return np.stack([cv2.GaussianBlur(rng.integers(0, 256, (32, 64, 3), dtype=np.uint8), (5, 5), 2) for _ in range(6)])
+
+
+def test_the_fused_descriptor_is_its_two_parts_each_normalised(frames):
+    X, info = features.extract(frames, FUSED, progress=False, return_info=True)
+    assert X.shape == (6, features.FUSED_DIM) and info.weights == "imagenet"
+    G = features.extract(frames, "gradients", progress=False)
+    feats, li = layers.extract_layers(frames, "efficientnetlite0", "imagenet", ("mid",), ("grid2",), progress=False,
+                                      width=features.FUSED_WIDTH)
+    assert li["input"] == "160x80"                                     # 160 pixels wide, the 2:1 aspect kept
+    np.testing.assert_allclose(X, np.hstack([l2_normalise(G), l2_normalise(feats[("mid", "grid2")])]), atol=1e-6)
+    np.testing.assert_allclose(np.linalg.norm(X[:, :256], axis=1), 1, rtol=1e-5)
+    np.testing.assert_allclose(np.linalg.norm(X[:, 256:], axis=1), 1, rtol=1e-5)
+    bgr = features.extract(frames[..., ::-1].copy(), FUSED, progress=False, color="bgr")
+    np.testing.assert_allclose(bgr, X, atol=1e-6)                     # the stream's decoded frames give the same
+
+
+def test_the_fused_descriptor_refuses_a_random_network(frames, monkeypatch):
+    with pytest.raises(ValueError, match="needs ImageNet weights"):
+        features.extract(frames, FUSED, weights=None, progress=False)
+    monkeypatch.setattr(features.weights, "imagenet_weights_path", lambda name: None)
+    with pytest.raises(features.WeightsNotFoundError, match="efficientnetlite0"):
+        features.extract(frames, FUSED, progress=False)               # 'auto' does not fall back to random init
+
+
+def test_shift_cells_moves_only_the_grid_of_each_part():
+    rng = np.random.default_rng(0)
+    d, p = int(np.prod(seqmatch.CELL_GRID)), features.FUSED_DIM
+    X = rng.normal(size=(3, 2 * p)).astype(np.float32)               # two joined parts (two centring windows)
+    for t in (1, -1):
+        Y = seqmatch.shift_cells(X, t, p).reshape(3, 2, p)
+        parts = X.reshape(3, 2, p)
+        for k in range(2):
+            np.testing.assert_array_equal(Y[:, k, :d], seqmatch.shift_cells(parts[:, k, :d], t))
+            np.testing.assert_array_equal(Y[:, k, d:], parts[:, k, d:])   # the CNN part is not moved
+    np.testing.assert_array_equal(seqmatch.shift_cells(X[:, :2 * d], 1, d), seqmatch.shift_cells(X[:, :2 * d], 1))
+    with pytest.raises(ValueError, match="begin with"):
+        seqmatch.shift_cells(X, 1, 100)                              # narrower than the grid
+    with pytest.raises(ValueError, match="begins with the 'gradients' grid"):
+        seqstream.score_matrix(rng.normal(size=(40, 300)).astype(np.float32), 10, cell_shift=1)
+
+
+def test_a_revisit_seen_a_cell_aside_is_found_through_the_fused_layout():
+    """A random walk in the fused layout, revisited with its gradient grid moved one cell column and
+    a CNN part that shares nothing with the first visit: only the shifted grid can find it, and
+    the shift of the fused layout does."""
+    rng = np.random.default_rng(1)
+    d, p, n0, back = int(np.prod(seqmatch.CELL_GRID)), features.FUSED_DIM, 200, 60
+    walk = np.abs(np.cumsum(rng.normal(size=(n0, p)), 0)).astype(np.float32)
+    seen = seqmatch.shift_cells(walk[:back], 1, p) + rng.normal(scale=0.05, size=(back, p)).astype(np.float32)
+    seen[:, d:] = np.cumsum(rng.normal(size=(back, p - d)), 0)
+    X = np.abs(np.concatenate([walk, seen])).astype(np.float32)
+    k = {n: v for n, v in seqmatch.CNN_KNOBS.items() if n != "descriptor"}
+    r1 = {}
+    for shift in (0, 1):
+        S = seqstream.score_matrix(X, 50, **dict(k, cell_shift=shift))
+        r1[shift] = np.mean([abs(int(S[:j - 50, j].argmax()) - (j - n0)) <= 2 for j in range(n0 + 10, len(X))])
+    assert r1[1] >= 0.9 and r1[1] > r1[0], r1
+
+
+def _detect_cnn(folder):
+    env = dict(os.environ, PYTHONPATH=str(ROOT), TF_CPP_MIN_LOG_LEVEL="3")
+    res = subprocess.run([sys.executable, "-m", "greenloop", "detect", str(folder), "--method", seqmatch.CNN_NAME],
+                         capture_output=True, text=True, env=env, timeout=300)
+    assert res.returncode == 0, res.stderr
+    return [line.split("\t") for line in res.stdout.splitlines() if line[:1].isdigit()]
+
+
+def test_cli_cnn_configuration_is_silent_without_revisit_and_finds_one(tmp_path):
+    """`detect --method greenloop-seq-cnn` with no knobs (CNN_KNOBS at CNN_THRESHOLD): silent on
+    tests/test_seqspeed.py's 500-frame pan that never comes back; on the same drive whose last 150
+    frames revisit places 0..149 it declares closures, each at its place."""
+    assert _detect_cnn(_drive(tmp_path / "once", range(500))) == []
+    rows = _detect_cnn(_drive(tmp_path / "back", list(range(350)) + list(range(150))))
+    assert len(rows) >= 75
+    assert all(int(r[0]) >= 350 and abs(int(r[1]) - (int(r[0]) - 350)) <= 2 for r in rows)
