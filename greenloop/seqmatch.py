@@ -98,8 +98,8 @@ CELL_GRID = (features.GRADIENT_SIZE[1] // features.GRADIENT_CELL, features.GRADI
 # "gradients" and "gradients+efficientnetlite0".
 SHIFTABLE_DIMS = (features.GRADIENT_DIM, features.FUSED_DIM)
 
-__all__ = ["DESCRIPTORS", "DEFAULT_NAME", "DEFAULT_KNOBS", "DEFAULT_THRESHOLD", "CNN_NAME", "CNN_KNOBS", "CNN_THRESHOLD", "CELL_GRID", "SHIFTABLE_DIMS", "shift_cells", "cell_shifts",
-           "center", "center_stored", "center_windows",
+__all__ = ["DESCRIPTORS", "DEFAULT_NAME", "DEFAULT_KNOBS", "DEFAULT_THRESHOLD", "CNN_NAME", "CNN_KNOBS", "CNN_THRESHOLD",
+           "CELL_GRID", "SHIFTABLE_DIMS", "shift_cells", "cell_shifts", "center", "center_stored", "center_windows",
            "calibrate_scores", "describe", "describe_frames", "normalise", "fit_projection", "contrast_normalise", "columns_to_scores",
            "closures", "choose_threshold", "threshold_range", "pick_knobs", "matrix_events"]
 

@@ -257,7 +257,7 @@ def threshold_check(data: Data, tuned: Tuned) -> list[dict]:
     return rows
 
 
-def run_protocol(data: Data, split: Split) -> tuple[Board, dict, dict]:
+def run_protocol(data: Data, split: Split) -> tuple[Board, dict, list]:
     """The named configurations and SeqSLAM (TARGET_ENTRIES) on one target protocol, as the leaderboard's
     rows are: tuned (SeqSLAM's grid on its tuning queries) and thresholded; the stream-vs-matrix
     check and the timing for the named configurations only: the leaderboard checks and times SeqSLAM,

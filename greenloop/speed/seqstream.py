@@ -17,8 +17,9 @@ import numpy as np
 
 from greenloop import evaluate, retrieval
 from greenloop.seqmatch import (_EPS, COLORS, DEFAULT_VELOCITIES, STORE_DTYPES, _check_descriptor, _join,
-                                CELL_GRID, SHIFTABLE_DIMS, calibrate_scores, cell_shifts, center, center_stored, center_windows, columns_to_scores,
-                                contrast_normalise, describe_frames, matrix_events, normalise, shift_cells, threshold_range)
+                                SHIFTABLE_DIMS, calibrate_scores, cell_shifts, center, center_stored, center_windows,
+                                columns_to_scores, contrast_normalise, describe_frames, matrix_events, normalise,
+                                shift_cells, threshold_range)
 from greenloop.similarity import l2_normalise
 from greenloop.util import numba_kernels
 from greenloop.util.checks import positive_int

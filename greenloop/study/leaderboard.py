@@ -330,7 +330,7 @@ def targets_table(board: pd.DataFrame, dataset, frame_step: int) -> pd.DataFrame
     one row each: configuration, target, measured, required, met (``study.targets.detector_targets``;
     SeqSLAM = the published and the tuned row, each judged). A dataset that is none of the targets'
     gives one row saying so."""
-    names = [seqmatch.DEFAULT_NAME] + [seqmatch.CNN_NAME] * (seqmatch.CNN_NAME in set(board["method"]))
+    names = [seqmatch.DEFAULT_NAME] + ([seqmatch.CNN_NAME] if seqmatch.CNN_NAME in set(board["method"]) else [])
     try:
         rows = [dict(configuration=n, **r) for n in names
                 for r in goals.detector_targets(board, str(dataset), n, ("SeqSLAM (published)", "SeqSLAM (tuned)"),
