@@ -14,7 +14,7 @@ from greenloop import features, seqmatch
 from greenloop.features import layers
 from greenloop.similarity import l2_normalise
 from greenloop.speed import seqstream
-from test_seqspeed import _drive  # noqa: E402  (the pan drive of the CLI tests)
+from test_seqspeed import N0, REVISIT, _drive, recall_at_1  # noqa: E402  (the drives of the target-5 and CLI tests)
 
 ROOT = Path(__file__).resolve().parents[1]
 FUSED = seqmatch.CNN_KNOBS["descriptor"]
@@ -100,3 +100,26 @@ def test_cli_cnn_configuration_is_silent_without_revisit_and_finds_one(tmp_path)
     rows = _detect_cnn(_drive(tmp_path / "back", list(range(350)) + list(range(150))))
     assert len(rows) >= 75
     assert all(int(r[0]) >= 350 and abs(int(r[1]) - (int(r[0]) - 350)) <= 2 for r in rows)
+
+
+@pytest.fixture(scope="module")
+def fused_route():
+    """tests/test_seqspeed.py's route and 1x revisit (an AR(1) walk plus a detail of each place's own,
+    the revisit observed with noise) in the fused layout's width."""
+    rng = np.random.default_rng(0)
+    w = np.zeros((N0, features.FUSED_DIM))
+    w[0] = rng.normal(size=features.FUSED_DIM)
+    for t in range(1, N0):
+        w[t] = 0.9 * w[t - 1] + np.sqrt(1 - 0.81) * rng.normal(size=features.FUSED_DIM)
+    w += np.random.default_rng(2).normal(size=w.shape)
+    return w, w[:REVISIT] + np.random.default_rng(1).normal(scale=1.3, size=(REVISIT, features.FUSED_DIM))
+
+
+@pytest.mark.parametrize("kind", ["0.5", "0.75", "1.5", "2", "stop", "reverse"])
+def test_the_cnn_configuration_keeps_speed_changes_and_reverse_revisits(fused_route, kind):
+    """#28's target 5 for greenloop-seq-cnn (its knobs, the fused layout's width): a replay at 0.5x to
+    2x, a 30-frame stop or the revisit driven the other way costs at most 5 points of R@1."""
+    knobs = {k: v for k, v in seqmatch.CNN_KNOBS.items() if k != "descriptor"}
+    base = recall_at_1(fused_route, "1", **knobs)
+    assert base >= 0.85
+    assert recall_at_1(fused_route, kind, **knobs) >= base - 0.05
