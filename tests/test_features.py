@@ -504,3 +504,30 @@ def test_bgr_frames_give_the_rgb_frames_descriptors(frames, tmp_path, backbone):
                            F.extract(folder, backbone, None, progress=False, input_size=size), rtol=1e-4, atol=0)
     with pytest.raises(ValueError, match="color must be"):
         F.extract(frames, backbone, None, progress=False, color="hsv")
+
+
+def test_run_model_warms_each_batch_length_up_once_per_key():
+    """A stream describes one frame per call: with a warm_key the network runs once per frame after
+    the first call of that batch length (not twice, warm-up and timed pass), without one it warms up
+    every call, and the features are the same either way."""
+    from greenloop.features import cnn
+    calls = []
+
+    def predict(x):
+        calls.append(len(x))
+        return x.reshape(len(x), -1).astype(np.float32) * 2
+
+    frames = np.arange(12, dtype=np.float32).reshape(3, 2, 2)
+    cnn.clear_models()
+    first, _ = cnn.run_model(predict, frames[:1], lambda a: a, 32, False, "t", ("fake", 1))
+    assert calls == [1, 1]                                         # warm-up, then the timed pass
+    again, _ = cnn.run_model(predict, frames[1:2], lambda a: a, 32, False, "t", ("fake", 1))
+    assert calls == [1, 1, 1] and np.array_equal(again, frames[1:2].reshape(1, -1) * 2)
+    cnn.run_model(predict, frames, lambda a: a, 2, False, "t", ("fake", 1))     # lengths 2 and 1: only 2 is new
+    assert calls == [1, 1, 1, 2, 2, 1]
+    cnn.run_model(predict, frames[:1], lambda a: a, 32, False, "t")           # no key: warm-up every call
+    assert calls[-2:] == [1, 1] and len(calls) == 8
+    cnn.clear_models()                                             # the models go, and with them what was warmed
+    cnn.run_model(predict, frames[:1], lambda a: a, 32, False, "t", ("fake", 1))
+    assert calls[-2:] == [1, 1] and len(calls) == 10
+    assert np.array_equal(first, frames[:1].reshape(1, -1) * 2)

@@ -121,15 +121,26 @@ def _progress(total, desc, progress):
     return tqdm(total=total, desc=desc, unit="img", disable=not progress)
 
 
-def run_model(predict, frames, batch_fn, batch_size, progress, desc):
+# (warm_key, batch length) pairs run_model has warmed up in this process (cleared with the models)
+_WARMED: set = set()
+
+
+def run_model(predict, frames, batch_fn, batch_size, progress, desc, warm_key=None):
     """Batched ``predict(batch_fn(frames[i:j]))`` (a Keras ``predict_on_batch`` or a TFLite runner)
-    with an untimed warm-up batch; returns (features (N, D) float32, seconds per image)."""
+    with an untimed warm-up batch per batch length; returns (features (N, D) float32, seconds per image).
+    warm_key: what identifies the traced model and its input size (None: warm up on every call). With
+    it, only the first call of each batch length warms up, so that a stream that describes one frame
+    per call runs the network once per frame, not twice."""
     n = len(frames)
     spans = _batches(n, batch_size)
     # warm-up, untimed: traces the graph for the full batch shape and, if different, the last one
     first, last = spans[0], spans[-1]
     for i, j in [first] + ([last] if last[1] - last[0] != first[1] - first[0] else []):
+        if warm_key is not None and (warm_key, j - i) in _WARMED:
+            continue
         predict(batch_fn(frames[i:j]))
+        if warm_key is not None:
+            _WARMED.add((warm_key, j - i))
     out = []
     with _progress(n, desc, progress) as bar:
         t0 = time.perf_counter()
@@ -149,14 +160,15 @@ def extract_cnn(b: Backbone, frames_or_folder, source, size, opt: Options):
             interp, used = _tflite_interpreter(b.name, key, len(rgb))
             return _tflite.describe(interp, used, b.name, rgb)
         return (*run_model(predict, frames, lambda a: rgb_batch(a, size, opt.color), opt.batch_size, opt.progress,
-                            f"{b.name} features"), {})
+                            f"{b.name} features", ("tflite", b.name, key)), {})
     model = _cnn_model(b.name, key, size)
     pre = _preprocess_fn(b)
     return (*run_model(model.predict_on_batch, frames, lambda a: pre(rgb_batch(a, size, opt.color)),
-                        opt.batch_size, opt.progress, f"{b.name} features"), {})
+                        opt.batch_size, opt.progress, f"{b.name} features", ("keras", id(model))), {})
 
 
 def clear_models() -> None:
     """Forget the CNN models and TFLite interpreters built so far."""
     _cnn_model.cache_clear()
     _tflite_interpreter.cache_clear()
+    _WARMED.clear()

@@ -169,8 +169,8 @@ def extract_layers(frames_or_folder, backbone: str, weights="auto", depths=DEPTH
         size = aspect_size(w, h, width)
     frames = load(frames_or_folder, size, gray=False, limit=limit, step=step)
     names = [LAYERS[backbone][d][0 if tflite else 1] for d in depths]
-    predict, batch_fn = _predictor(b, key, size, tflite, names, poolings)
-    X, spi = run_model(predict, frames, batch_fn, batch_size, progress, f"{b.name} layers")
+    predict, batch_fn, warm_key = _predictor(b, key, size, tflite, names, poolings)
+    X, spi = run_model(predict, frames, batch_fn, batch_size, progress, f"{b.name} layers", warm_key)
     feats, at = {}, 0
     for d, c in zip(depths, _channels(b.name, key, size, tflite, names)):
         for p in poolings:
@@ -182,20 +182,21 @@ def extract_layers(frames_or_folder, backbone: str, weights="auto", depths=DEPTH
 
 
 def _predictor(b, key, size, tflite: bool, names, poolings):
-    """(predict, batch_fn) for ``cnn.run_model``: a batch of frames -> every named map pooled every
-    way, concatenated (N, sum of D); the TFLite graph's interpreter or the Keras model's outputs."""
+    """(predict, batch_fn, warm_key) for ``cnn.run_model``: a batch of frames -> every named map pooled
+    every way, concatenated (N, sum of D); the TFLite graph's interpreter or the Keras model's outputs;
+    warm_key names the traced graph (run_model warms each batch length of it up once)."""
     if tflite:
         def predict(rgb):
             interp, used = _tflite_interpreter(b.name, key, len(rgb))
             out = _tflite.run(interp, used, rgb, names)
             return _pooled([out[n] for n in names], poolings)
-        return predict, lambda a: rgb_batch(a, size)
+        return predict, lambda a: rgb_batch(a, size), ("tflite", b.name, key)
     model, pre = _keras_layers(b.name, key, size, tuple(names)), _preprocess_fn(b)
 
     def predict(x):
         maps = model.predict_on_batch(x)
         return _pooled([np.asarray(m) for m in (maps if isinstance(maps, (list, tuple)) else [maps])], poolings)
-    return predict, lambda a: pre(rgb_batch(a, size))
+    return predict, lambda a: pre(rgb_batch(a, size)), ("keras", id(model))
 
 
 def _channels(name, key, size, tflite: bool, names) -> list[int]:
