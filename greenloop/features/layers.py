@@ -35,7 +35,6 @@ over the 2 x 2 grid, from frames ``registry.FUSED_WIDTH`` pixels wide (aspect ke
 from __future__ import annotations
 
 import functools
-import os
 import time
 
 import numpy as np
@@ -138,14 +137,15 @@ def _pooled(maps: list, poolings) -> np.ndarray:
 
 def extract_layers(frames_or_folder, backbone: str, weights="auto", depths=DEPTHS, poolings=POOLINGS,
                    aspect: bool = True, batch_size: int = 32, progress: bool = True, step: int = 1,
-                   limit: int | None = None, resolved=None, width: int = 224) -> tuple[dict, dict]:
+                   limit: int | None = None, resolved=None, width: int = 224, color: str = "rgb") -> tuple[dict, dict]:
     """Descriptors of every frame at several depths of one network, one forward pass.
 
     frames_or_folder: a sequence folder or (N, H, W, 3) RGB frames (as ``features.extract``).
     backbone: a key of ``LAYERS``; weights: as ``features.extract`` (the TFLite graphs for the
     ImageNet MobileNets, their Keras architecture with weights=None). depths: keys of
     LAYERS[backbone]; poolings: of ``POOLINGS``. aspect: keep the frames' aspect ratio where the
-    network allows it (:func:`aspect_size`, ``width`` pixels wide). step, limit, resolved: as ``features.extract``.
+    network allows it (:func:`aspect_size`, ``width`` pixels wide). step, limit, resolved, color (of a
+    frame array: "rgb", or "bgr" as ``cv2.imread`` decodes): as ``features.extract``.
     Returns (feats, info): feats {(depth, pooling): (N, D) float32}; info {'weights': label,
     'input': 'WxH', 'layers': {depth: layer name}, 'seconds_per_image': wall s per frame of the
     whole forward pass and pooling}.
@@ -169,7 +169,7 @@ def extract_layers(frames_or_folder, backbone: str, weights="auto", depths=DEPTH
         size = aspect_size(w, h, width)
     frames = load(frames_or_folder, size, gray=False, limit=limit, step=step)
     names = [LAYERS[backbone][d][0 if tflite else 1] for d in depths]
-    predict, batch_fn, warm_key = _predictor(b, key, size, tflite, names, poolings)
+    predict, batch_fn, warm_key = _predictor(b, key, size, tflite, names, poolings, color)
     X, spi = run_model(predict, frames, batch_fn, batch_size, progress, f"{b.name} layers", warm_key)
     feats, at = {}, 0
     for d, c in zip(depths, _channels(b.name, key, size, tflite, names)):
@@ -181,7 +181,7 @@ def extract_layers(frames_or_folder, backbone: str, weights="auto", depths=DEPTH
                    "layers": dict(zip(depths, names))}
 
 
-def _predictor(b, key, size, tflite: bool, names, poolings):
+def _predictor(b, key, size, tflite: bool, names, poolings, color: str = "rgb"):
     """(predict, batch_fn, warm_key) for ``cnn.run_model``: a batch of frames -> every named map pooled
     every way, concatenated (N, sum of D); the TFLite graph's interpreter or the Keras model's outputs;
     warm_key names the traced graph (run_model warms each batch length of it up once)."""
@@ -190,13 +190,13 @@ def _predictor(b, key, size, tflite: bool, names, poolings):
             interp, used = _tflite_interpreter(b.name, key, len(rgb))
             out = _tflite.run(interp, used, rgb, names)
             return _pooled([out[n] for n in names], poolings)
-        return predict, lambda a: rgb_batch(a, size), ("tflite", b.name, key)
+        return predict, lambda a: rgb_batch(a, size, color), ("tflite", b.name, key)
     model, pre = _keras_layers(b.name, key, size, tuple(names)), _preprocess_fn(b)
 
     def predict(x):
         maps = model.predict_on_batch(x)
         return _pooled([np.asarray(m) for m in (maps if isinstance(maps, (list, tuple)) else [maps])], poolings)
-    return predict, lambda a: pre(rgb_batch(a, size)), ("keras", id(model))
+    return predict, lambda a: pre(rgb_batch(a, size, color)), ("keras", id(model))
 
 
 def _channels(name, key, size, tflite: bool, names) -> list[int]:
@@ -242,12 +242,9 @@ def extract_fused(b, frames_or_folder, source, size, opt: Options):
         raise ValueError(f"{b.name} needs ImageNet weights for its CNN part, not a random-init network")
     t0 = time.perf_counter()
     G, _, _ = extract_gradients(BACKBONES["gradients"], frames_or_folder, None, GRADIENT_SIZE, opt)
-    rgb = frames_or_folder
-    if opt.color == "bgr" and not isinstance(frames_or_folder, (str, bytes, os.PathLike)):
-        rgb = np.asarray(frames_or_folder)[..., ::-1]
     backbone, depth, pooling = FUSED_CNN
-    feats, _ = extract_layers(rgb, backbone, depths=(depth,), poolings=(pooling,), batch_size=opt.batch_size,
+    feats, _ = extract_layers(frames_or_folder, backbone, depths=(depth,), poolings=(pooling,), batch_size=opt.batch_size,
                               progress=opt.progress, step=opt.step, limit=opt.limit,
-                              resolved=Resolved("imagenet", source), width=FUSED_WIDTH)
+                              resolved=Resolved("imagenet", source), width=FUSED_WIDTH, color=opt.color)
     X = np.hstack([l2_normalise(G), l2_normalise(feats[(depth, pooling)])]).astype(np.float32)
     return X, (time.perf_counter() - t0) / max(len(X), 1), {}
