@@ -14,7 +14,7 @@ from greenloop import features, seqmatch
 from greenloop.features import layers
 from greenloop.similarity import l2_normalise
 from greenloop.speed import seqstream
-from test_seqspeed import N0, REVISIT, _drive, recall_at_1  # noqa: E402  (the drives of the target-5 and CLI tests)
+from test_seqspeed import _drive, make_route, recall_at_1  # noqa: E402  (the drives of the target-5 and CLI tests)
 
 ROOT = Path(__file__).resolve().parents[1]
 FUSED = seqmatch.CNN_KNOBS["descriptor"]
@@ -104,15 +104,8 @@ def test_cli_cnn_configuration_is_silent_without_revisit_and_finds_one(tmp_path)
 
 @pytest.fixture(scope="module")
 def fused_route():
-    """tests/test_seqspeed.py's route and 1x revisit (an AR(1) walk plus a detail of each place's own,
-    the revisit observed with noise) in the fused layout's width."""
-    rng = np.random.default_rng(0)
-    w = np.zeros((N0, features.FUSED_DIM))
-    w[0] = rng.normal(size=features.FUSED_DIM)
-    for t in range(1, N0):
-        w[t] = 0.9 * w[t - 1] + np.sqrt(1 - 0.81) * rng.normal(size=features.FUSED_DIM)
-    w += np.random.default_rng(2).normal(size=w.shape)
-    return w, w[:REVISIT] + np.random.default_rng(1).normal(scale=1.3, size=(REVISIT, features.FUSED_DIM))
+    """tests/test_seqspeed.py's route and 1x revisit in the fused layout's width."""
+    return make_route(features.FUSED_DIM)
 
 
 @pytest.mark.parametrize("kind", ["0.5", "0.75", "1.5", "2", "stop", "reverse"])

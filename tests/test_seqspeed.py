@@ -21,26 +21,31 @@ LINES = dict(velocities=seqmatch.DEFAULT_VELOCITIES)            # today's straig
 DEFAULT = {k: v for k, v in seqmatch.DEFAULT_KNOBS.items() if k != "descriptor"}
 
 
-def _walk(n, seed, a=0.9):
-    """AR(1) random walk (n, D): neighbouring places look alike, far ones do not."""
+def _walk(n, seed, a=0.9, dim=D):
+    """AR(1) random walk (n, dim): neighbouring places look alike, far ones do not."""
     rng = np.random.default_rng(seed)
-    x = np.zeros((n, D))
-    x[0] = rng.normal(size=D)
+    x = np.zeros((n, dim))
+    x[0] = rng.normal(size=dim)
     for t in range(1, n):
-        x[t] = a * x[t - 1] + np.sqrt(1 - a * a) * rng.normal(size=D)
+        x[t] = a * x[t - 1] + np.sqrt(1 - a * a) * rng.normal(size=dim)
     return x
 
 
-@pytest.fixture(scope="module")
-def route():
-    """(route (N0, D), the revisit's frames at 1x (REVISIT, D): place k observed with noise).
+def make_route(dim=D):
+    """(route (N0, dim), the revisit's frames at 1x (REVISIT, dim): place k observed with noise).
     Place k looks like its neighbours (the random walk) plus a detail of its own as large (std 1,
     the walk's): consecutive camera frames differ in more than a smooth drift. Without the detail a
     short centring window (``seqmatch.center``) would turn each frame into the walk's local slope,
     which flips sign when the route is driven the other way; on real frames it does not
     (results/default_choice/windows.md: R@1 of the reversed tuning queries)."""
-    w = _walk(N0, 0) + np.random.default_rng(2).normal(size=(N0, D))
-    return w, w[:REVISIT] + np.random.default_rng(1).normal(scale=1.3, size=(REVISIT, D))
+    w = _walk(N0, 0, dim=dim) + np.random.default_rng(2).normal(size=(N0, dim))
+    return w, w[:REVISIT] + np.random.default_rng(1).normal(scale=1.3, size=(REVISIT, dim))
+
+
+@pytest.fixture(scope="module")
+def route():
+    """:func:`make_route` in the gradients layout's width."""
+    return make_route()
 
 
 def replay(kind):
