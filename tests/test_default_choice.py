@@ -64,12 +64,14 @@ def test_repeat_gate_counts_copies(stream):
 
 def test_the_committed_choice_is_the_code_default():
     """The committed table's winner is seqmatch.DEFAULT_KNOBS' center_window and cell_shift and its p95 pick,
-    rounded to one decimal, is DEFAULT_THRESHOLD: a default changed without `make default-choice`
-    fails here."""
+    rounded to one decimal, is DEFAULT_THRESHOLD (the CNN configuration's, CNN_THRESHOLD): a default
+    changed without `make default-choice` fails here."""
     folder = Path(__file__).resolve().parents[1] / "results" / "default_choice"
     table = pd.read_csv(folder / "windows.csv")
     params = json.loads((folder / "manifest.json").read_text())["parameters"]
     assert table["center_window"][0] == params["winner"] == str(list(seqmatch.center_windows(seqmatch.DEFAULT_KNOBS["center_window"])))
     assert table["cell_shift"][0] == params["winner_cell_shift"] == seqmatch.DEFAULT_KNOBS["cell_shift"]
     assert round(params["p95_threshold"], 1) == seqmatch.DEFAULT_THRESHOLD
+    assert params["cnn_configuration"] == seqmatch.CNN_NAME                 # and the CNN configuration's threshold
+    assert round(params["cnn_p95_threshold"], 1) == seqmatch.CNN_THRESHOLD
     assert params["repeat_levels"] and seqmatch.DEFAULT_KNOBS["repeat_cos"] in params["repeat_levels"]
