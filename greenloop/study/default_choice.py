@@ -43,6 +43,7 @@ CLI: ``python -m greenloop.study.default_choice [--nordland DIR] [--gardenspoint
 from __future__ import annotations
 
 import argparse
+import functools
 from pathlib import Path
 
 import numpy as np
@@ -59,6 +60,7 @@ SYNTHETIC_STEP = 4                       # notebook 13's frame_step on the synth
 REPEAT_LEVELS = (0.995, 0.999)
 THRESHOLD_STREAM = "nordland: every frame, +- 2 frames"   # Nordland at its full rate: the largest tuning part
 SYNTHETIC_STREAM = "synthetic: leaderboard"
+_PARAMS = dict(seq_lens=[5, 10, 20], fps_frames=300, weights="auto")   # what ex.prepare needs here
 
 __all__ = ["GRID", "SHIFTS", "REPEAT_LEVELS", "streams", "reversed_stream", "rank", "repeat_gate", "threshold",
            "cnn_threshold", "main"]
@@ -69,17 +71,24 @@ def streams(nordland=None, gardenspoint=None, synthetic=None, descriptor: str = 
     tune (N,) bool tuning queries)}: the target streams of the given dataset folders (None: left
     out), split as notebook 13 splits them (tune_fraction 0.5, exclude 150 original frames).
     descriptor: the named default's "gradients" (256-d) or the CNN configuration's (``seqmatch.CNN_KNOBS``)."""
-    params = dict(seq_lens=[5, 10, 20], fps_frames=300, weights="auto")
     out = {}
     for folder in (f for f in (nordland, gardenspoint) if f is not None):
-        data, _ = ex.prepare(str(folder), 1, 0.5, 150, 0.5, None, params)
-        for label, (d, _) in ex.target_protocols(data, 0.5).items():
+        for label, d in _protocols(str(folder)):
             out[f"{targets.dataset_kind(folder)}: {label}"] = (d.descriptors[descriptor], d.GT, d.exclude, d.tune)
     if synthetic is not None:
-        d, _ = ex.prepare(str(synthetic), SYNTHETIC_STEP, 0.5, 150, 0.5, None, params)
+        d, _ = ex.prepare(str(synthetic), SYNTHETIC_STEP, 0.5, 150, 0.5, None, _PARAMS)
         X = seqmatch.describe(str(synthetic), descriptor, step=SYNTHETIC_STEP)
         out[SYNTHETIC_STREAM] = (X, d.GT, d.exclude, d.tune)
     return out
+
+
+@functools.lru_cache(maxsize=None)
+def _protocols(folder: str) -> tuple:
+    """((label, Data), ...): notebook 13's target protocols of a Nordland or Gardens Point folder, with
+    every named configuration's descriptors (``experiment.TARGET_ENTRIES``), prepared once per process
+    (the default's ranking and the CNN configuration's threshold read the same streams)."""
+    data, _ = ex.prepare(folder, 1, 0.5, 150, 0.5, None, _PARAMS)
+    return tuple((label, d) for label, (d, _) in ex.target_protocols(data, 0.5).items())
 
 
 def _scores(stream, center_window, cell_shift: int = 0) -> np.ndarray:
