@@ -531,3 +531,34 @@ def test_run_model_warms_each_batch_length_up_once_per_key():
     cnn.run_model(predict, frames[:1], lambda a: a, 32, False, "t", ("fake", 1))
     assert calls[-2:] == [1, 1] and len(calls) == 10
     assert np.array_equal(first, frames[:1].reshape(1, -1) * 2)
+
+
+def test_keras_predict_runs_the_lite_network_as_its_tflite_graph_with_the_same_outputs():
+    """EfficientNet-Lite's Keras network runs as a TFLite graph (the runtime of the MobileNet graphs):
+    its maps equal predict_on_batch's to float32 rounding at every batch length, with one output and
+    with several in the model's order; a graph that does not give the model's outputs on the probe
+    batch is refused; the Keras applications keep predict_on_batch."""
+    from greenloop.features import layers as FL
+    from greenloop.features.registry import get_backbone
+    if keras.backend.backend() != "tensorflow":
+        pytest.skip("the TFLite runtime is the tensorflow backend's")
+    b = get_backbone("efficientnetlite0")
+    names = tuple(FL.LAYERS["efficientnetlite0"][d][1] for d in ("early", "mid"))
+    model = FL._keras_layers(b.name, None, (64, 32), names)          # random init, two maps
+    predict = FCNN.predictor(b, model)
+    assert predict != model.predict_on_batch
+    x = FCNN._preprocess_fn(b)(np.random.default_rng(3).integers(0, 256, (3, 32, 64, 3)).astype(np.float32))
+    for batch in (x[:1], x, x[:2]):
+        want, got = model.predict_on_batch(batch), predict(batch)
+        assert len(got) == 2 and [g.shape for g in got] == [np.asarray(w).shape for w in want]
+        for w, g in zip(want, got):
+            w = np.asarray(w)
+            assert np.abs(g - w).max() <= 1e-4 * np.abs(w).max() and np.abs(w).max() > 0
+    one = FL._keras_layers(b.name, None, (64, 32), names[1:])
+    assert FCNN.keras_predict(one)(x).shape == np.asarray(one.predict_on_batch(x)).shape
+    bad = keras.Model(one.inputs, one.outputs)
+    bad.predict_on_batch = lambda a: np.asarray(one.predict_on_batch(a)) + 1.0
+    with pytest.raises(RuntimeError, match="probe"):
+        FCNN.keras_predict(bad)
+    vgg = FCNN._cnn_model("vgg19", None, (64, 64))
+    assert FCNN.predictor(get_backbone("vgg19"), vgg) == vgg.predict_on_batch

@@ -8,7 +8,10 @@ from __future__ import annotations
 import functools
 import importlib
 import random
+import re
 import time
+import warnings
+import weakref
 from pathlib import Path
 
 import numpy as np
@@ -121,12 +124,79 @@ def _progress(total, desc, progress):
     return tqdm(total=total, desc=desc, unit="img", disable=not progress)
 
 
+# Keras model -> its TFLite interpreter (keras_predict), forgotten with the model
+_LITE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+# backbone kinds whose Keras networks run as TFLite graphs (keras_predict): the EfficientNet-Lite port,
+# a family made for that runtime. The converter's graphs of Keras applications (VGG19, MobileNet v3)
+# gave inf / nan here, so those keep predict_on_batch.
+LITE_KINDS = ("efficientnet_lite",)
+
+
+def predictor(b: Backbone, model):
+    """The predict function of backbone ``b``'s Keras ``model``: :func:`keras_predict` for
+    ``LITE_KINDS``, ``model.predict_on_batch`` for the others."""
+    return keras_predict(model) if b.kind in LITE_KINDS else model.predict_on_batch
+
+
+def keras_predict(model):
+    """``predict(x)`` of a Keras model: x (N, h, w, c) float32, its preprocessed input -> the model's
+    outputs as ``model.predict_on_batch`` gives them (an array, or a list in the model's output order).
+
+    With the tensorflow backend the model runs as a float32 TFLite graph converted from it once per
+    model (XNNPACK kernels, one thread per core: the runtime of the ImageNet MobileNet graphs), checked
+    on a probe batch to give the Keras model's outputs to float32 rounding. With another backend
+    (jax on a GPU) it is ``predict_on_batch``. Raises RuntimeError when the graph's outputs differ."""
+    import keras
+    if keras.backend.backend() != "tensorflow":
+        return model.predict_on_batch
+    if model not in _LITE:
+        _LITE[model] = _lite_graph(model)
+    interp, inp, outs = _LITE[model]
+
+    def predict(x):
+        x = np.ascontiguousarray(x, dtype=np.float32)
+        if tuple(interp.get_input_details()[0]["shape"]) != x.shape:
+            interp.resize_tensor_input(inp, x.shape)
+            interp.allocate_tensors()
+        interp.set_tensor(inp, x)
+        interp.invoke()
+        got = [interp.get_tensor(o) for o in outs]
+        return got[0] if len(model.outputs) == 1 else got
+    return predict
+
+
+def _lite_graph(model):
+    """(interpreter, input index, output indices in the model's order) of a Keras model converted to a
+    float32 TFLite graph with a free batch dimension, after a probe batch gave the model's outputs."""
+    import tensorflow as tf
+    spec = tf.TensorSpec((None, *model.inputs[0].shape[1:]), tf.float32)
+    fn = tf.function(lambda x: model(x, training=False), input_signature=[spec])
+    flat = tf.lite.TFLiteConverter.from_concrete_functions([fn.get_concrete_function()], model).convert()
+    with warnings.catch_warnings():  # the interpreter's deprecation notice
+        warnings.filterwarnings("ignore", message=r"(?s).*deprecated", category=UserWarning)
+        interp = tf.lite.Interpreter(model_content=flat, num_threads=_tflite._threads())
+    # outputs are named Identity, Identity_1, ... in the order the function returns them
+    details = sorted(interp.get_output_details(),
+                     key=lambda d: int((re.findall(r"_(\d+)$", d["name"]) or [0])[0]))
+    probe = np.random.default_rng(0).uniform(-1, 1, (2, *model.inputs[0].shape[1:])).astype(np.float32)
+    interp.resize_tensor_input(interp.get_input_details()[0]["index"], probe.shape)
+    interp.allocate_tensors()
+    interp.set_tensor(interp.get_input_details()[0]["index"], probe)
+    interp.invoke()
+    want = model.predict_on_batch(probe)
+    for d, w in zip(details, want if isinstance(want, (list, tuple)) else [want]):
+        w, got = np.asarray(w), interp.get_tensor(d["index"])
+        if got.shape != w.shape or not np.allclose(got, w, rtol=1e-3, atol=1e-4 * max(np.abs(w).max(), 1e-12)):
+            raise RuntimeError(f"the TFLite graph of {model.name} does not give its outputs on a probe batch")
+    return interp, interp.get_input_details()[0]["index"], [d["index"] for d in details]
+
+
 # (warm_key, batch length) pairs run_model has warmed up in this process (cleared with the models)
 _WARMED: set = set()
 
 
 def run_model(predict, frames, batch_fn, batch_size, progress, desc, warm_key=None):
-    """Batched ``predict(batch_fn(frames[i:j]))`` (a Keras ``predict_on_batch`` or a TFLite runner)
+    """Batched ``predict(batch_fn(frames[i:j]))`` (:func:`predictor`'s or a TFLite runner)
     with an untimed warm-up batch per batch length; returns (features (N, D) float32, seconds per image).
     warm_key: what identifies the traced model and its input size (None: warm up on every call). With
     it, only the first call of each batch length warms up, so that a stream that describes one frame
@@ -163,7 +233,7 @@ def extract_cnn(b: Backbone, frames_or_folder, source, size, opt: Options):
                             f"{b.name} features", ("tflite", b.name, key)), {})
     model = _cnn_model(b.name, key, size)
     pre = _preprocess_fn(b)
-    return (*run_model(model.predict_on_batch, frames, lambda a: pre(rgb_batch(a, size, opt.color)),
+    return (*run_model(predictor(b, model), frames, lambda a: pre(rgb_batch(a, size, opt.color)),
                         opt.batch_size, opt.progress, f"{b.name} features", ("keras", id(model))), {})
 
 
@@ -171,4 +241,5 @@ def clear_models() -> None:
     """Forget the CNN models and TFLite interpreters built so far."""
     _cnn_model.cache_clear()
     _tflite_interpreter.cache_clear()
+    _LITE.clear()
     _WARMED.clear()

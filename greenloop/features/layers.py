@@ -41,7 +41,7 @@ import numpy as np
 
 from greenloop.backbones import mobilenet_tflite as _tflite
 from greenloop.datasets import sequence
-from greenloop.features.cnn import _cnn_model, _preprocess_fn, _tflite_interpreter, run_model
+from greenloop.features.cnn import _cnn_model, _preprocess_fn, _tflite_interpreter, predictor, run_model
 from greenloop.features.frames import load, rgb_batch
 from greenloop.features.pixels import extract_gradients
 from greenloop.features.registry import (BACKBONES, FUSED_CNN, FUSED_WIDTH, GRADIENT_SIZE, ExtractInfo, Options,
@@ -183,7 +183,8 @@ def extract_layers(frames_or_folder, backbone: str, weights="auto", depths=DEPTH
 
 def _predictor(b, key, size, tflite: bool, names, poolings, color: str = "rgb"):
     """(predict, batch_fn, warm_key) for ``cnn.run_model``: a batch of frames -> every named map pooled
-    every way, concatenated (N, sum of D); the TFLite graph's interpreter or the Keras model's outputs;
+    every way, concatenated (N, sum of D); the TFLite graph's interpreter or the Keras model's outputs
+    (``cnn.predictor``: EfficientNet-Lite's runs as a TFLite graph converted from it);
     warm_key names the traced graph (run_model warms each batch length of it up once)."""
     if tflite:
         def predict(rgb):
@@ -192,9 +193,10 @@ def _predictor(b, key, size, tflite: bool, names, poolings, color: str = "rgb"):
             return _pooled([out[n] for n in names], poolings)
         return predict, lambda a: rgb_batch(a, size, color), ("tflite", b.name, key)
     model, pre = _keras_layers(b.name, key, size, tuple(names)), _preprocess_fn(b)
+    run = predictor(b, model)
 
     def predict(x):
-        maps = model.predict_on_batch(x)
+        maps = run(x)
         return _pooled([np.asarray(m) for m in (maps if isinstance(maps, (list, tuple)) else [maps])], poolings)
     return predict, lambda a: pre(rgb_batch(a, size, color)), ("keras", id(model))
 
