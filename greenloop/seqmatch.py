@@ -129,15 +129,17 @@ def describe(frames_or_folder, descriptor: str = "pixels", step: int = 1, weight
     return (X, info) if return_info else X
 
 
-def describe_frames(frames, descriptor: str = "pixels", color: str = "bgr", weights="auto") -> np.ndarray:
+def describe_frames(frames, descriptor: str = "pixels", color: str = "bgr", weights="auto",
+                    resolved=None) -> np.ndarray:
     """Raw camera frames -> descriptors (M, D) float32, the streaming path of ``speed.seqstream.Detector``.
 
     frames: a list of M same-sized (H, W, 3) uint8 frames (BGR as cv2 decodes them, or RGB with
     color="rgb") or (H, W) gray uint8. ``features.extract`` of the descriptor's registry entry, with
     the frames' channel order, so a frame from disk gives the same descriptor as :func:`describe`.
+    resolved: ``features.resolve`` of the descriptor and ``weights``, already done (a stream does it once).
     """
     return features.extract(features.stack_frames(frames), _check_descriptor(descriptor), weights=weights,
-                            progress=False, color=color)
+                            progress=False, color=color, resolved=resolved)
 
 
 def normalise(X, projection=None) -> np.ndarray:

@@ -253,3 +253,30 @@ def test_repeat_gate_reads_raw_frames():
         det.update_descriptor(x)
         held.append(det._newest == before)               # the ring did not move: the frame was held out
     assert held[21:] == [True] * 9 and not any(held[:21])
+
+
+def test_a_stream_looks_its_weights_up_once_not_at_every_frame(monkeypatch):
+    """Resolving weights searches folders (every frame it cost a tenth of a millisecond and repeated the
+    random-init warning): a Detector and a leaderboard describer resolve once and give the same
+    descriptors as describing each frame on its own."""
+    from greenloop.detectors import greenloop_seq
+    from greenloop.features import extraction
+    calls = []
+    real = extraction.resolve
+
+    def counted(*a, **k):
+        calls.append(a[0])
+        return real(*a, **k)
+    monkeypatch.setattr(extraction, "resolve", counted)
+    monkeypatch.setattr(features, "resolve", counted)
+    frames = np.random.default_rng(2).integers(0, 256, (6, 48, 64, 3), dtype=np.uint8)
+    det = seqstream.Detector(None, descriptor="gradients", seq_len=2, exclude=0)
+    for f in frames:
+        det.update(f)
+    assert calls == ["gradients"]
+    calls.clear()
+    describe = greenloop_seq.frame_describer("pixels")
+    got = np.stack([describe(f) for f in frames])
+    assert calls == ["pixels"]
+    want = features.extract(frames[..., ::-1].copy(), "pixels", progress=False)
+    np.testing.assert_array_equal(got, want)

@@ -81,11 +81,12 @@ def frame_describer(descriptor: str, weights="auto", input_size=None, vocabulary
     """One decoded BGR frame (H, W, 3) uint8 -> the raw descriptor (D,) a method stores: the
     timed describe step. descriptor: a seqmatch descriptor or a backbone entry. SIFT-BoVW
     quantises against ``vocabulary`` (one frame's tf-idf)."""
+    resolved = features.resolve_spec(descriptor, weights)   # once, not at every frame
     if descriptor in seqmatch.DESCRIPTORS and descriptor != "mobilenetv2":
-        return lambda f: seqmatch.describe_frames([f], descriptor)[0]
+        return lambda f: seqmatch.describe_frames([f], descriptor, resolved=resolved)[0]
     kw = {"vocabulary": vocabulary} if descriptor == "sift_bovw" else {}
     return lambda f: features.extract_spec(cv2.cvtColor(f, cv2.COLOR_BGR2RGB)[None], descriptor, weights,
-                                           input_size, progress=False, **kw)[0]
+                                           input_size, progress=False, resolved=resolved, **kw)[0]
 
 
 def describer(k: dict, data: Data):

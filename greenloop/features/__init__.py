@@ -94,7 +94,7 @@ extractor families cnn / pixels / sift / spot <- layers <- extraction <- cache):
     sift.py      SIFT bag of words;  spot.py  the main paper's CNN
     layers.py    CNN maps at an early, mid and last depth, pooled avg / 2x2 grid / GeM: the entries
                  "backbone@depth-pooling" that extract_spec and extract_all read (one pass per network)
-    extraction.py  extract, extract_spec, extract_rgbd, time_per_image; EXTRACTORS {kind: fn}
+    extraction.py  extract, extract_spec, resolve_spec, extract_rgbd, time_per_image; EXTRACTORS {kind: fn}
     cache.py     extract_all and its descriptor cache
 """
 from __future__ import annotations
@@ -102,7 +102,7 @@ from __future__ import annotations
 from greenloop.features.cache import extract_all, random_init_reported
 from greenloop.features.cnn import clear_models
 from greenloop.features.extraction import (EXTRACTORS, clear_cache, extract, extract_rgbd,
-                                           extract_spec, time_per_image)
+                                           extract_spec, resolve_spec, time_per_image)
 from greenloop.features.frames import depth_to_uint8, stack_frames
 from greenloop.features.pixels import gradient_histograms, patch_normalise
 from greenloop.features.registry import (BACKBONES, CNN_BACKBONES, CNN_KINDS, DEFAULT_VOCAB_SIZE,
@@ -122,5 +122,6 @@ __all__ = ["BACKBONES", "CNN_BACKBONES", "CNN_KINDS", "DEFAULT_VOCAB_SIZE", "DEP
            "ExtractInfo", "Options", "Resolved", "WeightsNotFoundError", "clear_cache", "clear_models",
            "depth_to_uint8", "extract", "extract_all", "extract_rgbd", "extract_spec", "fit_vocabulary",
            "get_backbone", "gradient_histograms", "imagenet_weights_path", "patch_normalise",
-           "random_init_reported", "resolve", "spot_feature_model", "split_spec", "stack_frames", "time_per_image",
+           "random_init_reported", "resolve", "resolve_spec", "spot_feature_model", "split_spec", "stack_frames",
+           "time_per_image",
            "weights_search_path", "weights_used"]

@@ -5,8 +5,10 @@
 """
 from __future__ import annotations
 
+import contextlib
 import functools
 import importlib
+import io
 import random
 import re
 import time
@@ -169,9 +171,12 @@ def _lite_graph(model):
     """(interpreter, input index, output indices in the model's order) of a Keras model converted to a
     float32 TFLite graph with a free batch dimension, after a probe batch gave the model's outputs."""
     import tensorflow as tf
+    # the model's own tf.function: from_keras_model (speed.stream's converter) fails on the Lite port's
+    # several-output models under Keras 3
     spec = tf.TensorSpec((None, *model.inputs[0].shape[1:]), tf.float32)
     fn = tf.function(lambda x: model(x, training=False), input_signature=[spec])
-    flat = tf.lite.TFLiteConverter.from_concrete_functions([fn.get_concrete_function()], model).convert()
+    with contextlib.redirect_stdout(io.StringIO()):
+        flat = tf.lite.TFLiteConverter.from_concrete_functions([fn.get_concrete_function()], model).convert()
     with warnings.catch_warnings():  # the interpreter's deprecation notice
         warnings.filterwarnings("ignore", message=r"(?s).*deprecated", category=UserWarning)
         interp = tf.lite.Interpreter(model_content=flat, num_threads=_tflite._threads())

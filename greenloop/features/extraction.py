@@ -103,6 +103,14 @@ def extract_spec(frames_or_folder, spec: str, weights="auto", input_size=None, *
     return extract(frames_or_folder, name, weights=w, input_size=size, **kw)
 
 
+def resolve_spec(spec: str, weights="auto", warn: bool = True) -> Resolved:
+    """``weights.resolve`` of a backbone-list entry (:func:`extract_spec`'s ``spec``; a layer descriptor:
+    of its backbone), for a caller that describes frame by frame and hands it to :func:`extract_spec`
+    as ``resolved``, so that the weights are looked up once, not at every frame."""
+    name, w = split_spec(spec, weights)
+    return resolve(name.partition("@")[0], w, warn)
+
+
 def extract_rgbd(folder, backbone: str, weights="auto", batch_size: int = 32, progress: bool = True,
                  input_size=None, *, max_depth: float = DEPTH_MAX_M, return_info: bool = False,
                  limit: int | None = None, step: int = 1, **kwargs):

@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from greenloop import evaluate, retrieval
+from greenloop import evaluate, features, retrieval
 from greenloop.seqmatch import (_EPS, COLORS, DEFAULT_VELOCITIES, STORE_DTYPES, _check_descriptor, _join,
                                 SHIFTABLE_DIMS, calibrate_scores, cell_shifts, center, center_stored, center_windows,
                                 columns_to_scores, contrast_normalise, describe_frames, matrix_events, normalise,
@@ -153,6 +153,7 @@ class Detector:
                              "support calibrate, repeat_cos, cell_shift or negative (reverse) velocities: pass index=None, "
                              "or knobs without them (e.g. the CLI's --threshold with --index)")
         self.velocities, self.projection, self.color, self.weights = tuple(v), projection, color, weights
+        self._resolved = None   # features.resolve(descriptor, weights), at the first frame
         self.store_dtype = np.dtype(store_dtype)
         off = _offsets(self.seq_len, self.velocities)
         self._margin = int(off.max())
@@ -488,7 +489,9 @@ class Detector:
             return []
         for k, f in enumerate(frames):
             self._check_frame(f, self.frame_index + k)
-        X = describe_frames(frames, self.descriptor, self.color, self.weights)
+        if self._resolved is None:   # the weights are looked up at the first frame, not at every one
+            self._resolved = features.resolve(self.descriptor, self.weights)
+        X = describe_frames(frames, self.descriptor, self.color, resolved=self._resolved)
         return [self.update_descriptor(x) for x in X]
 
 def _running_sums(R, first: int, chunk: int = 65536) -> np.ndarray:
