@@ -89,6 +89,8 @@ DEFAULT_THRESHOLD = 2.8
 CNN_NAME = "greenloop-seq-cnn"
 CNN_KNOBS = dict(DEFAULT_KNOBS, descriptor="gradients+efficientnetlite0")
 CNN_THRESHOLD = 3.1
+# the named configurations, never tuned: {name: (knobs, fixed threshold)}, the CLI's default first
+NAMED = {DEFAULT_NAME: (DEFAULT_KNOBS, DEFAULT_THRESHOLD), CNN_NAME: (CNN_KNOBS, CNN_THRESHOLD)}
 
 # The "gradients" descriptor's layout (``features.gradient_histograms``): (rows, columns, bins) of its
 # cell grid, cells row-major and bins innermost; what ``shift_cells`` moves.
@@ -98,7 +100,7 @@ CELL_GRID = (features.GRADIENT_SIZE[1] // features.GRADIENT_CELL, features.GRADI
 # "gradients" and "gradients+efficientnetlite0".
 SHIFTABLE_DIMS = (features.GRADIENT_DIM, features.FUSED_DIM)
 
-__all__ = ["DESCRIPTORS", "DEFAULT_NAME", "DEFAULT_KNOBS", "DEFAULT_THRESHOLD", "CNN_NAME", "CNN_KNOBS", "CNN_THRESHOLD",
+__all__ = ["DESCRIPTORS", "DEFAULT_NAME", "DEFAULT_KNOBS", "DEFAULT_THRESHOLD", "CNN_NAME", "CNN_KNOBS", "CNN_THRESHOLD", "NAMED",
            "CELL_GRID", "SHIFTABLE_DIMS", "shift_cells", "cell_shifts", "center", "center_stored", "center_windows",
            "calibrate_scores", "describe", "describe_frames", "normalise", "fit_projection", "contrast_normalise", "columns_to_scores",
            "closures", "choose_threshold", "threshold_range", "pick_knobs", "matrix_events"]

@@ -186,6 +186,22 @@ def test_targets_table_says_when_a_dataset_is_not_one_of_its_own():
     assert step.measured == 8 and step.met is False or step.met == False   # noqa: E712 (numpy bool)
 
 
+def test_targets_table_judges_each_named_configuration_on_its_own_sequence_length(monkeypatch):
+    """Each named configuration on the board gets its rows, its "frames of sequence" from its own knobs:
+    one with 20 frames fails Nordland's <= 10 while the named default (10) meets it."""
+    from greenloop import seqmatch
+    long = dict(seqmatch.CNN_KNOBS, seq_len=20)
+    monkeypatch.setattr(seqmatch, "NAMED", {**seqmatch.NAMED, seqmatch.CNN_NAME: (long, seqmatch.CNN_THRESHOLD)})
+    board = pd.DataFrame([{"method": m, "mode": "loop closure", "R@1_%": 50.0}
+                          for m in (seqmatch.DEFAULT_NAME, seqmatch.CNN_NAME)])
+    t = lb.targets_table(board, "data/nordland", 1)
+    seq = t[t.target == "frames of sequence"].set_index("configuration")
+    assert seq.loc[seqmatch.DEFAULT_NAME, "measured"] == 10 and bool(seq.loc[seqmatch.DEFAULT_NAME, "met"])
+    assert seq.loc[seqmatch.CNN_NAME, "measured"] == 20 and not bool(seq.loc[seqmatch.CNN_NAME, "met"])
+    only = lb.targets_table(board[board.method == seqmatch.DEFAULT_NAME], "data/nordland", 1)
+    assert set(only.configuration) == {seqmatch.DEFAULT_NAME}
+
+
 def test_weights_kind_names_each_kind_of_weights():
     assert lb.weights_kind("imagenet, tflite uint8") == "imagenet" and lb.weights_kind("random init") == "random init"
     assert lb.weights_kind("trained here") == "trained here"              # the Siamese row's network

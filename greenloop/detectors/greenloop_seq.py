@@ -20,9 +20,7 @@ from greenloop.detectors.interface import Data, Entry
 from greenloop.speed import seqstream
 
 NAME, FAST = "greenloop-seq", "greenloop-seq-fast"
-# the named configurations: {name: (knobs, fixed threshold)}
-NAMED = {seqmatch.DEFAULT_NAME: (seqmatch.DEFAULT_KNOBS, seqmatch.DEFAULT_THRESHOLD),
-         seqmatch.CNN_NAME: (seqmatch.CNN_KNOBS, seqmatch.CNN_THRESHOLD)}
+NAMED = seqmatch.NAMED   # the named configurations: {name: (knobs, fixed threshold)}
 
 
 def named_default(name: str = seqmatch.DEFAULT_NAME) -> dict:

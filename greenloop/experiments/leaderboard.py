@@ -33,8 +33,8 @@ from greenloop.study import leaderboard as lb
 from greenloop.study import report
 from greenloop.study import targets as goals
 
-SEQ_ROWS = ("greenloop-seq", "greenloop-seq-fast", seqmatch.DEFAULT_NAME, seqmatch.CNN_NAME)   # the rows the targets judge
-NAMED = (seqmatch.DEFAULT_NAME, seqmatch.CNN_NAME)      # the named configurations (untuned, fixed thresholds)
+NAMED = tuple(seqmatch.NAMED)      # the named configurations (untuned, fixed thresholds)
+SEQ_ROWS = ("greenloop-seq", "greenloop-seq-fast", *NAMED)   # the rows the targets judge
 TARGET_ENTRIES = NAMED + ("seqslam",)    # what a target protocol runs: the named configurations and SeqSLAM's rows
 TARGET_TOLERANCE = 2       # frames: the targets' ground truth, frame k of each traversal +- 2
 GP_PAIRS = (("day_right", "night_right"), ("day_left", "night_right"))   # Gardens Point's named pairs

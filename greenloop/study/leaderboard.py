@@ -325,16 +325,16 @@ def dictionary_row(name: str, tau: int, n_train: int, closures: dict, op: dict, 
 
 
 def targets_table(board: pd.DataFrame, dataset, frame_step: int) -> pd.DataFrame:
-    """The detector's targets for each named configuration on this board (the named default,
-    ``seqmatch.DEFAULT_NAME``, and the CNN one, ``seqmatch.CNN_NAME``, where the board has its row),
-    one row each: configuration, target, measured, required, met (``study.targets.detector_targets``;
+    """The detector's targets for each named configuration on this board (``seqmatch.NAMED``: the named
+    default always, the others where the board has their row), one row each: configuration, target,
+    measured, required, met (``study.targets.detector_targets``, with the configuration's own seq_len;
     SeqSLAM = the published and the tuned row, each judged). A dataset that is none of the targets'
     gives one row saying so."""
-    names = [seqmatch.DEFAULT_NAME] + ([seqmatch.CNN_NAME] if seqmatch.CNN_NAME in set(board["method"]) else [])
+    names = [n for n in seqmatch.NAMED if n == seqmatch.DEFAULT_NAME or n in set(board["method"])]
     try:
         rows = [dict(configuration=n, **r) for n in names
                 for r in goals.detector_targets(board, str(dataset), n, ("SeqSLAM (published)", "SeqSLAM (tuned)"),
-                                                seq_len=seqmatch.DEFAULT_KNOBS["seq_len"], frame_step=frame_step)]
+                                                seq_len=seqmatch.NAMED[n][0]["seq_len"], frame_step=frame_step)]
     except ValueError as e:
         rows = [{"configuration": None, "target": "the detector's targets", "measured": None, "required": None,
                  "met": None, "note": f"not judged: {e}"}]
