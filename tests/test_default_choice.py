@@ -75,3 +75,45 @@ def test_the_committed_choice_is_the_code_default():
     assert params["cnn_configuration"] == seqmatch.CNN_NAME                 # and the CNN configuration's threshold
     assert round(params["cnn_p95_threshold"], 1) == seqmatch.CNN_THRESHOLD
     assert params["repeat_levels"] and seqmatch.DEFAULT_KNOBS["repeat_cos"] in params["repeat_levels"]
+
+
+@pytest.fixture(scope="module")
+def end_loop_stream(tiny_end_loop_sequence):
+    """tiny_end_loop_sequence as a stream of its gradients: frames 180..199 revisit 0..19 (+- 1), the
+    first ten of them the tuning queries; with its folder and frame numbers (``stream_frames``' form)."""
+    from greenloop import features
+    n = 200
+    G = features.extract(tiny_end_loop_sequence, "gradients", progress=False)
+    GT = np.zeros((n, n), bool)
+    for k in range(20):
+        GT[max(k - 1, 0):k + 2, 180 + k] = True
+    GT |= GT.T
+    tune = np.zeros(n, bool)
+    tune[180:190] = True
+    return (G, GT, 20, tune), (str(tiny_end_loop_sequence), np.arange(n))
+
+
+def test_cnn_part_at_the_configuration_width_is_the_configuration_descriptor(tiny_end_loop_sequence):
+    from greenloop import features
+    from greenloop.similarity import l2_normalise
+    X = features.extract(tiny_end_loop_sequence, seqmatch.CNN_KNOBS["descriptor"], progress=False, limit=12)
+    G = features.extract(tiny_end_loop_sequence, "gradients", progress=False, limit=12)
+    C = dc.cnn_part(str(tiny_end_loop_sequence), features.FUSED_WIDTH)[:12]
+    np.testing.assert_allclose(np.hstack([l2_normalise(G), l2_normalise(C)]), X, atol=1e-6)
+    narrow = dc.cnn_part(str(tiny_end_loop_sequence), 64)[:12]
+    assert narrow.shape == C.shape and not np.allclose(narrow, C)      # another width is another input
+
+
+def test_width_table_reads_tuning_queries_only_ranks_and_times_each_width(end_loop_stream):
+    (G, GT, ex, tune), frames = end_loop_stream
+    from greenloop.datasets import sequence
+    timing = {"t": sequence.load_frames(frames[0], size=None, gray=False, limit=3, dtype=np.uint8, progress=False)}
+    t1 = dc.width_table({"s": (G, GT, ex, tune)}, {"s": frames}, timing, widths=(96, 64))
+    broken = GT.copy()
+    broken[:, 190:] = broken[190:, :] = False                            # the untuned revisit loses its labels
+    t2 = dc.width_table({"s": (G, broken, ex, tune)}, {"s": frames}, timing, widths=(96, 64))
+    assert list(t1.columns) == ["cnn_width", "AUC-PR_tune_% s", "mean_AUC-PR_tune_%", "cnn_ms_per_frame t"]
+    assert sorted(t1.cnn_width) == [64, 96] and t1["mean_AUC-PR_tune_%"].is_monotonic_decreasing   # best first
+    np.testing.assert_allclose(t1["AUC-PR_tune_% s"], t2["AUC-PR_tune_% s"])
+    np.testing.assert_allclose(t1["mean_AUC-PR_tune_%"], t1["AUC-PR_tune_% s"])
+    assert (t1["cnn_ms_per_frame t"] > 0).all() and t1["AUC-PR_tune_% s"].between(0, 100).all()

@@ -33,7 +33,7 @@ def test_the_fused_descriptor_is_its_two_parts_each_normalised(frames):
     G = features.extract(frames, "gradients", progress=False)
     feats, li = layers.extract_layers(frames, "efficientnetlite0", "imagenet", ("mid",), ("grid2",), progress=False,
                                       width=features.FUSED_WIDTH)
-    assert li["input"] == "160x80"                                     # 160 pixels wide, the 2:1 aspect kept
+    assert li["input"] == "128x64"                                     # FUSED_WIDTH (128) wide, the 2:1 aspect kept
     np.testing.assert_allclose(X, np.hstack([l2_normalise(G), l2_normalise(feats[("mid", "grid2")])]), atol=1e-6)
     np.testing.assert_allclose(np.linalg.norm(X[:, :256], axis=1), 1, rtol=1e-5)
     np.testing.assert_allclose(np.linalg.norm(X[:, 256:], axis=1), 1, rtol=1e-5)

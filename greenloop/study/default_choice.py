@@ -35,22 +35,33 @@ two Gardens Point pairs, and the synthetic sequence's leaderboard stream (every 
    share a large positive part, so a level that suits centred descriptors also holds out moving
    frames.
 
+4. The CNN configuration's input width (``features.FUSED_WIDTH``): :func:`width_table` scores the
+   named CNN configuration (its knobs as they are) with its CNN part fed frames of each of
+   CNN_WIDTHS pixels wide (aspect kept) by the same per-query AUC-PR on the same tuning queries; the
+   highest mean wins, as for the windows. Beside it, the CNN part's cost per frame on this machine:
+   what a narrower, cheaper network costs in accuracy, the trade-off behind the 920 frames/s target
+   (notebook 13's targets table). The threshold of step 2 is then picked at the width in the code.
+
 Everything else of ``seqmatch.DEFAULT_KNOBS`` (descriptor, seq_len, velocities) is kept.
 CLI: ``python -m greenloop.study.default_choice [--nordland DIR] [--gardenspoint DIR]
-[--synthetic DIR] [--out results/default_choice]`` writes ``<out>/windows`` and ``<out>/repeat_gate``
-(.md and .csv) and ``<out>/manifest.json``.
+[--synthetic DIR] [--out results/default_choice]`` writes ``<out>/windows``, ``<out>/repeat_gate``
+and ``<out>/cnn_width`` (.md and .csv) and ``<out>/manifest.json``.
 """
 from __future__ import annotations
 
 import argparse
 import functools
+import time
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from greenloop import evaluate, seqmatch
+from greenloop import evaluate, features, seqmatch
+from greenloop.datasets import sequence
 from greenloop.experiments import leaderboard as ex
+from greenloop.features.layers import extract_layers
+from greenloop.similarity import l2_normalise
 from greenloop.speed import seqstream
 from greenloop.study import report, targets
 
@@ -60,10 +71,12 @@ SYNTHETIC_STEP = 4                       # notebook 13's frame_step on the synth
 REPEAT_LEVELS = (0.995, 0.999)
 THRESHOLD_STREAM = "nordland: every frame, +- 2 frames"   # Nordland at its full rate: the largest tuning part
 SYNTHETIC_STREAM = "synthetic: leaderboard"
+CNN_WIDTHS = (96, 128, 160, 224)         # the CNN configuration's input widths ranked (features.FUSED_WIDTH: the winner)
+TIMING_FRAMES, TIMING_REPEATS = 200, 3    # the CNN part's cost: one frame per call, median over the repeats
 _PARAMS = dict(seq_lens=[5, 10, 20], fps_frames=300, weights="auto")   # what ex.prepare needs here
 
-__all__ = ["GRID", "SHIFTS", "REPEAT_LEVELS", "streams", "reversed_stream", "rank", "repeat_gate", "threshold",
-           "cnn_threshold", "main"]
+__all__ = ["GRID", "SHIFTS", "REPEAT_LEVELS", "CNN_WIDTHS", "streams", "stream_frames", "reversed_stream", "rank",
+           "repeat_gate", "threshold", "cnn_threshold", "cnn_part", "cnn_ms_per_frame", "width_table", "main"]
 
 
 def streams(nordland=None, gardenspoint=None, synthetic=None, descriptor: str = "gradients") -> dict:
@@ -79,6 +92,19 @@ def streams(nordland=None, gardenspoint=None, synthetic=None, descriptor: str = 
         d, _ = ex.prepare(str(synthetic), SYNTHETIC_STEP, 0.5, 150, 0.5, None, _PARAMS)
         X = seqmatch.describe(str(synthetic), descriptor, step=SYNTHETIC_STEP)
         out[SYNTHETIC_STREAM] = (X, d.GT, d.exclude, d.tune)
+    return out
+
+
+def stream_frames(nordland=None, gardenspoint=None, synthetic=None) -> dict:
+    """{label: (folder, frames (N,) int)}: the dataset folder and original frame numbers of each of
+    :func:`streams`' streams (the same labels, the same frames in stream order)."""
+    out = {}
+    for folder in (f for f in (nordland, gardenspoint) if f is not None):
+        for label, d in _protocols(str(folder)):
+            out[f"{targets.dataset_kind(folder)}: {label}"] = (str(folder), np.asarray(d.frames))
+    if synthetic is not None:
+        d, _ = ex.prepare(str(synthetic), SYNTHETIC_STEP, 0.5, 150, 0.5, None, _PARAMS)
+        out[SYNTHETIC_STREAM] = (str(synthetic), np.asarray(d.frames))
     return out
 
 
@@ -160,6 +186,57 @@ def cnn_threshold(nordland) -> float:
     return threshold(s, k["center_window"], k["cell_shift"])
 
 
+def cnn_part(frames_or_folder, width: int, resolved=None) -> np.ndarray:
+    """The CNN part of the CNN configuration's descriptor fed frames ``width`` pixels wide (aspect
+    kept): EfficientNet-Lite0's block-10 map pooled over 2 x 2 cells (``features.FUSED_CNN``,
+    ImageNet weights; a random-init network is refused) of every frame of a folder or of an
+    (N, H, W, 3) RGB array. Returns (N, 448) float32, not normalised. At ``features.FUSED_WIDTH``,
+    ``[l2(gradients) | l2(this)]`` is the descriptor ``features.extract`` gives the configuration.
+    resolved: ``features.resolve`` of the network, already looked up (None: looked up here)."""
+    backbone, depth, pooling = features.FUSED_CNN
+    resolved = features.resolve(backbone, "imagenet") if resolved is None else resolved
+    feats, _ = extract_layers(frames_or_folder, backbone, depths=(depth,), poolings=(pooling,), progress=False,
+                              resolved=resolved, width=int(width))
+    return feats[(depth, pooling)]
+
+
+def cnn_ms_per_frame(frames, width: int, repeats: int = TIMING_REPEATS) -> float:
+    """Milliseconds per frame of :func:`cnn_part` fed one decoded frame per call, as a stream
+    describes (frames: (N, H, W, 3) uint8 RGB; the first call, which builds the network, untimed):
+    the median over ``repeats`` passes of each pass's mean, on this machine."""
+    resolved = features.resolve(features.FUSED_CNN[0], "imagenet")
+    cnn_part(frames[:1], width, resolved)
+    per = []
+    for _ in range(int(repeats)):
+        t = time.perf_counter()
+        for f in frames:
+            cnn_part(f[None], width, resolved)
+        per.append(1000 * (time.perf_counter() - t) / len(frames))
+    return float(np.median(per))
+
+
+def width_table(streams: dict, frames: dict, timing_frames: dict, widths=CNN_WIDTHS) -> pd.DataFrame:
+    """One row per CNN input width, best first (highest mean; ties: ``widths`` order): the named CNN
+    configuration (``seqmatch.CNN_KNOBS`` as they are) with its CNN part at that width, per-query AUC-PR
+    (%) on each stream's tuning queries and their mean, and the CNN part's cost per frame (:func:`cnn_ms_per_frame`)
+    on each of ``timing_frames`` ({name: (N, H, W, 3) uint8 RGB frames}). streams: :func:`streams` of
+    the gradients (the descriptor's first part); frames: :func:`stream_frames` of the same streams."""
+    k, rows = seqmatch.CNN_KNOBS, []
+    for w in widths:
+        row, parts = {"cnn_width": int(w)}, {}
+        for label, (G, GT, exclude, tune) in streams.items():
+            folder, idx = frames[label]
+            if folder not in parts:
+                parts[folder] = cnn_part(folder, w)
+            X = np.hstack([l2_normalise(G), l2_normalise(parts[folder][idx])]).astype(np.float32)
+            m = evaluate.per_query(_scores((X, GT, exclude, tune), k["center_window"], k["cell_shift"]), GT, exclude, tune)
+            row[f"AUC-PR_tune_% {label}"] = 100 * m["AUC-PR"]
+        row["mean_AUC-PR_tune_%"] = float(np.mean([v for c, v in row.items() if c.startswith("AUC-PR")]))
+        row.update({f"cnn_ms_per_frame {name}": cnn_ms_per_frame(f, w) for name, f in timing_frames.items()})
+        rows.append(row)
+    return pd.DataFrame(rows).sort_values("mean_AUC-PR_tune_%", ascending=False, kind="stable").reset_index(drop=True)
+
+
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(prog="python -m greenloop.study.default_choice", description=__doc__.splitlines()[0])
     p.add_argument("--nordland", default="data/nordland")
@@ -186,6 +263,18 @@ def main(argv=None) -> None:
                              f"seqmatch.DEFAULT_THRESHOLD {seqmatch.DEFAULT_THRESHOLD}. The same rule picks {t_cnn:.4f} "
                              f"for the named CNN configuration ({seqmatch.CNN_NAME}, not ranked here): "
                              f"seqmatch.CNN_THRESHOLD {seqmatch.CNN_THRESHOLD}."))
+    widths = width_table(s, stream_frames(a.nordland, a.gardenspoint, a.synthetic),
+                         {f"{Path(f).name} ({TIMING_FRAMES} frames)": sequence.load_frames(f, size=None, gray=False, limit=TIMING_FRAMES,
+                                                                                         progress=False, dtype=np.uint8)
+                          for f in (a.nordland, a.synthetic)})
+    report.write_table(widths, out / "cnn_width", decimals=2,
+                       title=f"The named CNN configuration ({seqmatch.CNN_NAME}) by its CNN's input width: per-query AUC-PR on the "
+                             "tuning queries of the target streams, and the CNN part's cost per frame",
+                       note=(f"greenloop.study.default_choice.width_table: the first row wins (highest mean). In the code: "
+                             f"features.FUSED_WIDTH = {features.FUSED_WIDTH} pixels (aspect kept). cnn_ms_per_frame: "
+                             f"EfficientNet-Lite0 to block 10 and its pooling, one decoded frame per call (TFLite graph, "
+                             f"{TIMING_REPEATS} passes over the first {TIMING_FRAMES} frames, median), on this machine; the "
+                             f"frame budget at 920 frames/s is 1.09 ms for everything (descriptor and search)."))
     gate = repeat_gate(s)
     report.write_table(gate, out / "repeat_gate", decimals=2,
                        title="Frames the repeat gate holds out of the trajectories, by its level (raw descriptors)",
@@ -193,12 +282,17 @@ def main(argv=None) -> None:
                             f"{seqmatch.DEFAULT_KNOBS['repeat_cos']}.")
     report.manifest(out, dict(grid=[str(c) for c in GRID], shifts=list(SHIFTS), repeat_levels=list(REPEAT_LEVELS), synthetic_step=SYNTHETIC_STEP,
                               threshold_stream=THRESHOLD_STREAM, winner=best, winner_cell_shift=shift, p95_threshold=round(t, 4),
-                              cnn_configuration=seqmatch.CNN_NAME, cnn_p95_threshold=round(t_cnn, 4)),
+                              cnn_configuration=seqmatch.CNN_NAME, cnn_p95_threshold=round(t_cnn, 4),
+                              cnn_widths=list(CNN_WIDTHS), cnn_width_winner=int(widths["cnn_width"][0]),
+                              fused_width=features.FUSED_WIDTH, timing_frames=TIMING_FRAMES,
+                              timing_repeats=TIMING_REPEATS),
                     datasets=[a.nordland, a.gardenspoint, a.synthetic])
     print(table.round(2).to_string(index=False))
     print(gate.round(2).to_string(index=False))
+    print(widths.round(2).to_string(index=False))
     print(f"winner {best}, cell_shift {shift}; p95 threshold on {THRESHOLD_STREAM}: {t:.4f}; "
-          f"{seqmatch.CNN_NAME}: {t_cnn:.4f}")
+          f"{seqmatch.CNN_NAME}: {t_cnn:.4f} at features.FUSED_WIDTH {features.FUSED_WIDTH} "
+          f"(the width ranking's winner: {int(widths['cnn_width'][0])})")
 
 
 if __name__ == "__main__":
