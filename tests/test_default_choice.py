@@ -96,11 +96,13 @@ def end_loop_stream(tiny_end_loop_sequence):
 def test_cnn_part_at_the_configuration_width_is_the_configuration_descriptor(tiny_end_loop_sequence):
     from greenloop import features
     from greenloop.similarity import l2_normalise
-    X = features.extract(tiny_end_loop_sequence, seqmatch.CNN_KNOBS["descriptor"], progress=False, limit=12)
-    G = features.extract(tiny_end_loop_sequence, "gradients", progress=False, limit=12)
-    C = dc.cnn_part(str(tiny_end_loop_sequence), features.FUSED_WIDTH)[:12]
+    from greenloop.datasets import sequence
+    frames = sequence.load_frames(tiny_end_loop_sequence, size=None, gray=False, limit=12, dtype=np.uint8, progress=False)
+    X = features.extract(frames, seqmatch.CNN_KNOBS["descriptor"], progress=False)
+    G = features.extract(frames, "gradients", progress=False)
+    C = dc.cnn_part(frames, features.FUSED_WIDTH)
     np.testing.assert_allclose(np.hstack([l2_normalise(G), l2_normalise(C)]), X, atol=1e-6)
-    narrow = dc.cnn_part(str(tiny_end_loop_sequence), 64)[:12]
+    narrow = dc.cnn_part(frames, 64)
     assert narrow.shape == C.shape and not np.allclose(narrow, C)      # another width is another input
 
 
