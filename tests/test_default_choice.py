@@ -64,8 +64,9 @@ def test_repeat_gate_counts_copies(stream):
 
 def test_the_committed_choice_is_the_code_default():
     """The committed table's winner is seqmatch.DEFAULT_KNOBS' center_window and cell_shift and its p95 pick,
-    rounded to one decimal, is DEFAULT_THRESHOLD (the CNN configuration's, CNN_THRESHOLD): a default
-    changed without `make default-choice` fails here."""
+    rounded to one decimal, is DEFAULT_THRESHOLD (the CNN configuration's, CNN_THRESHOLD, picked at the
+    width the width table ranks first, features.FUSED_WIDTH): a default changed without `make default-choice`
+    fails here."""
     folder = Path(__file__).resolve().parents[1] / "results" / "default_choice"
     table = pd.read_csv(folder / "windows.csv")
     params = json.loads((folder / "manifest.json").read_text())["parameters"]
@@ -75,6 +76,9 @@ def test_the_committed_choice_is_the_code_default():
     assert params["cnn_configuration"] == seqmatch.CNN_NAME                 # and the CNN configuration's threshold
     assert round(params["cnn_p95_threshold"], 1) == seqmatch.CNN_THRESHOLD
     assert params["repeat_levels"] and seqmatch.DEFAULT_KNOBS["repeat_cos"] in params["repeat_levels"]
+    from greenloop import features
+    widths = pd.read_csv(folder / "cnn_width.csv")
+    assert widths["cnn_width"][0] == params["cnn_width_winner"] == params["fused_width"] == features.FUSED_WIDTH
 
 
 @pytest.fixture(scope="module")
