@@ -123,3 +123,17 @@ def test_width_table_reads_tuning_queries_only_ranks_and_times_each_width(end_lo
     np.testing.assert_allclose(t1["AUC-PR_tune_% s"], t2["AUC-PR_tune_% s"])
     np.testing.assert_allclose(t1["mean_AUC-PR_tune_%"], t1["AUC-PR_tune_% s"])
     assert (t1["cnn_ms_per_frame t"] > 0).all() and t1["AUC-PR_tune_% s"].between(0, 100).all()
+
+
+def test_streams_and_stream_frames_name_the_same_frames(tiny_sequence):
+    """The synthetic target stream: every 4th frame (notebook 13's step), its descriptors the ones
+    seqmatch.describe gives those frames, and stream_frames the same labels and frame numbers."""
+    s = dc.streams(synthetic=tiny_sequence)
+    f = dc.stream_frames(synthetic=tiny_sequence)
+    assert list(s) == list(f) == [dc.SYNTHETIC_STREAM]
+    X, GT, ex, tune = s[dc.SYNTHETIC_STREAM]
+    folder, frames = f[dc.SYNTHETIC_STREAM]
+    np.testing.assert_array_equal(frames, np.arange(0, 200, dc.SYNTHETIC_STEP))
+    assert folder == str(tiny_sequence) and X.shape == (len(frames), D) and GT.shape == (len(frames),) * 2
+    from greenloop import features
+    np.testing.assert_allclose(X[:3], features.extract(str(tiny_sequence), "gradients", progress=False, step=4)[:3])

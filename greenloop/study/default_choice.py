@@ -84,28 +84,31 @@ def streams(nordland=None, gardenspoint=None, synthetic=None, descriptor: str = 
     tune (N,) bool tuning queries)}: the target streams of the given dataset folders (None: left
     out), split as notebook 13 splits them (tune_fraction 0.5, exclude 150 original frames).
     descriptor: the named default's "gradients" (256-d) or the CNN configuration's (``seqmatch.CNN_KNOBS``)."""
-    out = {}
-    for folder in (f for f in (nordland, gardenspoint) if f is not None):
-        for label, d in _protocols(str(folder)):
-            out[f"{targets.dataset_kind(folder)}: {label}"] = (d.descriptors[descriptor], d.GT, d.exclude, d.tune)
-    if synthetic is not None:
-        d, _ = ex.prepare(str(synthetic), SYNTHETIC_STEP, 0.5, 150, 0.5, None, _PARAMS)
-        X = seqmatch.describe(str(synthetic), descriptor, step=SYNTHETIC_STEP)
-        out[SYNTHETIC_STREAM] = (X, d.GT, d.exclude, d.tune)
-    return out
+    return {label: (seqmatch.describe(folder, descriptor, step=SYNTHETIC_STEP) if label == SYNTHETIC_STREAM
+                    else d.descriptors[descriptor], d.GT, d.exclude, d.tune)
+            for label, folder, d in _target_data(nordland, gardenspoint, synthetic)}
 
 
 def stream_frames(nordland=None, gardenspoint=None, synthetic=None) -> dict:
     """{label: (folder, frames (N,) int)}: the dataset folder and original frame numbers of each of
     :func:`streams`' streams (the same labels, the same frames in stream order)."""
-    out = {}
+    return {label: (folder, np.asarray(d.frames)) for label, folder, d in _target_data(nordland, gardenspoint, synthetic)}
+
+
+def _target_data(nordland, gardenspoint, synthetic):
+    """(label, folder, Data) of each target stream of the given folders (None: left out), in order."""
     for folder in (f for f in (nordland, gardenspoint) if f is not None):
         for label, d in _protocols(str(folder)):
-            out[f"{targets.dataset_kind(folder)}: {label}"] = (str(folder), np.asarray(d.frames))
+            yield f"{targets.dataset_kind(folder)}: {label}", str(folder), d
     if synthetic is not None:
-        d, _ = ex.prepare(str(synthetic), SYNTHETIC_STEP, 0.5, 150, 0.5, None, _PARAMS)
-        out[SYNTHETIC_STREAM] = (str(synthetic), np.asarray(d.frames))
-    return out
+        yield SYNTHETIC_STREAM, str(synthetic), _synthetic(str(synthetic))
+
+
+@functools.lru_cache(maxsize=None)
+def _synthetic(folder: str):
+    """The synthetic sequence's leaderboard stream (notebook 13's frame_step and split) as a Data, its
+    descriptors not computed, prepared once per process."""
+    return ex.prepare(folder, SYNTHETIC_STEP, 0.5, 150, 0.5, None, _PARAMS)[0]
 
 
 @functools.lru_cache(maxsize=None)
