@@ -277,7 +277,7 @@ def main(argv=None) -> None:
                              f"features.FUSED_WIDTH = {features.FUSED_WIDTH} pixels (aspect kept). cnn_ms_per_frame: "
                              f"EfficientNet-Lite0 to block 10 and its pooling, one decoded frame per call (TFLite graph, "
                              f"{TIMING_REPEATS} passes over the first {TIMING_FRAMES} frames, median), on this machine; the "
-                             f"frame budget at 920 frames/s is 1.09 ms for everything (descriptor and search)."))
+                             f"frame budget at {targets.FPS_TARGET:g} frames/s is {1000 / targets.FPS_TARGET:.2f} ms for everything (descriptor and search)."))
     gate = repeat_gate(s)
     report.write_table(gate, out / "repeat_gate", decimals=2,
                        title="Frames the repeat gate holds out of the trajectories, by its level (raw descriptors)",
