@@ -206,3 +206,23 @@ def test_weights_kind_names_each_kind_of_weights():
     assert lb.weights_kind("imagenet, tflite uint8") == "imagenet" and lb.weights_kind("random init") == "random init"
     assert lb.weights_kind("trained here") == "trained here"              # the Siamese row's network
     assert lb.weights_kind("none") == "none" and lb.weights_kind(None) == "none"
+
+
+def test_threshold_check_without_an_honest_split_reports_the_fixed_threshold_only(revisit):
+    """A recording without a tuning part (data.tune None, every query an evaluation query) has no
+    p95 pick: the fixed threshold's closures are still counted, the pick's columns are NaN (this
+    raised KeyError: 'precision' and stopped make quick on a user's recording)."""
+    from greenloop.detectors.interface import Data
+    from greenloop.experiments import leaderboard as exp
+    X, GT = revisit
+    n, name = len(X), exp.NAMED[0]
+    S = seqstream.score_matrix(X, exclude=EX, seq_len=5)
+    data = Data("user-recording", 1, np.arange(n), GT, EX, None, np.ones(n, bool), {}, {}, {}, {})
+    tuned = exp.Tuned(pd.DataFrame(), {name: {"fixed_threshold": 0.5}}, {}, {}, {}, {name: S})
+    (row,) = exp.threshold_check(data, tuned)
+    want = seqmatch.closures(S, GT, 0.5, EX, np.ones(n, bool))
+    assert want["declared"] > 0
+    assert row["declared_at_fixed"] == want["declared"]
+    assert row["precision_at_fixed_%"] == round(100 * want["precision"], 2)
+    assert math.isnan(row["threshold_tuning_p95"]) and math.isnan(row["declared_at_tuning_p95"])
+    assert math.isnan(row["precision_at_tuning_p95_%"])

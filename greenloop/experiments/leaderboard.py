@@ -250,9 +250,14 @@ def threshold_check(data: Data, tuned: Tuned) -> list[dict]:
         own = np.nan if data.tune is None else seqmatch.choose_threshold(S, GT, ex, data.tune, rule="p95")
         row = {"configuration": m}
         for name, thr in (("fixed", tuned.knobs[m]["fixed_threshold"]), ("tuning_p95", own)):
-            c = seqmatch.closures(S, GT, thr, ex, data.evalq) if np.isfinite(thr) else {"declared": np.nan}
-            row.update({f"threshold_{name}": round(float(thr), 4), f"declared_at_{name}": c["declared"],
-                        f"precision_at_{name}_%": round(100 * c["precision"], 2) if c["declared"] else np.nan})
+            row.update({f"threshold_{name}": round(float(thr), 4), f"declared_at_{name}": np.nan,
+                        f"precision_at_{name}_%": np.nan})
+            if not np.isfinite(thr):           # no tuning part (no honest split): nothing to pick on
+                continue
+            c = seqmatch.closures(S, GT, thr, ex, data.evalq)
+            row[f"declared_at_{name}"] = c["declared"]
+            if c["declared"]:
+                row[f"precision_at_{name}_%"] = round(100 * c["precision"], 2)
         rows.append(row)
     return rows
 
