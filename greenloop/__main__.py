@@ -1,19 +1,17 @@
 """Command line: ``python -m greenloop <command> ...`` (a thin argparse dispatcher).
 
 Commands
-    detect SEQUENCE_FOLDER --model MODEL [--threshold TAU] [--frames-per-spot L]
-        run a trained model (.keras or .tflite) over a recording (a sequence folder or a folder of
-        .jpg/.png frames of any size, in numeric order) and print each declared loop closure and a
-        summary (frames, closures, frames/s). ``--method dictionary`` (the default) is the main
-        paper's CNN + frequency dictionary (greenloop.speed.stream.Detector).
-    detect SEQUENCE_FOLDER --method greenloop-seq (--tuned SUMMARY_JSON | --threshold T)
-          [--variant greenloop-seq|greenloop-seq-fast] [--descriptor NAME] [--seq-len L]
-          [--exclude FRAMES] [--contrast-window R] [--step N]
-        greenloop's own sequence-matching detector (greenloop.seqstream.Detector): no model, no
-        poses; prints each closure (query frame, matched earlier frame, score).
-        [--index scan|flat|ivf|hnsw|swp|qdp] [--candidates K]: verify sequences on the K frames a
-        retrieval index returns (greenloop.retrieval); [--state FILE] [--save-every N]
-        [--stop-after N]: save the detector and resume from it (a progress bar goes to stderr).
+    detect SEQUENCE_FOLDER [--method NAME] [--matches FILE.csv] [--exclude N] [--step N] ...
+        stream a recording (a sequence folder or a folder of .jpg/.png frames of any size, in
+        numeric order) through a registered detector (greenloop.detectors.registry) and print each
+        declared loop closure (query frame, matched earlier frame, score) and a summary. With no
+        flags: the named default (seqmatch.DEFAULT_NAME), no model, no poses, no tuning; the
+        exclusion follows greenloop.datasets.exclusion (make's rule), printed. The greenloop-seq
+        methods (greenloop.seqstream.Detector) take [--tuned SUMMARY_JSON] [--descriptor ...]
+        [--seq-len L] [--contrast-window R] [--index KIND [--candidates K]] [--state FILE ...];
+        ``--method dictionary --model MODEL`` is the main paper's CNN + frequency dictionary
+        (greenloop.speed.stream.Detector). ``--matches`` writes every frame's best match, its score
+        and the decision (MATCH_COLUMNS) for scoring against your own ground truth.
     sweep NOTEBOOK --grid NAME=V1,V2,... [--grid ...] --out OUT [-f PARAMS.yaml] [-p NAME VALUE]
           [--dataset DIR] [--scheduler local|tcp://HOST:8786|slurm|pbs] [--workers N] [--metric SPEC]
         run the notebook once per point of the grids' cross product on Dask (greenloop.study.sweep) and
@@ -40,6 +38,7 @@ import yaml  # noqa: E402
 import numpy as np  # noqa: E402
 
 from greenloop import retrieval, seqmatch  # noqa: E402
+from greenloop.datasets import exclusion  # noqa: E402
 from greenloop.datasets import groundtruth_formats as gt_formats  # noqa: E402
 from greenloop.datasets.sequence import (DESCRIPTION_NAME, GROUND_TRUTH_NAME, layout, list_frames,  # noqa: E402
                                          read_description, traversals, write_loop_pairs)
@@ -65,19 +64,24 @@ def _read_window(paths):
 
 
 def _stream_windows(paths, window: int, events_of, line_of, desc: str, first: int = 0,
-                    stop: int | None = None, after=None) -> float:
+                    stop: int | None = None, after=None, matches=None) -> float:
     """The CLI's one streaming loop: decode paths[first:stop] in windows of ``window`` frames
-    (:func:`_read_window`), print ``line_of(e)`` for each event ``events_of(frames)`` returns, a
-    progress bar on stderr, ``after()`` once per window (state saving). Returns the wall seconds
-    (decoding included; ``speed.timing.timed``)."""
+    (:func:`_read_window`), print ``line_of(e)`` for each event ``events_of(frames)`` returns (rows
+    with ``closure`` False are per-frame decisions: not printed), ``matches(rows)`` per window when
+    given, a progress bar on stderr, ``after()`` once per window (state saving). Returns the wall
+    seconds (decoding included; ``speed.timing.timed``)."""
     stop = len(paths) if stop is None else stop
     progress = bar(total=len(paths), initial=first, desc=desc, unit="frame")
 
     def run():
         for start in range(first, stop, window):
             chunk = paths[start:min(start + window, stop)]
-            for e in events_of(_read_window(chunk)):
-                print(line_of(e), flush=True)
+            rows = events_of(_read_window(chunk))
+            for e in rows:
+                if e.get("closure", True):
+                    print(line_of(e), flush=True)
+            if matches is not None:
+                matches(rows)
             progress.update(len(chunk))
             if after is not None:
                 after()
@@ -85,6 +89,30 @@ def _stream_windows(paths, window: int, events_of, line_of, desc: str, first: in
         return timing.timed(run)[1]
     finally:
         progress.close()
+
+
+MATCH_COLUMNS = ("frame", "file", "match", "match_file", "score", "closure")
+
+
+def _matches_writer(path, paths, append: bool):
+    """``--matches FILE.csv``: a function taking a window's decisions ({'frame', 'match', 'score',
+    'closure'}, ``seqstream.Detector.decide_many``) and appending one CSV line per frame (MATCH_COLUMNS:
+    streamed frame number and file, its best stored match and file, empty while none is a candidate,
+    the score, 1 where a closure was declared); a new file (header first) unless ``append``."""
+    path = Path(path)
+    if path.parent and not path.parent.is_dir():
+        raise FileNotFoundError(f"--matches {path}: folder {path.parent} does not exist")
+    if not append or not path.is_file():
+        path.write_text(",".join(MATCH_COLUMNS) + "\n")
+
+    def write(rows):
+        with open(path, "a") as f:
+            for r in rows:
+                m = r["match"]
+                f.write(f"{r['frame']},{paths[r['frame']].name},{m if m >= 0 else ''},"
+                        f"{paths[m].name if m >= 0 else ''},{'' if m < 0 else format(r['score'], '.6g')},"
+                        f"{int(r['closure'])}\n")
+    return write
 
 
 def _closure_line(paths):
@@ -109,28 +137,40 @@ def _read_tuned(path, variant: str) -> tuple[dict, float, int, int]:
     return summary["knobs"][variant], summary["thresholds"][variant], step, int(summary["exclude_steps"]) * step
 
 
+SEQ_METHODS = ("greenloop-seq", *seqmatch.NAMED)   # the methods detect streams with seqstream.Detector
+PLAIN_SEQ_KNOBS = dict(descriptor="pixels-patchnorm", seq_len=10, contrast_window=10)   # greenloop-seq with --threshold
+
+
+def _base_knobs(args) -> tuple[dict, str]:
+    """The knobs a greenloop-seq method starts from and where they come from: a named configuration
+    (``seqmatch.NAMED``: its knobs and fixed threshold), ``--tuned``'s record, or for
+    ``--method greenloop-seq`` with ``--threshold`` the plain PLAIN_SEQ_KNOBS (with neither, the named
+    default). Returns (knobs with threshold and step, origin)."""
+    name = args.method
+    if name == "greenloop-seq" and args.tuned:
+        tuned, threshold, _, _ = _read_tuned(args.tuned, args.variant or "greenloop-seq-fast")
+        return dict(PLAIN_SEQ_KNOBS, **tuned, threshold=threshold, step=1), "--tuned"
+    if name == "greenloop-seq" and args.threshold is not None:
+        return dict(PLAIN_SEQ_KNOBS, threshold=None, step=1), "default"
+    name = name if name in seqmatch.NAMED else seqmatch.DEFAULT_NAME
+    knobs, threshold = seqmatch.NAMED[name]
+    return dict(knobs, threshold=threshold, step=1), f"default {name}"
+
+
 def _tuned_knobs(args) -> tuple[dict, list[str]]:
-    """greenloop-seq's knobs and one line per knob saying where it came from: ``--tuned`` (a
-    notebook 13 summary.json, the variant named by ``--variant``), the folder's sequence.yaml
-    (``frame_step``, ``exclude``), any flag given explicitly (which wins), else the defaults.
-    The frames are never subsampled unless asked (``--step`` or sequence.yaml's frame_step): the
-    tuned frame_step is reported, not applied. Returns (dict(descriptor, seq_len, contrast_window,
-    threshold, step, exclude), lines); exclude and seq_len in streamed frames."""
-    knobs = dict(descriptor="pixels-patchnorm", seq_len=10, contrast_window=10, threshold=None, step=1)
-    origin = dict.fromkeys([*knobs, "exclude"], "default")
+    """A greenloop-seq method's knobs and one line per knob saying where it came from
+    (:func:`_base_knobs`, the folder's sequence.yaml ``frame_step``, any flag given, which wins),
+    and the exclusion (:func:`_exclusion`). The frames are never subsampled unless asked (``--step``
+    or sequence.yaml's frame_step): the tuned frame_step is reported, not applied. Returns
+    (dict(descriptor, seq_len, contrast_window, threshold, step, exclude, ...), lines); exclude and
+    seq_len in streamed frames."""
+    knobs, where = _base_knobs(args)
+    origin = dict.fromkeys(knobs, where)
+    origin["step"] = "default"
     desc = read_description(args.folder) if Path(args.folder).is_dir() else {}
-    exclude_frames, tuned_step = 150, None       # exclude in ORIGINAL frames until the step is known
-    if not args.tuned and args.threshold is None:   # the named default, its calibrated threshold
-        knobs.update(seqmatch.DEFAULT_KNOBS, threshold=seqmatch.DEFAULT_THRESHOLD)
-        origin = dict(dict.fromkeys(knobs, f"default {seqmatch.DEFAULT_NAME}"), step="default",
-                      exclude="default")
+    tuned_step = tuned_exclude = None
     if args.tuned:
-        tuned, threshold, tuned_step, exclude_frames = _read_tuned(args.tuned, args.variant or "greenloop-seq-fast")
-        knobs.update(tuned, threshold=threshold)
-        origin.update({k: "--tuned" for k in tuned}, threshold="--tuned")
-        origin["exclude"] = "--tuned"
-    if desc.get("exclude") is not None:
-        exclude_frames, origin["exclude"] = desc["exclude"], f"{DESCRIPTION_NAME}"
+        _, _, tuned_step, tuned_exclude = _read_tuned(args.tuned, args.variant or "greenloop-seq-fast")
     if desc.get("frame_step") is not None:
         knobs["step"], origin["step"] = desc["frame_step"], f"{DESCRIPTION_NAME}"
     for k in ("descriptor", "seq_len", "contrast_window", "threshold", "step"):
@@ -142,16 +182,35 @@ def _tuned_knobs(args) -> tuple[dict, list[str]]:
                          "threshold on a tuning part) or --threshold T")
     if knobs["step"] < 1:
         raise ValueError(f"--step must be >= 1, got {knobs['step']}")
-    knobs["exclude"] = exclude_frames // knobs["step"]
-    if args.exclude is not None:
-        knobs["exclude"], origin["exclude"] = args.exclude, "--exclude"
-    lines = [f"# {k} {knobs[k]} ({origin[k]})" for k in knobs]
+    knobs["exclude"], origin["exclude"], rule = _exclusion(args, knobs["step"], tuned_exclude)
+    lines = [f"# {k} {knobs[k]} ({origin[k]})" for k in knobs] + [f"# exclusion: {rule}"]
     if tuned_step is not None and tuned_step != knobs["step"]:
         lines.append(f"# --tuned picked its knobs streaming every {tuned_step}th frame; here every "
                      f"{knobs['step']} (no frame is dropped unless asked): seq_len and the contrast window "
                      f"count streamed frames, so they span {knobs['step']}/{tuned_step} of the original frames "
                      f"they spanned there; pass --step {tuned_step} to stream at the tuned rate")
     return knobs, lines
+
+
+def _exclusion(args, step: int, tuned_exclude: int | None = None) -> tuple[int, str, str]:
+    """The exclusion in streamed frames, its source and the rule's sentence: ``--exclude`` (streamed frames), else
+    the folder's sequence.yaml, else ``--tuned``'s, else greenloop.datasets.exclusion's rule (the
+    ground truth, the frame rate or a fraction of the recording: the rule make uses). Warns on
+    stderr when it leaves fewer than half of the streamed frames any candidate."""
+    n = len(list_frames(args.folder)[::step])
+    if args.exclude is not None:
+        frames, source, rule = args.exclude, "--exclude", f"--exclude {args.exclude} streamed frames"
+    else:
+        found = exclusion.exclusion(args.folder)
+        if tuned_exclude is not None and found.source != DESCRIPTION_NAME:
+            found = exclusion.Exclusion(tuned_exclude, "--tuned", f"exclude {tuned_exclude} frames, from --tuned")
+        frames, source = found.frames // step, found.source
+        rule = found.rule + ("" if step == 1 else f"; {frames} streamed frames at step {step}")
+    if exclusion.candidate_share(n, frames) < 0.5:
+        print(f"warning: exclude {frames} leaves only {max(n - frames - 1, 0)} of the {n} streamed frames any "
+              f"candidate (a loop is searched among frames more than {frames} frames older): pass --exclude N "
+              f"or write `exclude: N` in {Path(args.folder) / DESCRIPTION_NAME}", file=sys.stderr, flush=True)
+    return frames, source, rule
 
 
 def _detect_seq(args) -> int:
@@ -162,7 +221,7 @@ def _detect_seq(args) -> int:
     paths = list_frames(args.folder)[::kn["step"]]
     det = _seq_detector(args, kn, paths)
     print("\n".join(lines), flush=True)
-    print(f"# {len(paths)} frames from {args.folder} (every {kn['step']}); greenloop-seq "
+    print(f"# {len(paths)} frames from {args.folder} (every {kn['step']}); {args.method} "
           f"({kn['descriptor']}, seq_len {det.seq_len}, exclude {det.exclude}, contrast window "
           f"{det.contrast_window}); threshold {det.threshold:g}; candidates: "
           f"{'every stored frame' if det.index_kind is None else f'{det.k} from {det.index_kind}'}"
@@ -224,9 +283,10 @@ def _seq_stream(det: seqstream.Detector, paths, args, kn: dict) -> tuple[bool, f
         if args.state and det.frame_index - last_save[0] >= args.save_every:
             _seq_save(det, args, kn, paths)
             last_save[0] = det.frame_index
+    matches = None if args.matches is None else _matches_writer(args.matches, paths, append=first > 0)
     try:
-        dt = _stream_windows(paths, args.window, det.update_many, _closure_line(paths), "greenloop-seq",
-                             first, stop, save_now)
+        dt = _stream_windows(paths, args.window, det.decide_many if matches else det.update_many,
+                             _closure_line(paths), args.method, first, stop, save_now, matches)
     except KeyboardInterrupt:
         if args.state:
             _seq_save(det, args, kn, paths)
@@ -246,11 +306,11 @@ def _registered_stream(args):
         raise ValueError(f"--method {args.method} has no streaming form for detect")
     knobs, threshold = dict(entry.cli_knobs), entry.cli_knobs.get("fixed_threshold")
     desc = read_description(args.folder) if Path(args.folder).is_dir() else {}
-    exclude_frames = desc.get("exclude") if desc.get("exclude") is not None else 150
+    tuned_exclude = None
     if args.tuned:
         if args.variant is None:
             raise ValueError(f"--tuned needs --variant: the leaderboard row whose knobs --method {args.method} streams")
-        knobs, threshold, _, exclude_frames = _read_tuned(args.tuned, args.variant)
+        knobs, threshold, _, tuned_exclude = _read_tuned(args.tuned, args.variant)
     threshold = args.threshold if args.threshold is not None else threshold
     if threshold is None:
         raise ValueError(f"--method {args.method} needs a threshold chosen on your own data: pass --threshold T or "
@@ -258,7 +318,8 @@ def _registered_stream(args):
     step = args.step or desc.get("frame_step") or 1
     if step < 1:
         raise ValueError(f"--step must be >= 1, got {step}")
-    exclude = args.exclude if args.exclude is not None else exclude_frames // step
+    exclude, _, rule = _exclusion(args, step, tuned_exclude)
+    print(f"# exclusion: {rule}", flush=True)
     paths = list_frames(args.folder)[::step]
     data = Data(args.folder, step, np.arange(len(paths)) * step, None, exclude, None, None,
                 {"velocities": seqmatch.DEFAULT_VELOCITIES, "weights": "auto"}, {}, {}, {})
@@ -273,8 +334,18 @@ def _detect_registered(args) -> int:
     print(f"# {len(paths)} frames from {args.folder} (every {step}); {args.method} ({knobs}); exclude "
           f"{det.exclude}; threshold {det.threshold:g}", flush=True)
     print("frame\tmatch\tscore\tfile\tmatch_file", flush=True)
-    dt = _stream_windows(paths, args.window, lambda frames: [e for e in (update(det, f) for f in frames) if e],
-                         _closure_line(paths), args.method)
+
+    def decide(frames):
+        rows = []
+        for f in frames:
+            j, event = det.frame_index, update(det, f)
+            match, score = seqstream.best_candidate(det)
+            rows.append(dict(event or {"frame": j, "match": match, "score": score}, closure=event is not None))
+        return rows
+    matches = None if args.matches is None else _matches_writer(args.matches, paths, append=False)
+    dt = _stream_windows(paths, args.window, decide if matches else
+                         (lambda frames: [e for e in (update(det, f) for f in frames) if e]),
+                         _closure_line(paths), args.method, matches=matches)
     print(f"# summary: {det.frame_index} frames, {len(det.events)} closures, {det.frame_index / max(dt, 1e-9):.1f} "
           f"frames/s (decoding included, {dt:.2f} s); {det.bytes_per_frame} bytes per stored frame", flush=True)
     return 0
@@ -285,13 +356,17 @@ def _detect(args) -> int:
     greenloop.speed.stream.Detector (``--method dictionary``), greenloop.seqstream.Detector
     (``--method greenloop-seq``, with --index / --state) or any other registered detector's
     stream (:func:`_detect_registered`) in windows; prints events as they are declared."""
-    if args.method == "greenloop-seq":
+    if args.method in SEQ_METHODS:
         return _detect_seq(args)
     if args.method != "dictionary":
         return _detect_registered(args)
+    if args.matches is not None:
+        raise ValueError("--matches needs a method that matches frames (the dictionary counts spot labels): "
+                         f"pass --method {seqmatch.DEFAULT_NAME} (the default) or another registered one")
 
     if args.model is None:
-        raise ValueError("--method dictionary needs --model (a trained .keras or .tflite file)")
+        raise ValueError(f"--method dictionary needs --model (a trained .keras or .tflite file); without "
+                         f"--method, detect runs the named default {seqmatch.DEFAULT_NAME}, which needs no model")
     if args.threshold is not None and int(args.threshold) != args.threshold:
         raise ValueError(f"--threshold (tau) must be an integer for --method dictionary, got {args.threshold:g}")
     if not Path(args.model).is_file():
@@ -434,34 +509,54 @@ def _import_gt_parser(sub) -> None:
     s.set_defaults(func=_import_gt)
 
 
+def _knob_defaults(knob: str) -> str:
+    """One knob's default per greenloop-seq method, for --help: from seqmatch.NAMED and PLAIN_SEQ_KNOBS."""
+    return "; ".join([f"{n}: {k[knob]}" for n, (k, _) in seqmatch.NAMED.items()]
+                     + [f"greenloop-seq with --threshold: {PLAIN_SEQ_KNOBS[knob]}"])
+
+
+_DETECT_DESCRIPTION = (
+    f"Stream a recording frame by frame through a detector and print each declared loop closure "
+    f"(frame, matched earlier frame, score) and a summary. With no flags it runs the named default "
+    f"{seqmatch.DEFAULT_NAME} (descriptor {seqmatch.DEFAULT_KNOBS['descriptor']}, seq_len "
+    f"{seqmatch.DEFAULT_KNOBS['seq_len']}, threshold {seqmatch.DEFAULT_THRESHOLD:g}): no model, no poses, no "
+    f"tuning. {seqmatch.CNN_NAME} adds an ImageNet CNN (threshold {seqmatch.CNN_THRESHOLD:g}). The frames it "
+    f"never compares with a query (the exclusion) follow one rule, the one make uses, printed at the start. "
+    f"--matches writes every frame's best match for your own scoring.")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser: one subparser per command (add new commands here)."""
     ap = argparse.ArgumentParser(prog="python -m greenloop",
                                  description="greenloop: CNN visual loop-closure detection for "
                                              "agricultural robots.")
     sub = ap.add_subparsers(dest="command", metavar="COMMAND")
-    d = sub.add_parser("detect", help="run a trained model over a recording and print loop closures",
-                       description="Classify every frame of a recording with a trained spot CNN, "
-                                   "count the predictions in the paper's dictionary and print each "
-                                   "declared loop closure (frame, spot, count) and a summary.")
+    d = sub.add_parser("detect", help="stream a recording through a loop-closure detector and print its closures",
+                       description=_DETECT_DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
     d.add_argument("folder", metavar="SEQUENCE_FOLDER",
                    help="sequence folder (its rgb/) or folder of .jpg/.png frames, any size")
-    d.add_argument("--method", default="dictionary", choices=list(detectors.REGISTRY),
-                   help="a registered detector (greenloop.detectors.registry): dictionary, the main paper's CNN + "
-                        "frequency dictionary (needs --model; default); greenloop-seq: sequence matching "
-                        "(greenloop.seqmatch); any other: its stream at its default knobs or --tuned's --variant")
-    d.add_argument("--model", default=None, help="dictionary: trained model, .keras or .tflite file")
+    d.add_argument("--method", default=seqmatch.DEFAULT_NAME, choices=list(detectors.REGISTRY),
+                   help=f"a registered detector (greenloop.detectors.registry); default {seqmatch.DEFAULT_NAME}, "
+                        f"the named default, which needs no model and no tuning")
     d.add_argument("--threshold", "--tau", type=float, default=None,
-                   help="dictionary: tau, declare a closure when a spot has been predicted this many "
-                        "times (an integer; default frames-per-spot + margin); greenloop-seq: the "
-                        "sequence score to reach (else read from --tuned)")
-    d.add_argument("--frames-per-spot", type=int, default=None, metavar="L",
-                   help="frames per spot the model was trained with (default 60)")
-    d.add_argument("--margin", type=int, default=10, help="Delta in tau = L + Delta (default 10)")
-    d.add_argument("--backend", default="auto", choices=("auto", "numpy", "tflite", "keras"),
-                   help="inference backend (default auto)")
-    d.add_argument("--window", type=int, default=70, help="frames per batch (default 70)")
-    g = d.add_argument_group("greenloop-seq (greenloop.seqstream.Detector)")
+                   help="the score to reach: " + "; ".join(f"{n}: {t:g}" for n, (_, t) in seqmatch.NAMED.items())
+                        + " (calibrated z-scores); greenloop-seq: needed unless --tuned; dictionary: tau, an "
+                          "integer (default frames-per-spot + margin)")
+    d.add_argument("--matches", default=None, metavar="FILE.csv",
+                   help="also write every frame's best stored match, its score and the decision (1: closure) to "
+                        "this CSV, to score the detector against your own ground truth or pick your own threshold")
+    d.add_argument("--exclude", type=int, default=None,
+                   help="only frames more than this many streamed frames older are candidates (default: the "
+                        "exclusion rule, printed: sequence.yaml's exclude, else the ground truth's, else "
+                        f"{exclusion.EXCLUDE_SECONDS:g} s at sequence.yaml's frame_rate, else "
+                        f"{100 * exclusion.EXCLUDE_FRACTION:g} %% of the recording within "
+                        f"{exclusion.MIN_EXCLUDE}..{exclusion.DEFAULT_EXCLUDE} frames)")
+    d.add_argument("--step", type=int, default=None,
+                   help="stream every step-th frame (default: sequence.yaml's frame_step, else 1; --tuned's "
+                        "frame_step is printed, not applied)")
+    d.add_argument("--window", type=int, default=70, help="frames decoded per batch (default 70)")
+    g = d.add_argument_group("greenloop-seq knobs (greenloop.seqstream.Detector; default: the method's "
+                             "configuration, printed at the start)")
     g.add_argument("--tuned", default=None, metavar="SUMMARY_JSON",
                    help="knobs and threshold picked by notebook 13 on a tuning part "
                         "(<results>/13_leaderboard/summary.json); flags below override them")
@@ -469,16 +564,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="which of --tuned's rows (greenloop-seq: greenloop-seq or greenloop-seq-fast, the default: no "
                         "CNN; another --method: the row to stream, e.g. 'SeqSLAM (tuned)')")
     g.add_argument("--descriptor", default=None, choices=seqmatch.DESCRIPTORS,
-                   help="per-frame descriptor (default pixels-patchnorm)")
-    g.add_argument("--seq-len", type=int, default=None, help="frames per matched sequence (default 10)")
-    g.add_argument("--exclude", type=int, default=None,
-                   help="only frames more than this many streamed frames older are candidates (default: "
-                        "sequence.yaml's exclude, else --tuned's, else 150 original frames, divided by the step)")
+                   help="per-frame descriptor (default: " + _knob_defaults("descriptor") + ")")
+    g.add_argument("--seq-len", type=int, default=None,
+                   help="frames per matched sequence (default: " + _knob_defaults("seq_len") + ")")
     g.add_argument("--contrast-window", type=int, default=None,
-                   help="SeqSLAM local contrast window in frames, 0 = off (default 10)")
-    g.add_argument("--step", type=int, default=None,
-                   help="stream every step-th frame (default: sequence.yaml's frame_step, else 1; --tuned's "
-                        "frame_step is printed, not applied)")
+                   help="SeqSLAM local contrast window in frames, 0 = off (default: "
+                        + _knob_defaults("contrast_window") + ")")
     g.add_argument("--index", default=None, choices=retrieval.KINDS,
                    help="verify sequences on the --candidates frames this index retrieves (scan, flat: "
                         "exact; ivf, hnsw, swp, qdp: approximate) instead of on every stored frame: "
@@ -490,6 +581,13 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--save-every", type=int, default=10000, help="--state: frames between saves (default 10000)")
     g.add_argument("--stop-after", type=int, default=None, metavar="N",
                    help="process at most N frames in this run, then save --state and stop")
+    m = d.add_argument_group("dictionary (the main paper's CNN + frequency dictionary, greenloop.speed.stream)")
+    m.add_argument("--model", default=None, help="trained model, .keras or .tflite file (needed)")
+    m.add_argument("--frames-per-spot", type=int, default=None, metavar="L",
+                   help="frames per spot the model was trained with (default 60)")
+    m.add_argument("--margin", type=int, default=10, help="Delta in tau = L + Delta (default 10)")
+    m.add_argument("--backend", default="auto", choices=("auto", "numpy", "tflite", "keras"),
+                   help="inference backend (default auto)")
     d.set_defaults(func=_detect)
     _sweep_parser(sub)
     _import_gt_parser(sub)

@@ -224,7 +224,8 @@ def test_loops_inside_the_default_window_get_a_fitting_exclude(tiny_near_loop_se
     assert params.loop_distances(tiny_near_loop_sequence) == (99, 101)
     p, notes = params.sequence_parameters(tiny_near_loop_sequence)
     assert p == {"exclude": 49, "first_traversal_end": 100}
-    assert "closest loop of the ground truth is 99 frames apart" in notes[0] and "-p exclude N" in notes[0]
+    assert "half the closest revisit" in notes[0] and "revisits 99..101 frames apart" in notes[0]
+    assert "would leave 0 of 200 revisit frames" in notes[0]
 
 
 def test_a_notebook_without_any_counted_loop_is_skipped_with_the_reason(tiny_near_loop_sequence, tmp_path, capsys):
@@ -235,12 +236,13 @@ def test_a_notebook_without_any_counted_loop_is_skipped_with_the_reason(tiny_nea
     assert params.main(args + ["--", "-p", "exclude", "120"]) == 0
     printed = capsys.readouterr().out
     assert "no loop pair more than exclude=120" in printed and "-p exclude 49" in printed
+    assert "exclude 49 frames (the longer of" in printed         # the rule, printed once per run
     assert "07_feature_baselines: skipped" in "".join(json.loads(out.read_text())["cells"][0]["source"])
     assert "exclude=120" in (tmp_path / "res" / "07_feature_baselines" / "skipped.md").read_text()
     assert "07_feature_baselines: skipped" in report.assemble_tables(tmp_path / "res").read_text()
     out.unlink()
     assert params.main(args) == 0 and not out.exists()                 # exclude 49: it runs
-    assert "exclude = 49" in capsys.readouterr().out
+    assert "exclude 49" not in capsys.readouterr().out                 # the same rule: not printed again
     assert params.main([str(ROOT / "notebooks" / "04_shift_robustness.ipynb")] + args[1:] + ["--", "-p", "exclude", "120"]) == 0
     assert not out.exists()                                            # 04 scores no loops: never skipped
 

@@ -200,14 +200,20 @@ def test_cli_detect_by_method(tmp_path):
                            env=env, timeout=120)
     assert tuned.returncode == 0, tuned.stderr
     assert [line.split("\t")[:2] for line in tuned.stdout.splitlines() if line[:1].isdigit()] == [r[:2] for r in rows]
-    none = subprocess.run(cmd[:7], capture_output=True, text=True, env=env, timeout=60)   # the named default
-    assert none.returncode == 0 and "greenloop-seq (gradients, seq_len 10, exclude 150" in none.stdout, none.stderr
+    # no flags at all: the named default, its exclusion by the rule make uses (no ground truth, no frame
+    # rate: 10 % of 45 frames, at least 20), printed with the rule
+    none = subprocess.run(cmd[:5], capture_output=True, text=True, env=env, timeout=60)
+    assert none.returncode == 0, none.stderr
+    assert f"{seqmatch.DEFAULT_NAME} (gradients, seq_len 10, exclude 20," in none.stdout, none.stdout
+    assert "# exclude 20 (fraction)" in none.stdout and "10% of the 45 frames" in none.stdout
+    plain = subprocess.run(cmd[:7], capture_output=True, text=True, env=env, timeout=60)   # greenloop-seq, no threshold
+    assert plain.returncode == 0 and "(default greenloop-seq-grad)" in plain.stdout, plain.stderr
     wrong = subprocess.run(cmd[:7] + ["--tuned", str(summary), "--variant", "greenloop-seq"], capture_output=True,
                            text=True, env=env, timeout=60)
     assert wrong.returncode == 2 and "no variant 'greenloop-seq'" in wrong.stderr
     nomodel = subprocess.run([sys.executable, "-m", "greenloop", "detect", str(folder), "--method", "dictionary"],
                              capture_output=True, text=True, env=env, timeout=60)
-    assert nomodel.returncode == 2 and "--model" in nomodel.stderr
+    assert nomodel.returncode == 2 and "--model" in nomodel.stderr and seqmatch.DEFAULT_NAME in nomodel.stderr
 
 
 def test_tune_knobs_scores_every_combination_on_the_tuning_queries(revisit):

@@ -25,7 +25,7 @@ from greenloop.util import numba_kernels
 from greenloop.util.checks import positive_int
 from greenloop.util.threads import one_blas_thread
 
-__all__ = ["Detector", "score_matrix", "tune_knobs", "stream_disagreements", "stream_matches_matrix", "stream_check"]
+__all__ = ["Detector", "best_candidate", "score_matrix", "tune_knobs", "stream_disagreements", "stream_matches_matrix", "stream_check"]
 
 
 def _offsets(seq_len: int, velocities) -> np.ndarray:
@@ -484,15 +484,41 @@ class Detector:
         """A window of raw frames (one batched descriptor pass) -> the events declared in it."""
         return [e for e in self._update_frames(list(frames)) if e is not None]
 
-    def _update_frames(self, frames) -> list:
-        if not frames:
-            return []
+    def decide_many(self, frames) -> list[dict]:
+        """A window of raw frames -> one decision per frame, closures or not: {'frame': j, 'match':
+        its best candidate (stored frame number, -1 while none is a candidate), 'score': that
+        candidate's score (NaN when none), 'closure': whether a closure was declared}."""
+        out = []
+        for x in self._describe(list(frames)):
+            j, event = self.frame_index, self.update_descriptor(x)
+            match, score = best_candidate(self)
+            out.append({"frame": j, "match": match, "score": score, "closure": event is not None})
+        return out
+
+    def _describe(self, frames: list) -> np.ndarray:
+        """The window's raw descriptors (N, D), each frame checked; the weights looked up once."""
         for k, f in enumerate(frames):
             self._check_frame(f, self.frame_index + k)
         if self._resolved is None:   # the weights are looked up at the first frame, not at every one
             self._resolved = features.resolve(self.descriptor, self.weights)
-        X = describe_frames(frames, self.descriptor, self.color, resolved=self._resolved)
-        return [self.update_descriptor(x) for x in X]
+        return describe_frames(frames, self.descriptor, self.color, resolved=self._resolved)
+
+    def _update_frames(self, frames) -> list:
+        if not frames:
+            return []
+        return [self.update_descriptor(x) for x in self._describe(frames)]
+
+
+def best_candidate(det) -> tuple[int, float]:
+    """The newest query's best candidate of a descriptor-fed stream (this module's Detector or a
+    subclass, after ``update_descriptor``): (stored frame number, score), (-1, NaN) when the query
+    had no candidate. In candidate mode the frame number is the retrieved row's."""
+    s = det.last_scores
+    if not s.size:
+        return -1, float("nan")
+    i = int(np.argmax(s))
+    rows = getattr(det, "last_candidates", None) if det.index_kind is not None else None
+    return (int(rows[i]) if rows is not None else i), float(s[i])
 
 def _running_sums(R, first: int, chunk: int = 65536) -> np.ndarray:
     """Running float64 sums of the rows R (c, D) added one at a time, as a candidate-mode stream

@@ -3,12 +3,10 @@
 ``make`` runs every notebook as ``papermill -f RESULTS/sequence_params.yaml -f
 params/datasets/<name>.yaml $(PARAMS)``: later files and ``-p`` win, so a user's PARAMS overrides
 the dataset's budget, which overrides what the folder says of itself. ``sequence_params.yaml``
-is written here (:func:`sequence_parameters`) from the folder's ``sequence.yaml``
-(greenloop.datasets.sequence.read_description: ``exclude``, ``frame_step``, traversal boundaries)
-and, where it sets no ``exclude``, from its ground truth: when a loop-pair ground truth has loops
-but none more than DEFAULT_EXCLUDE frames apart, ``exclude`` becomes half the distance of its
-closest loop (EXCLUDE_RULE), so that those loops count, and one line names the distance and the
-override.
+is written here (:func:`sequence_parameters`) from the folder: ``exclude`` by the one exclusion
+rule (greenloop.datasets.exclusion, which ``python -m greenloop detect`` reads too), and from its
+``sequence.yaml`` (greenloop.datasets.sequence.read_description) ``frame_step`` and the traversal
+boundaries; one line says how each was chosen.
 
 Before each notebook, :func:`check` reads the parameters that notebook will get (its defaults,
 then the files and ``-p`` arguments above) and, for the notebooks that score loops (LOOP_NOTEBOOKS),
@@ -31,12 +29,11 @@ import numpy as np
 import yaml
 
 from greenloop import groundtruth
-from greenloop.datasets import sequence
+from greenloop.datasets import exclusion, sequence
 from greenloop.study import report
 from greenloop.util.files import write_atomic
 
-DEFAULT_EXCLUDE = 150                  # every notebook's default exclusion window, frames
-EXCLUDE_RULE = "half the distance of the closest loop"
+DEFAULT_EXCLUDE = exclusion.DEFAULT_EXCLUDE   # every notebook's default exclusion window, frames
 LOOP_NOTEBOOKS = ("07", "08", "09", "10", "11", "12", "13")   # they score loops: none, nothing to score
 PARAMS_NAME = "sequence_params.yaml"
 
@@ -63,25 +60,14 @@ def loop_distances(folder) -> tuple[int, int] | None:
 def sequence_parameters(folder) -> tuple[dict, list[str]]:
     """Papermill parameters a folder implies and one note per choice made for it.
 
-    Returns ({name: value}: ``exclude`` and ``frame_step`` from sequence.yaml, or ``exclude`` by
-    EXCLUDE_RULE where the default window would hide every loop; ``first_traversal_end`` (notebook
-    12) where the folder has several traversals), [sentences saying why]).
+    Returns ({name: value}: ``exclude`` by greenloop.datasets.exclusion's rule, ``frame_step`` from
+    sequence.yaml, ``first_traversal_end`` (notebook 12) where the folder has several traversals),
+    [sentences saying why]).
     """
     folder = Path(folder)
     d = sequence.read_description(folder)
-    params, notes = {}, []
-    if d["exclude"] is not None:
-        params["exclude"] = d["exclude"]
-        notes.append(f"exclude {d['exclude']} frames from {folder / sequence.DESCRIPTION_NAME}")
-    else:
-        dist = loop_distances(folder)
-        if dist is not None and dist[1] <= DEFAULT_EXCLUDE:
-            params["exclude"] = max(0, dist[0] // 2)
-            notes.append(f"{folder}: the closest loop of the ground truth is {dist[0]} frames apart, the "
-                         f"farthest {dist[1]}, all inside the default exclusion window of {DEFAULT_EXCLUDE} "
-                         f"frames, so exclude = {params['exclude']} ({EXCLUDE_RULE}); to choose another, "
-                         f"write `exclude: N` in {folder / sequence.DESCRIPTION_NAME} or run make with "
-                         f"PARAMS='-p exclude N'")
+    rule = exclusion.exclusion(folder)
+    params, notes = {"exclude": rule.frames}, [f"{folder}: {rule.rule}"]
     if d["frame_step"] is not None:
         params["frame_step"] = d["frame_step"]
         notes.append(f"frame_step {d['frame_step']} from {folder / sequence.DESCRIPTION_NAME}")
@@ -230,10 +216,10 @@ def main(argv=None) -> int:
     a, rest = ap.parse_args(argv[:cut]), argv[cut + 1:]
     try:
         seq_file = Path(a.results) / PARAMS_NAME
+        before = seq_file.read_text() if seq_file.is_file() else None
         _, notes = write_parameters(a.dataset, seq_file)
-        for n in notes:
-            if "closest loop" in n:
-                print(n, flush=True)
+        if seq_file.read_text() != before:          # once per run of make, not once per notebook
+            print("\n".join(notes), flush=True)
         params = effective_parameters(a.notebook, [seq_file], rest)
         reason = skip_reason(a.notebook, a.dataset, params)
     except (FileNotFoundError, ValueError) as e:
