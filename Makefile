@@ -113,7 +113,9 @@ else
 DATA_DEP := $(DATASET)
 endif
 
-all: $(HTML) $(RESULTS)/tables.md results/datasets.md results/coverage.md ## run every notebook into results/, render HTML, assemble results/tables.md
+# the tables across the committed results folders; `make quick` (a first look) leaves them alone
+CROSS ?= results/datasets.md results/coverage.md
+all: $(HTML) $(RESULTS)/tables.md $(CROSS) ## run every notebook into results/, render HTML, assemble results/tables.md
 
 # One table across every dataset that has results: results/ (synthetic) and results/<name>/.
 DATASET_RESULTS := results $(filter-out results/quick,$(patsubst %/07_feature_baselines/,%,$(wildcard results/*/07_feature_baselines/)))
@@ -161,7 +163,7 @@ $(RESULTS)/tables.md: $(EXECUTED) $(wildcard $(RESULTS)/coverage.md)
 # RESULTS given on the command line wins (make quick RESULTS=results/mine); else results/quick/
 QUICK_RESULTS := $(if $(filter command line,$(origin RESULTS)),$(RESULTS),results/quick)
 quick: ## the same notebooks with few epochs and seeds into results/quick/ (or RESULTS=...; minutes)
-	$(MAKE) all RESULTS=$(QUICK_RESULTS) PARAMS="-f params/quick.yaml $(PARAMS)"
+	$(MAKE) all RESULTS=$(QUICK_RESULTS) PARAMS="-f params/quick.yaml $(PARAMS)" CROSS=
 
 # `make sweep`: greenloop.study.sweep over Dask (python -m greenloop sweep --help). Each --grid is one
 # word of SWEEP_GRID; points whose point.json says ok are skipped, so an interrupted sweep resumes.

@@ -1,0 +1,70 @@
+"""Recordings a new user could bring, cut from the real sets beside the repository (../shared/real)
+and from the synthetic generator: short, loop pairs only, GPS only, no revisit. Used by
+tests/test_user_folders.py; also by hand, to try ``make quick DATASET=...`` as a stranger would:
+
+    PYTHONPATH=. .venv/bin/python -c "from tests import user_folders as u; u.gardenspoint_pairs('/tmp/gp')"
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from greenloop.datasets import sequence
+
+REAL = Path(__file__).resolve().parents[2] / "shared" / "real"
+
+
+def _write(folder: Path, images) -> Path:
+    (folder / "rgb").mkdir(parents=True, exist_ok=True)
+    for k, img in enumerate(images):
+        cv2.imwrite(str(folder / "rgb" / f"{k}.jpg"), img)
+    return folder
+
+
+def gardenspoint_pairs(out, n: int = 100, src=REAL / "gardenspoint") -> Path:
+    """Gardens Point day_right 0..n-1 then night_right 0..n-1 (640x360), loop pairs only (k, n + k,
+    tolerance 2) in ground_truth.csv: a short recording driven twice, day then night."""
+    out, src = Path(out), Path(src)
+    if not (src / "night_right").is_dir():
+        raise FileNotFoundError(f"Gardens Point not found at {src}")
+    imgs = [cv2.resize(cv2.imread(str(src / t / f"Image{k:03d}.jpg")), (640, 360))
+            for t in ("day_right", "night_right") for k in range(n)]
+    _write(out, imgs)
+    sequence.write_loop_pairs(out / sequence.GROUND_TRUTH_NAME, [(k, n + k, 2) for k in range(n)])
+    return out
+
+
+def nordland_short(out, n: int = 80, start: int = 1000, src=REAL / "nordland") -> Path:
+    """Nordland summer frames start..start+n-1 then the same places in winter (64x32), loop pairs
+    (k, n + k, tolerance 2): 2n frames, revisits n frames apart."""
+    out, src = Path(out), Path(src)
+    if not (src / "winter").is_dir():
+        raise FileNotFoundError(f"Nordland not found at {src}")
+    name = "images-{:05d}.png"
+    imgs = [cv2.imread(str(src / s / name.format(10 * (start + k + 1)))) for s in ("summer", "winter") for k in range(n)]
+    _write(out, imgs)
+    sequence.write_loop_pairs(out / sequence.GROUND_TRUTH_NAME, [(k, n + k, 2) for k in range(n)])
+    return out
+
+
+def synthetic_gps(out, synthetic_folder) -> Path:
+    """A synthetic sequence's frames with its poses replaced by positions only (positions.csv
+    ``frame,x,y,z``, as GPS gives them; no CameraTrajectory.txt, no depth) and sequence.yaml's
+    threshold_m 0.5: ground truth from positions alone."""
+    out, src = Path(out), Path(synthetic_folder)
+    paths = sequence.list_frames(src)
+    _write(out, [cv2.imread(str(p)) for p in paths])
+    _, poses = sequence.read_trajectory(src, n_frames=len(paths))
+    rows = "".join(f"{k},{x:.4f},{y:.4f},{z:.4f}\n" for k, (x, y, z) in enumerate(poses[:, :3, 3]))
+    (out / "positions.csv").write_text("frame,x,y,z\n" + rows)
+    (out / sequence.DESCRIPTION_NAME).write_text("threshold_m: 0.5\n")
+    return out
+
+
+def no_revisit(out, synthetic_folder, n: int = 120) -> Path:
+    """The first n frames of a synthetic sequence, no ground truth at all: a drive that never
+    comes back."""
+    paths = sequence.list_frames(synthetic_folder)[:n]
+    return _write(Path(out), [cv2.imread(str(p)) for p in paths])
