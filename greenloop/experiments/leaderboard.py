@@ -173,8 +173,9 @@ def board(data: Data, split: Split, tuned: Tuned, timed: Timed, decisions=()) ->
     rows = lb.method_rows(tuned.S, meta, data.GT, data.exclude, data.evalq, split.reference, timed.thresholds,
                           timed.speed.to_dict("index"), data.frame_step, split.scored_on, split.gap)
     rows += lb.chance_rows(data.GT, data.exclude, data.evalq, split.reference, split.scored_on)
+    counts = lb.query_counts(data.GT, data.exclude, data.evalq)
     rows += [lb.dictionary_row(d["name"], d["tau"], d["n_train"], d["closures"], d["op"],
-                               timed.speed.loc[d["name"]].to_dict(), data.frame_step, split.scored_on)
+                               timed.speed.loc[d["name"]].to_dict(), data.frame_step, split.scored_on, counts)
              for d in decisions]
     table = lb.table(rows)
     written = lb.rounded(table)
@@ -242,13 +243,13 @@ def threshold_check(data: Data, tuned: Tuned) -> list[dict]:
     beside those at the threshold the "p95" rule (the lowest score with >= 95 % closure precision,
     ``seqmatch.choose_threshold``) picks on this stream's own tuning queries.
     Returns one row (dict) per named configuration (NAMED) scored here: its name ("configuration"),
-    the thresholds (calibrated scores; the tuning part's NaN without an honest split), closures
+    the evaluation queries and revisit queries the closures are counted on (``lb.query_counts``), the thresholds (calibrated scores; the tuning part's NaN without an honest split), closures
     declared and their precision (%, NaN when none) at each."""
     GT, ex, rows = data.GT, data.exclude, []
     for m in (m for m in NAMED if m in tuned.S):
         S = tuned.S[m]
         own = np.nan if data.tune is None else seqmatch.choose_threshold(S, GT, ex, data.tune, rule="p95")
-        row = {"configuration": m}
+        row = {"configuration": m, **lb.query_counts(GT, ex, data.evalq)}
         for name, thr in (("fixed", tuned.knobs[m]["fixed_threshold"]), ("tuning_p95", own)):
             row.update({f"threshold_{name}": round(float(thr), 4), f"declared_at_{name}": np.nan,
                         f"precision_at_{name}_%": np.nan})
