@@ -286,3 +286,67 @@ def test_targets_table_says_how_many_queries_each_measured_target_rests_on():
     assert n.loc["R@1 (%), loop closure", lb.COUNTS].tolist() == [180, 150]
     assert n.loc["frame step of the rows (1 = Nordland's full rate)", lb.COUNTS].isna().all()
     assert "180," in t.to_csv() and "180.0" not in t.to_csv()                # whole numbers, blank where not counted
+
+
+def _two_traversals(n: int, tol: int, step: int, exclude: int):
+    """The ground truth of every step-th frame of two aligned traversals of n frames (frame k of each
+    the same place +- tol), pairs within ``exclude`` original frames left out, and the band in steps."""
+    from greenloop import groundtruth
+    from greenloop.datasets import sequence
+    pairs = sequence.aligned_pairs([(0, n), (n, 2 * n)], tol)
+    return groundtruth.pair_matrix(pairs, 2 * n, np.arange(0, 2 * n, step), exclude), exclude // step
+
+
+def test_evaluation_revisits_count_the_revisit_queries_after_the_split():
+    from greenloop.experiments import leaderboard as exp
+    GT, ex = _two_traversals(40, 0, 1, 10)              # frames 40..79 revisit 0..39 exactly
+    tune, evq = evaluate.split_mask(80, 0.5, gt=GT, gap=5)
+    assert np.flatnonzero(evq)[0] == 65                 # revisits 40..59 tune, gap 60..64, evaluate 65..79
+    assert exp.evaluation_revisits(GT, ex, 0.5, 5) == 15
+    assert exp.evaluation_revisits(GT, ex, 0.5, 50) == 40    # no honest split: every query is scored
+    assert exp.evaluation_revisits(np.zeros((80, 80), bool), ex, 0.5, 5) == 0
+
+
+def test_largest_step_keeps_the_requested_step_or_the_largest_smaller_one_with_enough_revisits():
+    from greenloop.experiments import leaderboard as exp
+    counts = {8: 14, 7: 30, 6: 45, 5: 52, 4: 60, 3: 80, 2: 120, 1: 240}
+    assert exp.largest_step(8, counts.get, 50) == (5, {8: 14, 7: 30, 6: 45, 5: 52})   # stops at the first that does
+    assert exp.largest_step(4, counts.get, 50) == (4, {4: 60})
+    assert exp.largest_step(8, counts.get, 500) == (1, counts)                      # none does: every frame
+    assert exp.largest_step(1, counts.get, 500) == (1, {1: 240})
+
+
+def test_step_rule_on_two_traversals_lowers_a_coarse_step_and_keeps_a_fine_one():
+    """A 222-frame corridor walked twice: every 8th frame leaves 5 evaluation revisit queries, every
+    frame 78; an 800-frame one: step 3 is the largest to leave 50 (step 4: 45); a 6000-frame drive
+    keeps step 8."""
+    from greenloop.experiments import leaderboard as exp
+
+    def at(n, tol, exclude, tune, gap):
+        return lambda s: exp.evaluation_revisits(*_two_traversals(n, tol, s, exclude), tune, gap)
+
+    step, seen = exp.largest_step(8, at(111, 2, 50, 0.25, 5), 50)
+    assert step == 1 and seen[8] == 5 and seen[2] == 36 and seen[1] == 78
+    step, seen = exp.largest_step(8, at(400, 4, 50, 0.5, 5), 50)
+    assert step == 3 and (seen[4], seen[3]) == (45, 62) and min(seen) == 3
+    step, seen = exp.largest_step(8, at(3000, 15, 150, 0.5, 20), 50)
+    assert step == 8 and list(seen) == [8] and seen[8] >= 50
+    why = exp.step_text(3, 8, {8: 20, 4: 45, 3: 62}, 50)
+    assert why.startswith("frame_step 3, not the requested 8") and "20 evaluation revisit queries (< 50)" in why
+
+
+def test_choose_step_is_the_step_prepare_then_scores(tmp_path):
+    """On a folder (222 frames, ground_truth.csv: two traversals +- 2 frames): the step chosen, and
+    the revisit count it was chosen by, are those of the evaluation part prepare builds at it."""
+    from conftest import write_frames
+    from greenloop.datasets import sequence
+    from greenloop.experiments import leaderboard as exp
+    folder = write_frames(tmp_path / "corridor", 222, size=(8, 8))
+    sequence.write_loop_pairs(folder / sequence.GROUND_TRUTH_NAME, sequence.aligned_pairs([(0, 111), (111, 222)], 2))
+    params = {"seq_lens": [5], "fps_frames": 10}
+    step = exp.choose_step(str(folder), 8, 0.5, 50, 0.25, params, 50)
+    assert (step.step, step.requested, step.revisits[8], step.revisits[1]) == (1, 8, 5, 78)
+    data, _ = exp.prepare(str(folder), step.step, 0.5, 50, 0.25, None, params)
+    assert lb.query_counts(data.GT, data.exclude, data.evalq)["revisit_queries"] == 78
+    assert exp.choose_step(str(folder), 8, 0.5, 50, 0.25, params, 5).step == 8      # 5 is enough: kept
+    assert step.why.startswith("frame_step 1, not the requested 8: step 8 would leave 5")
