@@ -310,7 +310,8 @@ def threshold_check(data: Data, tuned: Tuned) -> list[dict]:
     beside those at the threshold the "p95" rule (the lowest score with >= 95 % closure precision,
     ``seqmatch.choose_threshold``) picks on this stream's own tuning queries.
     Returns one row (dict) per named configuration (NAMED) scored here: its name ("configuration"),
-    the evaluation queries and revisit queries the closures are counted on (``lb.query_counts``), the thresholds (calibrated scores; the tuning part's NaN without an honest split), closures
+    the evaluation queries and revisit queries the closures are counted on (``lb.query_counts``),
+    the thresholds (calibrated scores; the tuning part's NaN without an honest split), closures
     declared and their precision (%, NaN when none) at each."""
     GT, ex, rows = data.GT, data.exclude, []
     for m in (m for m in NAMED if m in tuned.S):
@@ -406,7 +407,8 @@ def note(data: Data, split: Split, target: dict, loop_threshold: float, referenc
             f"counters). Targets: {target}.")
 
 
-def summary(data: Data, split: Split, tuned: Tuned, timed: Timed, result: Board, decisions=(), step: Step | None = None) -> dict:
+def summary(data: Data, split: Split, tuned: Tuned, timed: Timed, result: Board, decisions=(),
+            step: Step | None = None) -> dict:
     """summary.json's content (the keys the CLI's --tuned, the tests and the README read); step: the
     :func:`choose_step` that gave ``data.frame_step`` (its requested step and why), when given."""
     return {"leaderboard": lb.rounded(result.board).to_dict("records"), "target": result.target,

@@ -130,7 +130,8 @@ def chance_rows(GT, exclude: int, queries, reference=None, scored_on: str = "") 
         q = evaluate.query_chance(GT, exclude, queries=queries, reference=ref, ks=(1, 5))
         ap = evaluate.chance_level(GT, exclude, queries=queries) if ref is None else np.nan
         rows.append({"method": "chance (random scores)", "mode": mode, "weights": "none", "knobs": "-",
-                     **query_counts(GT, exclude, queries, ref), **{f"{k}_%": 100 * q[k] for k in ("R@1", "R@5", "AUC-PR", "R@100P", "R@95P")},
+                     **query_counts(GT, exclude, queries, ref),
+                     **{f"{k}_%": 100 * q[k] for k in ("R@1", "R@5", "AUC-PR", "R@100P", "R@95P")},
                      "pair_AP_%": 100 * ap, "scored_on": scored_on})
     return rows
 
