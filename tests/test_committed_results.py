@@ -68,3 +68,27 @@ def test_no_copy_differs_from_its_source(folder, tmp_path):
     # tables.md is what make assembles from the folder's tables now
     out = report.assemble_tables(folder, tmp_path / "tables.md")
     assert out.read_text() == (folder / "tables.md").read_text(), f"{folder}/tables.md is stale: make all RESULTS={folder}"
+
+
+def rests_on(board) -> int:
+    """The evaluation revisit queries of a leaderboard's loop-closure rows: its revisit_queries column,
+    or, in a table written before that column existed, the evaluation part's revisit frames its
+    scored_on names (loop closure, the same count: the ground truth already leaves out the band)."""
+    lc = board[board["mode"] == "loop closure"].iloc[0]
+    if "revisit_queries" in board.columns:
+        return int(lc["revisit_queries"])
+    return int(re.search(r"evaluation queries: frames \d+\.\.\d+ \((\d+) revisit frames\)", lc["scored_on"]).group(1))
+
+
+@pytest.mark.parametrize("folder", FOLDERS, ids=lambda p: p.relative_to(ROOT).as_posix())
+def test_the_step_rule_keeps_each_committed_leaderboards_frame_step(folder):
+    """Notebook 13 keeps frame_step only where it leaves MIN_REVISIT_QUERIES evaluation revisit
+    queries (experiments.leaderboard.choose_step): each committed run's step (synthetic 4, Nordland
+    8, Gardens Point 1) leaves them, or is 1 already, so a rerun describes the same frames."""
+    import pandas as pd
+
+    from greenloop.experiments.leaderboard import MIN_REVISIT_QUERIES
+    board = pd.read_csv(folder / "13_leaderboard" / "leaderboard.csv")
+    params = json.loads((folder / "13_leaderboard" / "manifest.json").read_text())["parameters"]
+    assert params["frame_step"] == 1 or rests_on(board) >= MIN_REVISIT_QUERIES, (params["frame_step"], rests_on(board))
+    assert params.get("frame_step_requested", params["frame_step"]) == params["frame_step"]

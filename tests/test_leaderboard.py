@@ -36,6 +36,39 @@ def test_reference_mask():
 
 
 
+def _hand_gt():
+    """10 frames, loops (0,5) (1,6) (2,9) and (3,4), the last inside a band of 2 steps."""
+    GT = np.zeros((10, 10), bool)
+    for i, j in ((0, 5), (1, 6), (2, 9), (3, 4)):
+        GT[i, j] = GT[j, i] = True
+    return GT
+
+
+def test_query_counts_equal_a_hand_count():
+    GT, q = _hand_gt(), np.arange(10) >= 4             # queries 4..9, exclude 2 steps
+    # loop closure: 4..9 all have an earlier frame more than 2 back; partners: 5 (0), 6 (1), 9 (2), not 4 (3 is inside)
+    assert lb.query_counts(GT, 2, q) == {"queries": 6, "revisit_queries": 3}
+    assert lb.query_counts(GT, 2, None) == {"queries": 7, "revisit_queries": 3}     # frames 3..9; 3 has no partner
+    assert lb.query_counts(GT, 3, q) == {"queries": 6, "revisit_queries": 3}        # 9 - 2 = 7 > 3 still
+    assert lb.query_counts(GT, 4, q) == {"queries": 5, "revisit_queries": 3}        # 4 has no candidate (4 - 0 = 4)
+    assert lb.query_counts(GT, 5, q) == {"queries": 4, "revisit_queries": 1}        # 6..9; only 9 - 2 = 7 > 5
+    # place recognition, database {0, 1, 3} (no exclusion band): 4 (3), 5 (0), 6 (1) have a partner in it, 9 (2) not
+    ref = np.isin(np.arange(10), [0, 1, 3])
+    assert lb.query_counts(GT, 2, q, ref) == {"queries": 6, "revisit_queries": 3}
+    assert np.flatnonzero(evaluate.revisit_queries(GT, 2, q, ref)).tolist() == [4, 5, 6]
+    assert np.flatnonzero(evaluate.revisit_queries(GT, 2)).tolist() == [5, 6, 9]     # the old call, unchanged
+
+
+def test_query_counts_are_what_the_metrics_average_over(revisit):
+    X, GT = revisit
+    S = seqstream.score_matrix(X, EX, 5, contrast_window=0)
+    q = np.arange(len(X)) >= N0 - 10
+    for ref in (None, np.arange(len(X)) < N0):
+        m = evaluate.per_query(S, GT, EX, queries=q, reference=ref, ks=(1,))
+        assert lb.query_counts(GT, EX, q, ref) == {"queries": m["queries"], "revisit_queries": m["revisits"]}
+    assert lb.query_counts(GT, EX, q) == {"queries": 50, "revisit_queries": REPEAT}    # frames 70..119; 80..119 revisit
+
+
 def test_metric_and_chance_rows_are_the_evaluate_functions(revisit):
     X, GT = revisit
     S = seqstream.score_matrix(X, EX, 5, contrast_window=0)
@@ -51,10 +84,13 @@ def test_metric_and_chance_rows_are_the_evaluate_functions(revisit):
     assert rows[1]["R@5_%"] == 100 * b["R@5"] and rows[1]["R@100P_%"] == 100 * b["R@100P"]
     assert rows[0]["pair_AP_%"] == 100 * evaluate.average_precision(S, GT, EX, queries=q)
     assert math.isnan(rows[1]["pair_AP_%"]) and len(lb.metric_rows(S, GT, EX, q)) == 1
+    assert [(r["queries"], r["revisit_queries"]) for r in rows] == [(a["queries"], a["revisits"]),
+                                                                     (b["queries"], b["revisits"])]
     c = lb.chance_rows(GT, EX, q, None, "evaluation queries")
     ch = evaluate.query_chance(GT, EX, queries=q, ks=(1, 5))
     assert len(c) == 1 and c[0]["R@1_%"] == 100 * ch["R@1"] and c[0]["scored_on"] == "evaluation queries"
     assert c[0]["pair_AP_%"] == 100 * evaluate.chance_level(GT, EX, queries=q)
+    assert (c[0]["queries"], c[0]["revisit_queries"]) == (rows[0]["queries"], rows[0]["revisit_queries"])
     assert rows[0]["R@1_%"] > c[0]["R@1_%"] + 30
 
 
@@ -158,6 +194,12 @@ def test_dictionary_row():
                           {"fps_median": 10.0, "fps_min": 9.0, "fps_max": 11.0, "decode_ms": 1.0}, 4, "evaluation queries")
     assert r["first_revisit_delay_frames"] == 8 and r["threshold"] == 70 and "0..499" in r["knobs"]
     assert r["scored_on"].startswith("evaluation queries; decisions only") and r["bytes_per_stored_frame"] == 0
+    assert "queries" not in r
+    counts = lb.query_counts(_hand_gt(), 2, np.arange(10) >= 4)
+    r = lb.dictionary_row("dict", 70, 500, {"declared": 3, "false": 1, "first_delay": 2}, {"precision": 0.5, "recall": 0.25},
+                          {}, 4, "evaluation queries", counts)
+    assert (r["queries"], r["revisit_queries"]) == (6, 3)
+    assert lb.table([r]).loc[0, lb.COUNTS].tolist() == [6, 3]
 
 
 def test_method_rows_one_per_mode_with_closures_in_loop_closure_only(revisit):
@@ -226,3 +268,85 @@ def test_threshold_check_without_an_honest_split_reports_the_fixed_threshold_onl
     assert row["precision_at_fixed_%"] == round(100 * want["precision"], 2)
     assert math.isnan(row["threshold_tuning_p95"]) and math.isnan(row["declared_at_tuning_p95"])
     assert math.isnan(row["precision_at_tuning_p95_%"])
+    assert (row["queries"], row["revisit_queries"]) == (n - EX - 1, REPEAT)    # frames 21..119; 80..119 revisit
+
+
+def test_targets_table_says_how_many_queries_each_measured_target_rests_on():
+    from greenloop import seqmatch
+    name = seqmatch.DEFAULT_NAME
+    board = pd.DataFrame([{"method": name, "mode": "loop closure", "queries": 180, "revisit_queries": 150, "R@1_%": 80.0,
+                           "R@100P_%": 40.0, "fps_min": 1000.0, "closures_declared": 10, "closures_false": 0},
+                          {"method": name, "mode": "place recognition", "queries": 400, "revisit_queries": 380,
+                           "R@1_%": 95.0, "R@100P_%": 60.0}])
+    t = lb.targets_table(board, "data/gardenspoint", 1).set_index("target")
+    assert t.loc["R@1 (%), place recognition", lb.COUNTS].tolist() == [400, 380]
+    assert t.loc["closure precision at the threshold (%)", lb.COUNTS].tolist() == [180, 150]
+    assert t.loc["frames/s (slowest repeat)", lb.COUNTS].isna().all()       # no query count bears on a frame rate
+    n = lb.targets_table(board, "data/nordland", 8).set_index("target")
+    assert n.loc["R@1 (%), loop closure", lb.COUNTS].tolist() == [180, 150]
+    assert n.loc["frame step of the rows (1 = Nordland's full rate)", lb.COUNTS].isna().all()
+    assert "180," in t.to_csv() and "180.0" not in t.to_csv()                # whole numbers, blank where not counted
+
+
+def _two_traversals(n: int, tol: int, step: int, exclude: int):
+    """The ground truth of every step-th frame of two aligned traversals of n frames (frame k of each
+    the same place +- tol), pairs within ``exclude`` original frames left out, and the band in steps."""
+    from greenloop import groundtruth
+    from greenloop.datasets import sequence
+    pairs = sequence.aligned_pairs([(0, n), (n, 2 * n)], tol)
+    return groundtruth.pair_matrix(pairs, 2 * n, np.arange(0, 2 * n, step), exclude), exclude // step
+
+
+def test_evaluation_revisits_count_the_revisit_queries_after_the_split():
+    from greenloop.experiments import leaderboard as exp
+    GT, ex = _two_traversals(40, 0, 1, 10)              # frames 40..79 revisit 0..39 exactly
+    tune, evq = evaluate.split_mask(80, 0.5, gt=GT, gap=5)
+    assert np.flatnonzero(evq)[0] == 65                 # revisits 40..59 tune, gap 60..64, evaluate 65..79
+    assert exp.evaluation_revisits(GT, ex, 0.5, 5) == 15
+    assert exp.evaluation_revisits(GT, ex, 0.5, 50) == 40    # no honest split: every query is scored
+    assert exp.evaluation_revisits(np.zeros((80, 80), bool), ex, 0.5, 5) == 0
+
+
+def test_largest_step_keeps_the_requested_step_or_the_largest_smaller_one_with_enough_revisits():
+    from greenloop.experiments import leaderboard as exp
+    counts = {8: 14, 7: 30, 6: 45, 5: 52, 4: 60, 3: 80, 2: 120, 1: 240}
+    assert exp.largest_step(8, counts.get, 50) == (5, {8: 14, 7: 30, 6: 45, 5: 52})   # stops at the first that does
+    assert exp.largest_step(4, counts.get, 50) == (4, {4: 60})
+    assert exp.largest_step(8, counts.get, 500) == (1, counts)                      # none does: every frame
+    assert exp.largest_step(1, counts.get, 500) == (1, {1: 240})
+
+
+def test_step_rule_on_two_traversals_lowers_a_coarse_step_and_keeps_a_fine_one():
+    """A 222-frame corridor walked twice: every 8th frame leaves 5 evaluation revisit queries, every
+    frame 78; an 800-frame one: step 3 is the largest to leave 50 (step 4: 45); a 6000-frame drive
+    keeps step 8."""
+    from greenloop.experiments import leaderboard as exp
+
+    def at(n, tol, exclude, tune, gap):
+        return lambda s: exp.evaluation_revisits(*_two_traversals(n, tol, s, exclude), tune, gap)
+
+    step, seen = exp.largest_step(8, at(111, 2, 50, 0.25, 5), 50)
+    assert step == 1 and seen[8] == 5 and seen[2] == 36 and seen[1] == 78
+    step, seen = exp.largest_step(8, at(400, 4, 50, 0.5, 5), 50)
+    assert step == 3 and (seen[4], seen[3]) == (45, 62) and min(seen) == 3
+    step, seen = exp.largest_step(8, at(3000, 15, 150, 0.5, 20), 50)
+    assert step == 8 and list(seen) == [8] and seen[8] >= 50
+    why = exp.step_text(3, 8, {8: 20, 4: 45, 3: 62}, 50)
+    assert why.startswith("frame_step 3, not the requested 8") and "20 evaluation revisit queries (< 50)" in why
+
+
+def test_choose_step_is_the_step_prepare_then_scores(tmp_path):
+    """On a folder (222 frames, ground_truth.csv: two traversals +- 2 frames): the step chosen, and
+    the revisit count it was chosen by, are those of the evaluation part prepare builds at it."""
+    from conftest import write_frames
+    from greenloop.datasets import sequence
+    from greenloop.experiments import leaderboard as exp
+    folder = write_frames(tmp_path / "corridor", 222, size=(8, 8))
+    sequence.write_loop_pairs(folder / sequence.GROUND_TRUTH_NAME, sequence.aligned_pairs([(0, 111), (111, 222)], 2))
+    params = {"seq_lens": [5], "fps_frames": 10}
+    step = exp.choose_step(str(folder), 8, 0.5, 50, 0.25, params, 50)
+    assert (step.step, step.requested, step.revisits[8], step.revisits[1]) == (1, 8, 5, 78)
+    data, _ = exp.prepare(str(folder), step.step, 0.5, 50, 0.25, None, params)
+    assert lb.query_counts(data.GT, data.exclude, data.evalq)["revisit_queries"] == 78
+    assert exp.choose_step(str(folder), 8, 0.5, 50, 0.25, params, 5).step == 8      # 5 is enough: kept
+    assert step.why.startswith("frame_step 1, not the requested 8: step 8 would leave 5")

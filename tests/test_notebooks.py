@@ -21,7 +21,9 @@ OVERRIDES = {
     "09_rgbd_features": {"backbones": ["ghostnet", "mobilenetv3small"]},
     # the layer rows' tuning, stream and timing on a 224-wide network took half of 13's run: their entry
     # is checked in tests/test_detectors.py, their descriptors in 07's tiny run and tests/test_layers.py
-    "13_leaderboard": {"layer_backbones": []},
+    # frame_step 4 as make quick's 8 on a short recording: 13 must come down to every frame (the tiny sequence's
+    # evaluation part holds 26 revisit queries at step 1, 4 at step 4), so its rows are those of step 1
+    "13_leaderboard": {"layer_backbones": [], "frame_step": 4},
 }
 
 
@@ -501,6 +503,29 @@ def _leaderboard_bounds(t):
         assert (m[f"{k}_lo_%"] <= m[f"{k}_%"] + 1e-9).all() and (m[f"{k}_%"] <= m[f"{k}_hi_%"] + 1e-9).all(), k
 
 
+def _check_13_counts(folder, t):
+    """Every row says the queries it rests on (one count per mode, the dictionary's and chance's the
+    methods'), the step the notebook chose from the requested 4 is 1, and the revisit count it chose
+    by is the table's; threshold_carry and targets carry the same loop-closure counts."""
+    from greenloop.study import leaderboard
+    assert t[leaderboard.COUNTS].notna().all().all() and (t.revisit_queries <= t.queries).all()
+    per_mode = t.groupby("mode")[leaderboard.COUNTS].nunique()
+    assert (per_mode == 1).all().all(), per_mode
+    lc = t[t["mode"] == "loop closure"].iloc[0]
+    assert lc.revisit_queries > 0
+    man, s = (json.loads((folder / f).read_text()) for f in ("manifest.json", "summary.json"))
+    man = man["parameters"]
+    assert man["frame_step"] == s["frame_step"] == 1 and man["frame_step_requested"] == s["frame_step_requested"] == 4
+    rule = man["frame_step_rule"]
+    assert rule == s["frame_step_rule"] and rule.startswith("frame_step 1, not the requested 4")
+    assert f"step 1: {lc.revisit_queries})" in rule, rule
+    carry = pd.read_csv(folder / "threshold_carry.csv")
+    assert (carry[leaderboard.COUNTS] == lc[leaderboard.COUNTS].astype(int).tolist()).all().all()
+    targets = pd.read_csv(folder / "targets.csv")
+    counted = targets[targets.protocol == "leaderboard"].dropna(subset=["queries"])
+    assert len(counted) and (counted.queries == lc.queries).all()
+
+
 def _check_13(folder):
     from greenloop.study import leaderboard
     csv = folder / "leaderboard.csv"
@@ -531,6 +556,7 @@ def _check_13(folder):
         assert set(pr.index) == set(lc.dropna(subset=["R@1_%"]).index) and pr["pair_AP_%"].isna().all()
         assert pr.loc["greenloop-seq", "R@1_%"] > pr.loc["chance (random scores)", "R@1_%"]
     assert t.scored_on.str.startswith("evaluation queries").all()
+    _check_13_counts(folder, t)
     s = json.loads((folder / "summary.json").read_text())
     start = s["timing_window"][0]
     assert start > 0 and s["dictionary_trained_on_frames"] < 200                  # trained before the evaluation part
@@ -647,6 +673,8 @@ def _end_loop_12(folder):
 def _end_loop_13(folder):
     t = pd.read_csv(folder / "leaderboard.csv")
     assert len(t) and t.filter(like="AP").stack().dropna().between(0, 100).all()
+    assert json.loads((folder / "manifest.json").read_text())["parameters"]["frame_step"] == 1   # 20 revisit frames
+    assert (t.revisit_queries <= t.queries).all() and (t.revisit_queries > 0).all()
     _leaderboard_bounds(t)
 
 

@@ -50,7 +50,7 @@ def test_cross_dataset_table_puts_datasets_side_by_side(tmp_path):
         "dictionary": [{"tau_rule": "chosen", "tau": 65, "precision": 0.5, "recall": 0.25}]})
     report.write_json(tmp_path / "nordland" / "13_leaderboard" / "summary.json", {"leaderboard": [
         {"method": "greenloop-seq", "mode": "loop closure", "knobs": "pixels, whitening none, seq_len 10",
-         "R@1_%": 87.0, "AUC-PR_%": 61.5, "R@100P_%": 20.0},
+         "queries": 203, "revisit_queries": 180, "R@1_%": 87.0, "AUC-PR_%": 61.5, "R@100P_%": 20.0},
         {"method": "greenloop-seq", "mode": "place recognition", "knobs": "pixels, whitening none, seq_len 10",
          "R@1_%": 90.0, "AUC-PR_%": 70.0, "R@100P_%": 30.0},
         {"method": "greenloop-seq-fast", "mode": "loop closure", "knobs": "pixels", "R@1_%": float("nan"),
@@ -58,7 +58,8 @@ def test_cross_dataset_table_puts_datasets_side_by_side(tmp_path):
     t = report.cross_dataset([tmp_path / "synthetic", tmp_path / "nordland", tmp_path / "absent"])
     seq = t[t.method.str.startswith("greenloop-seq")]        # a row that was not run (NaN) is left out
     assert dict(zip(seq.metric, seq.nordland)) == {"R@1_%": "87.0 (pixels)", "AUC-PR_%": "61.5 (pixels)",
-                                                   "R@100P_%": "20.0 (pixels)"} and len(seq) == 3   # loop closure only
+                                                   "R@100P_%": "20.0 (pixels)", "queries (revisit queries)": "203 (180)"}
+    assert len(seq) == 4                     # loop closure only; the counts where the summary has them
     assert list(t.columns) == ["method", "metric", "synthetic", "nordland"]
     ap = t[(t.method == "pixels (none), cosine") & (t.metric == "AP_%")].iloc[0]
     assert (ap.synthetic, ap.nordland) == (40.0, 12.5)

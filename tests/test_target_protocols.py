@@ -80,6 +80,8 @@ def test_a_pair_run_is_the_default_streamed_over_the_pair_alone(gp):
     pr = rows.loc[(seqmatch.DEFAULT_NAME, "place recognition")]
     assert pr["R@1_%"] == pytest.approx(100 * ex.evaluate.per_query(S, d.GT, d.exclude, d.evalq, s.reference)["R@1"])
     assert pr["R@1_%"] == 100.0                                            # the textures repeat exactly
+    m = ex.evaluate.per_query(S, d.GT, d.exclude, d.evalq, s.reference)  # the counts the stream's rows rest on
+    assert (pr["queries"], pr["revisit_queries"]) == (m["queries"], m["revisits"]) and m["revisits"] > 0
     assert check[seqmatch.DEFAULT_NAME]["equal"]
     seqslam = rows.loc[("SeqSLAM (published)", "loop closure")]
     assert np.isnan(seqslam["fps_min"]) and np.isnan(seqslam["bytes_per_stored_frame"])   # measured in the leaderboard only
@@ -91,9 +93,11 @@ def test_a_pair_run_is_the_default_streamed_over_the_pair_alone(gp):
     assert targets["R@1 (%), place recognition"] is True
     table, board_rows = ex.protocol_tables(result, {"day_right -> night_right": result})
     assert set(table.protocol) == {"leaderboard", "day_right -> night_right"} and len(board_rows) == len(result.board)
+    assert board_rows[["queries", "revisit_queries"]].notna().all().all()   # target_protocols states them too
     lc = rows.loc[(seqmatch.DEFAULT_NAME, "loop closure")]                 # the carry row: the board's closures at
     assert carry["threshold_fixed"] == seqmatch.DEFAULT_THRESHOLD          # the fixed threshold, and the p95 rule's
     assert carry["declared_at_fixed"] == lc["closures_declared"]           # own pick on this tuning part
+    assert (carry["queries"], carry["revisit_queries"]) == (lc["queries"], lc["revisit_queries"])
     own = seqmatch.choose_threshold(S, d.GT, d.exclude, d.tune, rule="p95")
     assert carry["threshold_tuning_p95"] == pytest.approx(own, abs=1e-4)
     assert carry["declared_at_tuning_p95"] == seqmatch.closures(S, d.GT, own, d.exclude, d.evalq)["declared"]

@@ -472,11 +472,14 @@ def chance_level(GT, exclude: int = 150, queries=None) -> float:
     return float(pair_samples(np.zeros((n, n), np.float32), G, exclude, queries)[0].mean())
 
 
-def revisit_queries(GT, exclude: int = 150) -> np.ndarray:
-    """(N,) bool: the queries with a loop partner among their counted pairs (frame j with some
-    GT[i, j], i < j - exclude, :func:`pair_mask`). GT: (N, N) bool; exclude: frames."""
+def revisit_queries(GT, exclude: int = 150, queries=None, reference=None) -> np.ndarray:
+    """(N,) bool: the queries with a loop partner among their candidates: frame j with some
+    GT[i, j], i < j - exclude (:func:`pair_mask`, loop closure), or with i a ``reference`` frame
+    (place recognition); within ``queries`` when given (:func:`candidate_mask`). These are the
+    queries R@K and the recall of :func:`query_metrics` rest on (its "revisits"). GT: (N, N)
+    bool; exclude: frames; queries, reference: (N,) bool or None."""
     G = _check_gt(GT)
-    return (G & pair_mask(G.shape[0], exclude)).any(0)
+    return (G & candidate_mask(G.shape[0], exclude, queries, reference)).any(0)
 
 
 def precision_at_recall(S, GT, recall: float, exclude: int = 150, queries=None) -> float:

@@ -3,7 +3,8 @@ tuning budget and timing (``greenloop.detectors.registry``; the rows are ``study
 
 The calls, in the notebook's order (each returns what one table or figure shows):
 
-    data, split = prepare(dataset, frame_step, loop_threshold, exclude, tune_fraction, reference_frames, params)
+    step = choose_step(dataset, frame_step, loop_threshold, exclude, tune_fraction, params, min_revisit_queries)
+    data, split = prepare(dataset, step.step, loop_threshold, exclude, tune_fraction, reference_frames, params)
     tuned = tune(data)                  # describe + tune every entry (one budget), score matrices
     decisions = decide(data)            # entries without a score (the dictionary): trained, declared
     timed = stream_and_time(data, tuned, decisions)   # thresholds, stream = matrix check, timing
@@ -85,6 +86,72 @@ class Board(NamedTuple):
     target: dict
     targets: pd.DataFrame
     statement: str
+
+
+MIN_REVISIT_QUERIES = 50    # evaluation revisit queries a leaderboard must rest on where the recording has them
+
+
+class Step(NamedTuple):
+    """The frame step notebook 13 describes: step (used), requested, minimum (evaluation revisit
+    queries wanted), revisits ({step tried: its evaluation revisit queries}), why (the printed line)."""
+    step: int
+    requested: int
+    minimum: int
+    revisits: dict
+    why: str
+
+
+def evaluation_revisits(GT, exclude_steps: int, tune_fraction: float, gap: int) -> int:
+    """The revisit queries (``lb.query_counts``, loop closure) among the evaluation queries that
+    :func:`prepare` would score on this ground truth: the honest split's evaluation part (a gap of
+    ``gap`` steps), every query without one. GT: (M, M) bool; 0 when it has no revisit at all."""
+    G = np.asarray(GT, dtype=bool)
+    if len(G) < 2 or not groundtruth.revisit_frames(G).any():
+        return 0
+    _, evalq, no_split = evaluate.honest_split(len(G), tune_fraction, G, gap)
+    return lb.query_counts(G, exclude_steps, evalq if no_split is None else None)["revisit_queries"]
+
+
+def largest_step(requested: int, revisits_at, minimum: int = MIN_REVISIT_QUERIES) -> tuple[int, dict]:
+    """The largest step s <= requested with revisits_at(s) >= minimum, trying requested, requested - 1,
+    ... down to 1 (so only as far as needed); 1 when none does. revisits_at: step -> evaluation
+    revisit queries. Returns (step, {step tried: revisits_at(step)})."""
+    seen = {}
+    for s in range(int(requested), 0, -1):
+        seen[s] = int(revisits_at(s))
+        if seen[s] >= minimum:
+            return s, seen
+    return 1, seen
+
+
+def step_text(step: int, requested: int, revisits: dict, minimum: int) -> str:
+    """The line that says which frame step the leaderboard uses and why (:func:`choose_step`)."""
+    if step == requested:
+        more = "" if revisits[step] >= minimum else f"; fewer than {minimum}, and no finer step exists"
+        return f"frame_step {step} as requested: its evaluation part holds {revisits[step]} revisit queries{more}"
+    if revisits[step] >= minimum:
+        return (f"frame_step {step}, not the requested {requested}: step {requested} would leave "
+                f"{revisits[requested]} evaluation revisit queries (< {minimum}); {step} is the largest step that "
+                f"leaves at least {minimum} ({revisits[step]})")
+    return (f"frame_step 1, not the requested {requested}: no step leaves {minimum} evaluation revisit queries "
+            f"(step {requested}: {revisits[requested]}, step 1: {revisits[1]}), so every frame is described")
+
+
+def choose_step(dataset, requested: int, loop_threshold: float, exclude: int, tune_fraction: float, params: dict,
+                minimum: int = MIN_REVISIT_QUERIES) -> Step:
+    """The frame step for :func:`prepare`: the largest step <= ``requested`` whose described frames
+    leave at least ``minimum`` revisit queries in the evaluation part (:func:`evaluation_revisits`,
+    the split :func:`prepare` makes: a gap of the longest of ``params["seq_lens"]``), step 1 when none
+    does. A coarse ``frame_step`` meant for notebooks 07-09 must not leave the leaderboard resting on a
+    handful of queries. exclude: ORIGINAL frames."""
+    gap = max(params["seq_lens"])
+
+    def at(s):
+        _, exclude_steps, GT, _ = groundtruth.described_frames(dataset, s, loop_threshold, exclude)
+        return evaluation_revisits(GT, exclude_steps, tune_fraction, gap)
+
+    step, seen = largest_step(requested, at, minimum)
+    return Step(step, int(requested), int(minimum), seen, step_text(step, int(requested), seen, minimum))
 
 
 def prepare(dataset, frame_step: int, loop_threshold: float, exclude: int, tune_fraction: float,
@@ -173,8 +240,9 @@ def board(data: Data, split: Split, tuned: Tuned, timed: Timed, decisions=()) ->
     rows = lb.method_rows(tuned.S, meta, data.GT, data.exclude, data.evalq, split.reference, timed.thresholds,
                           timed.speed.to_dict("index"), data.frame_step, split.scored_on, split.gap)
     rows += lb.chance_rows(data.GT, data.exclude, data.evalq, split.reference, split.scored_on)
+    counts = lb.query_counts(data.GT, data.exclude, data.evalq)
     rows += [lb.dictionary_row(d["name"], d["tau"], d["n_train"], d["closures"], d["op"],
-                               timed.speed.loc[d["name"]].to_dict(), data.frame_step, split.scored_on)
+                               timed.speed.loc[d["name"]].to_dict(), data.frame_step, split.scored_on, counts)
              for d in decisions]
     table = lb.table(rows)
     written = lb.rounded(table)
@@ -242,13 +310,14 @@ def threshold_check(data: Data, tuned: Tuned) -> list[dict]:
     beside those at the threshold the "p95" rule (the lowest score with >= 95 % closure precision,
     ``seqmatch.choose_threshold``) picks on this stream's own tuning queries.
     Returns one row (dict) per named configuration (NAMED) scored here: its name ("configuration"),
+    the evaluation queries and revisit queries the closures are counted on (``lb.query_counts``),
     the thresholds (calibrated scores; the tuning part's NaN without an honest split), closures
     declared and their precision (%, NaN when none) at each."""
     GT, ex, rows = data.GT, data.exclude, []
     for m in (m for m in NAMED if m in tuned.S):
         S = tuned.S[m]
         own = np.nan if data.tune is None else seqmatch.choose_threshold(S, GT, ex, data.tune, rule="p95")
-        row = {"configuration": m}
+        row = {"configuration": m, **lb.query_counts(GT, ex, data.evalq)}
         for name, thr in (("fixed", tuned.knobs[m]["fixed_threshold"]), ("tuning_p95", own)):
             row.update({f"threshold_{name}": round(float(thr), 4), f"declared_at_{name}": np.nan,
                         f"precision_at_{name}_%": np.nan})
@@ -338,15 +407,19 @@ def note(data: Data, split: Split, target: dict, loop_threshold: float, referenc
             f"counters). Targets: {target}.")
 
 
-def summary(data: Data, split: Split, tuned: Tuned, timed: Timed, result: Board, decisions=()) -> dict:
-    """summary.json's content (the keys the CLI's --tuned, the tests and the README read)."""
+def summary(data: Data, split: Split, tuned: Tuned, timed: Timed, result: Board, decisions=(),
+            step: Step | None = None) -> dict:
+    """summary.json's content (the keys the CLI's --tuned, the tests and the README read); step: the
+    :func:`choose_step` that gave ``data.frame_step`` (its requested step and why), when given."""
     return {"leaderboard": lb.rounded(result.board).to_dict("records"), "target": result.target,
             "detector_targets": result.targets.to_dict("records"), "knobs": tuned.knobs,
             "thresholds": {k: timed.thresholds[k] for k in tuned.knobs}, "stream_matches_matrix": timed.stream_check,
             "frames": len(data.frames), "frame_step": data.frame_step, "exclude_steps": data.exclude,
             "timing_window": list(data.params["timing_window"]), "decode": timed.decode,
             "dictionary_trained_on_frames": decisions[0]["n_train"] if decisions else None,
-            "split": {"honest": split.no_split is None, "not_available": split.no_split}}
+            "split": {"honest": split.no_split is None, "not_available": split.no_split},
+            **({} if step is None else {"frame_step_requested": step.requested, "frame_step_rule": step.why,
+                                        "min_revisit_queries": step.minimum})}
 
 
 def manifest_extra(data: Data, tuned: Tuned) -> dict:

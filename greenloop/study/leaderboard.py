@@ -22,7 +22,8 @@ from greenloop.util.files import write_atomic
 MODES = ("loop closure", "place recognition")
 METRICS = ["R@1_%", "R@5_%", "AUC-PR_%", "R@100P_%", "R@95P_%"]
 SPREADS = ["R@1_lo_%", "R@1_hi_%", "AUC-PR_lo_%", "AUC-PR_hi_%"]
-COLUMNS = (["method", "mode", "weights", "knobs"] + METRICS + SPREADS +
+COUNTS = ["queries", "revisit_queries"]      # what each row's metrics rest on (:func:`query_counts`)
+COLUMNS = (["method", "mode", "weights", "knobs"] + COUNTS + METRICS + SPREADS +
            ["pair_AP_%", "fps_median", "fps_min", "fps_max", "decode_ms", "bytes_per_stored_frame", "threshold",
             "closures_declared", "closures_false", "first_revisit_delay_frames", "scored_on"])
 
@@ -56,6 +57,20 @@ def reference_mask(frames, reference_frames) -> np.ndarray | None:
 
 
 
+def query_counts(GT, exclude: int, queries, reference=None) -> dict:
+    """How many queries a row rests on, from the masks its metrics use (``evaluate.candidate_mask``).
+
+    GT: (M, M) bool; exclude: steps; queries: (M,) bool or None (every frame); reference: (M,)
+    bool database (place recognition) or None (loop closure). Returns {"queries": the query
+    frames in ``queries`` with at least one candidate (what every per-query metric averages
+    over), "revisit_queries": those with a ground-truth partner among their candidates
+    (``evaluate.revisit_queries``: what R@K and the recall of AUC-PR, R@100P rest on)}."""
+    G = np.asarray(GT, dtype=bool)
+    cand = evaluate.candidate_mask(len(G), exclude, queries, reference)
+    rev = evaluate.revisit_queries(G, exclude, queries, reference)
+    return {"queries": int(cand.any(0).sum()), "revisit_queries": int(rev.sum())}
+
+
 def thresholds(S: dict, GT, exclude: int, tune, rule: str, fixed: dict | None = None) -> dict:
     """{method: threshold picked on the tuning queries (``seqmatch.choose_threshold``)}; NaN for
     every method when tune is None (no tuning part); a method in ``fixed`` ({method: threshold},
@@ -67,7 +82,8 @@ def thresholds(S: dict, GT, exclude: int, tune, rule: str, fixed: dict | None = 
 
 def metric_rows(S, GT, exclude: int, queries, reference=None, block: int = 10) -> list[dict]:
     """The metric columns of one score matrix, in % (unrounded): one row per database mode (loop closure;
-    place recognition too when ``reference`` is given), with the :func:`spread` of R@1 and
+    place recognition too when ``reference`` is given), with the :func:`query_counts` the row rests
+    on and the :func:`spread` of R@1 and
     AUC-PR (bootstrap runs of ``block`` queries). pair_AP_% (pairs i < j, j - i > exclude) is a
     loop-closure quantity: NaN in the place-recognition row."""
     rows = []
@@ -76,7 +92,8 @@ def metric_rows(S, GT, exclude: int, queries, reference=None, block: int = 10) -
             continue
         q = evaluate.per_query(S, GT, exclude, queries=queries, reference=ref, ks=(1, 5))
         ap = evaluate.average_precision(S, GT, exclude, queries=queries) if ref is None else np.nan
-        rows.append({"mode": mode, **{f"{k}_%": 100 * q[k] for k in ("R@1", "R@5", "AUC-PR", "R@100P", "R@95P")},
+        rows.append({"mode": mode, **query_counts(GT, exclude, queries, ref),
+                     **{f"{k}_%": 100 * q[k] for k in ("R@1", "R@5", "AUC-PR", "R@100P", "R@95P")},
                      "pair_AP_%": 100 * ap, **spread(S, GT, exclude, queries, ref, block)})
     return rows
 
@@ -113,6 +130,7 @@ def chance_rows(GT, exclude: int, queries, reference=None, scored_on: str = "") 
         q = evaluate.query_chance(GT, exclude, queries=queries, reference=ref, ks=(1, 5))
         ap = evaluate.chance_level(GT, exclude, queries=queries) if ref is None else np.nan
         rows.append({"method": "chance (random scores)", "mode": mode, "weights": "none", "knobs": "-",
+                     **query_counts(GT, exclude, queries, ref),
                      **{f"{k}_%": 100 * q[k] for k in ("R@1", "R@5", "AUC-PR", "R@100P", "R@95P")},
                      "pair_AP_%": 100 * ap, "scored_on": scored_on})
     return rows
@@ -311,13 +329,14 @@ def knob_table(knobs: dict, score: dict, texts: dict) -> pd.DataFrame:
 
 
 def dictionary_row(name: str, tau: int, n_train: int, closures: dict, op: dict, speed: dict, frame_step: int,
-                   scored_on: str) -> dict:
+                   scored_on: str, counts: dict | None = None) -> dict:
     """The dictionary's leaderboard row: decisions only (no per-query score, so no metric columns).
     closures: ``dictionary.query_closures``; op: ``evaluate.operating_point``; speed: its timing
-    row with decode_ms."""
+    row with decode_ms; counts: :func:`query_counts` of the queries its closures are counted on
+    (loop closure; None: not given)."""
     d = closures["first_delay"]
     return {"method": name, "mode": "loop closure", "weights": "trained here",
-            "knobs": f"tau {tau}, CNN trained on original frames 0..{n_train - 1}",
+            "knobs": f"tau {tau}, CNN trained on original frames 0..{n_train - 1}", **(counts or {}),
             **{c: speed.get(c) for c in ("fps_median", "fps_min", "fps_max", "decode_ms")}, "bytes_per_stored_frame": 0,
             "threshold": tau, "closures_declared": closures["declared"], "closures_false": closures["false"],
             "first_revisit_delay_frames": None if d is None else d * int(frame_step),
@@ -329,14 +348,28 @@ def targets_table(board: pd.DataFrame, dataset, frame_step: int) -> pd.DataFrame
     default always, the others where the board has their row), one row each: configuration, target,
     measured, required, met (``study.targets.detector_targets``, with the configuration's own seq_len;
     SeqSLAM = the published and the tuned row, each judged). A dataset that is none of the targets'
-    gives one row saying so."""
+    gives one row saying so. A target measured on per-query rows gets their COUNTS (:func:`_rests_on`)."""
     names = [n for n in seqmatch.NAMED if n == seqmatch.DEFAULT_NAME or n in set(board["method"])]
     try:
-        rows = [dict(configuration=n, **r) for n in names
+        rows = [dict(configuration=n, **r, **_rests_on(board, n, r["target"])) for n in names
                 for r in goals.detector_targets(board, str(dataset), n, ("SeqSLAM (published)", "SeqSLAM (tuned)"),
                                                 seq_len=seqmatch.NAMED[n][0]["seq_len"], frame_step=frame_step)]
     except ValueError as e:
-        rows = [{"configuration": None, "target": "the detector's targets", "measured": None, "required": None,
-                 "met": None, "note": f"not judged: {e}"}]
-    return pd.DataFrame(rows)
+        return pd.DataFrame([{"configuration": None, "target": "the detector's targets", "measured": None,
+                              "required": None, "met": None, "note": f"not judged: {e}"}])
+    t = pd.DataFrame(rows)
+    for c in COUNTS:                     # whole numbers, blank where not counted (not 203.0 beside NaN)
+        t[c] = pd.Series([r[c] for r in rows], index=t.index, dtype=object)
+    return t
 
+
+def _rests_on(board: pd.DataFrame, method: str, target: str) -> dict:
+    """COUNTS of ``method``'s board row that a target (its text, ``study.targets.detector_targets``)
+    is measured on: the place-recognition row where the text names it, else the loop-closure row;
+    None for the targets no query count bears on (frames/s, the frame step, frames of sequence:
+    texts starting "frame") or where the board has no such row."""
+    mode = "place recognition" if "place recognition" in target else "loop closure"
+    row = board[(board["method"] == method) & (board["mode"] == mode)]
+    if target.startswith("frame") or not len(row) or not set(COUNTS) <= set(row.columns):
+        return dict.fromkeys(COUNTS)
+    return {c: None if pd.isna(row[c].iloc[0]) else int(row[c].iloc[0]) for c in COUNTS}

@@ -197,9 +197,13 @@ def _dataset_rows(folder: Path) -> list[dict]:
         r1 = r.get("R@1_%")                               # None or NaN: not run (e.g. no honest split)
         if (r["method"] in ("greenloop-seq", "greenloop-seq-fast", "SeqSLAM (published)") and r1 is not None
                 and r1 == r1 and r.get("mode", "loop closure") == "loop closure"):
+            name = f"{r['method']}, evaluation part of the leaderboard split (loop closure)"
             for metric in ("R@1_%", "AUC-PR_%", "R@100P_%"):   # per query; greenloop-seq's descriptor is picked per dataset
-                rows.append({"method": f"{r['method']}, evaluation part of the leaderboard split (loop closure)",
-                             "metric": metric, "value": f"{r[metric]} ({str(r.get('knobs', '')).split(',')[0]})"})
+                rows.append({"method": name, "metric": metric,
+                             "value": f"{r[metric]} ({str(r.get('knobs', '')).split(',')[0]})"})
+            if r.get("queries") is not None:               # what they rest on (summaries before the counts: absent)
+                rows.append({"method": name, "metric": "queries (revisit queries)",
+                             "value": f"{int(r['queries'])} ({int(r['revisit_queries'])})"})
     s01 = _json(folder / "01_spot_grouping" / "summary.json")
     for r in (s01 or {}).get("table1", []):
         rows.append({"method": f"paper's CNN, L = {r['frames_per_spot']}, random 80/20 split (Table 1)",
