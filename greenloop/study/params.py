@@ -153,9 +153,23 @@ def effective_parameters(notebook, files=(), args=()) -> dict:
     return {k: v for k, v in out.items() if k in declared}
 
 
+def loop_step(folder, params: dict) -> int | None:
+    """The largest frame step <= ``params``' frame_step (1 when absent) whose described frames keep at
+    least one ground-truth loop pair beyond ``params``' exclude: the step itself where it does, a finer
+    one where only that does (a coarse budget step must not hide a short recording's loops), None
+    where not even every frame does."""
+    exclude, step = int(params.get("exclude", DEFAULT_EXCLUDE)), int(params.get("frame_step", 1) or 1)
+    n = len(sequence.list_frames(folder))
+    for s in range(step, 0, -1):
+        if groundtruth.for_sequence(folder, np.arange(0, n, s), params.get("loop_threshold", 0.5), exclude).any():
+            return s
+    return None
+
+
 def skip_reason(notebook, folder, params: dict) -> str | None:
     """Why ``notebook`` cannot run on ``folder`` with ``params`` (one sentence), or None: a
-    LOOP_NOTEBOOKS notebook needs at least one ground-truth loop pair at its exclude and frame_step."""
+    LOOP_NOTEBOOKS notebook needs at least one ground-truth loop pair at its exclude, at its
+    frame_step or a finer one (:func:`loop_step`)."""
     stem = Path(notebook).stem
     if stem[:2] not in LOOP_NOTEBOOKS:
         return None
@@ -163,26 +177,21 @@ def skip_reason(notebook, folder, params: dict) -> str | None:
         return (f"{stem} scores loop closures, and {folder} has no ground truth (add ground_truth.csv, "
                 f"CameraTrajectory.txt or `ground_truth: aligned` in sequence.yaml, or run "
                 f"`python -m greenloop import-gt FILE`)")
-    exclude, step = int(params.get("exclude", DEFAULT_EXCLUDE)), int(params.get("frame_step", 1) or 1)
-    frames = np.arange(0, len(sequence.list_frames(folder)), step)
-    gt = groundtruth.for_sequence(folder, frames, params.get("loop_threshold", 0.5), exclude)
-    if gt.any():
+    if loop_step(folder, params) is not None:
         return None
+    exclude = int(params.get("exclude", DEFAULT_EXCLUDE))
     dist = loop_distances(folder)
     closest = (f"its closest loop is {dist[0]} frames apart and its farthest {dist[1]}"
                if dist else "it has no loop at all")
     yaml_file = Path(folder) / sequence.DESCRIPTION_NAME
     if dist is None:
         fix = "this sequence does not revisit a place, so there is nothing to score"
-    elif exclude < dist[1]:          # loops outside the window exist: the step misses their partners
-        fix = (f"describe every frame (`frame_step: 1` in {yaml_file} or PARAMS='-p frame_step 1'), or "
-               f"widen the ground truth's tolerance")
+    elif exclude < dist[1]:          # loops outside the window exist: the tolerance misses their partners
+        fix = "widen the ground truth's tolerance"
     else:
         fix = f"write `exclude: {dist[0] // 2}` in {yaml_file} or run make with PARAMS='-p exclude {dist[0] // 2}'"
-    every = "all frames" if step == 1 else f"every {step}th frame"
     return (f"{stem} scores loop closures, and the ground truth of {folder} has no loop pair more than "
-            f"exclude={exclude} frames apart among {every} ({closest}): skipped; to run "
-            f"it, {fix}")
+            f"exclude={exclude} frames apart, even among all frames ({closest}): skipped; to run it, {fix}")
 
 
 def write_skipped(notebook, out, folder, results_dir, reason: str, params: dict) -> Path:
