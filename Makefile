@@ -135,22 +135,25 @@ readme-coverage: results/coverage.md ## refresh the README's coverage table from
 
 # Each notebook gets, in increasing precedence: what the dataset says of itself (its sequence.yaml,
 # or an exclude that fits its ground truth: $(RESULTS)/sequence_params.yaml, written by
-# greenloop.study.params), the dataset's budget, then PARAMS. A notebook that scores loops on a
-# ground truth without any loop at its exclude is not run: the same command writes an executed
-# notebook saying why (and $(RESULTS)/<stem>/skipped.md), prints the reason and the fix, and make
-# carries on.
+# greenloop.study.params), dataset and results_dir, the dataset's budget, then PARAMS. A notebook
+# that scores loops on a ground truth without any loop at its exclude is not run: the same command
+# writes an executed notebook saying why (and $(RESULTS)/<stem>/skipped.md), prints the reason and
+# the fix, and make carries on. Else it merges those parameters into .tmp-<stem>.yaml, keeping only
+# the names the notebook's parameters cell declares (papermill would warn "Passed unknown parameter"
+# for each other one; a name no notebook declares gets one line: a typo?), and writes the other
+# papermill options of PARAMS (--start-timeout 60, ...) to .tmp-<stem>.args, which xargs appends.
 $(RESULTS)/%.ipynb: notebooks/%.ipynb $(SOURCES) $(DATA_DEP) $(wildcard $(DATASET)/sequence.yaml) | $(STAMP)
 	@mkdir -p $(@D)
 	@echo "== $*"
 	@# the notebook's folder holds only what this run writes: no table or figure of an older version survives;
 	@# the old executed notebook goes too, so that a run that fails is run again by the next make
-	@rm -rf $@ $(@D)/.tmp-$*.ipynb $(RESULTS)/$*
-	$(BIN)/python -m greenloop.study.params $< $(DATASET) $(RESULTS) --out $(@D)/.tmp-$*.ipynb -- \
-	    $(DATASET_PARAMS:%=-f %) $(PARAMS)
-	@test -f $(@D)/.tmp-$*.ipynb || $(BIN)/papermill -k $(KERNEL) --execution-timeout $(TIMEOUT) --log-output --progress-bar \
-	    -p dataset $(DATASET) -p results_dir $(RESULTS) -f $(RESULTS)/sequence_params.yaml $(DATASET_PARAMS:%=-f %) \
-	    $(PARAMS) $< $(@D)/.tmp-$*.ipynb
+	@rm -rf $@ $(@D)/.tmp-$*.ipynb $(@D)/.tmp-$*.yaml $(@D)/.tmp-$*.args $(RESULTS)/$*
+	$(BIN)/python -m greenloop.study.params $< $(DATASET) $(RESULTS) --out $(@D)/.tmp-$*.ipynb \
+	    --params-out $(@D)/.tmp-$*.yaml --args-out $(@D)/.tmp-$*.args -- $(DATASET_PARAMS:%=-f %) $(PARAMS)
+	@test -f $(@D)/.tmp-$*.ipynb || xargs -0 -a $(@D)/.tmp-$*.args $(BIN)/papermill -k $(KERNEL) \
+	    --execution-timeout $(TIMEOUT) --log-output --progress-bar -f $(@D)/.tmp-$*.yaml $< $(@D)/.tmp-$*.ipynb
 	@mv $(@D)/.tmp-$*.ipynb $@
+	@rm -f $(@D)/.tmp-$*.yaml $(@D)/.tmp-$*.args
 
 $(RESULTS)/%.html: $(RESULTS)/%.ipynb
 	$(BIN)/jupyter nbconvert --to html --log-level WARN --output-dir $(@D) --output .tmp-$* $<

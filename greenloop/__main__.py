@@ -406,6 +406,11 @@ def _sweep(args) -> int:
         base.update(yaml.safe_load(open(path)) or {})
     for name, value in args.parameter:
         base[name] = yaml.safe_load(value)
+    if Path(args.notebook).is_file():       # a name no notebook declares: a typo? (plan drops it)
+        given = {**{k: path for path in args.parameters_file for k in yaml.safe_load(open(path)) or {}},
+                 **{name: "-p" for name, _ in args.parameter}}
+        for line in study_params.undeclared(given, args.notebook):
+            print(line, file=sys.stderr)
     options = dict(queue=args.queue, cores=args.cores, memory=args.memory, walltime=args.walltime,
                    account=args.account, job_extra_directives=args.job_extra)
     try:

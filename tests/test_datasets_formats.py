@@ -260,9 +260,11 @@ def test_make_passes_the_folder_parameters_first_and_builds_gardenspoint(tmp_pat
     runs = [k for k, ln in enumerate(lines) if "papermill" in ln]
     assert build and check and runs and build[0] < check[0] < runs[0]
     assert "--src /some/copy" in lines[build[0]]
+    # the check merges sequence_params.yaml, the budget and PARAMS into the one file papermill reads
     run = " ".join(lines[runs[0]].split())
-    assert run.index(f"-f {tmp_path / 'res'}/sequence_params.yaml") < run.index("-p exclude 7")
-    assert "-p exclude 7" in lines[check[0]]
+    assert f"-f {tmp_path / 'res'}/.tmp-00_dataset.yaml" in run and "exclude" not in run and "sequence_params" not in run
+    assert f"--params-out {tmp_path / 'res'}/.tmp-00_dataset.yaml" in lines[check[0]]
+    assert lines[check[0]].rstrip().endswith("-p exclude 7")
 
 
 # ------------------------------------------------------------------------------ the CLI

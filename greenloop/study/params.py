@@ -209,16 +209,85 @@ def write_skipped(notebook, out, folder, results_dir, reason: str, params: dict)
     return Path(out)
 
 
+PARAMETER_OPTIONS = {"-f": "-f", "--parameters_file": "-f", "-y": "-y", "--parameters_yaml": "-y",
+                     "-p": "-p", "--parameters": "-p", "-r": "-r", "--parameters_raw": "-r"}
+
+
+def split_arguments(args) -> tuple[dict[str, str], list[str]]:
+    """Papermill arguments -> ({parameter name: where it comes from (a file, ``-y``, ``-p``, ``-r``)},
+    [the other arguments, e.g. ``--start-timeout 120``, in their order]), read as
+    :func:`effective_parameters` reads them."""
+    args, names, other, k = list(args), {}, [], 0
+    while k < len(args):
+        kind = PARAMETER_OPTIONS.get(args[k])
+        if kind in ("-f", "-y") and k + 1 < len(args):
+            text = Path(args[k + 1]).read_text() if kind == "-f" else args[k + 1]
+            names.update(dict.fromkeys(yaml.safe_load(text) or {}, args[k + 1] if kind == "-f" else kind))
+            k += 2
+        elif kind in ("-p", "-r") and k + 2 < len(args):
+            names[args[k + 1]] = kind
+            k += 3
+        else:
+            other.append(args[k])
+            k += 1
+    return names, other
+
+
+def declared_names(notebook) -> set[str]:
+    """The names ``notebook``'s parameters cell declares (:func:`notebook_defaults`)."""
+    return set(notebook_defaults(notebook))
+
+
+def declared_only(notebook, params: dict) -> dict:
+    """``params`` without the names ``notebook``'s parameters cell does not declare (papermill would
+    inject them anyway, warning "Passed unknown parameter")."""
+    declared = declared_names(notebook)
+    return {k: v for k, v in params.items() if k in declared}
+
+
+def passed_parameters(notebook, files=(), args=()) -> dict:
+    """What make passes ``notebook``: :func:`effective_parameters` of ``files`` and ``args`` (the
+    same precedence), only the names they give that the notebook declares; never its own defaults,
+    so that papermill injects what was chosen and nothing else."""
+    names, _ = split_arguments([a for f in files for a in ("-f", str(f))] + list(args))
+    return {k: v for k, v in effective_parameters(notebook, files, args).items() if k in names}
+
+
+def undeclared(names, notebook) -> list[str]:
+    """One line per name of ``names`` ({name: where from}) that no numbered notebook beside
+    ``notebook`` (NN_*.ipynb in its folder) declares: most likely a typo, which papermill would
+    inject unread."""
+    import difflib
+    folder = Path(notebook).parent
+    known = set().union(*(declared_names(nb) for nb in sorted(folder.glob("[0-9][0-9]_*.ipynb"))),
+                        declared_names(notebook))
+    lines = []
+    for name, source in names.items():
+        if name not in known:
+            close = difflib.get_close_matches(name, sorted(known), n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            lines.append(f"warning: parameter {name!r} ({source}) is declared by no notebook in "
+                         f"{folder}{hint}: ignored")
+    return lines
+
+
 def main(argv=None) -> int:
     """CLI (make's): write RESULTS/sequence_params.yaml, print its notes; when NOTEBOOK cannot run,
-    write --out as a notebook that says why and print the reason. Exit 0 either way."""
+    write --out as a notebook that says why and print the reason. Else, with --params-out, write the
+    one papermill YAML file of the run: RESULTS/sequence_params.yaml, then the arguments after --
+    (params/datasets/*.yaml, PARAMS; ``-p dataset DATASET -p results_dir RESULTS`` before them),
+    with papermill's precedence, only the names NOTEBOOK declares (:func:`passed_parameters`); with
+    --args-out the other papermill options after -- (NUL-separated, for ``xargs -0``). One line on
+    stderr names each parameter after -- that no notebook declares. Exit 0 either way."""
     ap = argparse.ArgumentParser(prog="python -m greenloop.study.params",
                                  description="Parameters a sequence folder implies; skip a notebook that "
-                                             "cannot run on it.")
+                                             "cannot run on it; the parameters papermill passes it.")
     ap.add_argument("notebook")
     ap.add_argument("dataset")
     ap.add_argument("results")
     ap.add_argument("--out", required=True, help="where the executed notebook goes (written only when skipped)")
+    ap.add_argument("--params-out", help="papermill YAML file of the run's parameters (written unless skipped)")
+    ap.add_argument("--args-out", help="the run's other papermill options, NUL-separated (written unless skipped)")
     ap.epilog = "after --: the papermill -f/-p arguments of the run (params/datasets/*.yaml, PARAMS)"
     argv = list(sys.argv[1:] if argv is None else argv)
     cut = argv.index("--") if "--" in argv else len(argv)
@@ -231,12 +300,25 @@ def main(argv=None) -> int:
             print("\n".join(notes), flush=True)
         params = effective_parameters(a.notebook, [seq_file], rest)
         reason = skip_reason(a.notebook, a.dataset, params)
+        names, other = split_arguments(rest)
+        for line in undeclared(names, a.notebook):
+            print(line, file=sys.stderr, flush=True)
     except (FileNotFoundError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
     if reason:
         write_skipped(a.notebook, a.out, a.dataset, a.results, reason, params)
         print(reason, flush=True)
+        return 0
+    if a.params_out:
+        run = passed_parameters(a.notebook, [seq_file], ["-p", "dataset", a.dataset, "-p", "results_dir",
+                                                         a.results] + rest)
+        write_atomic(a.params_out, f"# papermill parameters of {Path(a.notebook).name} "
+                                   f"(greenloop.study.params): {PARAMS_NAME}, then the dataset's and "
+                                   f"PARAMS, only the names it declares\n"
+                                   + yaml.safe_dump(run, sort_keys=False, allow_unicode=True))
+    if a.args_out:
+        write_atomic(a.args_out, "".join(f"{x}\0" for x in other))
     return 0
 
 

@@ -35,7 +35,6 @@ import datetime as _dt
 import hashlib
 import itertools
 import json
-import logging
 import os
 import re
 import shlex
@@ -157,14 +156,20 @@ def check_grid(grid: dict, params: dict, notebook) -> None:
                              + "'")
 
 
-def plan(grid: dict, out: Path, base: dict | None = None, dataset=DEFAULT_DATASET) -> list[dict]:
+def plan(grid: dict, out: Path, base: dict | None = None, dataset=DEFAULT_DATASET, notebook=None) -> list[dict]:
     """The points of the grid's cross product, in grid order.
 
     Returns a list of dicts: name (folder name), folder (absolute Path), values (the grid values of
     this point) and parameters (everything injected: base, dataset, the grid values, results_dir).
     Dataset paths (``--dataset`` or a swept ``dataset``) must exist; they are injected absolute.
+    With ``notebook``, base keeps only the names its parameters cell declares (what the dataset
+    implies and a shared params file hold names other notebooks read; papermill would warn "Passed
+    unknown parameter" for each: greenloop.study.params.declared_only, as make does).
     """
     out = Path(out).resolve()
+    if notebook is not None and base:
+        from greenloop.study import params as study_params
+        base = study_params.declared_only(notebook, base)
     points = []
     for combo in itertools.product(*grid.values()):
         values = dict(zip(grid, combo))
@@ -235,7 +240,6 @@ def papermill_once(notebook, folder: Path, parameters: dict, env: dict, cwd, ker
     stem = Path(notebook).stem
     tmp = folder / f".tmp-{stem}.ipynb"
     os.environ.update(env)  # every point of a sweep has the same env: no need to restore it
-    logging.getLogger("papermill").setLevel(logging.ERROR)  # not one warning per base parameter
     try:
         papermill.execute_notebook(str(notebook), str(tmp), parameters=parameters, kernel_name=kernel,
                                    cwd=str(cwd), execution_timeout=timeout, progress_bar=False,
@@ -655,7 +659,8 @@ def run_sweep(notebook, grid: dict, out, *, base: dict | None = None, dataset=DE
     """Run every point of ``grid`` (see ``parse_grid``) over ``notebook`` into ``out`` on Dask,
     skipping complete points unless ``force``, then write sweep.csv/.md/.png.
 
-    base: parameters for every point (e.g. read from params/tiny.yaml); the grid's values win.
+    base: parameters for every point (e.g. read from params/tiny.yaml), only the names the notebook
+    declares (``plan``); the grid's values win.
     metrics: ``read_metric`` specs; the first is the figure's y axis.
     Returns the table (pandas DataFrame, one row per point).
     """
@@ -668,7 +673,7 @@ def run_sweep(notebook, grid: dict, out, *, base: dict | None = None, dataset=DE
     if x is not None and x not in grid:
         raise ValueError(f"--x {x!r} is not swept: choose one of {', '.join(grid)}")
     out = Path(out).resolve()
-    points = plan(grid, out, base, dataset)
+    points = plan(grid, out, base, dataset, notebook)
     todo = [p for p in points if force or not is_complete(p, notebook)]
     if progress:
         print(f"sweep: {len(points)} point{'s' * (len(points) != 1)} of {notebook.name} into {out}; "
