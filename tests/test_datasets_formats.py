@@ -375,3 +375,21 @@ def test_make_skips_a_notebook_without_counted_loops_and_carries_on(tiny_near_lo
     assert json.loads((res / "07_feature_baselines" / "manifest.json").read_text())["skipped"].startswith("07")
     assert not (res / "07_feature_baselines" / "older_version.png").exists()      # the folder holds this run's files only
     assert not list(res.glob(".tmp-*"))
+
+
+def test_a_coarse_step_that_hides_every_loop_is_refined_and_said(tiny_near_loop_sequence, tmp_path, capsys):
+    """quick's every 8th frame on two 100-frame traversals (loops 99..101 frames apart: no multiple of
+    8, 7 or 6 among them): 07 runs at step 5, the largest step that keeps loops, and make says so; 13
+    keeps its requested step (it chooses its own, experiments.leaderboard.choose_step)."""
+    import yaml
+    res, out = tmp_path / "res", tmp_path / "res" / ".tmp.ipynb"
+    for stem, want in (("07_feature_baselines", 5), ("13_leaderboard", 8)):
+        nb = ROOT / "notebooks" / f"{stem}.ipynb"
+        run = tmp_path / f"{stem}.yaml"
+        args = [str(nb), str(tiny_near_loop_sequence), str(res), "--out", str(out), "--params-out", str(run)]
+        assert params.main(args + ["--", "-p", "frame_step", "8"]) == 0 and not out.exists()
+        assert yaml.safe_load(run.read_text())["frame_step"] == want
+        printed = capsys.readouterr().out
+        assert ("frame_step 5, not the requested 8" in printed) == (want == 5), printed
+    assert params.loop_step(tiny_near_loop_sequence, {"exclude": 49, "frame_step": 8}) == 5
+    assert params.loop_step(tiny_near_loop_sequence, {"exclude": 120, "frame_step": 8}) is None

@@ -1,21 +1,24 @@
 """The notebook parameters a sequence folder implies, and the check make runs before each notebook.
 
-``make`` runs every notebook as ``papermill -f RESULTS/sequence_params.yaml -f
-params/datasets/<name>.yaml $(PARAMS)``: later files and ``-p`` win, so a user's PARAMS overrides
-the dataset's budget, which overrides what the folder says of itself. ``sequence_params.yaml``
-is written here (:func:`sequence_parameters`) from the folder: ``exclude`` by the one exclusion
-rule (greenloop.datasets.exclusion, which ``python -m greenloop detect`` reads too), and from its
+``make`` runs every notebook as ``papermill -f <one YAML file>``, written here (:func:`main`,
+``--params-out``): RESULTS/sequence_params.yaml, then params/datasets/<name>.yaml, then PARAMS,
+later ones winning (a user's PARAMS overrides the dataset's budget, which overrides what the folder
+says of itself), only the names the notebook's parameters cell declares (papermill warns about
+others; a PARAMS name no notebook declares gets one line). ``sequence_params.yaml`` is written here
+(:func:`sequence_parameters`) from the folder: ``exclude`` by the one exclusion rule
+(greenloop.datasets.exclusion, which ``python -m greenloop detect`` reads too), and from its
 ``sequence.yaml`` (greenloop.datasets.sequence.read_description) ``frame_step`` and the traversal
-boundaries; one line says how each was chosen.
+boundaries; one line says how each was chosen, printed once per run.
 
-Before each notebook, :func:`check` reads the parameters that notebook will get (its defaults,
-then the files and ``-p`` arguments above) and, for the notebooks that score loops (LOOP_NOTEBOOKS),
-whether the ground truth has any loop pair at that exclude and frame_step. Where it has none, the
-notebook is not run: an executed notebook that says why is written in its place and
-``<results>/<stem>/skipped.md`` records the reason, so ``make`` carries on with the next one.
+Before each notebook, :func:`main` reads the parameters that notebook will get and, for the
+notebooks that score loops (LOOP_NOTEBOOKS), whether the ground truth keeps any loop pair at that
+exclude, at its frame_step or a finer one (:func:`loop_step`; a finer one is then passed and
+printed, :func:`finer_step`). Where not even every frame keeps one, the notebook is not run: an
+executed notebook that says why is written in its place and ``<results>/<stem>/skipped.md``
+records the reason, so ``make`` carries on with the next one.
 
 CLI (the Makefile's): ``python -m greenloop.study.params NOTEBOOK DATASET RESULTS --out TMP.ipynb
--- [papermill -f/-p arguments]``.
+[--params-out TMP.yaml --args-out TMP.args] -- [papermill -f/-p arguments]``.
 """
 from __future__ import annotations
 
@@ -166,6 +169,22 @@ def loop_step(folder, params: dict) -> int | None:
     return None
 
 
+def finer_step(notebook, folder, params: dict) -> tuple[int | None, str | None]:
+    """(step, the printed line) where a loop notebook's frame_step keeps no ground-truth loop but a
+    finer step does (:func:`loop_step`): e.g. quick's every 8th frame on a 200-frame recording driven
+    twice; else (None, None). Notebook 13 chooses its own step (``experiments.leaderboard.choose_step``)."""
+    stem = Path(notebook).stem
+    if stem[:2] not in LOOP_NOTEBOOKS or stem[:2] == "13" or "frame_step" not in params:
+        return None, None
+    requested = int(params["frame_step"] or 1)
+    step = loop_step(folder, params) if sequence.ground_truth_kind(folder) is not None else None
+    if step is None or step == requested:
+        return None, None
+    return step, (f"{stem}: frame_step {step}, not the requested {requested}: at every {requested}th frame no "
+                  f"described frame keeps a ground-truth loop beyond exclude={params.get('exclude')}; {step} is the "
+                  f"largest step that keeps one")
+
+
 def skip_reason(notebook, folder, params: dict) -> str | None:
     """Why ``notebook`` cannot run on ``folder`` with ``params`` (one sentence), or None: a
     LOOP_NOTEBOOKS notebook needs at least one ground-truth loop pair at its exclude, at its
@@ -313,6 +332,10 @@ def main(argv=None) -> int:
     if a.params_out:
         run = passed_parameters(a.notebook, [seq_file], ["-p", "dataset", a.dataset, "-p", "results_dir",
                                                          a.results] + rest)
+        step, why = finer_step(a.notebook, a.dataset, params)
+        if why:
+            run["frame_step"] = step
+            print(why, flush=True)
         write_atomic(a.params_out, f"# papermill parameters of {Path(a.notebook).name} "
                                    f"(greenloop.study.params): {PARAMS_NAME}, then the dataset's and "
                                    f"PARAMS, only the names it declares\n"
