@@ -1,0 +1,89 @@
+"""Recordings nobody working on greenloop made (tests/user_folders.py: cut from Gardens Point,
+Nordland and the synthetic generator; short, loop pairs only, GPS only, no revisit), met as a new
+user meets them: what make would pass each notebook, which notebooks it would skip and why, and
+`detect` with no flags. (`make quick` itself on such folders: the closing notes.)"""
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from greenloop.datasets import exclusion
+from greenloop.study import params
+from tests import user_folders
+
+ROOT = Path(__file__).resolve().parents[1]
+QUICK = ROOT / "params" / "quick.yaml"
+
+
+def _make_params(folder, stem, results):
+    """What make's rule does before one notebook under `make quick`: (the YAML papermill gets or
+    None, the skip reason or None, what it printed)."""
+    nb = ROOT / "notebooks" / f"{stem}.ipynb"
+    out, run = results / f".tmp-{stem}.ipynb", results / f".tmp-{stem}.yaml"
+    rc = params.main([str(nb), str(folder), str(results), "--out", str(out), "--params-out", str(run),
+                      "--", "-f", str(QUICK)])
+    assert rc == 0
+    skipped = (results / stem / "skipped.md").read_text() if out.exists() else None
+    return (yaml.safe_load(run.read_text()) if run.exists() else None), skipped
+
+
+def _detect(folder):
+    env = dict(os.environ, PYTHONPATH=str(ROOT), TF_CPP_MIN_LOG_LEVEL="3")
+    r = subprocess.run([sys.executable, "-m", "greenloop", "detect", str(folder)], capture_output=True, text=True,
+                       env=env, timeout=300)
+    assert r.returncode == 0, r.stderr
+    return r
+
+
+@pytest.fixture(scope="module")
+def gardenspoint_short(tmp_path_factory):
+    try:
+        return user_folders.gardenspoint_pairs(tmp_path_factory.mktemp("u") / "gp", n=60)
+    except FileNotFoundError as e:
+        pytest.skip(str(e))
+
+
+def test_a_short_recording_driven_twice_runs_every_notebook(gardenspoint_short, tmp_path):
+    """120 frames (Gardens Point day then night, 60 places), loop pairs only: the exclusion leaves
+    the revisits 58..62 frames apart (the paper's 150 would hide them all), quick's step 8 is
+    refined for 07 (60 = 4 mod 8), and 13 runs (it picks its own step)."""
+    e = exclusion.exclusion(gardenspoint_short)
+    assert e.frames == 29 and e.source == "ground truth"
+    run07, skip07 = _make_params(gardenspoint_short, "07_feature_baselines", tmp_path)
+    assert skip07 is None and run07["exclude"] == 29 and run07["frame_step"] in (1, 2, 3, 4, 5, 6)
+    run13, skip13 = _make_params(gardenspoint_short, "13_leaderboard", tmp_path)
+    assert skip13 is None and run13["frame_step"] == 8 and run13["exclude"] == 29
+    r = _detect(gardenspoint_short)
+    assert "# exclude 29 (ground truth)" in r.stdout and "warning" not in r.stderr
+
+
+def test_nordland_cut_and_a_gps_only_survey(tmp_path, tiny_sequence):
+    try:
+        nl = user_folders.nordland_short(tmp_path / "nl", n=40)
+    except FileNotFoundError as e:
+        pytest.skip(str(e))
+    assert exclusion.exclusion(nl).frames == 19
+    assert _make_params(nl, "08_descriptor_postprocessing", tmp_path / "r1")[1] is None
+    gps = user_folders.synthetic_gps(tmp_path / "gps", tiny_sequence)
+    e = exclusion.exclusion(gps)
+    assert e.source == "ground truth" and e.frames < exclusion.DEFAULT_EXCLUDE
+    assert "the camera leaves a place within" in e.rule
+    run, skipped = _make_params(gps, "11_lsh_matching", tmp_path / "r2")
+    assert skipped is None and run["exclude"] == e.frames
+
+
+def test_a_drive_that_never_comes_back(tmp_path, tiny_sequence):
+    """No ground truth: the notebooks that score loops are skipped with the reason in skipped.md
+    and the manifest; `detect` runs with the fraction rule and declares nothing."""
+    f = user_folders.no_revisit(tmp_path / "once", tiny_sequence, n=100)
+    run, skipped = _make_params(f, "07_feature_baselines", tmp_path / "r")
+    assert run is None and "has no ground truth" in skipped
+    manifest = json.loads((tmp_path / "r" / "07_feature_baselines" / "manifest.json").read_text())
+    assert manifest["skipped"].startswith("07_feature_baselines scores loop closures")
+    assert _make_params(f, "04_shift_robustness", tmp_path / "r")[1] is None           # scores no loops: runs
+    r = _detect(f)
+    assert "# exclude 20 (fraction)" in r.stdout and "summary: 100 frames, 0 closures" in r.stdout
