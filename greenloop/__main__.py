@@ -356,6 +356,9 @@ def _detect(args) -> int:
     greenloop.speed.stream.Detector (``--method dictionary``), greenloop.seqstream.Detector
     (``--method greenloop-seq``, with --index / --state) or any other registered detector's
     stream (:func:`_detect_registered`) in windows; prints events as they are declared."""
+    if args.model is not None and args.method != "dictionary":
+        raise ValueError(f"--model is the main paper's trained CNN, used by --method dictionary only; "
+                         f"--method {args.method} needs no model: pass --method dictionary with it, or drop it")
     if args.method in SEQ_METHODS:
         return _detect_seq(args)
     if args.method != "dictionary":

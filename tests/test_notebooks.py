@@ -697,14 +697,20 @@ def test_notebook_runs_on_a_sequence_whose_loops_lie_inside_the_default_window(
         notebook, tiny_near_loop_sequence, near_loop_results, monkeypatch, capsys):
     """A user's sequence: revisits 100 frames apart, inside the default 150-frame window,
     and no PARAMS for exclude; two traversals/ folders, ground truth by frame index from its
-    sequence.yaml. As make does, greenloop.study.params prints the closest loop
-    distance and the override, and passes exclude = 49 (half of it) before the notebook's
-    parameters (TINY without its exclude); the notebook runs to the end on it."""
+    sequence.yaml. As make does, greenloop.study.params prints (once per results folder) the
+    exclusion greenloop.datasets.exclusion derives and why, and passes exclude = 49 (half the
+    closest revisit) before the notebook's parameters (TINY without its exclude); the notebook
+    runs to the end on it."""
     from greenloop.study import params
     tmp = near_loop_results / f".tmp-{notebook.stem}.ipynb"
+    first = not (near_loop_results / params.PARAMS_NAME).exists()
     assert params.main([str(notebook), str(tiny_near_loop_sequence), str(near_loop_results), "--out", str(tmp)]) == 0
     printed = capsys.readouterr().out
-    assert "closest loop of the ground truth is 99 frames apart" in printed and "PARAMS='-p exclude N'" in printed
+    if first:
+        assert "exclude 49 frames (the longer of the camera's stay and half the closest revisit)" in printed
+        assert "revisits 99..101 frames apart" in printed and "the paper's 150 would leave 0 of" in printed
+    else:
+        assert "exclude 49" not in printed                             # said once per run of make
     assert not tmp.exists()                                            # not skipped: loops count at 49
     implied = yaml.safe_load((near_loop_results / params.PARAMS_NAME).read_text())
     assert implied == {"exclude": 49, "first_traversal_end": 100}

@@ -189,7 +189,7 @@ def test_cli_detect_on_jpg_folder(tmp_path, brightness_model):
     model = tmp_path / "m.keras"
     brightness_model.save(model)
     env = dict(os.environ, PYTHONPATH=str(ROOT), TF_CPP_MIN_LOG_LEVEL="3")
-    cmd = [sys.executable, "-m", "greenloop", "detect", str(folder), "--model", str(model),
+    cmd = [sys.executable, "-m", "greenloop", "detect", str(folder), "--method", "dictionary", "--model", str(model),
            "--threshold", "3", "--window", "5", "--backend", "numpy"]
     res = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=120)
     assert res.returncode == 0, res.stderr
@@ -201,13 +201,17 @@ def test_cli_detect_on_jpg_folder(tmp_path, brightness_model):
     helped = subprocess.run([sys.executable, "-m", "greenloop", "--help"], capture_output=True,
                             text=True, env=env, timeout=60)
     assert helped.returncode == 0 and "detect" in helped.stdout
-    missing = subprocess.run([sys.executable, "-m", "greenloop", "detect", str(folder), "--model",
-                              str(tmp_path / "nope.keras")], capture_output=True, text=True, env=env,
+    missing = subprocess.run([sys.executable, "-m", "greenloop", "detect", str(folder), "--method", "dictionary",
+                              "--model", str(tmp_path / "nope.keras")], capture_output=True, text=True, env=env,
                              timeout=60)
     assert missing.returncode == 2 and "not found" in missing.stderr
     nofolder = subprocess.run([sys.executable, "-m", "greenloop", "detect", str(tmp_path / "nodir"),
-                               "--model", str(model)], capture_output=True, text=True, env=env, timeout=60)
+                               "--method", "dictionary", "--model", str(model)], capture_output=True, text=True,
+                              env=env, timeout=60)
     assert nofolder.returncode == 2 and "does not exist" in nofolder.stderr
+    stray = subprocess.run([sys.executable, "-m", "greenloop", "detect", str(folder), "--model", str(model)],
+                           capture_output=True, text=True, env=env, timeout=60)
+    assert stray.returncode == 2 and "--method dictionary" in stray.stderr and "needs no model" in stray.stderr
 
 
 def test_bad_inputs(tmp_path, random_model):
