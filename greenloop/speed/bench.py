@@ -19,16 +19,14 @@ Measures, interleaving reference and candidates so that load from other jobs hit
     training wall times (through the model cache; skipped with --quick);
 (d) label agreement of every backend with Keras on all frames; and the accuracy change of a
     dynamic-range quantised TFLite export.
-Writes ``<out>/bench.json`` (figures, machine, CPU, versions, date) and ``<out>/bench.md`` /
+Writes ``<out>/bench.json`` (figures, provenance: date, git commit, CPU; versions) and ``<out>/bench.md`` /
 ``bench.csv`` (measurement | reference | ours | ratio | target | met?).
 If the dataset folder is missing, frames are random (said so in bench.json).
 """
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
 import os
-import platform
 import sys
 import tempfile
 from pathlib import Path
@@ -430,11 +428,10 @@ def _quantized_accuracy(quick: bool, fast_run: dict, epochs: int, X, y, u8, tmpd
 
 def _result(quick, info, n_classes, default_backend, windows, single, training, accuracy,
             agreement, quant) -> dict:
-    """bench.json's content: the figures plus date, machine, CPU and versions."""
+    """bench.json's content: the figures plus report.provenance() (date, git commit, environment
+    hash, CPU model, platform) and the library versions."""
     return {
-        "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-        "machine": platform.node(), "platform": platform.platform(), "cpu": report.cpu_model(),
-        "versions": report.versions(), "quick": quick, "data": info, "window": WINDOW,
+        **report.provenance(), "versions": report.versions(), "quick": quick, "data": info, "window": WINDOW,
         "n_classes": n_classes, "default_backend": default_backend,
         "windows": windows, "single": single, "training": training, "accuracy_200_epochs": accuracy,
         "agreement": agreement,

@@ -9,9 +9,11 @@ from __future__ import annotations
 
 import argparse
 import datetime as _dt
+import hashlib
 import json
 import os
 import platform
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -25,6 +27,7 @@ from greenloop.study import coverage
 from greenloop.util.files import write_atomic  # the one atomic file write, also report.write_atomic
 
 PAPER, RUN = "paper", "this run"
+ROOT = Path(__file__).resolve().parents[2]   # the checkout greenloop runs from
 
 
 def _default(o):
@@ -100,17 +103,62 @@ def save_figure(fig, path, dpi: int = 110) -> Path:
     return write_atomic(path, lambda p: fig.savefig(p, dpi=dpi, bbox_inches="tight", format="png"))
 
 
-def cpu_model() -> str:
-    """The CPU's model name (from /proc/cpuinfo on Linux) and the number of cores visible."""
-    name = platform.processor() or platform.machine()
+def cpu_name() -> str:
+    """The CPU's model name: /proc/cpuinfo's first 'model name' on Linux, else what the platform
+    module says (the processor, else the architecture)."""
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
             if line.startswith("model name"):
-                name = line.split(":", 1)[1].strip()
-                break
+                return line.split(":", 1)[1].strip()
     except OSError:
         pass
-    return f"{name} ({os.cpu_count()} cores)"
+    return platform.processor() or platform.machine() or "unknown"
+
+
+def cpu_model() -> str:
+    """The CPU's model name (:func:`cpu_name`) and the number of cores visible."""
+    return f"{cpu_name()} ({os.cpu_count()} cores)"
+
+
+def git_state(root=None) -> dict:
+    """{'git_commit': HEAD's sha of the checkout greenloop runs from (root, default ROOT), 'git_dirty':
+    whether a tracked file outside results/ differs from it} (``git status --porcelain
+    --untracked-files=no -- . ':(exclude)results'``: a run rewrites results/ itself). Both None
+    where root is not the top of a git checkout, or without git."""
+    root = Path(root or ROOT)
+
+    def git(*args):
+        return subprocess.run(["git", "-C", str(root), *args], capture_output=True, text=True, timeout=60)
+    try:
+        top = git("rev-parse", "--show-toplevel")
+        if top.returncode != 0 or Path(top.stdout.strip()).resolve() != root.resolve():
+            return {"git_commit": None, "git_dirty": None}
+        head = git("rev-parse", "HEAD")
+        status = git("status", "--porcelain", "--untracked-files=no", "--", ".", ":(exclude)results")
+    except (OSError, subprocess.SubprocessError):
+        return {"git_commit": None, "git_dirty": None}
+    return {"git_commit": head.stdout.strip() if head.returncode == 0 else None,
+            "git_dirty": bool(status.stdout.strip()) if status.returncode == 0 else None}
+
+
+def environment_hash(path=None) -> str | None:
+    """sha256 (hex) of the bytes ``python <X.Y.Z>\\n`` (this interpreter's platform.python_version())
+    followed by the bytes of environment.txt, the pinned packages: equal hashes, same Python and same
+    pins. path: default ROOT/environment.txt. None where it is absent."""
+    try:
+        pins = Path(path or ROOT / "environment.txt").read_bytes()
+    except OSError:
+        return None
+    return hashlib.sha256(f"python {platform.python_version()}\n".encode() + pins).hexdigest()
+
+
+def provenance() -> dict:
+    """Where and from what a result comes: date (UTC), git commit and dirty flag (:func:`git_state`),
+    environment hash (:func:`environment_hash`), CPU model (:func:`cpu_name`), the CPU with its core
+    count (:func:`cpu_model`) and the platform."""
+    return {"date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"), **git_state(),
+            "environment_hash": environment_hash(), "cpu_model": cpu_name(), "cpu": cpu_model(),
+            "platform": platform.platform()}
 
 
 def versions() -> dict:
@@ -133,13 +181,12 @@ def versions() -> dict:
 
 
 def manifest(folder, parameters: dict, dataset: str | Path | None = None, **extra) -> Path:
-    """Write ``<folder>/manifest.json``: date, machine, CPU, library versions, parameters,
-    dataset path, fingerprint and ground-truth kind ('poses', 'pairs' or None), the wall time of
-    this process so far (for a notebook executed by papermill: its kernel, i.e. the notebook's
-    run time), plus any extra fields."""
-    info = {"date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-            "wall_seconds": round(time.time() - psutil.Process().create_time(), 1),
-            "machine": platform.node(), "platform": platform.platform(), "cpu": cpu_model(),
+    """Write ``<folder>/manifest.json``: :func:`provenance` (date, git commit and whether the tree
+    was dirty, environment hash, CPU model, platform), the wall time of this process so far (for a
+    notebook executed by papermill: its kernel, i.e. the notebook's run time until this call),
+    library versions, parameters, dataset path, fingerprint and ground-truth kind ('poses', 'pairs'
+    or None), plus any extra fields."""
+    info = {**provenance(), "wall_seconds": round(time.time() - psutil.Process().create_time(), 1),
             "versions": versions(), "parameters": parameters}
     if dataset is not None:
         info["dataset"] = str(dataset)

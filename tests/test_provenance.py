@@ -1,0 +1,64 @@
+"""Manifests say where a result comes from (commit, environment hash, CPU, date)."""
+import hashlib
+import json
+import platform
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from greenloop.study import report
+
+ROOT = Path(__file__).resolve().parents[1]
+GIT = shutil.which("git")
+
+
+def git(repo, *args) -> str:
+    return subprocess.run(["git", "-C", str(repo), "-c", "user.name=t", "-c", "user.email=t@t", *args],
+                          capture_output=True, text=True, check=True).stdout.strip()
+
+
+def test_manifest_records_commit_environment_hash_cpu_and_date(tmp_path):
+    report.manifest(tmp_path, {"epochs": 3})
+    m = json.loads((tmp_path / "manifest.json").read_text())
+    pins = (ROOT / "environment.txt").read_bytes()
+    assert m["environment_hash"] == hashlib.sha256(f"python {platform.python_version()}\n".encode() + pins).hexdigest()
+    assert m["cpu_model"] == report.cpu_name() and m["cpu_model"] and m["cpu"].startswith(m["cpu_model"])
+    assert m["date"][:2] == "20" and "machine" not in m          # the host name said nothing; the CPU does
+    assert m["parameters"] == {"epochs": 3} and "numpy" in m["versions"] and "wall_seconds" in m
+    if GIT and (ROOT / ".git").exists():
+        assert m["git_commit"] == git(ROOT, "rev-parse", "HEAD") and isinstance(m["git_dirty"], bool)
+
+
+def test_a_manifest_outside_a_git_checkout_says_null(tmp_path, monkeypatch):
+    shutil.copy(ROOT / "environment.txt", tmp_path / "environment.txt")
+    monkeypatch.setattr(report, "ROOT", tmp_path)                 # greenloop copied out of any checkout
+    report.manifest(tmp_path / "out", {})
+    m = json.loads((tmp_path / "out" / "manifest.json").read_text())
+    assert m["git_commit"] is None and m["git_dirty"] is None and m["environment_hash"] == report.environment_hash()
+    assert report.environment_hash(tmp_path / "absent.txt") is None
+
+    def no_git(*a, **k):
+        raise FileNotFoundError("git")
+    monkeypatch.setattr(report.subprocess, "run", no_git)
+    assert report.git_state(ROOT) == {"git_commit": None, "git_dirty": None}
+
+
+@pytest.mark.skipif(GIT is None, reason="no git")
+def test_dirty_means_a_tracked_file_outside_results_changed(tmp_path):
+    git(tmp_path, "init", "-q")
+    (tmp_path / "code.py").write_text("x = 1\n")
+    (tmp_path / "results").mkdir()
+    (tmp_path / "results" / "t.csv").write_text("a\n1\n")
+    git(tmp_path, "add", ".")
+    git(tmp_path, "commit", "-qm", "c")
+    head = git(tmp_path, "rev-parse", "HEAD")
+    (tmp_path / "results" / "t.csv").write_text("a\n2\n")          # a run rewrites its results
+    (tmp_path / "notes.txt").write_text("untracked\n")
+    assert report.git_state(tmp_path) == {"git_commit": head, "git_dirty": False}
+    (tmp_path / "code.py").write_text("x = 2\n")
+    assert report.git_state(tmp_path) == {"git_commit": head, "git_dirty": True}
+    (tmp_path / "sub").mkdir()                                     # a folder inside a checkout is not its top
+    assert report.git_state(tmp_path / "sub") == {"git_commit": None, "git_dirty": None}
+
