@@ -43,7 +43,7 @@ GARDENSPOINT := data/gardenspoint
 GARDENSPOINT_SRC ?= $(if $(wildcard ../shared/real/gardenspoint/night_right),../shared/real/gardenspoint,)
 GARDENSPOINT_URL ?= https://github.com/aghagol/loop-detection
 
-.PHONY: all help venv synthetic data nordland gardenspoint test quick sweep bench bench-scale clean-results readme-coverage default-choice
+.PHONY: all help venv synthetic data nordland gardenspoint test quick sweep bench bench-scale clean-results readme-coverage default-choice provenance
 .DEFAULT_GOAL := help
 
 help: ## this list
@@ -114,7 +114,7 @@ DATA_DEP := $(DATASET)
 endif
 
 # the tables across the committed results folders; `make quick` (a first look) leaves them alone
-CROSS ?= results/datasets.md results/coverage.md
+CROSS ?= results/datasets.md results/coverage.md results/PROVENANCE.md
 all: $(HTML) $(RESULTS)/tables.md $(CROSS) ## run every notebook into results/, render HTML, assemble results/tables.md
 
 # One table across every dataset that has results: results/ (synthetic) and results/<name>/.
@@ -125,6 +125,16 @@ results/datasets.md: $(wildcard $(DATASET_RESULTS:%=%/*/summary.json)) $(RESULTS
 # Which table and figure of the papers the results reproduce (greenloop.study.coverage), read from them.
 results/coverage.md: $(wildcard $(DATASET_RESULTS:%=%/*/manifest.json)) greenloop/study/coverage.py
 	$(BIN)/python -m greenloop.study.report --coverage $@ $(DATASET_RESULTS)
+
+# Each notebook's git commit, environment hash, CPU, date (its manifest) and duration (papermill's, in
+# the executed notebook), one table per results folder (greenloop.study.provenance). After tables.md, as
+# datasets.md: in `make all` (-j too) it reads the manifests this run wrote. `make provenance` writes it
+# from the folders as they are, running nothing.
+results/PROVENANCE.md: $(wildcard $(DATASET_RESULTS:%=%/*/manifest.json)) $(RESULTS)/tables.md greenloop/study/provenance.py
+	$(BIN)/python -m greenloop.study.provenance --out $@ $(DATASET_RESULTS)
+
+provenance: | $(STAMP) ## results/PROVENANCE.md: each notebook's commit, environment hash, CPU, date and duration
+	$(BIN)/python -m greenloop.study.provenance --out results/PROVENANCE.md $(DATASET_RESULTS)
 
 default-choice: | $(STAMP) ## the named default's centring windows, cell shift and threshold, chosen on tuning queries -> results/default_choice/
 	$(BIN)/python -m greenloop.study.default_choice --nordland $(NORDLAND) --gardenspoint $(GARDENSPOINT) \

@@ -1,4 +1,5 @@
-"""Manifests say where a result comes from (commit, environment hash, CPU, date)."""
+"""Manifests say where a result comes from (commit, environment hash, CPU, date), and
+results/PROVENANCE.md lists it per results folder and notebook (greenloop.study.provenance)."""
 import hashlib
 import json
 import platform
@@ -8,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from greenloop.study import report
+from greenloop.study import provenance, report
 
 ROOT = Path(__file__).resolve().parents[1]
 GIT = shutil.which("git")
@@ -62,3 +63,25 @@ def test_dirty_means_a_tracked_file_outside_results_changed(tmp_path):
     (tmp_path / "sub").mkdir()                                     # a folder inside a checkout is not its top
     assert report.git_state(tmp_path / "sub") == {"git_commit": None, "git_dirty": None}
 
+
+def test_provenance_md_lists_each_notebook_and_dashes_what_an_old_manifest_lacks(tmp_path, capsys):
+    res = tmp_path / "results"
+    report.manifest(res / "01_new", {}, dataset="data/synthetic-greenhouse")
+    (res / "01_new.ipynb").write_text(json.dumps({"cells": [], "metadata": {"papermill": {"duration": 12.34}}}))
+    report.write_json(res / "00_old" / "manifest.json", {"date": "2026-12-05T01:53:16+00:00",
+                                                         "cpu": "AMD EPYC (2 cores)", "wall_seconds": 18.4})
+    report.write_json(res / "02_bare" / "manifest.json", {"parameters": {}})
+    (res / "models").mkdir()                                       # no manifest: not a row
+    new = json.loads((res / "01_new" / "manifest.json").read_text())
+    assert provenance.main([str(res), "--out", str(tmp_path / "PROVENANCE.md")]) == 0
+    assert capsys.readouterr().out.strip() == str(tmp_path / "PROVENANCE.md")
+    text = (tmp_path / "PROVENANCE.md").read_text()
+    assert "synthetic-greenhouse" in text and "models" not in text
+    rows = {line.split(" | ")[0].strip("| "): line.strip("| \n").split(" | ") for line in text.splitlines()
+            if line.startswith("| 0")}
+    commit = "not a git checkout" if new["git_commit"] is None else new["git_commit"][:12]
+    assert commit in rows["01_new"][1] and new["environment_hash"][:12] in rows["01_new"][2]
+    assert rows["01_new"][3:] == [new["cpu_model"], new["date"], "12.3 s"]
+    assert rows["00_old"] == ["00_old", "—", "—", "AMD EPYC (2 cores)", "2026-12-05T01:53:16+00:00", "18.4 s †"]
+    assert rows["02_bare"] == ["02_bare", "—", "—", "—", "—", "—"]
+    assert list(rows) == ["00_old", "01_new", "02_bare"]
