@@ -43,7 +43,7 @@ GARDENSPOINT := data/gardenspoint
 GARDENSPOINT_SRC ?= $(if $(wildcard ../shared/real/gardenspoint/night_right),../shared/real/gardenspoint,)
 GARDENSPOINT_URL ?= https://github.com/aghagol/loop-detection
 
-.PHONY: all help venv synthetic data nordland gardenspoint test quick sweep bench bench-scale clean-results readme-coverage default-choice provenance
+.PHONY: all help venv synthetic data nordland gardenspoint test quick sweep bench bench-scale clean-results readme-coverage default-choice verify provenance
 .DEFAULT_GOAL := help
 
 help: ## this list
@@ -135,6 +135,15 @@ results/PROVENANCE.md: $(wildcard $(DATASET_RESULTS:%=%/*/manifest.json)) $(RESU
 
 provenance: | $(STAMP) ## results/PROVENANCE.md: each notebook's commit, environment hash, CPU, date and duration
 	$(BIN)/python -m greenloop.study.provenance --out results/PROVENANCE.md $(DATASET_RESULTS)
+
+# `make verify RESULTS=DIR`: did a rerun reproduce the committed tables? Every NN_name/*.csv of the
+# committed folder of DIR's dataset (REFERENCE, or REFERENCE/<dataset>) against DIR's, cell by cell,
+# timing columns aside, trained models' numbers within the committed seed spread (greenloop.study.verify).
+# Exits non-zero when a table differs or is missing from DIR.
+REFERENCE ?= results
+verify: | $(STAMP) ## did a rerun reproduce? RESULTS=DIR's tables vs the committed REFERENCE=results, outside timing
+	@test "$(origin RESULTS)" = "command line" || { echo "make verify RESULTS=DIR: name the rerun's results folder (compared with REFERENCE=$(REFERENCE))"; exit 2; }
+	$(BIN)/python -m greenloop.study.verify $(REFERENCE) $(RESULTS)
 
 default-choice: | $(STAMP) ## the named default's centring windows, cell shift and threshold, chosen on tuning queries -> results/default_choice/
 	$(BIN)/python -m greenloop.study.default_choice --nordland $(NORDLAND) --gardenspoint $(GARDENSPOINT) \
