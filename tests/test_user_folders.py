@@ -85,5 +85,7 @@ def test_a_drive_that_never_comes_back(tmp_path, tiny_sequence):
     manifest = json.loads((tmp_path / "r" / "07_feature_baselines" / "manifest.json").read_text())
     assert manifest["skipped"].startswith("07_feature_baselines scores loop closures")
     assert _make_params(f, "04_shift_robustness", tmp_path / "r")[1] is None           # scores no loops: runs
+    run05, skipped05 = _make_params(f, "05_dictionary_threshold", tmp_path / "r")      # counts closure events
+    assert run05 is None and "has no ground truth" in skipped05
     r = _detect(f)
     assert "# exclude 20 (fraction)" in r.stdout and "summary: 100 frames, 0 closures" in r.stdout

@@ -38,6 +38,7 @@ from greenloop.util.files import write_atomic
 
 DEFAULT_EXCLUDE = exclusion.DEFAULT_EXCLUDE   # every notebook's default exclusion window, frames
 LOOP_NOTEBOOKS = ("07", "08", "09", "10", "11", "12", "13")   # they score loops: none, nothing to score
+GROUND_TRUTH_NOTEBOOKS = ("05",) + LOOP_NOTEBOOKS   # they read a ground truth: without one, skipped
 PARAMS_NAME = "sequence_params.yaml"
 
 
@@ -188,15 +189,16 @@ def finer_step(notebook, folder, params: dict) -> tuple[int | None, str | None]:
 def skip_reason(notebook, folder, params: dict) -> str | None:
     """Why ``notebook`` cannot run on ``folder`` with ``params`` (one sentence), or None: a
     LOOP_NOTEBOOKS notebook needs at least one ground-truth loop pair at its exclude, at its
-    frame_step or a finer one (:func:`loop_step`)."""
+    frame_step or a finer one (:func:`loop_step`); a GROUND_TRUTH_NOTEBOOKS one (05 counts its
+    closure events against the ground truth) needs a ground truth."""
     stem = Path(notebook).stem
-    if stem[:2] not in LOOP_NOTEBOOKS:
+    if stem[:2] not in GROUND_TRUTH_NOTEBOOKS:
         return None
     if sequence.ground_truth_kind(folder) is None:
         return (f"{stem} scores loop closures, and {folder} has no ground truth (add ground_truth.csv, "
                 f"CameraTrajectory.txt or `ground_truth: aligned` in sequence.yaml, or run "
                 f"`python -m greenloop import-gt FILE`)")
-    if loop_step(folder, params) is not None:
+    if stem[:2] not in LOOP_NOTEBOOKS or loop_step(folder, params) is not None:
         return None
     exclude = int(params.get("exclude", DEFAULT_EXCLUDE))
     dist = loop_distances(folder)
