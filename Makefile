@@ -72,7 +72,9 @@ $(STAMP): environment.txt
 	@# the kernel does not copy low-level output (TensorFlow's C++ logs, progress bars on the real
 	@# stderr) into executed notebooks: it goes to the terminal that runs make (greenloop.util.progress)
 	@mkdir -p $(VENV)/etc/ipython
-	@echo "c.IPKernelApp.capture_fd_output = False" > $(VENV)/etc/ipython/ipython_kernel_config.py
+	@# and it does not warn, once per notebook, that papermill's local kernel talks over TCP
+	@printf 'c.IPKernelApp.capture_fd_output = False\nc.IPKernelApp.log_level = "ERROR"\n' \
+		> $(VENV)/etc/ipython/ipython_kernel_config.py
 	@touch $@
 
 synthetic: $(SYNTHETIC)/synthetic.json ## generate the embedded synthetic greenhouse sequence (2260 frames)

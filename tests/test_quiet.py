@@ -1,6 +1,6 @@
 """A quiet terminal (issue 48, point 6): make passes each notebook only the parameters it declares,
 papermill parses every notebook's parameters cell, and TensorFlow does not probe CUDA where there
-is no NVIDIA GPU. Nothing here runs a kernel."""
+is no NVIDIA GPU. One test runs a one-cell kernel: the one make runs is quiet too."""
 import json
 import logging
 import os
@@ -124,3 +124,15 @@ def test_tensorflow_through_greenloop_prints_no_cuda_error_on_a_cpu_machine():
     assert runs["greenloop"].returncode == 0 and runs["greenloop"].stdout.split() == ["2.0", "['CPU']"], runs["greenloop"]
     assert "cuInit" not in runs["greenloop"].stderr and "CUDA error" not in runs["greenloop"].stderr, runs["greenloop"].stderr
     assert "cuInit" in runs["plain"].stderr        # what it hides (else the setting is no longer needed)
+
+
+def test_the_kernel_make_runs_prints_nothing_of_its_own(tmp_path):
+    """papermill's kernel (the venv's config that `make venv` writes) does not print its TCP
+    transport warning once per notebook; the notebook's own output still reaches the notebook."""
+    nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell("print('hello from the cell')")])
+    nbformat.write(nb, tmp_path / "in.ipynb")
+    r = subprocess.run([sys.executable, "-m", "papermill", str(tmp_path / "in.ipynb"), str(tmp_path / "out.ipynb"),
+                        "-k", "greenloop", "--no-progress-bar"], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert "WARNING" not in r.stderr and "encryption" not in r.stderr, r.stderr
+    assert "hello from the cell" in (tmp_path / "out.ipynb").read_text()
