@@ -22,6 +22,9 @@ from greenloop.util.files import write_atomic
 MODES = ("loop closure", "place recognition")
 METRICS = ["R@1_%", "R@5_%", "AUC-PR_%", "R@100P_%", "R@95P_%"]
 SPREADS = ["R@1_lo_%", "R@1_hi_%", "AUC-PR_lo_%", "AUC-PR_hi_%"]
+COMPARED = ("R@1", "AUC-PR")                # the metrics the paired comparisons judge (:func:`paired`)
+N_BOOT, SEED = 200, 0                       # the bootstrap's resamples and seed (:func:`resamples`), every interval
+COMPARISON_COLUMNS = ["a", "b", "metric", "difference", "lo", "hi", "resolved", "queries"]
 COUNTS = ["queries", "revisit_queries"]      # what each row's metrics rest on (:func:`query_counts`)
 COLUMNS = (["method", "mode", "weights", "knobs"] + COUNTS + METRICS + SPREADS +
            ["pair_AP_%", "fps_median", "fps_min", "fps_max", "decode_ms", "bytes_per_stored_frame", "threshold",
@@ -98,26 +101,98 @@ def metric_rows(S, GT, exclude: int, queries, reference=None, block: int = 10) -
     return rows
 
 
-def spread(S, GT, exclude: int, queries, reference=None, block: int = 10, n_boot: int = 200, seed: int = 0) -> dict:
+def spread(S, GT, exclude: int, queries, reference=None, block: int = 10, n_boot: int = N_BOOT,
+           seed: int = SEED) -> dict:
     """95 % block-bootstrap intervals of R@1 and AUC-PR over the queries, in %.
 
-    The per-query matches (``evaluate.best_matches``) are cut into runs of ``block`` consecutive
-    queries (neighbouring queries see nearly the same frames, so they are resampled together),
-    ``n_boot`` resamples of as many runs drawn with replacement, each scored by
-    ``evaluate.query_metrics``; a resample without a revisit query is drawn again. Returns
-    {"R@1_lo_%", "R@1_hi_%", "AUC-PR_lo_%", "AUC-PR_hi_%"} (2.5th and 97.5th percentiles, in %, unrounded).
+    The per-query matches (``evaluate.best_matches``) are resampled by :func:`resamples` (runs of
+    ``block`` consecutive queries: neighbouring queries see nearly the same frames) and each
+    resample scored by ``evaluate.query_metrics`` (:func:`boot_metrics`). Returns {"R@1_lo_%",
+    "R@1_hi_%", "AUC-PR_lo_%", "AUC-PR_hi_%"} (2.5th and 97.5th percentiles, in %, unrounded).
     """
-    m = evaluate.best_matches(S, GT, exclude, queries, reference, k=1)
-    runs = [np.arange(a, min(a + int(block), len(m.query))) for a in range(0, len(m.query), int(block))]
-    rng, r1, auc = np.random.default_rng(seed), [], []
-    while len(r1) < n_boot:
-        idx = np.concatenate([runs[i] for i in rng.integers(0, len(runs), len(runs))])
-        if not m.has_partner[idx].any():
-            continue
-        q = evaluate.query_metrics(evaluate.Matches(*(a[idx] for a in m[:6]), m.k), ks=(1,))
-        r1.append(q["R@1"]), auc.append(q["AUC-PR"])
-    lo, hi = np.percentile([r1, auc], [2.5, 97.5], axis=1)
+    b = boot_metrics(evaluate.best_matches(S, GT, exclude, queries, reference, k=1), block, n_boot, seed)
+    lo, hi = np.percentile(b, [2.5, 97.5], axis=0)
     return {"R@1_lo_%": 100 * lo[0], "R@1_hi_%": 100 * hi[0], "AUC-PR_lo_%": 100 * lo[1], "AUC-PR_hi_%": 100 * hi[1]}
+
+
+def resamples(has_partner, block: int = 10, n_boot: int = N_BOOT, seed: int = SEED):
+    """The block bootstrap's resamples of Q queries, the one definition :func:`spread` and
+    :func:`paired` share. has_partner: (Q,) bool (``Matches.has_partner``). The queries are cut
+    into runs of ``block`` consecutive ones; each resample draws as many runs with replacement
+    (``np.random.default_rng(seed)``); one without a query with a partner is drawn again.
+    Yields ``n_boot`` int index arrays into the Q queries (about Q long: the last run may be short)."""
+    hp = np.asarray(has_partner, dtype=bool)
+    runs = [np.arange(a, min(a + int(block), len(hp))) for a in range(0, len(hp), int(block))]
+    rng, kept = np.random.default_rng(seed), 0
+    while kept < n_boot:
+        idx = np.concatenate([runs[i] for i in rng.integers(0, len(runs), len(runs))])
+        if hp[idx].any():
+            kept += 1
+            yield idx
+
+
+def boot_metrics(m, block: int = 10, n_boot: int = N_BOOT, seed: int = SEED) -> np.ndarray:
+    """(n_boot, 2) float: R@1 and AUC-PR (fractions, :data:`COMPARED` order) of each of
+    :func:`resamples` of the (Q,) matches ``m`` (``evaluate.Matches``), by ``evaluate.query_metrics``."""
+    out = []
+    for idx in resamples(m.has_partner, block, n_boot, seed):
+        q = evaluate.query_metrics(evaluate.Matches(*(a[idx] for a in m[:6]), m.k), ks=(1,))
+        out.append([q[k] for k in COMPARED])
+    return np.array(out, dtype=np.float64).reshape(-1, len(COMPARED))
+
+
+def resolved(lo, hi) -> bool:
+    """A difference's interval [lo, hi] excludes 0."""
+    return bool(lo > 0 or hi < 0)
+
+
+def paired(a, b, block: int = 10, n_boot: int = N_BOOT, seed: int = SEED) -> dict:
+    """Paired 95 % block bootstrap of method a minus method b over the same queries.
+
+    a, b: ``evaluate.Matches`` of two methods on the same (Q,) queries (``best_matches`` with the
+    same GT, exclude, queries, reference); both are scored on the SAME resamples (:func:`resamples`,
+    as :func:`spread`: block, n_boot, seed). Returns {metric: {"difference": a - b on every query,
+    "lo", "hi": 2.5th / 97.5th percentiles of the resampled differences, "resolved": [lo, hi]
+    excludes 0}} for each metric of :data:`COMPARED`, in percentage points (unrounded)."""
+    if not (np.array_equal(a.query, b.query) and np.array_equal(a.has_partner, b.has_partner)):
+        raise ValueError("a paired comparison needs both methods' matches on the same queries and ground truth")
+    return _differences(a, b, boot_metrics(a, block, n_boot, seed), boot_metrics(b, block, n_boot, seed))
+
+
+def _differences(a, b, boot_a, boot_b) -> dict:
+    """:func:`paired` from the matches and their (n_boot, 2) :func:`boot_metrics` on the same resamples."""
+    qa, qb = (evaluate.query_metrics(m, ks=(1,)) for m in (a, b))
+    lo, hi = np.percentile(100 * (boot_a - boot_b), [2.5, 97.5], axis=0)
+    return {k: {"difference": 100 * (qa[k] - qb[k]), "lo": float(lo[i]), "hi": float(hi[i]),
+                "resolved": resolved(lo[i], hi[i])} for i, k in enumerate(COMPARED)}
+
+
+def comparison_pairs(board: pd.DataFrame, names) -> list[tuple]:
+    """(a, b) for each of ``names`` with a loop-closure R@1 on the board against every other
+    loop-closure row with one (chance and the decision-only rows have none), in board order."""
+    lc = board[(board["mode"] == "loop closure") & ~board["method"].str.startswith("chance")].dropna(subset=["R@1_%"])
+    rows = list(dict.fromkeys(lc["method"]))
+    return [(a, b) for a in names if a in rows for b in rows if b != a]
+
+
+def comparisons(S: dict, pairs, GT, exclude: int, queries, block: int = 10, n_boot: int = N_BOOT,
+                seed: int = SEED) -> pd.DataFrame:
+    """The paired comparisons (:func:`paired`, loop closure) of each (a, b) in ``pairs`` as they are
+    written and judged: one row per pair and metric of :data:`COMPARED`, :data:`COMPARISON_COLUMNS`:
+    difference, lo, hi (a minus b, percentage points, to 0.01), resolved (the written [lo, hi]
+    excludes 0) and queries (Q, the queries both are scored on). S: {method: (M, M) score
+    matrix}; GT, exclude, queries, block, n_boot, seed: as :func:`spread` (each method is
+    bootstrapped once)."""
+    names = list(dict.fromkeys(n for p in pairs for n in p))
+    m = {n: evaluate.best_matches(S[n], GT, exclude, queries, k=1) for n in names}
+    boot = {n: boot_metrics(m[n], block, n_boot, seed) for n in names}
+    rows = []
+    for a, b in pairs:
+        for metric, d in _differences(m[a], m[b], boot[a], boot[b]).items():
+            lo, hi = round(d["lo"], 2), round(d["hi"], 2)
+            rows.append({"a": a, "b": b, "metric": metric, "difference": round(d["difference"], 2), "lo": lo,
+                         "hi": hi, "resolved": resolved(lo, hi), "queries": len(m[a].query)})
+    return pd.DataFrame(rows, columns=COMPARISON_COLUMNS)
 
 
 def chance_rows(GT, exclude: int, queries, reference=None, scored_on: str = "") -> list[dict]:
