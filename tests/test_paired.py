@@ -156,3 +156,35 @@ def test_the_comparisons_table_is_the_paired_differences_as_written(revisit):
         assert r.difference == pytest.approx(row[r.a, f"{r.metric}_%"] - row[r.b, f"{r.metric}_%"], abs=0.006)
     assert (t.queries == lb.query_counts(GT, ex, q)["queries"]).all()
     assert t.set_index(["b", "metric"]).loc[("noisy", "R@1"), "resolved"]
+
+
+def _table(rows):
+    return pd.DataFrame([dict(zip(lb.COMPARISON_COLUMNS, r + (50,))) for r in rows])
+
+
+def test_the_statement_reads_higher_and_not_resolved_from_the_table_only():
+    """The rows' intervals overlap (greenloop-seq [85, 95], pixels [60, 92]) but the table says
+    resolved: "higher"; they separate for AUC-PR but the table says not resolved: "not resolved"."""
+    spread = {"R@1_lo_%": 85.0, "R@1_hi_%": 95.0, "AUC-PR_lo_%": 70.0, "AUC-PR_hi_%": 90.0}
+    board = lb.table([
+        {"method": "greenloop-seq", "mode": "loop closure", "R@1_%": 90.0, "AUC-PR_%": 80.0, "R@100P_%": 40.0, **spread},
+        {"method": "pixels (single frame)", "mode": "loop closure", "R@1_%": 70.0, "AUC-PR_%": 50.0, "R@100P_%": 0.0,
+         "R@1_lo_%": 60.0, "R@1_hi_%": 92.0, "AUC-PR_lo_%": 40.0, "AUC-PR_hi_%": 60.0}])
+    t = _table([("greenloop-seq", "pixels (single frame)", "R@1", 20.0, 2.5, 31.0, True),
+                ("greenloop-seq", "pixels (single frame)", "AUC-PR", 30.0, -1.0, 45.0, False)])
+    s = lb.statement(board, t, ["greenloop-seq"])
+    assert "R@1 higher than it (difference 20.00 [2.50, 31.00])" in s
+    assert "AUC-PR not resolved (difference 30.00 [-1.00, 45.00])" in s
+    assert "R@1 above 1, below 0, not resolved against 0 of the 1 other rows" in s
+    assert lb.targets(board, ["greenloop-seq"], t)["greenloop-seq"]["highest_R@1"] is True
+    assert lb.targets(board, ["greenloop-seq"], t)["greenloop-seq"]["highest_AUC-PR"] is False
+    assert lb.targets(board, ["greenloop-seq"])["greenloop-seq"]["highest_AUC-PR"] is True     # rows alone: intervals
+    t.loc[0, ["difference", "lo", "hi"]] = [-20.0, -31.0, -2.5]
+    assert "R@1 lower than it (difference -20.00 [-31.00, -2.50])" in lb.statement(board, t, ["greenloop-seq"])
+    assert "R@1 not compared with it" in lb.statement(board, t.iloc[1:], ["greenloop-seq"])
+
+
+def test_write_comparisons_writes_one_table_as_csv_and_markdown(tmp_path):
+    t = _table([("a", "b", "R@1", 1.5, -0.5, 3.0, False)]).assign(protocol="leaderboard")
+    csv, md = lb.write_comparisons(t, tmp_path, "the note")
+    assert pd.read_csv(csv).equals(t) and "| a " in md.read_text() and md.read_text().rstrip().endswith("the note")

@@ -304,22 +304,60 @@ def write(board: pd.DataFrame, out_dir, results_dir, title: str, note: str):
 
 
 def _compare(a, b, lo: str, hi: str, word: tuple) -> str:
-    """'higher'/'lower' (word) when the [lo, hi] ranges of rows a and b do not overlap, else
-    'not resolved against'."""
+    """'faster than'/'slower than' (word) when the [lo, hi] ranges of rows a and b (frames/s [min,
+    max] over the timing repeats) do not overlap, else 'not resolved against'."""
     if pd.isna(a[lo]) or pd.isna(b[lo]):
         return "not compared with"
     return word[0] if a[lo] > b[hi] else word[1] if a[hi] < b[lo] else "not resolved against"
 
 
-def statement(board: pd.DataFrame, seq_names=("greenloop-seq", "greenloop-seq-fast")) -> str:
-    """What the table holds about greenloop-seq, in sentences with the numbers and spreads
-    (loop closure): its R@1 and AUC-PR with their bootstrap intervals against the row with the
-    highest R@1 among the others (chance aside) and against SeqSLAM (published), frames/s as median
-    [min, max]; "higher"/"faster" only where the ranges do not overlap, else "not resolved"."""
+def _pick(comparisons: pd.DataFrame, a: str, metric: str) -> pd.DataFrame:
+    """The rows of the comparisons table (:func:`comparisons`) of ``a`` against any b on ``metric``."""
+    return comparisons[(comparisons["a"] == a) & (comparisons["metric"] == metric)]
+
+
+def paired_text(comparisons: pd.DataFrame, a: str, b: str, metric: str) -> str:
+    """What the comparisons table says of a against b on ``metric``: "higher than it" / "lower than
+    it" where its row is resolved (its interval above / below 0), else "not resolved", each with
+    "(difference X [lo, hi])" in points; "not compared with it" where the table has no such row."""
+    c = _pick(comparisons, a, metric)
+    c = c[c["b"] == b]
+    if not len(c):
+        return "not compared with it"
+    c = c.iloc[0]
+    diff = f"(difference {c['difference']:.2f} [{c['lo']:.2f}, {c['hi']:.2f}])"
+    if not c["resolved"]:
+        return f"not resolved {diff}"
+    return f"{'higher' if c['lo'] > 0 else 'lower'} than it {diff}"
+
+
+def _tally(comparisons: pd.DataFrame, a: str) -> str:
+    """'R@1 above k, below j, not resolved against r of the n other rows; AUC-PR ...' from the table."""
+    out = []
+    for metric in COMPARED:
+        c = _pick(comparisons, a, metric)
+        up, down = int((c["resolved"] & (c["lo"] > 0)).sum()), int((c["resolved"] & (c["hi"] < 0)).sum())
+        out.append(f"{metric} above {up}, below {down}, not resolved against {len(c) - up - down} of the "
+                   f"{len(c)} other rows")
+    return "; ".join(out)
+
+
+def _rivals(others: pd.DataFrame) -> list[str]:
+    """The rows the statement sets a greenloop-seq row beside (those present, in this order): the
+    highest R@1 of ``others``, the highest single-frame row, SeqSLAM published and tuned."""
+    tops = [t["R@1_%"].idxmax() for t in (others, others[others.index.str.endswith("(single frame)")]) if len(t)]
+    return list(dict.fromkeys(tops + [n for n in ("SeqSLAM (published)", "SeqSLAM (tuned)") if n in others.index]))
+
+
+def statement(board: pd.DataFrame, comparisons: pd.DataFrame, seq_names=("greenloop-seq", "greenloop-seq-fast")) -> str:
+    """What the table holds about the greenloop-seq rows, in sentences with the numbers (loop
+    closure): R@1 and AUC-PR with their bootstrap intervals, frames/s as median [min, max]; how
+    many other rows each is resolved above / below (:func:`_tally`); against each of
+    :func:`_rivals` (chance and the greenloop-seq rows aside) "higher"/"lower" only where the
+    comparisons table (:func:`comparisons`, paired differences in points) says resolved, else "not
+    resolved (difference X [lo, hi])"; speed "faster" only where the [min, max] ranges do not overlap."""
     lc = board[board["mode"] == "loop closure"].set_index("method")
     others = lc[~lc.index.str.startswith(("greenloop-seq", "chance"))].dropna(subset=["R@1_%"])
-    rivals = list(dict.fromkeys(([others["R@1_%"].idxmax()] if len(others) else [])
-                                + (["SeqSLAM (published)"] if "SeqSLAM (published)" in others.index else [])))
     out = []
     for n in (s for s in seq_names if s in lc.index and pd.notna(lc.loc[s, "R@1_%"])):
         r = lc.loc[n]
@@ -327,11 +365,12 @@ def statement(board: pd.DataFrame, seq_names=("greenloop-seq", "greenloop-seq-fa
                 f"[{r['AUC-PR_lo_%']:.2f}, {r['AUC-PR_hi_%']:.2f}], R@100P {r['R@100P_%']:.2f} %")
         if pd.notna(r["fps_median"]):
             line += f", {r['fps_median']:.0f} frames/s [{r['fps_min']:.0f}, {r['fps_max']:.0f}]"
-        for b_name in rivals:
+        line += f"; paired (comparisons): {_tally(comparisons, n)}"
+        for b_name in _rivals(others):
             b = others.loc[b_name]
-            line += (f"; vs {b_name} (R@1 {b['R@1_%']:.2f} % [{b['R@1_lo_%']:.2f}, {b['R@1_hi_%']:.2f}], AUC-PR "
-                     f"{b['AUC-PR_%']:.2f} %): R@1 {_compare(r, b, 'R@1_lo_%', 'R@1_hi_%', ('higher than', 'lower than'))} it, "
-                     f"AUC-PR {_compare(r, b, 'AUC-PR_lo_%', 'AUC-PR_hi_%', ('higher than', 'lower than'))} it")
+            line += (f"; vs {b_name} (R@1 {b['R@1_%']:.2f} %, AUC-PR {b['AUC-PR_%']:.2f} %; paired differences in "
+                     f"points): R@1 {paired_text(comparisons, n, b_name, 'R@1')}, "
+                     f"AUC-PR {paired_text(comparisons, n, b_name, 'AUC-PR')}")
             if pd.notna(r["fps_median"]) and pd.notna(b["fps_median"]):
                 line += (f", speed {_compare(r, b, 'fps_min', 'fps_max', ('faster than', 'slower than'))} it "
                          f"({b['fps_median']:.0f} frames/s [{b['fps_min']:.0f}, {b['fps_max']:.0f}])")
@@ -341,6 +380,17 @@ def statement(board: pd.DataFrame, seq_names=("greenloop-seq", "greenloop-seq-fa
         out.append(f"chance: R@1 {c['R@1_%']:.2f} %, AUC-PR {c['AUC-PR_%']:.2f} %")
     return "\n".join(out)
 
+
+def write_comparisons(table: pd.DataFrame, out_dir, note: str) -> tuple:
+    """Write ``out_dir/comparisons.csv`` and ``.md`` (titled, with ``note``) from ONE table (the
+    :func:`comparisons` rows as written, any extra columns first). Returns (csv path, md path)."""
+    out_dir = Path(out_dir)
+    paths = (out_dir / "comparisons.csv", out_dir / "comparisons.md")
+    md = ("### Paired comparisons: a minus b on the same queries (percentage points)\n\n"
+          + table.to_markdown(index=False) + f"\n\n{note}\n")
+    write_atomic(paths[0], lambda p: p.write_text(table.to_csv(index=False)))
+    write_atomic(paths[1], lambda p: p.write_text(md))
+    return paths
 
 
 def timing_window(evalq, n_frames: int):
@@ -370,10 +420,11 @@ def stream_checks(names, dets: dict, knobs: dict, descriptors: dict, S: dict, GT
             for n in names if n in dets and dets[n].threshold is not None}
 
 
-def targets(board: pd.DataFrame, names) -> dict:
-    """{name: {"highest_R@1", "highest_AUC-PR" (its 95 % interval wholly above every other row's but
-    chance and greenloop-seq's, loop closure: ``study.targets.separated``), "fps_min_at_least_920" (the
-    slowest repeat reaches the main paper's 920)}}."""
+def targets(board: pd.DataFrame, names, comparisons: pd.DataFrame | None = None) -> dict:
+    """{name: {"highest_R@1", "highest_AUC-PR" (above every other row but chance and greenloop-seq's,
+    loop closure: with ``comparisons`` (:func:`comparisons`) every paired difference resolved above 0,
+    ``study.targets.paired_ahead``; without, its 95 % interval wholly above theirs,
+    ``study.targets.separated``), "fps_min_at_least_920" (the slowest repeat reaches the main paper's 920)}}."""
     lc = board[board["mode"] == "loop closure"].dropna(subset=["R@1_%"])
     out = {}
     for n in names:
@@ -383,8 +434,12 @@ def targets(board: pd.DataFrame, names) -> dict:
         r, rest = r.iloc[0], lc[(lc.method != n) & ~lc.method.str.startswith(("greenloop-seq", "chance"))]
         above = {}
         for key in ("R@1_%", "AUC-PR_%"):
-            lo, top = goals.separated(r.to_dict(), rest.to_dict("records"), key)
-            above[f"highest_{key[:-2]}"] = bool(lo is not None and top is not None and lo > top)
+            if comparisons is not None:
+                ok = goals.paired_ahead(comparisons, n, rest.to_dict("records"), key)[1]
+            else:
+                lo, top = goals.separated(r.to_dict(), rest.to_dict("records"), key)
+                ok = lo is not None and top is not None and lo > top
+            above[f"highest_{key[:-2]}"] = bool(ok)
         out[n] = {**above, "fps_min_at_least_920": bool(pd.notna(r["fps_min"]) and r["fps_min"] >= 920)}
     return out
 
@@ -418,17 +473,20 @@ def dictionary_row(name: str, tau: int, n_train: int, closures: dict, op: dict, 
             "scored_on": f"{scored_on}; decisions only (no score): pair precision {op['precision']:.3f}, recall {op['recall']:.3f}"}
 
 
-def targets_table(board: pd.DataFrame, dataset, frame_step: int) -> pd.DataFrame:
+def targets_table(board: pd.DataFrame, dataset, frame_step: int,
+                  comparisons: pd.DataFrame | None = None) -> pd.DataFrame:
     """The detector's targets for each named configuration on this board (``seqmatch.NAMED``: the named
     default always, the others where the board has their row), one row each: configuration, target,
     measured, required, met (``study.targets.detector_targets``, with the configuration's own seq_len;
-    SeqSLAM = the published and the tuned row, each judged). A dataset that is none of the targets'
-    gives one row saying so. A target measured on per-query rows gets their COUNTS (:func:`_rests_on`)."""
+    SeqSLAM = the published and the tuned row, each judged; "above" and "highest" from ``comparisons``,
+    :func:`comparisons`, where given). A dataset that is none of the targets' gives one row saying so.
+    A target measured on per-query rows gets their COUNTS (:func:`_rests_on`)."""
     names = [n for n in seqmatch.NAMED if n == seqmatch.DEFAULT_NAME or n in set(board["method"])]
     try:
         rows = [dict(configuration=n, **r, **_rests_on(board, n, r["target"])) for n in names
                 for r in goals.detector_targets(board, str(dataset), n, ("SeqSLAM (published)", "SeqSLAM (tuned)"),
-                                                seq_len=seqmatch.NAMED[n][0]["seq_len"], frame_step=frame_step)]
+                                                seq_len=seqmatch.NAMED[n][0]["seq_len"], frame_step=frame_step,
+                                                comparisons=comparisons)]
     except ValueError as e:
         return pd.DataFrame([{"configuration": None, "target": "the detector's targets", "measured": None,
                               "required": None, "met": None, "note": f"not judged: {e}"}])
