@@ -148,18 +148,31 @@ def _board():
         {"method": "chance (random scores)", "mode": "loop closure", "R@1_%": 5.0, "AUC-PR_%": 1.0, "R@100P_%": 0.0}])
 
 
+def _comparisons(resolved_r1=True):
+    """The paired comparisons of _board's greenloop-seq with its two other rows (as lb.comparisons writes them)."""
+    rows = [("pixels (single frame)", "R@1", 20.0, 12.0, 28.0, True), ("pixels (single frame)", "AUC-PR", -5.0, -12.0, 2.0, False),
+            ("SeqSLAM (published)", "R@1", 40.0, 30.0, 50.0, resolved_r1), ("SeqSLAM (published)", "AUC-PR", 50.0, 40.0, 60.0, True)]
+    return pd.DataFrame([dict(zip(lb.COMPARISON_COLUMNS, ("greenloop-seq",) + r + (60,))) for r in rows])
+
+
 def test_table_targets_and_statement():
-    b = _board()
+    b, c = _board(), _comparisons()
     assert list(b.columns) == lb.COLUMNS
-    t = lb.targets(b, ["greenloop-seq"])
+    t = lb.targets(b, ["greenloop-seq"], c)
     assert t == {"greenloop-seq": {"highest_R@1": True, "highest_AUC-PR": False, "fps_min_at_least_920": True}}
-    s = lb.statement(b, ["greenloop-seq"])
-    assert "R@1 90.00 % [85.00, 95.00]" in s and "vs pixels (single frame) (R@1 70.00 % [60.00, 80.00]" in s
-    assert "R@1 higher than it, AUC-PR not resolved against it, speed not resolved against it (900 frames/s" in s
+    s = lb.statement(b, c, ["greenloop-seq"])
+    assert "R@1 90.00 % [85.00, 95.00]" in s and "vs pixels (single frame) (R@1 70.00 %, AUC-PR 85.00 %;" in s
+    assert ("R@1 higher than it (difference 20.00 [12.00, 28.00]), AUC-PR not resolved (difference -5.00 [-12.00, 2.00]), "
+            "speed not resolved against it (900 frames/s") in s
     assert "vs SeqSLAM (published)" in s and "speed faster than it (100 frames/s" in s and "chance: R@1 5.00 %" in s
-    b.loc[1, "fps_max"], b.loc[1, "R@1_hi_%"] = 900.0, 86.0
-    s = lb.statement(b, ["greenloop-seq"])
-    assert "R@1 not resolved against it" in s and "speed faster than it (900 frames/s" in s
+    assert "R@1 above 2, below 0, not resolved against 0 of the 2 other rows; AUC-PR above 1, below 0" in s
+    b.loc[1, "fps_max"], b.loc[1, "R@1_hi_%"] = 900.0, 86.0        # the rows' R@1 intervals now overlap: the table rules
+    s = lb.statement(b, c, ["greenloop-seq"])
+    assert "R@1 higher than it (difference 20.00" in s and "speed faster than it (900 frames/s" in s
+    c.loc[0, "resolved"] = False
+    assert "R@1 not resolved (difference 20.00 [12.00, 28.00])" in lb.statement(b, c, ["greenloop-seq"])
+    assert lb.targets(b, ["greenloop-seq"], c)["greenloop-seq"]["highest_R@1"] is False
+    assert lb.targets(b, ["greenloop-seq"], c[c.b != "pixels (single frame)"])["greenloop-seq"]["highest_R@1"] is False
 
 
 def test_spread_brackets_the_metric_and_widens_with_fewer_queries(revisit):

@@ -526,6 +526,23 @@ def _check_13_counts(folder, t):
     assert len(counted) and (counted.queries == lc.queries).all()
 
 
+def _check_13_comparisons(folder, lc):
+    """comparisons.csv: greenloop-seq against every other scored loop-closure row, each metric once, the
+    difference the rows' (to rounding), resolved exactly where the written interval excludes 0, on the
+    rows' queries; the Markdown beside it."""
+    from greenloop.study import leaderboard
+    c = pd.read_csv(folder / "comparisons.csv")
+    assert list(c.columns) == ["protocol"] + leaderboard.COMPARISON_COLUMNS and (folder / "comparisons.md").is_file()
+    c = c[(c.protocol == "leaderboard") & (c.a == "greenloop-seq")]
+    scored = set(lc.dropna(subset=["R@1_%"]).index) - {"greenloop-seq", "chance (random scores)"}
+    assert set(c.b) == scored and len(c) == len(scored) * len(leaderboard.COMPARED)
+    assert (c.resolved == ((c.lo > 0) | (c.hi < 0))).all() and (c.lo <= c.hi).all()
+    assert (c.queries == lc.loc["greenloop-seq", "queries"]).all()
+    for _, r in c.iterrows():
+        want = lc.loc[r.a, f"{r.metric}_%"] - lc.loc[r.b, f"{r.metric}_%"]
+        assert abs(r.difference - want) <= 0.011, (r.b, r.metric, r.difference, want)
+
+
 def _check_13(folder):
     from greenloop.study import leaderboard
     csv = folder / "leaderboard.csv"
@@ -557,6 +574,7 @@ def _check_13(folder):
         assert pr.loc["greenloop-seq", "R@1_%"] > pr.loc["chance (random scores)", "R@1_%"]
     assert t.scored_on.str.startswith("evaluation queries").all()
     _check_13_counts(folder, t)
+    _check_13_comparisons(folder, lc)
     s = json.loads((folder / "summary.json").read_text())
     start = s["timing_window"][0]
     assert start > 0 and s["dictionary_trained_on_frames"] < 200                  # trained before the evaluation part

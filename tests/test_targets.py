@@ -76,3 +76,31 @@ def test_nordland_judges_every_seqslam_row_named():
     assert m["R@1 above SeqSLAM (tuned) (88.0 %)"] is False                # 90 > 88, but the intervals overlap
     absent = {r["target"].split(":")[0]: r["met"] for r in detector_targets(rows[:1], "nordland", seqslam=("SeqSLAM (tuned)",))}
     assert absent["R@1 above SeqSLAM (tuned) (not measured %)"] is None
+
+
+def _paired(rows):
+    """A comparisons table (study.leaderboard.comparisons' columns) of greenloop-seq against each b."""
+    return pd.DataFrame([{"a": "greenloop-seq", "b": b, "metric": m, "difference": d, "lo": lo, "hi": hi,
+                          "resolved": lo > 0 or hi < 0, "queries": 100} for b, m, d, lo, hi in rows])
+
+
+def test_with_comparisons_above_and_highest_are_the_paired_differences_not_the_intervals():
+    """SeqSLAM (tuned)'s interval overlaps greenloop-seq's, but their paired difference is resolved:
+    above; SeqSLAM (published)'s intervals separate, but the table says not resolved: not above."""
+    rows = [{"method": "greenloop-seq", "mode": "loop closure", **_spread(90.0, 4.0)},
+            {"method": "SeqSLAM (published)", "mode": "loop closure", **_spread(70.0, 4.0)},
+            {"method": "SeqSLAM (tuned)", "mode": "loop closure", **_spread(88.0, 4.0)}]
+    comp = _paired([("SeqSLAM (published)", "R@1", 20.0, -0.5, 40.0), ("SeqSLAM (tuned)", "R@1", 2.0, 0.5, 3.5)])
+    out = {r["target"].split(":")[0]: r for r in
+           detector_targets(rows, "nordland", seqslam=("SeqSLAM (published)", "SeqSLAM (tuned)"), comparisons=comp)}
+    pub, tuned = out["R@1 above SeqSLAM (published) (70.0 %)"], out["R@1 above SeqSLAM (tuned) (88.0 %)"]
+    assert pub["met"] is False and pub["measured"] == -0.5
+    assert tuned["met"] is True and tuned["measured"] == 0.5 and tuned["required"] == "> 0, each resolved"
+    absent = detector_targets(rows, "nordland", seqslam=("SeqSLAM (tuned)",), comparisons=comp.iloc[:1])
+    assert [r["met"] for r in absent if r["target"].startswith("R@1 above")] == [None]     # no such row: not measured
+    comp = _paired([("SeqSLAM (published)", "R@1", 20.0, 10.0, 30.0), ("SeqSLAM (tuned)", "R@1", 2.0, 0.5, 3.5),
+                    ("SeqSLAM (published)", "AUC-PR", 20.0, 10.0, 30.0), ("SeqSLAM (tuned)", "AUC-PR", 2.0, -1.0, 4.0)])
+    high = {r["target"].split(",")[0]: r for r in detector_targets(rows, "synthetic", comparisons=comp)}
+    assert high["highest R@1 of every method"]["met"] is True and high["highest R@1 of every method"]["measured"] == 0.5
+    assert high["highest AUC-PR of every method"]["met"] is False                 # not resolved against the tuned row
+    assert [r["met"] for r in detector_targets(rows, "synthetic")[:2]] == [False, False]   # rows alone: overlap

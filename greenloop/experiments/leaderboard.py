@@ -81,11 +81,14 @@ class Timed(NamedTuple):
 class Board(NamedTuple):
     """board: the leaderboard (``study.leaderboard.COLUMNS``, unrounded; ``leaderboard.rounded`` is
     its written form); target: ``leaderboard.targets``; targets: the targets table; statement:
-    the printed sentences (these three judge the written, rounded numbers)."""
+    the printed sentences (these three judge the written, rounded numbers, and read "above",
+    "higher" and "highest" from comparisons only); comparisons: the paired comparisons as written
+    (``leaderboard.comparisons``: each greenloop-seq row against every other scored row, loop closure)."""
     board: pd.DataFrame
     target: dict
     targets: pd.DataFrame
     statement: str
+    comparisons: pd.DataFrame
 
 
 MIN_REVISIT_QUERIES = 50    # evaluation revisit queries a leaderboard must rest on where the recording has them
@@ -235,7 +238,9 @@ def stream_and_time(data: Data, tuned: Tuned, decisions=(), registry=None, only=
 
 def board(data: Data, split: Split, tuned: Tuned, timed: Timed, decisions=()) -> Board:
     """The leaderboard (evaluation queries only): every method's rows, chance, the decisions' rows;
-    the targets of the greenloop-seq rows and the named default's targets table; the statement."""
+    the paired comparisons of the greenloop-seq rows (SEQ_ROWS) with every other scored row (in the
+    bootstrap runs of the rows' intervals, ``split.gap`` queries); their targets, the named
+    configurations' targets table and the statement, judged from those comparisons."""
     meta = lb.meta(tuned.knobs, timed.dets, data.infos, tuned.texts)
     rows = lb.method_rows(tuned.S, meta, data.GT, data.exclude, data.evalq, split.reference, timed.thresholds,
                           timed.speed.to_dict("index"), data.frame_step, split.scored_on, split.gap)
@@ -246,8 +251,9 @@ def board(data: Data, split: Split, tuned: Tuned, timed: Timed, decisions=()) ->
              for d in decisions]
     table = lb.table(rows)
     written = lb.rounded(table)
-    return Board(table, lb.targets(written, list(SEQ_ROWS)), lb.targets_table(written, data.dataset, data.frame_step),
-                 lb.statement(written, SEQ_ROWS))
+    comp = lb.comparisons(tuned.S, lb.comparison_pairs(written, SEQ_ROWS), data.GT, data.exclude, data.evalq, split.gap)
+    return Board(table, lb.targets(written, list(SEQ_ROWS), comp), lb.targets_table(written, data.dataset,
+                 data.frame_step, comp), lb.statement(written, comp, SEQ_ROWS), comp)
 
 
 def _every_frame(data: Data, registry: dict) -> Data:
@@ -357,6 +363,24 @@ def protocol_tables(result: Board, runs: dict) -> tuple[pd.DataFrame, pd.DataFra
             pd.concat(rows, ignore_index=True)[cols] if rows else pd.DataFrame(columns=cols))
 
 
+COMPARISONS_NOTE = ("leaderboard.comparisons: a minus b (percentage points) on the evaluation queries both are scored "
+                    "on (queries), loop closure; lo, hi: the 95 % paired block bootstrap, both methods scored on the "
+                    "same resamples as the leaderboard's *_lo_% / *_hi_% intervals (leaderboard.resamples: the same "
+                    f"runs of consecutive queries, {lb.N_BOOT} resamples, seed {lb.SEED}), each resample's R@1 and "
+                    "AUC-PR recomputed by evaluate.query_metrics; resolved: the written [lo, hi] excludes 0. The "
+                    "statement and the targets call a row higher, above or highest only where these rows are "
+                    "resolved. protocol: the leaderboard or the stream a target names.")
+
+
+def write_comparisons(result: Board, runs: dict, out_dir):
+    """``comparisons.csv`` and ``.md`` in ``out_dir``: the leaderboard's paired comparisons and every
+    protocol run's ({label: Board}, :func:`run_protocol`), with a ``protocol`` column first
+    ("leaderboard" for this run's own). Returns (csv path, md path)."""
+    table = pd.concat([c.comparisons.assign(protocol=k) for k, c in [("leaderboard", result), *runs.items()]],
+                      ignore_index=True)
+    return lb.write_comparisons(table[["protocol"] + lb.COMPARISON_COLUMNS], out_dir, COMPARISONS_NOTE)
+
+
 def figure_pr(data: Data, tuned: Tuned):
     """Per-query PR curves of every scored method (loop closure, evaluation queries): a Figure."""
     curves = lb.pr_curves(tuned.S, data.GT, data.exclude, data.evalq)
@@ -396,8 +420,9 @@ def note(data: Data, split: Split, target: dict, loop_threshold: float, referenc
             + ("" if split.reference is None else f"; place recognition: the reference = original frames < {reference_frames}")
             + "). Per-query metrics (evaluate.per_query) in %: R@1, R@5, AUC-PR (step-wise area of the PR curve over each "
             "query's best match), R@100P, R@95P; *_lo_% / *_hi_% = 95 % block-bootstrap interval of R@1 and AUC-PR over "
-            f"the queries (runs of {split.gap} consecutive queries resampled, leaderboard.spread); pair_AP_% = the pair AP "
-            "(one sample per pair of frames), a secondary column; chance = evaluate.query_chance (pair AP: "
+            f"the queries (runs of {split.gap} consecutive queries resampled, leaderboard.spread); a row is called "
+            "higher than another only where their paired difference is resolved (comparisons.csv); pair_AP_% = the "
+            "pair AP (one sample per pair of frames), a secondary column; chance = evaluate.query_chance (pair AP: "
             f"evaluate.chance_level). Knobs picked by per-query AUC-PR on the tuning queries ({split.scored_on}); "
             f"thresholds by rule '{p['threshold_rule']}' on the tuning queries. Frames/s (greenloop.speed.timing): decoded "
             "frame in memory -> decision (describe, match against every stored frame, store), over described frames "

@@ -22,6 +22,9 @@ from greenloop.util.files import write_atomic
 MODES = ("loop closure", "place recognition")
 METRICS = ["R@1_%", "R@5_%", "AUC-PR_%", "R@100P_%", "R@95P_%"]
 SPREADS = ["R@1_lo_%", "R@1_hi_%", "AUC-PR_lo_%", "AUC-PR_hi_%"]
+COMPARED = ("R@1", "AUC-PR")                # the metrics the paired comparisons judge (:func:`paired`)
+N_BOOT, SEED = 200, 0                       # the bootstrap's resamples and seed (:func:`resamples`), every interval
+COMPARISON_COLUMNS = ["a", "b", "metric", "difference", "lo", "hi", "resolved", "queries"]
 COUNTS = ["queries", "revisit_queries"]      # what each row's metrics rest on (:func:`query_counts`)
 COLUMNS = (["method", "mode", "weights", "knobs"] + COUNTS + METRICS + SPREADS +
            ["pair_AP_%", "fps_median", "fps_min", "fps_max", "decode_ms", "bytes_per_stored_frame", "threshold",
@@ -98,26 +101,98 @@ def metric_rows(S, GT, exclude: int, queries, reference=None, block: int = 10) -
     return rows
 
 
-def spread(S, GT, exclude: int, queries, reference=None, block: int = 10, n_boot: int = 200, seed: int = 0) -> dict:
+def spread(S, GT, exclude: int, queries, reference=None, block: int = 10, n_boot: int = N_BOOT,
+           seed: int = SEED) -> dict:
     """95 % block-bootstrap intervals of R@1 and AUC-PR over the queries, in %.
 
-    The per-query matches (``evaluate.best_matches``) are cut into runs of ``block`` consecutive
-    queries (neighbouring queries see nearly the same frames, so they are resampled together),
-    ``n_boot`` resamples of as many runs drawn with replacement, each scored by
-    ``evaluate.query_metrics``; a resample without a revisit query is drawn again. Returns
-    {"R@1_lo_%", "R@1_hi_%", "AUC-PR_lo_%", "AUC-PR_hi_%"} (2.5th and 97.5th percentiles, in %, unrounded).
+    The per-query matches (``evaluate.best_matches``) are resampled by :func:`resamples` (runs of
+    ``block`` consecutive queries: neighbouring queries see nearly the same frames) and each
+    resample scored by ``evaluate.query_metrics`` (:func:`boot_metrics`). Returns {"R@1_lo_%",
+    "R@1_hi_%", "AUC-PR_lo_%", "AUC-PR_hi_%"} (2.5th and 97.5th percentiles, in %, unrounded).
     """
-    m = evaluate.best_matches(S, GT, exclude, queries, reference, k=1)
-    runs = [np.arange(a, min(a + int(block), len(m.query))) for a in range(0, len(m.query), int(block))]
-    rng, r1, auc = np.random.default_rng(seed), [], []
-    while len(r1) < n_boot:
-        idx = np.concatenate([runs[i] for i in rng.integers(0, len(runs), len(runs))])
-        if not m.has_partner[idx].any():
-            continue
-        q = evaluate.query_metrics(evaluate.Matches(*(a[idx] for a in m[:6]), m.k), ks=(1,))
-        r1.append(q["R@1"]), auc.append(q["AUC-PR"])
-    lo, hi = np.percentile([r1, auc], [2.5, 97.5], axis=1)
+    b = boot_metrics(evaluate.best_matches(S, GT, exclude, queries, reference, k=1), block, n_boot, seed)
+    lo, hi = np.percentile(b, [2.5, 97.5], axis=0)
     return {"R@1_lo_%": 100 * lo[0], "R@1_hi_%": 100 * hi[0], "AUC-PR_lo_%": 100 * lo[1], "AUC-PR_hi_%": 100 * hi[1]}
+
+
+def resamples(has_partner, block: int = 10, n_boot: int = N_BOOT, seed: int = SEED):
+    """The block bootstrap's resamples of Q queries, the one definition :func:`spread` and
+    :func:`paired` share. has_partner: (Q,) bool (``Matches.has_partner``). The queries are cut
+    into runs of ``block`` consecutive ones; each resample draws as many runs with replacement
+    (``np.random.default_rng(seed)``); one without a query with a partner is drawn again.
+    Yields ``n_boot`` int index arrays into the Q queries (about Q long: the last run may be short)."""
+    hp = np.asarray(has_partner, dtype=bool)
+    runs = [np.arange(a, min(a + int(block), len(hp))) for a in range(0, len(hp), int(block))]
+    rng, kept = np.random.default_rng(seed), 0
+    while kept < n_boot:
+        idx = np.concatenate([runs[i] for i in rng.integers(0, len(runs), len(runs))])
+        if hp[idx].any():
+            kept += 1
+            yield idx
+
+
+def boot_metrics(m, block: int = 10, n_boot: int = N_BOOT, seed: int = SEED) -> np.ndarray:
+    """(n_boot, 2) float: R@1 and AUC-PR (fractions, :data:`COMPARED` order) of each of
+    :func:`resamples` of the (Q,) matches ``m`` (``evaluate.Matches``), by ``evaluate.query_metrics``."""
+    out = []
+    for idx in resamples(m.has_partner, block, n_boot, seed):
+        q = evaluate.query_metrics(evaluate.Matches(*(a[idx] for a in m[:6]), m.k), ks=(1,))
+        out.append([q[k] for k in COMPARED])
+    return np.array(out, dtype=np.float64).reshape(-1, len(COMPARED))
+
+
+def resolved(lo, hi) -> bool:
+    """A difference's interval [lo, hi] excludes 0."""
+    return bool(lo > 0 or hi < 0)
+
+
+def paired(a, b, block: int = 10, n_boot: int = N_BOOT, seed: int = SEED) -> dict:
+    """Paired 95 % block bootstrap of method a minus method b over the same queries.
+
+    a, b: ``evaluate.Matches`` of two methods on the same (Q,) queries (``best_matches`` with the
+    same GT, exclude, queries, reference); both are scored on the SAME resamples (:func:`resamples`,
+    as :func:`spread`: block, n_boot, seed). Returns {metric: {"difference": a - b on every query,
+    "lo", "hi": 2.5th / 97.5th percentiles of the resampled differences, "resolved": [lo, hi]
+    excludes 0}} for each metric of :data:`COMPARED`, in percentage points (unrounded)."""
+    if not (np.array_equal(a.query, b.query) and np.array_equal(a.has_partner, b.has_partner)):
+        raise ValueError("a paired comparison needs both methods' matches on the same queries and ground truth")
+    return _differences(a, b, boot_metrics(a, block, n_boot, seed), boot_metrics(b, block, n_boot, seed))
+
+
+def _differences(a, b, boot_a, boot_b) -> dict:
+    """:func:`paired` from the matches and their (n_boot, 2) :func:`boot_metrics` on the same resamples."""
+    qa, qb = (evaluate.query_metrics(m, ks=(1,)) for m in (a, b))
+    lo, hi = np.percentile(100 * (boot_a - boot_b), [2.5, 97.5], axis=0)
+    return {k: {"difference": 100 * (qa[k] - qb[k]), "lo": float(lo[i]), "hi": float(hi[i]),
+                "resolved": resolved(lo[i], hi[i])} for i, k in enumerate(COMPARED)}
+
+
+def comparison_pairs(board: pd.DataFrame, names) -> list[tuple]:
+    """(a, b) for each of ``names`` with a loop-closure R@1 on the board against every other
+    loop-closure row with one (chance and the decision-only rows have none), in board order."""
+    lc = board[(board["mode"] == "loop closure") & ~board["method"].str.startswith("chance")].dropna(subset=["R@1_%"])
+    rows = list(dict.fromkeys(lc["method"]))
+    return [(a, b) for a in names if a in rows for b in rows if b != a]
+
+
+def comparisons(S: dict, pairs, GT, exclude: int, queries, block: int = 10, n_boot: int = N_BOOT,
+                seed: int = SEED) -> pd.DataFrame:
+    """The paired comparisons (:func:`paired`, loop closure) of each (a, b) in ``pairs`` as they are
+    written and judged: one row per pair and metric of :data:`COMPARED`, :data:`COMPARISON_COLUMNS`:
+    difference, lo, hi (a minus b, percentage points, to 0.01), resolved (the written [lo, hi]
+    excludes 0) and queries (Q, the queries both are scored on). S: {method: (M, M) score
+    matrix}; GT, exclude, queries, block, n_boot, seed: as :func:`spread` (each method is
+    bootstrapped once)."""
+    names = list(dict.fromkeys(n for p in pairs for n in p))
+    m = {n: evaluate.best_matches(S[n], GT, exclude, queries, k=1) for n in names}
+    boot = {n: boot_metrics(m[n], block, n_boot, seed) for n in names}
+    rows = []
+    for a, b in pairs:
+        for metric, d in _differences(m[a], m[b], boot[a], boot[b]).items():
+            lo, hi = round(d["lo"], 2), round(d["hi"], 2)
+            rows.append({"a": a, "b": b, "metric": metric, "difference": round(d["difference"], 2), "lo": lo,
+                         "hi": hi, "resolved": resolved(lo, hi), "queries": len(m[a].query)})
+    return pd.DataFrame(rows, columns=COMPARISON_COLUMNS)
 
 
 def chance_rows(GT, exclude: int, queries, reference=None, scored_on: str = "") -> list[dict]:
@@ -229,22 +304,60 @@ def write(board: pd.DataFrame, out_dir, results_dir, title: str, note: str):
 
 
 def _compare(a, b, lo: str, hi: str, word: tuple) -> str:
-    """'higher'/'lower' (word) when the [lo, hi] ranges of rows a and b do not overlap, else
-    'not resolved against'."""
+    """'faster than'/'slower than' (word) when the [lo, hi] ranges of rows a and b (frames/s [min,
+    max] over the timing repeats) do not overlap, else 'not resolved against'."""
     if pd.isna(a[lo]) or pd.isna(b[lo]):
         return "not compared with"
     return word[0] if a[lo] > b[hi] else word[1] if a[hi] < b[lo] else "not resolved against"
 
 
-def statement(board: pd.DataFrame, seq_names=("greenloop-seq", "greenloop-seq-fast")) -> str:
-    """What the table holds about greenloop-seq, in sentences with the numbers and spreads
-    (loop closure): its R@1 and AUC-PR with their bootstrap intervals against the row with the
-    highest R@1 among the others (chance aside) and against SeqSLAM (published), frames/s as median
-    [min, max]; "higher"/"faster" only where the ranges do not overlap, else "not resolved"."""
+def _pick(comparisons: pd.DataFrame, a: str, metric: str) -> pd.DataFrame:
+    """The rows of the comparisons table (:func:`comparisons`) of ``a`` against any b on ``metric``."""
+    return comparisons[(comparisons["a"] == a) & (comparisons["metric"] == metric)]
+
+
+def paired_text(comparisons: pd.DataFrame, a: str, b: str, metric: str) -> str:
+    """What the comparisons table says of a against b on ``metric``: "higher than it" / "lower than
+    it" where its row is resolved (its interval above / below 0), else "not resolved", each with
+    "(difference X [lo, hi])" in points; "not compared with it" where the table has no such row."""
+    c = _pick(comparisons, a, metric)
+    c = c[c["b"] == b]
+    if not len(c):
+        return "not compared with it"
+    c = c.iloc[0]
+    diff = f"(difference {c['difference']:.2f} [{c['lo']:.2f}, {c['hi']:.2f}])"
+    if not c["resolved"]:
+        return f"not resolved {diff}"
+    return f"{'higher' if c['lo'] > 0 else 'lower'} than it {diff}"
+
+
+def _tally(comparisons: pd.DataFrame, a: str) -> str:
+    """'R@1 above k, below j, not resolved against r of the n other rows; AUC-PR ...' from the table."""
+    out = []
+    for metric in COMPARED:
+        c = _pick(comparisons, a, metric)
+        up, down = int((c["resolved"] & (c["lo"] > 0)).sum()), int((c["resolved"] & (c["hi"] < 0)).sum())
+        out.append(f"{metric} above {up}, below {down}, not resolved against {len(c) - up - down} of the "
+                   f"{len(c)} other rows")
+    return "; ".join(out)
+
+
+def _rivals(others: pd.DataFrame) -> list[str]:
+    """The rows the statement sets a greenloop-seq row beside (those present, in this order): the
+    highest R@1 of ``others``, the highest single-frame row, SeqSLAM published and tuned."""
+    tops = [t["R@1_%"].idxmax() for t in (others, others[others.index.str.endswith("(single frame)")]) if len(t)]
+    return list(dict.fromkeys(tops + [n for n in ("SeqSLAM (published)", "SeqSLAM (tuned)") if n in others.index]))
+
+
+def statement(board: pd.DataFrame, comparisons: pd.DataFrame, seq_names=("greenloop-seq", "greenloop-seq-fast")) -> str:
+    """What the table holds about the greenloop-seq rows, in sentences with the numbers (loop
+    closure): R@1 and AUC-PR with their bootstrap intervals, frames/s as median [min, max]; how
+    many other rows each is resolved above / below (:func:`_tally`); against each of
+    :func:`_rivals` (chance and the greenloop-seq rows aside) "higher"/"lower" only where the
+    comparisons table (:func:`comparisons`, paired differences in points) says resolved, else "not
+    resolved (difference X [lo, hi])"; speed "faster" only where the [min, max] ranges do not overlap."""
     lc = board[board["mode"] == "loop closure"].set_index("method")
     others = lc[~lc.index.str.startswith(("greenloop-seq", "chance"))].dropna(subset=["R@1_%"])
-    rivals = list(dict.fromkeys(([others["R@1_%"].idxmax()] if len(others) else [])
-                                + (["SeqSLAM (published)"] if "SeqSLAM (published)" in others.index else [])))
     out = []
     for n in (s for s in seq_names if s in lc.index and pd.notna(lc.loc[s, "R@1_%"])):
         r = lc.loc[n]
@@ -252,11 +365,12 @@ def statement(board: pd.DataFrame, seq_names=("greenloop-seq", "greenloop-seq-fa
                 f"[{r['AUC-PR_lo_%']:.2f}, {r['AUC-PR_hi_%']:.2f}], R@100P {r['R@100P_%']:.2f} %")
         if pd.notna(r["fps_median"]):
             line += f", {r['fps_median']:.0f} frames/s [{r['fps_min']:.0f}, {r['fps_max']:.0f}]"
-        for b_name in rivals:
+        line += f"; paired (comparisons): {_tally(comparisons, n)}"
+        for b_name in _rivals(others):
             b = others.loc[b_name]
-            line += (f"; vs {b_name} (R@1 {b['R@1_%']:.2f} % [{b['R@1_lo_%']:.2f}, {b['R@1_hi_%']:.2f}], AUC-PR "
-                     f"{b['AUC-PR_%']:.2f} %): R@1 {_compare(r, b, 'R@1_lo_%', 'R@1_hi_%', ('higher than', 'lower than'))} it, "
-                     f"AUC-PR {_compare(r, b, 'AUC-PR_lo_%', 'AUC-PR_hi_%', ('higher than', 'lower than'))} it")
+            line += (f"; vs {b_name} (R@1 {b['R@1_%']:.2f} %, AUC-PR {b['AUC-PR_%']:.2f} %; paired differences in "
+                     f"points): R@1 {paired_text(comparisons, n, b_name, 'R@1')}, "
+                     f"AUC-PR {paired_text(comparisons, n, b_name, 'AUC-PR')}")
             if pd.notna(r["fps_median"]) and pd.notna(b["fps_median"]):
                 line += (f", speed {_compare(r, b, 'fps_min', 'fps_max', ('faster than', 'slower than'))} it "
                          f"({b['fps_median']:.0f} frames/s [{b['fps_min']:.0f}, {b['fps_max']:.0f}])")
@@ -266,6 +380,17 @@ def statement(board: pd.DataFrame, seq_names=("greenloop-seq", "greenloop-seq-fa
         out.append(f"chance: R@1 {c['R@1_%']:.2f} %, AUC-PR {c['AUC-PR_%']:.2f} %")
     return "\n".join(out)
 
+
+def write_comparisons(table: pd.DataFrame, out_dir, note: str) -> tuple:
+    """Write ``out_dir/comparisons.csv`` and ``.md`` (titled, with ``note``) from ONE table (the
+    :func:`comparisons` rows as written, any extra columns first). Returns (csv path, md path)."""
+    out_dir = Path(out_dir)
+    paths = (out_dir / "comparisons.csv", out_dir / "comparisons.md")
+    md = ("### Paired comparisons: a minus b on the same queries (percentage points)\n\n"
+          + table.to_markdown(index=False) + f"\n\n{note}\n")
+    write_atomic(paths[0], lambda p: p.write_text(table.to_csv(index=False)))
+    write_atomic(paths[1], lambda p: p.write_text(md))
+    return paths
 
 
 def timing_window(evalq, n_frames: int):
@@ -295,10 +420,11 @@ def stream_checks(names, dets: dict, knobs: dict, descriptors: dict, S: dict, GT
             for n in names if n in dets and dets[n].threshold is not None}
 
 
-def targets(board: pd.DataFrame, names) -> dict:
-    """{name: {"highest_R@1", "highest_AUC-PR" (its 95 % interval wholly above every other row's but
-    chance and greenloop-seq's, loop closure: ``study.targets.separated``), "fps_min_at_least_920" (the
-    slowest repeat reaches the main paper's 920)}}."""
+def targets(board: pd.DataFrame, names, comparisons: pd.DataFrame | None = None) -> dict:
+    """{name: {"highest_R@1", "highest_AUC-PR" (above every other row but chance and greenloop-seq's,
+    loop closure: with ``comparisons`` (:func:`comparisons`) every paired difference resolved above 0,
+    ``study.targets.paired_ahead``; without, its 95 % interval wholly above theirs,
+    ``study.targets.separated``), "fps_min_at_least_920" (the slowest repeat reaches the main paper's 920)}}."""
     lc = board[board["mode"] == "loop closure"].dropna(subset=["R@1_%"])
     out = {}
     for n in names:
@@ -308,8 +434,12 @@ def targets(board: pd.DataFrame, names) -> dict:
         r, rest = r.iloc[0], lc[(lc.method != n) & ~lc.method.str.startswith(("greenloop-seq", "chance"))]
         above = {}
         for key in ("R@1_%", "AUC-PR_%"):
-            lo, top = goals.separated(r.to_dict(), rest.to_dict("records"), key)
-            above[f"highest_{key[:-2]}"] = bool(lo is not None and top is not None and lo > top)
+            if comparisons is not None:
+                ok = goals.paired_ahead(comparisons, n, rest.to_dict("records"), key)[1]
+            else:
+                lo, top = goals.separated(r.to_dict(), rest.to_dict("records"), key)
+                ok = lo is not None and top is not None and lo > top
+            above[f"highest_{key[:-2]}"] = bool(ok)
         out[n] = {**above, "fps_min_at_least_920": bool(pd.notna(r["fps_min"]) and r["fps_min"] >= 920)}
     return out
 
@@ -343,17 +473,20 @@ def dictionary_row(name: str, tau: int, n_train: int, closures: dict, op: dict, 
             "scored_on": f"{scored_on}; decisions only (no score): pair precision {op['precision']:.3f}, recall {op['recall']:.3f}"}
 
 
-def targets_table(board: pd.DataFrame, dataset, frame_step: int) -> pd.DataFrame:
+def targets_table(board: pd.DataFrame, dataset, frame_step: int,
+                  comparisons: pd.DataFrame | None = None) -> pd.DataFrame:
     """The detector's targets for each named configuration on this board (``seqmatch.NAMED``: the named
     default always, the others where the board has their row), one row each: configuration, target,
     measured, required, met (``study.targets.detector_targets``, with the configuration's own seq_len;
-    SeqSLAM = the published and the tuned row, each judged). A dataset that is none of the targets'
-    gives one row saying so. A target measured on per-query rows gets their COUNTS (:func:`_rests_on`)."""
+    SeqSLAM = the published and the tuned row, each judged; "above" and "highest" from ``comparisons``,
+    :func:`comparisons`, where given). A dataset that is none of the targets' gives one row saying so.
+    A target measured on per-query rows gets their COUNTS (:func:`_rests_on`)."""
     names = [n for n in seqmatch.NAMED if n == seqmatch.DEFAULT_NAME or n in set(board["method"])]
     try:
         rows = [dict(configuration=n, **r, **_rests_on(board, n, r["target"])) for n in names
                 for r in goals.detector_targets(board, str(dataset), n, ("SeqSLAM (published)", "SeqSLAM (tuned)"),
-                                                seq_len=seqmatch.NAMED[n][0]["seq_len"], frame_step=frame_step)]
+                                                seq_len=seqmatch.NAMED[n][0]["seq_len"], frame_step=frame_step,
+                                                comparisons=comparisons)]
     except ValueError as e:
         return pd.DataFrame([{"configuration": None, "target": "the detector's targets", "measured": None,
                               "required": None, "met": None, "note": f"not judged: {e}"}])

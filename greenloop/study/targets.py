@@ -13,16 +13,19 @@ The targets (evaluation part only, one configuration of greenloop-seq):
     synthetic     the highest R@1 and the highest AUC-PR of every method (loop closure, chance excluded)
     every dataset >= 920 frames/s (slowest repeat); closure precision >= 90 % at the threshold used
 
-"Above" and "highest" compare rows by their 95 % intervals (``R@1_lo_%`` / ``R@1_hi_%``, the same for
-AUC-PR, as notebook 13 writes them; :func:`separated`): met only where the method's interval lies
-wholly above the other rows', so a point estimate inside another row's spread is never called ahead.
-A comparison whose intervals are absent is not measured.
+"Above" and "highest" are judged from the paired comparisons where they are given (``comparisons``: the
+table ``study.leaderboard.comparisons`` writes, notebook 13's comparisons.csv; :func:`paired_ahead`): met
+only where every paired difference (the method minus each other row, on the same queries) is resolved
+above 0. Rows alone (no comparisons, e.g. a leaderboard.csv read back) compare their 95 % intervals
+(``R@1_lo_%`` / ``R@1_hi_%``, the same for AUC-PR; :func:`separated`): met only where the method's
+interval lies wholly above the other rows'. Either way a point estimate inside the spread is never
+called ahead, and a comparison that is absent is not measured.
 """
 from __future__ import annotations
 
 import math
 
-__all__ = ["FPS_TARGET", "PRECISION_TARGET", "dataset_kind", "detector_targets", "separated"]
+__all__ = ["FPS_TARGET", "PRECISION_TARGET", "dataset_kind", "detector_targets", "paired_ahead", "separated"]
 
 FPS_TARGET = 920.0            # frames/s per stream on 2 cores, descriptor included (the main paper's)
 PRECISION_TARGET = 90.0       # % closure precision at the one threshold
@@ -79,11 +82,31 @@ def separated(row, others, key: str):
     return _value(row, lo), top
 
 
-def _above(target: str, row, others, key: str) -> dict:
-    """A target met where ``row``'s interval of ``key`` lies wholly above every one of ``others``'
-    (:func:`separated`); measured = its low end, required = "> the others' highest high end"."""
+def paired_ahead(comparisons, method: str, others, key: str):
+    """(the lowest low end, in percentage points, of the paired differences ``method`` minus each of
+    ``others`` (rows with ``method``) on ``key``'s metric ("R@1_%": "R@1"); whether every one of
+    them is resolved with ``method`` ahead (its ``resolved`` True and its interval above 0)), read
+    from ``comparisons`` (rows or a DataFrame with a, b, metric, lo, resolved, as
+    ``study.leaderboard.comparisons`` writes them). (None, False) where ``others`` is empty or the
+    table lacks one of them."""
+    rows = {r["b"]: r for r in _rows(comparisons) if r.get("a") == method and r.get("metric") == key[:-2]}
+    names = [r.get("method") for r in others]
+    if not names or any(n not in rows or _value(rows[n], "lo") is None for n in names):
+        return None, False
+    return min(_value(rows[n], "lo") for n in names), all(bool(rows[n]["resolved"]) and rows[n]["lo"] > 0 for n in names)
+
+
+def _above(target: str, row, others, key: str, comparisons=None) -> dict:
+    """A target met where ``row`` is above every one of ``others`` on ``key``: with ``comparisons``,
+    every paired difference resolved above 0 (:func:`paired_ahead`: measured = the lowest low end,
+    required "> 0, each resolved"); without, its interval wholly above theirs (:func:`separated`:
+    measured = its low end, required = "> the others' highest high end")."""
+    if comparisons is not None:
+        low, ahead = (None, False) if row is None else paired_ahead(comparisons, row.get("method"), others, key)
+        return _judge(f"{target}: the lowest low end of its paired differences (points)", low, "> 0, each resolved",
+                      lambda v: ahead)
     lo, top = separated(row, others, key)
-    return _judge(target, None if top is None else lo, f"> {top}", lambda v: v > top)
+    return _judge(f"{target}: the low end of its interval", None if top is None else lo, f"> {top}", lambda v: v > top)
 
 
 def _common(row, seq_len) -> list[dict]:
@@ -97,13 +120,14 @@ def _common(row, seq_len) -> list[dict]:
 
 
 def detector_targets(rows, dataset: str, method: str = "greenloop-seq", seqslam: str = "SeqSLAM",
-                    seq_len=None, frame_step=None) -> list[dict]:
+                    seq_len=None, frame_step=None, comparisons=None) -> list[dict]:
     """Each of the detector's targets (module doc) of ``dataset`` for ``method``: a list of dicts target (text), measured
     (float, % or frames/s; None when the rows do not hold it), required (text) and met (bool; None
     when not measured). rows: the dataset's leaderboard rows (list of dicts or a DataFrame).
     seqslam: the SeqSLAM row's method name, or several (each judged: Nordland's R@1 above it).
     seq_len: the method's frames of sequence (needed for Nordland's "<= 10 frames"); frame_step:
-    the rows' frame step (Nordland's targets are at its full rate, frame_step 1)."""
+    the rows' frame step (Nordland's targets are at its full rate, frame_step 1). comparisons: the
+    paired comparisons that judge "above" and "highest" (module doc; None: the rows' intervals)."""
     rows, kind = _rows(rows), dataset_kind(dataset)
     lc, pr = _find(rows, method, "loop closure"), _find(rows, method, "place recognition")
     if kind == "nordland":
@@ -116,8 +140,8 @@ def detector_targets(rows, dataset: str, method: str = "greenloop-seq", seqslam:
         for name in ([seqslam] if isinstance(seqslam, str) else list(seqslam)):
             other = _find(rows, name, "loop closure")
             sr = _value(other, "R@1_%")
-            out.append(_above(f"R@1 above {name} ({sr if sr is not None else 'not measured'} %): "
-                              "the low end of its interval", lc, [] if other is None else [other], "R@1_%"))
+            out.append(_above(f"R@1 above {name} ({sr if sr is not None else 'not measured'} %)", lc,
+                              [] if other is None else [other], "R@1_%", comparisons))
         return out + _common(lc, seq_len)
     if kind == "gardenspoint":
         return [_judge("R@1 (%), place recognition", _value(pr, "R@1_%"), ">= 90", lambda v: v >= 90.0),
@@ -125,6 +149,6 @@ def detector_targets(rows, dataset: str, method: str = "greenloop-seq", seqslam:
             + _common(lc if lc is not None else pr, seq_len)
     out = []
     for key in ("R@1_%", "AUC-PR_%"):
-        out.append(_above(f"highest {key[:-2]} of every method (%), loop closure: the low end of its interval", lc,
-                          _others(rows, method, "loop closure", key), key))
+        out.append(_above(f"highest {key[:-2]} of every method, loop closure", lc,
+                          _others(rows, method, "loop closure", key), key, comparisons))
     return out + _common(lc, seq_len)
