@@ -15,7 +15,7 @@ import pandas as pd
 
 from greenloop import evaluate, groundtruth, similarity
 from greenloop.speed import timing
-from greenloop.study import report
+from greenloop import report
 
 __all__ = ["DECIMALS", "REFERENCE", "similarity_matrices", "table2", "layer_table", "chosen_layers",
            "layer_summary", "figure_layers",

@@ -63,7 +63,8 @@ from greenloop.experiments import leaderboard as ex
 from greenloop.features.layers import extract_layers
 from greenloop.similarity import l2_normalise
 from greenloop.speed import seqstream
-from greenloop.study import report, targets
+from greenloop import report
+from greenloop.study import targets
 
 GRID = [5, 10, 20, 30, 50] + [[a, b] for a in (3, 5, 10) for b in (15, 20, 30)]
 SHIFTS = (0, 1)

@@ -33,7 +33,7 @@ import yaml
 
 from greenloop import groundtruth
 from greenloop.datasets import exclusion, sequence
-from greenloop.study import report
+from greenloop import report
 from greenloop.util.files import write_atomic
 
 DEFAULT_EXCLUDE = exclusion.DEFAULT_EXCLUDE   # every notebook's default exclusion window, frames

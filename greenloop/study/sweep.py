@@ -49,7 +49,7 @@ from pathlib import Path
 import pandas as pd
 import yaml
 
-from greenloop.study import report
+from greenloop import report
 from greenloop.util.cache import CACHE_DIR, ROOT
 DEFAULT_DATASET = ROOT / "data" / "synthetic-greenhouse"
 TOPIC = "greenloop-sweep"            # Dask event topic: points report when they start and end
