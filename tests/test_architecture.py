@@ -77,6 +77,15 @@ def test_a_cycle_between_modules_of_one_unit_is_reported(tmp_path):
     assert architecture.check(root, CONTRACT) == ["import cycle among the modules pkg.util.a, pkg.util.b"]
 
 
+def test_the_documented_layers_are_the_contract():
+    """docs/ARCHITECTURE.md's layer table is ``python -m greenloop.architecture --markdown``."""
+    text = (ROOT / "docs" / "ARCHITECTURE.md").read_text()
+    start, end = "<!-- layers:start (python -m greenloop.architecture --markdown) -->\n", "<!-- layers:end -->"
+    assert start in text and end in text, "docs/ARCHITECTURE.md lost its layer table"
+    assert text.split(start, 1)[1].split(end, 1)[0] == architecture.markdown(), (
+        "docs/ARCHITECTURE.md's layer table is stale: paste `python -m greenloop.architecture --markdown`")
+
+
 def test_command_line(capsys):
     assert architecture.main([]) == 0 and "holds its" in capsys.readouterr().out
     assert architecture.main(["--markdown"]) == 0 and capsys.readouterr().out == architecture.markdown()
