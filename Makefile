@@ -148,7 +148,7 @@ verify: | $(STAMP) ## did a rerun reproduce? RESULTS=DIR's tables vs the committ
 	$(BIN)/python -m greenloop.study.verify $(REFERENCE) $(RESULTS)
 
 default-choice: | $(STAMP) ## the named default's centring windows, cell shift and threshold, chosen on tuning queries -> results/default_choice/
-	$(BIN)/python -m greenloop.study.default_choice --nordland $(NORDLAND) --gardenspoint $(GARDENSPOINT) \
+	$(BIN)/python -m greenloop.experiments.default_choice --nordland $(NORDLAND) --gardenspoint $(GARDENSPOINT) \
 		--synthetic $(SYNTHETIC) --out results/default_choice
 
 readme-coverage: results/coverage.md ## refresh the README's coverage table from the results folders

@@ -1,11 +1,13 @@
 """greenloop: CNN-based visual loop-closure detection for agricultural robots, as a study.
 
-The pipeline's stages stand at the top of the package (``groundtruth``, ``spots``, ``cnn``,
-``shift``, ``dictionary``, ``features``, ``similarity``, ``lsh``, ``siamese``, ``seqmatch``,
-``evaluate``); the study's other parts are folders: ``datasets`` (the sequence-folder contract and
-its builders), ``backbones`` (CNN ports and their weights), ``speed`` (the streaming detector and
-its benchmark), ``study`` (results, coverage, sweeps) and ``util`` (building blocks).
-docs/ARCHITECTURE.md draws the layout and what flows through it.
+The pipeline's stages stand at the top of the package (``groundtruth``, ``exclusion``, ``spots``,
+``cnn``, ``shift``, ``dictionary``, ``features``, ``similarity``, ``lsh``, ``retrieval``, ``siamese``,
+``seqmatch``, ``seqslam``, ``evaluate``), beside ``report`` (results on disk); the study's other parts
+are folders: ``datasets`` (the sequence-folder contract and its builders), ``backbones`` (CNN ports
+and their weights), ``speed`` (the streaming detectors, timing and benchmarks), ``detectors`` (one
+interface, one registry), ``study`` (assembled tables, coverage, sweeps), ``experiments`` (one module
+per notebook's study) and ``util`` (building blocks). ``architecture.LAYERS`` says which may import
+which; docs/ARCHITECTURE.md draws the layout and what flows through it.
 """
 from greenloop.util.devices import quiet_cuda_probe
 from greenloop.util.progress import log_to_terminal

@@ -6,7 +6,7 @@ Commands
         numeric order) through a registered detector (greenloop.detectors.registry) and print each
         declared loop closure (query frame, matched earlier frame, score) and a summary. With no
         flags: the named default (seqmatch.DEFAULT_NAME), no model, no poses, no tuning; the
-        exclusion follows greenloop.datasets.exclusion (make's rule), printed. The greenloop-seq
+        exclusion follows greenloop.exclusion (make's rule), printed. The greenloop-seq
         methods (greenloop.seqstream.Detector) take [--tuned SUMMARY_JSON] [--descriptor ...]
         [--seq-len L] [--contrast-window R] [--index KIND [--candidates K]] [--state FILE ...];
         ``--method dictionary --model MODEL`` is the main paper's CNN + frequency dictionary
@@ -37,8 +37,7 @@ import yaml  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from greenloop import retrieval, seqmatch  # noqa: E402
-from greenloop.datasets import exclusion  # noqa: E402
+from greenloop import exclusion, retrieval, seqmatch  # noqa: E402
 from greenloop.datasets import groundtruth_formats as gt_formats  # noqa: E402
 from greenloop.datasets.sequence import (DESCRIPTION_NAME, GROUND_TRUTH_NAME, layout, list_frames,  # noqa: E402
                                          read_description, traversals, write_loop_pairs)
@@ -194,7 +193,7 @@ def _tuned_knobs(args) -> tuple[dict, list[str]]:
 
 def _exclusion(args, step: int, tuned_exclude: int | None = None) -> tuple[int, str, str]:
     """The exclusion in streamed frames, its source and the rule's sentence: ``--exclude`` (streamed frames), else
-    the folder's sequence.yaml, else ``--tuned``'s, else greenloop.datasets.exclusion's rule (the
+    the folder's sequence.yaml, else ``--tuned``'s, else greenloop.exclusion's rule (the
     ground truth, the frame rate or a fraction of the recording: the rule make uses). Warns on
     stderr when it leaves fewer than half of the streamed frames any candidate."""
     n = len(list_frames(args.folder)[::step])

@@ -72,7 +72,7 @@ DEFAULT_NAME = "greenloop-seq-grad"
 DEFAULT_KNOBS = dict(descriptor="gradients", seq_len=10, contrast_window=0, center_window=(3, 15),
                      velocities=(0.8, 1.0, 1.25, 1.5, 2.0, -0.8, -1.0, -1.25), calibrate=True,
                      repeat_cos=0.999, cell_shift=1)
-# center_window, cell_shift and the threshold were chosen by ``greenloop.study.default_choice`` (its table:
+# center_window, cell_shift and the threshold were chosen by ``greenloop.experiments.default_choice`` (its table:
 # results/default_choice/windows.md): the centring windows and cell shift with the highest mean per-query AUC-PR over the
 # tuning queries of the four streams the detector's targets name, then the threshold the "p95" rule
 # (choose_threshold) picks on the tuning part of the largest of them, Nordland at its full rate,
@@ -84,7 +84,7 @@ DEFAULT_THRESHOLD = 2.8
 # "gradients+efficientnetlite0", the gradients beside an ImageNet CNN's mid-level map (which keeps
 # the image's layout, Sünderhauf et al. 2015), each part L2-normalised. A CNN forward pass per frame,
 # so not for the frame rate the named default keeps (13_leaderboard's timing). Its threshold comes
-# from the same "p95" rule on the same tuning part (``greenloop.study.default_choice``, rounded to
+# from the same "p95" rule on the same tuning part (``greenloop.experiments.default_choice``, rounded to
 # one decimal); `python -m greenloop detect FOLDER --method greenloop-seq-cnn` streams it.
 CNN_NAME = "greenloop-seq-cnn"
 CNN_KNOBS = dict(DEFAULT_KNOBS, descriptor="gradients+efficientnetlite0")

@@ -1,4 +1,4 @@
-"""greenloop.study.default_choice on a small stream the test makes: its ranking reads only tuning
+"""greenloop.experiments.default_choice on a small stream the test makes: its ranking reads only tuning
 queries, the reversed stream is the revisit driven the other way, the repeat gate counts copies."""
 import json
 from pathlib import Path
@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 
 from greenloop import seqmatch
-from greenloop.study import default_choice as dc
+from greenloop.experiments import default_choice as dc
 
 D, N0, REV, EX = int(np.prod(seqmatch.CELL_GRID)), 300, 120, 40     # the gradients layout (cell shifts)
 

@@ -1,4 +1,4 @@
-"""greenloop.datasets.exclusion: the one exclusion rule make and `detect` share, on folders a user
+"""greenloop.exclusion: the one exclusion rule make and `detect` share, on folders a user
 could bring (no ground truth, a frame rate, GPS positions, loop pairs, poses), and the CLI's use
 of it (printed rule, the warning, --matches)."""
 import os
@@ -10,8 +10,8 @@ import cv2
 import numpy as np
 import pytest
 
-from greenloop import seqmatch
-from greenloop.datasets import exclusion, sequence
+from greenloop import exclusion, seqmatch
+from greenloop.datasets import sequence
 from greenloop.study import params
 
 ROOT = Path(__file__).resolve().parents[1]

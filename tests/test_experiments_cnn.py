@@ -8,7 +8,7 @@ from conftest import revisit_example
 from greenloop import cnn, dictionary, evaluate, groundtruth, shift, spots
 from greenloop.experiments import (confusion_matrix, dataset, dictionary_threshold, shift_robustness,
                                    speed_claim, spot_grouping, training_over_seeds as tos)
-from greenloop.study import report
+from greenloop import report
 
 
 def _toy(n=120, L=30, seed=0):

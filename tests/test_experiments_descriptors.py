@@ -341,7 +341,7 @@ def test_rgbd_table_scores_the_halves_of_extract_rgbd(tmp_path):
 
 
 def test_paper_vs_run_rounds_a_measured_number_to_its_decimals():
-    from greenloop.study import report
+    from greenloop import report
     t = report.paper_vs_run([("a", 1, 2.34567, "n", 2), ("b", None, "text", "", 1), ("c", 2, np.float64(1.23456), "", 3),
                              ("d", 3, 7.891)])
     assert t["this run"].tolist() == [2.35, "text", 1.235, 7.891] and t.note.tolist() == ["n", "", "", ""]

@@ -716,7 +716,7 @@ def test_notebook_runs_on_a_sequence_whose_loops_lie_inside_the_default_window(
     """A user's sequence: revisits 100 frames apart, inside the default 150-frame window,
     and no PARAMS for exclude; two traversals/ folders, ground truth by frame index from its
     sequence.yaml. As make does, greenloop.study.params prints (once per results folder) the
-    exclusion greenloop.datasets.exclusion derives and why, and passes exclude = 49 (half the
+    exclusion greenloop.exclusion derives and why, and passes exclude = 49 (half the
     closest revisit) before the notebook's parameters (TINY without its exclude); the notebook
     runs to the end on it."""
     from greenloop.study import params

@@ -9,7 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from greenloop.study import provenance, report
+from greenloop import report
+from greenloop.study import provenance
 
 ROOT = Path(__file__).resolve().parents[1]
 GIT = shutil.which("git")

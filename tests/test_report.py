@@ -3,7 +3,8 @@ import json
 import pandas as pd
 import pytest
 
-from greenloop.study import report
+from greenloop import report
+from greenloop.study import report as study_report
 
 
 def test_tables_and_assembly(tmp_path):
@@ -12,7 +13,7 @@ def test_tables_and_assembly(tmp_path):
     report.write_table(df, tmp_path / "01_x" / "paper_vs_run", title="T")
     report.write_json(tmp_path / "01_x" / "manifest.json", {"date": "D", "cpu": "C", "dataset": "S"})
     (tmp_path / "models").mkdir()
-    out = report.assemble_tables(tmp_path)
+    out = study_report.assemble_tables(tmp_path)
     text = out.read_text()
     assert "## 01_x" in text and "| accuracy (%) |" in text and "91.5" in text and "models" not in text
     assert pd.read_csv(tmp_path / "01_x" / "paper_vs_run.csv").shape == (2, 4)
@@ -21,11 +22,11 @@ def test_tables_and_assembly(tmp_path):
 
 def test_command_line_assembles_and_refuses_a_missing_folder(tmp_path, capsys):
     report.write_table(report.paper_vs_run([("spots", 38, 38)]), tmp_path / "01_x" / "paper_vs_run", title="T")
-    assert report.main([str(tmp_path)]) == 0
+    assert study_report.main([str(tmp_path)]) == 0
     assert capsys.readouterr().out.strip() == str(tmp_path / "tables.md")
     assert "## 01_x" in (tmp_path / "tables.md").read_text()
     with pytest.raises(SystemExit) as e:
-        report.main([str(tmp_path / "nope")])
+        study_report.main([str(tmp_path / "nope")])
     assert e.value.code == 2 and "no such results folder" in capsys.readouterr().err
 
 
@@ -55,7 +56,7 @@ def test_cross_dataset_table_puts_datasets_side_by_side(tmp_path):
          "R@1_%": 90.0, "AUC-PR_%": 70.0, "R@100P_%": 30.0},
         {"method": "greenloop-seq-fast", "mode": "loop closure", "knobs": "pixels", "R@1_%": float("nan"),
          "AUC-PR_%": float("nan"), "R@100P_%": float("nan")}]})
-    t = report.cross_dataset([tmp_path / "synthetic", tmp_path / "nordland", tmp_path / "absent"])
+    t = study_report.cross_dataset([tmp_path / "synthetic", tmp_path / "nordland", tmp_path / "absent"])
     seq = t[t.method.str.startswith("greenloop-seq")]        # a row that was not run (NaN) is left out
     assert dict(zip(seq.metric, seq.nordland)) == {"R@1_%": "87.0 (pixels)", "AUC-PR_%": "61.5 (pixels)",
                                                    "R@100P_%": "20.0 (pixels)", "queries (revisit queries)": "203 (180)"}
@@ -65,10 +66,10 @@ def test_cross_dataset_table_puts_datasets_side_by_side(tmp_path):
     assert (ap.synthetic, ap.nordland) == (40.0, 12.5)
     rev = t[t.method.str.contains("revisit frames")].iloc[0]
     assert rev.nordland == "25.0 ± 7.1 (2 seeds)" and rev.synthetic == ""
-    out = report.write_cross_dataset([tmp_path / "synthetic", tmp_path / "nordland"], tmp_path / "datasets.md")
+    out = study_report.write_cross_dataset([tmp_path / "synthetic", tmp_path / "nordland"], tmp_path / "datasets.md")
     assert "| pixels (none), cosine" in out.read_text()
     with pytest.raises(FileNotFoundError, match="make all"):
-        report.cross_dataset([tmp_path / "absent"])
+        study_report.cross_dataset([tmp_path / "absent"])
 
 
 def test_coverage_status_comes_from_the_outputs(tmp_path):

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from greenloop.datasets import exclusion
+from greenloop import exclusion
 from greenloop.study import params
 from tests import user_folders
 

@@ -1,5 +1,7 @@
 """Experiments: one module per notebook's study; each function returns one table's unrounded DataFrame.
+``default_choice`` (``make default-choice``) is the study that chose the named default's knobs on
+notebook 13's target streams (``leaderboard.prepare``, ``target_protocols``).
 
 They sit above the stages, ``speed/``, ``detectors/`` and ``study/`` (they may import them) and below
-``__main__``; nothing below imports them.
+``__main__``; nothing below imports them (``greenloop.architecture``).
 """

@@ -1,7 +1,7 @@
 """Notebook 03's study: which spots the paper's CNN confuses (Figure 5, Table 2), on the random
 and the blocked split, and how many of its errors name the same place seen at another time.
 
-Every table comes back unrounded; ``study.report.write_table(..., decimals=...)`` rounds it.
+Every table comes back unrounded; ``report.write_table(..., decimals=...)`` rounds it.
 """
 from __future__ import annotations
 
@@ -56,7 +56,7 @@ def first_seed_tables(runs: dict, labels, n_classes: int) -> tuple[dict, dict]:
 
 
 def paper_rows(errors: pd.DataFrame, tables: dict, n_classes: int, has_gt: bool) -> list[tuple]:
-    """The paper-vs-run rows of every split for ``study.report.paper_vs_run``: test frames,
+    """The paper-vs-run rows of every split for ``report.paper_vs_run``: test frames,
     misclassified (first seed, and mean over seeds with 1 decimal), the share of errors on an
     adjacent spot and on the same place at another time (pooled over seeds, %, 1 decimal), and
     the classes with precision = recall = 1. errors: :func:`errors_per_seed`; tables:

@@ -1,7 +1,7 @@
 """Notebook 00's study: what a sequence holds (frames, path, ground-truth loops), beside the real
 GreenHouse trajectory where one is found.
 
-Every table comes back unrounded; ``study.report.write_table(..., decimals=...)`` rounds it.
+Every table comes back unrounded; ``report.write_table(..., decimals=...)`` rounds it.
 """
 from __future__ import annotations
 

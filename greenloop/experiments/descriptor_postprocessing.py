@@ -20,7 +20,7 @@ import pandas as pd
 from greenloop import similarity
 from greenloop.evaluate import (average_precision, mean_per_class_accuracy, mpca_threshold,
                                 pr_curve, recall_at_100_precision)
-from greenloop.study import report
+from greenloop import report
 
 __all__ = [
     "DECIMALS", "NOT_AVAILABLE", "tune_then_score", "whitened_variants", "median_scores",

@@ -2,7 +2,7 @@
 a sweep of τ, scored against the ground truth, with the paper's spot labels (by frame index)
 beside loop-aware ones (by place).
 
-Every table comes back unrounded; ``study.report.write_table(..., decimals=...)`` rounds it.
+Every table comes back unrounded; ``report.write_table(..., decimals=...)`` rounds it.
 """
 from __future__ import annotations
 

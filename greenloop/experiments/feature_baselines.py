@@ -14,8 +14,9 @@ import numpy as np
 import pandas as pd
 
 from greenloop import evaluate, groundtruth, similarity
+from greenloop.features import layers
 from greenloop.speed import timing
-from greenloop.study import report
+from greenloop import report
 
 __all__ = ["DECIMALS", "REFERENCE", "similarity_matrices", "table2", "layer_table", "chosen_layers",
            "layer_summary", "figure_layers",
@@ -66,7 +67,6 @@ def layer_table(feats: dict, infos: dict, GT, exclude: int, tune=None, evalq=Non
     evalq: (M,) bool), or ``_all`` on every query where tune is None. chosen: each backbone's
     row with the highest tuning AUC-PR (the first on a tie; False everywhere without a split).
     Unrounded; GT (M, M) bool, exclude in steps."""
-    from greenloop.features import layers
     parts = {"all": None} if tune is None else {"tune": tune, "eval": evalq}
     rows = []
     for spec, X in feats.items():

@@ -31,7 +31,7 @@ from greenloop.detectors.interface import Data
 from greenloop.detectors.registry import REGISTRY
 from greenloop.speed import timing
 from greenloop.study import leaderboard as lb
-from greenloop.study import report
+from greenloop import report
 from greenloop.study import targets as goals
 
 NAMED = tuple(seqmatch.NAMED)      # the named configurations (untuned, fixed thresholds)

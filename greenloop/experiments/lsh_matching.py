@@ -16,7 +16,7 @@ import pandas as pd
 
 from greenloop import evaluate, lsh, similarity
 from greenloop.speed import scale
-from greenloop.study import report
+from greenloop import report
 
 __all__ = [
     "scanned_matrix", "best_match_matrix", "table6_variants", "query_matches", "run_scores",

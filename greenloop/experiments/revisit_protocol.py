@@ -17,7 +17,7 @@ import pandas as pd
 
 from greenloop import cnn, dictionary, evaluate, groundtruth, spots
 from greenloop.datasets import sequence
-from greenloop.study import report
+from greenloop import report
 
 # decimals of the written tables' columns (rounded only where the notebook writes them)
 DECIMALS = {"final_train_acc_%": 2, "in_traversal_test_acc_%": 2, "revisit_acc_%": 2, "mean": 2, "std": 2,

@@ -13,7 +13,7 @@ import numpy as np
 import pandas as pd
 
 from greenloop import evaluate, features, similarity
-from greenloop.study import report
+from greenloop import report
 
 __all__ = ["DECIMALS", "REFERENCE", "split_backbones", "rgbd_table", "skipped_table", "paper_rows",
            "figure_pr_rgb_vs_rgbd", "figure_similarity", "figure_skipped"]

@@ -4,7 +4,7 @@ full-resolution controls of ``greenloop.shift``.
 
 The scoring functions take the classifier's predict function as an argument
 (``predict(model, X) -> (M,) labels``, e.g. ``greenloop.cnn.predict``). Every table comes back
-unrounded; ``study.report.write_table(..., decimals=...)`` rounds it.
+unrounded; ``report.write_table(..., decimals=...)`` rounds it.
 """
 from __future__ import annotations
 

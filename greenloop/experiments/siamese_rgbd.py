@@ -18,7 +18,7 @@ import pandas as pd
 
 from greenloop import evaluate, features, groundtruth, siamese, similarity
 from greenloop.datasets import sequence
-from greenloop.study import report
+from greenloop import report
 from greenloop.util.cache import cache_key
 
 # decimals of the written tables' columns (rounded only where the notebook writes them)

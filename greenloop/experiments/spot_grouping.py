@@ -1,7 +1,7 @@
 """Notebook 01's study: how many frames make a spot (the paper's Table 1), with the random split
 and under the leakage control of notebook 02.
 
-Every table comes back unrounded; ``study.report.write_table(..., decimals=...)`` rounds it.
+Every table comes back unrounded; ``report.write_table(..., decimals=...)`` rounds it.
 """
 from __future__ import annotations
 
@@ -56,7 +56,7 @@ def table1(X: np.ndarray, frames_per_spot_list, frames_per_spot: int, seeds, see
 
 
 def paper_rows(table1: pd.DataFrame) -> list[tuple]:
-    """Table 1's paper-vs-run rows for ``study.report.paper_vs_run``: per L, the accuracy (mean ±
+    """Table 1's paper-vs-run rows for ``report.paper_vs_run``: per L, the accuracy (mean ±
     std, median, min, seeds, converged, 2 decimals) and the number of spots."""
     rows = []
     for _, r in table1.iterrows():

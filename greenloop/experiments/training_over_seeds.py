@@ -2,7 +2,7 @@
 (Figures 3 and 4), and how much of the random split's accuracy is memory of neighbouring frames
 (the leakage controls, also run per grouping by notebook 01).
 
-Every table comes back unrounded; ``study.report.write_table(..., decimals=...)`` rounds it.
+Every table comes back unrounded; ``report.write_table(..., decimals=...)`` rounds it.
 """
 from __future__ import annotations
 

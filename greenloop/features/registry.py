@@ -27,7 +27,7 @@ GRADIENT_DIM = (GRADIENT_SIZE[0] // GRADIENT_CELL) * (GRADIENT_SIZE[1] // GRADIE
 # "gradients+efficientnetlite0": the gradients beside EfficientNet-Lite0's block-10 map (112 channels)
 # pooled over 2 x 2 cells (``features.layers``), the network fed frames FUSED_WIDTH pixels wide with
 # their aspect ratio kept (``layers.aspect_size``): Nordland's 64 x 32 frames become 128 x 64. The width
-# is the one ``greenloop.study.default_choice`` ranks first on tuning queries (results/default_choice/cnn_width.md).
+# is the one ``greenloop.experiments.default_choice`` ranks first on tuning queries (results/default_choice/cnn_width.md).
 FUSED_CNN = ("efficientnetlite0", "mid", "grid2")
 FUSED_WIDTH = 128
 FUSED_DIM = GRADIENT_DIM + 4 * 112

@@ -41,7 +41,7 @@ from greenloop.datasets import sequence  # noqa: E402
 from greenloop.dictionary import LoopDetector  # noqa: E402
 from greenloop.speed.stream import Detector, export_tflite, preprocess  # noqa: E402
 from greenloop.speed.timing import timed  # noqa: E402
-from greenloop.study import report  # noqa: E402
+from greenloop import report  # noqa: E402
 from greenloop.util.threads import run_chunked  # noqa: E402
 
 WINDOW = 70

@@ -37,7 +37,7 @@ from greenloop.datasets import augment
 from greenloop.speed import seqstream
 from greenloop.speed.timing import timed
 from greenloop.similarity import l2_normalise
-from greenloop.study import report
+from greenloop import report
 from greenloop.util.threads import one_blas_thread
 from greenloop.util.progress import bar
 

@@ -11,7 +11,7 @@ What is timed, for every method alike (:func:`time_methods`)
     * ``repeats`` times (at least 3), the methods interleaved in one process (repeat r starts at
       method r, so none always runs first on a warm or cold cache), each after one untimed
       warm-up frame; frames/s reported as median and min-max over the repeats;
-    * with the CPU named (``greenloop.study.report.cpu_model``);
+    * with the CPU named (``greenloop.report.cpu_model``);
     * each network on the runtime its family has here: the ImageNet MobileNets and EfficientNet-Lite0 as
       TFLite graphs (XNNPACK, ``features.cnn.predictor``), the networks trained here (the main paper's
       spot CNN, the Siamese networks) through Keras's ``predict_on_batch``, whose per-call cost makes
@@ -40,7 +40,7 @@ from typing import Callable, NamedTuple
 import cv2
 import numpy as np
 
-from greenloop.study import report
+from greenloop import report
 from greenloop.util.checks import positive_int
 
 __all__ = ["Method", "timed", "detector_method", "dictionary_method", "time_methods", "decode_ms", "best_of"]

@@ -6,7 +6,7 @@ later ones winning (a user's PARAMS overrides the dataset's budget, which overri
 says of itself), only the names the notebook's parameters cell declares (papermill warns about
 others; a PARAMS name no notebook declares gets one line). ``sequence_params.yaml`` is written here
 (:func:`sequence_parameters`) from the folder: ``exclude`` by the one exclusion rule
-(greenloop.datasets.exclusion, which ``python -m greenloop detect`` reads too), and from its
+(greenloop.exclusion, which ``python -m greenloop detect`` reads too), and from its
 ``sequence.yaml`` (greenloop.datasets.sequence.read_description) ``frame_step`` and the traversal
 boundaries; one line says how each was chosen, printed once per run.
 
@@ -31,9 +31,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from greenloop import groundtruth
-from greenloop.datasets import exclusion, sequence
-from greenloop.study import report
+from greenloop import exclusion, groundtruth, report
+from greenloop.datasets import sequence
 from greenloop.util.files import write_atomic
 
 DEFAULT_EXCLUDE = exclusion.DEFAULT_EXCLUDE   # every notebook's default exclusion window, frames
@@ -64,7 +63,7 @@ def loop_distances(folder) -> tuple[int, int] | None:
 def sequence_parameters(folder) -> tuple[dict, list[str]]:
     """Papermill parameters a folder implies and one note per choice made for it.
 
-    Returns ({name: value}: ``exclude`` by greenloop.datasets.exclusion's rule, ``frame_step`` from
+    Returns ({name: value}: ``exclude`` by greenloop.exclusion's rule, ``frame_step`` from
     sequence.yaml, ``first_traversal_end`` (notebook 12) where the folder has several traversals),
     [sentences saying why]).
     """

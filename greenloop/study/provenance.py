@@ -4,7 +4,7 @@
 writes one table per results folder (``results``, ``results/nordland``, ...), one row per folder of it
 that holds a ``manifest.json`` (the notebooks, ``default_choice``): the git commit and whether the tree
 was dirty, the environment hash, the CPU model and the date, from the manifest
-(``greenloop.study.report.provenance``), and the duration, from the executed notebook beside it
+(``greenloop.report.provenance``), and the duration, from the executed notebook beside it
 (``<results>/<notebook>.ipynb``: papermill's ``metadata.papermill.duration``). Nothing is typed by hand
 and nothing is guessed: a field an older manifest lacks shows ``—``.
 """

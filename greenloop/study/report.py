@@ -1,202 +1,22 @@
-"""Results on disk: atomic writes, paper-vs-run tables, figures, run manifests, results/tables.md.
+"""results/tables.md and the tables across results folders, assembled from what the notebooks wrote.
 
-Every notebook writes under ``<results_dir>/<notebook stem>/``; ``make`` assembles the ``*.md``
-tables there into ``results/tables.md`` without re-executing anything
+Every notebook writes under ``<results_dir>/<notebook stem>/`` (through ``greenloop.report``);
+``make`` assembles the ``*.md`` tables there into ``results/tables.md`` without re-executing anything
 (``python -m greenloop.study.report results``), and the results of several datasets into one table
 (``python -m greenloop.study.report --datasets results/datasets.md results results/nordland``).
 """
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
-import hashlib
 import json
-import os
-import platform
-import subprocess
 import sys
-import time
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
-import psutil
 
-from greenloop.datasets import sequence
+from greenloop.report import PAPER, RUN, write_table
 from greenloop.study import coverage
-from greenloop.util.files import write_atomic  # the one atomic file write, also report.write_atomic
-
-PAPER, RUN = "paper", "this run"
-ROOT = Path(__file__).resolve().parents[2]   # the checkout greenloop runs from
-
-
-def _default(o):
-    if isinstance(o, (np.integer,)):
-        return int(o)
-    if isinstance(o, (np.floating,)):
-        return float(o)
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, Path):
-        return str(o)
-    raise TypeError(f"cannot write {type(o)} to JSON")
-
-
-def write_json(path, obj) -> Path:
-    """Write ``obj`` (numpy scalars/arrays allowed) as indented JSON, atomically."""
-    return write_atomic(path, lambda p: p.write_text(json.dumps(obj, indent=1, default=_default)))
-
-
-def rounded(df, decimals=None, columns=None):
-    """df with its float columns rounded where a table is written (experiments return unrounded
-    frames): every numeric column to ``decimals`` places (None: left as is), the columns named in
-    ``columns`` ({column: places}) to theirs instead. Returns a new DataFrame."""
-    columns = dict(columns or {})
-    unknown = [c for c in columns if c not in df.columns]
-    if unknown:
-        raise ValueError(f"columns {unknown} to round are not in the table {list(df.columns)}: name its columns")
-    places = {c: columns.get(c, decimals) for c in df.columns}
-    return df.round({c: n for c, n in places.items() if n is not None})
-
-
-def records(df, decimals=None, columns=None) -> list[dict]:
-    """df as JSON records (one dict per row), rounded as :func:`rounded` rounds a written table."""
-    return rounded(df, decimals, columns).to_dict("records")
-
-
-def write_table(df, path, title: str | None = None, note: str | None = None, decimals=None,
-                columns=None) -> Path:
-    """Write a pandas DataFrame as ``<path>.csv`` and ``<path>.md`` (a titled Markdown table).
-
-    path: file path without suffix, e.g. results/01_spot_grouping/table1.
-    decimals, columns: round the written numbers (:func:`rounded`); None writes them as they are.
-    Returns the .md path.
-    """
-    path = Path(path)
-    df = rounded(df, decimals, columns)
-    write_atomic(path.with_suffix(".csv"), lambda p: df.to_csv(p, index=False))
-    md = (f"### {title}\n\n" if title else "") + df.to_markdown(index=False) + "\n"
-    if note:
-        md += f"\n{note}\n"
-    return write_atomic(path.with_suffix(".md"), lambda p: p.write_text(md))
-
-
-def paper_vs_run(rows):
-    """A table with the paper's value only as a reference column beside the measured one.
-
-    rows: iterable of (quantity, paper value or None, measured value[, note[, decimals]]): a
-    numeric measured value is shown rounded to ``decimals`` (``round``) where that is given.
-    Returns a DataFrame with columns: quantity | paper | this run | note.
-    """
-    out = []
-    for r in rows:
-        q, paper, run, note, decimals = (list(r) + ["", None][len(r) - 3:])[:5]
-        if decimals is not None and isinstance(run, (int, float, np.number)) and not isinstance(run, bool):
-            run = round(run, decimals)
-        out.append({"quantity": q, PAPER: "" if paper is None else paper, RUN: run, "note": note})
-    return pd.DataFrame(out, columns=["quantity", PAPER, RUN, "note"])
-
-
-def save_figure(fig, path, dpi: int = 110) -> Path:
-    """Save a matplotlib figure as PNG atomically (and leave it open for inline display)."""
-    path = Path(path).with_suffix(".png")
-    return write_atomic(path, lambda p: fig.savefig(p, dpi=dpi, bbox_inches="tight", format="png"))
-
-
-def cpu_name() -> str:
-    """The CPU's model name: /proc/cpuinfo's first 'model name' on Linux, else what the platform
-    module says (the processor, else the architecture)."""
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine() or "unknown"
-
-
-def cpu_model() -> str:
-    """The CPU's model name (:func:`cpu_name`) and the number of cores visible."""
-    return f"{cpu_name()} ({os.cpu_count()} cores)"
-
-
-def git_state(root=None) -> dict:
-    """{'git_commit': HEAD's sha of the checkout greenloop runs from (root, default ROOT), 'git_dirty':
-    whether a tracked file outside results/ differs from it} (``git status --porcelain
-    --untracked-files=no -- . ':(exclude)results'``: a run rewrites results/ itself). Both None
-    where root is not the top of a git checkout, or without git."""
-    root = Path(root or ROOT)
-
-    def git(*args):
-        return subprocess.run(["git", "-C", str(root), *args], capture_output=True, text=True, timeout=60)
-    try:
-        top = git("rev-parse", "--show-toplevel")
-        if top.returncode != 0 or Path(top.stdout.strip()).resolve() != root.resolve():
-            return {"git_commit": None, "git_dirty": None}
-        head = git("rev-parse", "HEAD")
-        status = git("status", "--porcelain", "--untracked-files=no", "--", ".", ":(exclude)results")
-    except (OSError, subprocess.SubprocessError):
-        return {"git_commit": None, "git_dirty": None}
-    return {"git_commit": head.stdout.strip() if head.returncode == 0 else None,
-            "git_dirty": bool(status.stdout.strip()) if status.returncode == 0 else None}
-
-
-def environment_hash(path=None) -> str | None:
-    """sha256 (hex) of the bytes ``python <X.Y.Z>\\n`` (this interpreter's platform.python_version())
-    followed by the bytes of environment.txt, the pinned packages: equal hashes, same Python and same
-    pins. path: default ROOT/environment.txt. None where it is absent."""
-    try:
-        pins = Path(path or ROOT / "environment.txt").read_bytes()
-    except OSError:
-        return None
-    return hashlib.sha256(f"python {platform.python_version()}\n".encode() + pins).hexdigest()
-
-
-def provenance() -> dict:
-    """Where and from what a result comes: date (UTC), git commit and dirty flag (:func:`git_state`),
-    environment hash (:func:`environment_hash`), CPU model (:func:`cpu_name`), the CPU with its core
-    count (:func:`cpu_model`) and the platform."""
-    return {"date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"), **git_state(),
-            "environment_hash": environment_hash(), "cpu_model": cpu_name(), "cpu": cpu_model(),
-            "platform": platform.platform()}
-
-
-def versions() -> dict:
-    """Versions of the libraries the results depend on."""
-    import importlib.metadata as md
-
-    out = {"python": sys.version.split()[0]}
-    for pkg in ("numpy", "tensorflow", "keras", "jax", "scikit-learn", "opencv-python-headless",
-                "pandas", "matplotlib", "papermill"):
-        try:
-            out[pkg] = md.version(pkg)
-        except md.PackageNotFoundError:
-            pass
-    try:
-        import keras
-        out["keras_backend"] = keras.backend.backend()
-    except Exception:  # keras absent is fine for a manifest
-        pass
-    return out
-
-
-def manifest(folder, parameters: dict, dataset: str | Path | None = None, **extra) -> Path:
-    """Write ``<folder>/manifest.json``: :func:`provenance` (date, git commit and whether the tree
-    was dirty, environment hash, CPU model, platform), the wall time of this process so far (for a
-    notebook executed by papermill: its kernel, i.e. the notebook's run time until this call),
-    library versions, parameters, dataset path, fingerprint and ground-truth kind ('poses', 'pairs'
-    or None), plus any extra fields."""
-    info = {**provenance(), "wall_seconds": round(time.time() - psutil.Process().create_time(), 1),
-            "versions": versions(), "parameters": parameters}
-    if dataset is not None:
-        info["dataset"] = str(dataset)
-        try:
-            info["dataset_fingerprint"] = sequence.fingerprint(dataset)
-        except (FileNotFoundError, ValueError) as e:
-            info["dataset_fingerprint"] = f"unavailable: {e}"
-        info["dataset_ground_truth"] = sequence.ground_truth_kind(dataset)
-    info.update(extra)
-    return write_json(Path(folder) / "manifest.json", info)
+from greenloop.util.files import write_atomic
 
 
 def assemble_tables(results_dir="results", out: str | Path | None = None) -> Path:

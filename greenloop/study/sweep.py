@@ -49,7 +49,8 @@ from pathlib import Path
 import pandas as pd
 import yaml
 
-from greenloop.study import report
+from greenloop import report
+from greenloop.study import params as study_params
 from greenloop.util.cache import CACHE_DIR, ROOT
 DEFAULT_DATASET = ROOT / "data" / "synthetic-greenhouse"
 TOPIC = "greenloop-sweep"            # Dask event topic: points report when they start and end
@@ -168,7 +169,6 @@ def plan(grid: dict, out: Path, base: dict | None = None, dataset=DEFAULT_DATASE
     """
     out = Path(out).resolve()
     if notebook is not None and base:
-        from greenloop.study import params as study_params
         base = study_params.declared_only(notebook, base)
     points = []
     for combo in itertools.product(*grid.values()):

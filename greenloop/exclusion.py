@@ -25,6 +25,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from greenloop import groundtruth
 from greenloop.datasets import sequence
 
 DEFAULT_EXCLUDE = 150        # frames: the paper's neighbour window (Qi 2024, Eq. 5), GreenHouse's protocol
@@ -72,7 +73,6 @@ def partner_offsets(folder, loop_threshold: float = 0.5) -> tuple[np.ndarray, np
 
     Poses: Qi 2024 Eq. 5 (``groundtruth.pose_error`` < loop_threshold); loop pairs (any source of
     ``sequence.ground_truth_source``): each row (i, j, tolerance) pairs i with j - tol .. j + tol."""
-    from greenloop import groundtruth
     n = len(sequence.list_frames(folder))
     if sequence.ground_truth_kind(folder) == "poses":
         _, poses = sequence.read_trajectory(folder, n_frames=n)

@@ -43,7 +43,7 @@ two Gardens Point pairs, and the synthetic sequence's leaderboard stream (every 
    (notebook 13's targets table). The threshold of step 2 is then picked at the width in the code.
 
 Everything else of ``seqmatch.DEFAULT_KNOBS`` (descriptor, seq_len, velocities) is kept.
-CLI: ``python -m greenloop.study.default_choice [--nordland DIR] [--gardenspoint DIR]
+CLI: ``python -m greenloop.experiments.default_choice [--nordland DIR] [--gardenspoint DIR]
 [--synthetic DIR] [--out results/default_choice]`` writes ``<out>/windows``, ``<out>/repeat_gate``
 and ``<out>/cnn_width`` (.md and .csv) and ``<out>/manifest.json``.
 """
@@ -63,7 +63,8 @@ from greenloop.experiments import leaderboard as ex
 from greenloop.features.layers import extract_layers
 from greenloop.similarity import l2_normalise
 from greenloop.speed import seqstream
-from greenloop.study import report, targets
+from greenloop import report
+from greenloop.study import targets
 
 GRID = [5, 10, 20, 30, 50] + [[a, b] for a in (3, 5, 10) for b in (15, 20, 30)]
 SHIFTS = (0, 1)
@@ -241,7 +242,7 @@ def width_table(streams: dict, frames: dict, timing_frames: dict, widths=CNN_WID
 
 
 def main(argv=None) -> None:
-    p = argparse.ArgumentParser(prog="python -m greenloop.study.default_choice", description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(prog="python -m greenloop.experiments.default_choice", description=__doc__.splitlines()[0])
     p.add_argument("--nordland", default="data/nordland")
     p.add_argument("--gardenspoint", default="data/gardenspoint")
     p.add_argument("--synthetic", default="data/synthetic-greenhouse")
@@ -259,7 +260,7 @@ def main(argv=None) -> None:
     out = Path(a.out)
     report.write_table(table, out / "windows", decimals=2,
                        title="The named default's center_window and cell_shift: per-query AUC-PR on the tuning queries of the target streams",
-                       note=(f"greenloop.study.default_choice: the first row wins (highest mean). The 'p95' rule on "
+                       note=(f"greenloop.experiments.default_choice: the first row wins (highest mean). The 'p95' rule on "
                              f"{THRESHOLD_STREAM} picks the threshold {t:.4f} for it. In the code: "
                              f"seqmatch.DEFAULT_KNOBS center_window {list(seqmatch.center_windows(seqmatch.DEFAULT_KNOBS['center_window']))}, "
                              f"cell_shift {seqmatch.DEFAULT_KNOBS['cell_shift']}, "
@@ -273,7 +274,7 @@ def main(argv=None) -> None:
     report.write_table(widths, out / "cnn_width", decimals=2,
                        title=f"The named CNN configuration ({seqmatch.CNN_NAME}) by its CNN's input width: per-query AUC-PR on the "
                              "tuning queries of the target streams, and the CNN part's cost per frame",
-                       note=(f"greenloop.study.default_choice.width_table: the first row wins (highest mean). In the code: "
+                       note=(f"greenloop.experiments.default_choice.width_table: the first row wins (highest mean). In the code: "
                              f"features.FUSED_WIDTH = {features.FUSED_WIDTH} pixels (aspect kept). cnn_ms_per_frame: "
                              f"EfficientNet-Lite0 to block 10 and its pooling, one decoded frame per call (TFLite graph, "
                              f"{TIMING_REPEATS} passes over the first {TIMING_FRAMES} frames, median), on this machine; the "
@@ -281,7 +282,7 @@ def main(argv=None) -> None:
     gate = repeat_gate(s)
     report.write_table(gate, out / "repeat_gate", decimals=2,
                        title="Frames the repeat gate holds out of the trajectories, by its level (raw descriptors)",
-                       note=f"greenloop.study.default_choice.repeat_gate; seqmatch.DEFAULT_KNOBS repeat_cos "
+                       note=f"greenloop.experiments.default_choice.repeat_gate; seqmatch.DEFAULT_KNOBS repeat_cos "
                             f"{seqmatch.DEFAULT_KNOBS['repeat_cos']}.")
     report.manifest(out, dict(grid=[str(c) for c in GRID], shifts=list(SHIFTS), repeat_levels=list(REPEAT_LEVELS), synthetic_step=SYNTHETIC_STEP,
                               threshold_stream=THRESHOLD_STREAM, winner=best, winner_cell_shift=shift, p95_threshold=round(t, 4),

@@ -1,0 +1,93 @@
+"""greenloop.architecture: the package holds its layer contract (no import up a layer, no cycle, no
+import inside a function), the checker reports a planted violation of each kind, and
+docs/ARCHITECTURE.md lists the contract's layers as they are.
+
+(tests/test_layers.py is features.layers' test: CNN layers, not these.)"""
+from pathlib import Path
+
+import pytest
+
+import greenloop
+from greenloop import architecture
+from greenloop.architecture import Layer
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = Path(greenloop.__file__).resolve().parent
+
+
+def test_the_package_holds_its_layers():
+    assert architecture.check(PACKAGE) == []
+
+
+def test_the_reader_sees_every_form_of_import():
+    """Module level and function-local, ``from greenloop import x`` (a module), ``from greenloop.x
+    import name`` (a name of a module): the imports the contract is checked on."""
+    found = {(i.module, i.target): i for i in architecture.imports(PACKAGE)}
+    assert ("greenloop.speed.bench", "greenloop.report") in found                 # from greenloop import report
+    assert ("greenloop.experiments.default_choice", "greenloop.experiments.leaderboard") in found
+    assert ("greenloop.__main__", "greenloop.detectors.registry") in found       # from ...registry import REGISTRY
+    assert not any(i.local for i in found.values())
+    assert architecture.unit("greenloop.speed.bench") == "speed" and architecture.unit("greenloop") == "__init__"
+
+
+def _package(tmp_path, files: dict) -> Path:
+    root = tmp_path / "pkg"
+    for name, text in {"__init__.py": "", "util/__init__.py": "", **files}.items():
+        (root / name).parent.mkdir(parents=True, exist_ok=True)
+        (root / name).write_text(text)
+    return root
+
+
+CONTRACT = (Layer("bottom", ("__init__", "util", "low"), "the bottom"), Layer("top", ("top",), "the top"))
+
+
+def test_a_planted_upward_import_is_reported(tmp_path):
+    clean = {"low.py": "from pkg.util import helpers\n", "util/helpers.py": "X = 1\n",
+             "top.py": "from pkg import low\n"}
+    assert architecture.check(_package(tmp_path / "clean", clean), CONTRACT) == []
+    root = _package(tmp_path / "bad", {**clean, "util/helpers.py": "from pkg.top import T\nX = 1\n",
+                                       "top.py": "T = 1\n"})
+    problems = architecture.check(root, CONTRACT)
+    assert len(problems) == 1 and "pkg/util/helpers.py:1" in problems[0]
+    assert "pkg.util.helpers (layer 'bottom') imports pkg.top (layer 'top', higher)" in problems[0]
+
+
+def test_a_hidden_relative_or_local_upward_import_is_reported(tmp_path):
+    root = _package(tmp_path, {"low.py": "def f():\n    from . import top\n    return top\n",
+                               "util/helpers.py": "from ..top import T\n", "top.py": "T = 1\n"})
+    problems = architecture.check(root, CONTRACT)
+    assert any("pkg/low.py:2" in p and "inside a function" in p for p in problems)
+    assert any("pkg/low.py:2" in p and "an import up a layer" in p for p in problems)
+    assert any("pkg/util/helpers.py:1: pkg.util.helpers (layer 'bottom') imports pkg.top" in p for p in problems)
+
+
+def test_a_cycle_inside_one_layer_and_an_unplaced_module_are_reported(tmp_path):
+    root = _package(tmp_path, {"low.py": "from pkg.util import helpers\n",
+                               "util/helpers.py": "from pkg import low\n", "top.py": "", "new.py": ""})
+    problems = architecture.check(root, CONTRACT)
+    assert "import cycle among low, util" in problems
+    assert "pkg.new is in no layer of the contract: place it in one" in problems
+    gone = (Layer("bottom", ("__init__", "util", "low", "gone"), ""), Layer("top", ("top", "new"), ""))
+    assert "the contract names 'gone', which is not in pkg/" in architecture.check(root, gone)
+
+
+def test_a_cycle_between_modules_of_one_unit_is_reported(tmp_path):
+    root = _package(tmp_path, {"low.py": "", "top.py": "", "util/a.py": "from pkg.util import b\n",
+                               "util/b.py": "from pkg.util import a\n"})
+    assert architecture.check(root, CONTRACT) == ["import cycle among the modules pkg.util.a, pkg.util.b"]
+
+
+def test_the_documented_layers_are_the_contract():
+    """docs/ARCHITECTURE.md's layer table is ``python -m greenloop.architecture --markdown``."""
+    text = (ROOT / "docs" / "ARCHITECTURE.md").read_text()
+    start, end = "<!-- layers:start (python -m greenloop.architecture --markdown) -->\n", "<!-- layers:end -->"
+    assert start in text and end in text, "docs/ARCHITECTURE.md lost its layer table"
+    assert text.split(start, 1)[1].split(end, 1)[0] == architecture.markdown(), (
+        "docs/ARCHITECTURE.md's layer table is stale: paste `python -m greenloop.architecture --markdown`")
+
+
+def test_command_line(capsys):
+    assert architecture.main([]) == 0 and "holds its" in capsys.readouterr().out
+    assert architecture.main(["--markdown"]) == 0 and capsys.readouterr().out == architecture.markdown()
+    with pytest.raises(SystemExit):
+        architecture.main(["--bogus"])
