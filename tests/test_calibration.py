@@ -56,6 +56,7 @@ def test_the_unit_does_not_depend_on_how_many_frames_are_stored():
 def test_calibrate_knob():
     assert seqmatch.check_calibration(True) == "zscore" and seqmatch.check_calibration(False) is False
     assert seqmatch.check_calibration("neighbourhood") == "neighbourhood"
+    assert seqmatch.DEFAULT_KNOBS["calibrate"] == seqmatch.CNN_KNOBS["calibrate"] == "neighbourhood"
     with pytest.raises(ValueError, match="calibrate must be"):
         seqstream.Detector(None, calibrate="median")
 
