@@ -136,16 +136,16 @@ def test_frame_describers_are_the_streams_descriptors():
 
 def test_the_named_default_is_untuned_and_keeps_its_fixed_threshold():
     k = greenloop_seq.named_default()
-    assert k["descriptor"] == seqmatch.DEFAULT_KNOBS["descriptor"] and k["calibrate"] is True
+    assert k["descriptor"] == seqmatch.DEFAULT_KNOBS["descriptor"] and k["calibrate"] == seqmatch.DEFAULT_KNOBS["calibrate"]
     X = np.random.default_rng(0).normal(size=(60, int(np.prod(seqmatch.CELL_GRID)))).astype(np.float32)   # gradients-sized
     d = _data({k["descriptor"]: X}, np.zeros((60, 60), bool), np.ones(60, bool))
     assert greenloop_seq.DEFAULT_ENTRY.tune(d) == ([], {seqmatch.DEFAULT_NAME: k}, {})
     direct = seqstream.score_matrix(X, EX, k["seq_len"], tuple(k["velocities"]), 0, None, center_window=k["center_window"],
-                                   calibrate=True, repeat_cos=k["repeat_cos"], cell_shift=k["cell_shift"])
+                                   calibrate=k["calibrate"], repeat_cos=k["repeat_cos"], cell_shift=k["cell_shift"])
     assert k["cell_shift"] == seqmatch.DEFAULT_KNOBS["cell_shift"]
     assert np.array_equal(greenloop_seq.DEFAULT_ENTRY.score(k, d), direct)      # the record's knobs reach the detector
     det = greenloop_seq.DEFAULT_ENTRY.stream(k, k["fixed_threshold"], d)
-    assert det.calibrate and det.velocities == tuple(float(v) for v in k["velocities"]) and det.cell_shift == k["cell_shift"]
+    assert det.calibrate == k["calibrate"] and det.velocities == tuple(float(v) for v in k["velocities"]) and det.cell_shift == k["cell_shift"]
     assert det.threshold == seqmatch.DEFAULT_THRESHOLD
 
 

@@ -75,7 +75,7 @@ def test_a_pair_run_is_the_default_streamed_over_the_pair_alone(gp):
     k = seqmatch.DEFAULT_KNOBS
     X = np.concatenate([data.descriptors["gradients"][N:2 * N], data.descriptors["gradients"][2 * N:]])
     S = seqstream.score_matrix(X, d.exclude, k["seq_len"], k["velocities"], 0, None, center_window=k["center_window"],
-                               calibrate=True, repeat_cos=k["repeat_cos"], cell_shift=k["cell_shift"])
+                               calibrate=k["calibrate"], repeat_cos=k["repeat_cos"], cell_shift=k["cell_shift"])
     rows = result.board.set_index(["method", "mode"])
     pr = rows.loc[(seqmatch.DEFAULT_NAME, "place recognition")]
     assert pr["R@1_%"] == pytest.approx(100 * ex.evaluate.per_query(S, d.GT, d.exclude, d.evalq, s.reference)["R@1"])

@@ -23,14 +23,17 @@ def _write(folder: Path, images) -> Path:
     return folder
 
 
-def gardenspoint_pairs(out, n: int = 100, src=REAL / "gardenspoint") -> Path:
-    """Gardens Point day_right 0..n-1 then night_right 0..n-1 (640x360), loop pairs only (k, n + k,
-    tolerance 2) in ground_truth.csv: a short recording driven twice, day then night."""
+def gardenspoint_pairs(out, n: int = 100, src=REAL / "gardenspoint", start: int = 0,
+                       traversals=("day_right", "night_right")) -> Path:
+    """Gardens Point ``traversals[0]`` frames start..start+n-1 then the same places of ``traversals[1]``
+    (default day_right then night_right; 640x360), loop pairs only (k, n + k, tolerance 2) in
+    ground_truth.csv: a short recording driven twice, day then night (day_left: also from the
+    other side of the path)."""
     out, src = Path(out), Path(src)
     if not (src / "night_right").is_dir():
         raise FileNotFoundError(f"Gardens Point not found at {src}")
-    imgs = [cv2.resize(cv2.imread(str(src / t / f"Image{k:03d}.jpg")), (640, 360))
-            for t in ("day_right", "night_right") for k in range(n)]
+    imgs = [cv2.resize(cv2.imread(str(src / t / f"Image{start + k:03d}.jpg")), (640, 360))
+            for t in traversals for k in range(n)]
     _write(out, imgs)
     sequence.write_loop_pairs(out / sequence.GROUND_TRUTH_NAME, [(k, n + k, 2) for k in range(n)])
     return out

@@ -101,7 +101,8 @@ def knob_text(k: dict) -> str:
     if "fixed_threshold" in k:
         text += (f", centring {k['center_window']}, cell shift {k.get('cell_shift', 0)}, velocities {k['velocities']}, "
                  f"repeat gate {k['repeat_cos']}, "
-                 f"calibrated, fixed threshold {k['fixed_threshold']} (the CLI default, untuned)")
+                 f"calibrated ({seqmatch.check_calibration(k.get('calibrate', False))}), fixed threshold {k['fixed_threshold']} "
+                 f"(the CLI default, untuned)")
     return text
 
 

@@ -19,9 +19,9 @@ two Gardens Point pairs, and the synthetic sequence's leaderboard stream (every 
    forward-looking cameras): a shift tolerates a sideways move of the view, so a camera looking
    sideways, whose view pans as it drives, finds each place in its neighbours too, and its
    calibrated scores flatten. On the pan of ``tests/test_seqspeed.py``'s CLI drive a shift of two
-   keeps every score under the threshold carried from Nordland, where a shift of one declares most
-   of the revisit; a default that goes silent for a side-looking camera is not one for every
-   recording. A shift of one also reads each stored row once for its three products
+   declares under two thirds of what a shift of one declares (most of the revisit) at the threshold
+   carried from Nordland; calibrated against every candidate ("zscore") it kept every score under it,
+   and a default that goes silent for a side-looking camera is not one for every recording. A shift of one also reads each stored row once for its three products
    (``util.numba_kernels.max_dot``).
 2. The threshold: the "p95" rule (``seqmatch.choose_threshold``: the lowest score with >= 95 %
    closure precision) on the tuning queries of the largest stream, Nordland at its full rate, for

@@ -17,7 +17,7 @@ import numpy as np
 
 from greenloop import evaluate, features, retrieval
 from greenloop.seqmatch import (_EPS, COLORS, DEFAULT_VELOCITIES, STORE_DTYPES, _check_descriptor, _join,
-                                SHIFTABLE_DIMS, calibrate_scores, cell_shifts, center, center_stored, center_windows,
+                                SHIFTABLE_DIMS, calibrate_scores, cell_shifts, check_calibration, center, center_stored, center_windows,
                                 columns_to_scores, contrast_normalise, describe_frames, matrix_events, normalise,
                                 shift_cells, threshold_range)
 from greenloop.similarity import l2_normalise
@@ -94,7 +94,8 @@ class Detector:
         frames are centred again on every frame so far (:func:`center_stored`), so the start of the
         recording can be recognised.
     calibrate: score each candidate as a z-score against the query's own candidates
-        (:func:`calibrate_scores`); the threshold is then a z-score (any finite float).
+        (:func:`calibrate_scores`): True or "zscore" against all of them, "neighbourhood" against
+        those away from the best one; the threshold is then a z-score (any finite float).
     repeat_cos: a query whose raw descriptor (L2-normalised, before centring) has cosine >=
         repeat_cos with the previous frame's is a repeat (the camera stopped, or a frame duplicated by a slower replay): it is
         matched and stored, but its column does not enter the trajectory ring, so a stop or a
@@ -119,7 +120,7 @@ class Detector:
                  velocities=DEFAULT_VELOCITIES, exclude: int = 150, contrast_window: int = 10,
                  projection=None, store_dtype: str = "float32", color: str = "bgr", weights="auto",
                  index: str | None = None, k: int = 20, index_options: dict | None = None,
-                 center_window: int | list = 0, calibrate: bool = False, repeat_cos=None, cell_shift: int = 0):
+                 center_window: int | list = 0, calibrate: bool | str = False, repeat_cos=None, cell_shift: int = 0):
         if index is not None and index not in retrieval.KINDS:
             raise ValueError(f"index must be None (score every stored frame) or one of "
                              f"{retrieval.KINDS}, got {index!r}")
@@ -132,7 +133,7 @@ class Detector:
         self._windows = center_windows(center_window)  # validates; center_window stays as given
         self.center_window = list(center_window) if isinstance(center_window, tuple) else center_window
         self._W = max(self._windows, default=0)        # the centring buffer's length: the longest window
-        self.calibrate = bool(calibrate)
+        self.calibrate = check_calibration(calibrate)   # False, "zscore" or "neighbourhood"
         self._shifts = cell_shifts(cell_shift)
         self.cell_shift = len(self._shifts) // 2
         if self.cell_shift and projection is not None:
@@ -148,7 +149,7 @@ class Detector:
             raise ValueError(f"store_dtype must be one of {STORE_DTYPES}, got {store_dtype!r}")
         if color not in COLORS:
             raise ValueError(f"color must be one of {COLORS}, got {color!r}")
-        if index is not None and (calibrate or repeat_cos is not None or min(v) < 0 or self.cell_shift):
+        if index is not None and (self.calibrate or repeat_cos is not None or min(v) < 0 or self.cell_shift):
             raise ValueError("candidate mode (index=...) scores the retrieved frames only and does not yet "
                              "support calibrate, repeat_cos, cell_shift or negative (reverse) velocities: pass index=None, "
                              "or knobs without them (e.g. the CLI's --threshold with --index)")
@@ -322,7 +323,7 @@ class Detector:
             self.last_scores = _ring_scores(self._ring, rows, c, self._base,
                                             np.float32 if self.calibrate else np.float64)
             if self.calibrate:
-                self.last_scores = calibrate_scores(self.last_scores)
+                self.last_scores = calibrate_scores(self.last_scores, self.calibrate)
         else:
             self.last_scores = s
         self._store(y)
@@ -531,7 +532,7 @@ def _running_sums(R, first: int, chunk: int = 65536) -> np.ndarray:
 
 def score_matrix(X, exclude: int = 150, seq_len: int = 10, velocities=DEFAULT_VELOCITIES,
                  contrast_window: int = 10, projection=None, store_dtype: str = "float32",
-                 center_window: int | list = 0, calibrate: bool = False, repeat_cos=None,
+                 center_window: int | list = 0, calibrate: bool | str = False, repeat_cos=None,
                  cell_shift: int = 0) -> np.ndarray:
     """The (N, N) score matrix the streaming detector thresholds, for ``greenloop.evaluate``.
 
