@@ -363,3 +363,26 @@ def test_choose_step_is_the_step_prepare_then_scores(tmp_path):
     assert lb.query_counts(data.GT, data.exclude, data.evalq)["revisit_queries"] == 78
     assert exp.choose_step(str(folder), 8, 0.5, 50, 0.25, params, 5).step == 8      # 5 is enough: kept
     assert step.why.startswith("frame_step 1, not the requested 8: step 8 would leave 5")
+
+
+def test_the_r1_bars_carry_each_rows_interval_and_its_colour():
+    """figure_r1: every loop-closure row one bar, best first, a whisker from R@1_lo to R@1_hi (none
+    where the interval is missing), the colour method_colours gives it (figure_pr's)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    from matplotlib.colors import to_rgba
+    from greenloop.experiments import leaderboard as exp
+    t = pd.DataFrame({"method": ["a", "b", "chance (random scores)", "c"], "mode": ["loop closure"] * 4,
+                      "R@1_%": [60.0, 80.0, 5.0, 70.0], "R@1_lo_%": [50.0, 75.0, 1.0, np.nan],
+                      "R@1_hi_%": [65.0, 90.0, 9.0, np.nan]})
+    fig = exp.figure_r1(t)
+    ax = fig.axes[0]
+    from matplotlib.container import BarContainer
+    bars = next(c for c in ax.containers if isinstance(c, BarContainer))
+    assert [p.get_width() for p in bars.patches] == [80.0, 70.0, 60.0, 5.0]
+    colours = exp.method_colours(t.method)
+    assert [p.get_facecolor() for p in bars.patches] == [to_rgba(colours[m]) for m in ["b", "c", "a", "chance (random scores)"]]
+    segments = bars.errorbar.lines[2][0].get_segments()
+    spans = [(round(s[0][0], 6), round(s[1][0], 6)) for s in segments]
+    assert spans == [(75.0, 90.0), (70.0, 70.0), (50.0, 65.0), (1.0, 9.0)]
+    assert len(set(colours.values())) == 4

@@ -381,31 +381,48 @@ def write_comparisons(result: Board, runs: dict, out_dir):
     return lb.write_comparisons(table[["protocol"] + lb.COMPARISON_COLUMNS], out_dir, COMPARISONS_NOTE)
 
 
-def figure_pr(data: Data, tuned: Tuned):
-    """Per-query PR curves of every scored method (loop closure, evaluation queries): a Figure."""
+def method_colours(methods) -> dict:
+    """{method: RGBA colour}: one tab20 colour per distinct name, in sorted order, so that a
+    board's figures (PR curves, R@1 bars) draw each method in the same colour (up to 20 methods
+    are distinct)."""
+    cmap = plt.get_cmap("tab20")
+    return {m: cmap(i % 20) for i, m in enumerate(sorted(set(methods)))}
+
+
+def figure_pr(data: Data, tuned: Tuned, board: pd.DataFrame):
+    """Per-query PR curves of every scored method (loop closure, evaluation queries), coloured as
+    in :func:`figure_r1` for ``board`` (the leaderboard table), the legend beside the axes: a Figure."""
     curves = lb.pr_curves(tuned.S, data.GT, data.exclude, data.evalq)
-    fig, ax = plt.subplots(figsize=(8, 6))
-    for n_, (name, (p, r)) in enumerate(curves.items()):
+    colours = method_colours([*board.method, *curves])
+    fig, ax = plt.subplots(figsize=(10, 6))
+    for name, (p, r) in curves.items():
         seq = name.startswith(("greenloop-seq", "SeqSLAM"))
-        ax.step(r, p, where="post", lw=2.2 if seq else 1.1, color=None if seq else plt.get_cmap("tab20")(n_ % 20),
-                label=name)
+        ax.step(r, p, where="post", lw=2.2 if seq else 1.1, color=colours[name], label=name)
     ax.set_xlabel("recall (queries with a partner)"); ax.set_ylabel("precision (declared queries)")
     ax.set_xlim(0, 1); ax.set_ylim(0, 1.02)
     ax.set_title(f"{Path(data.dataset).name}: per-query PR over each query's best match, loop closure, "
                  "evaluation queries", fontsize=9)
-    ax.legend(fontsize=6, loc="lower left")
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1), title="thick: sequence methods",
+              title_fontsize=7)
+    fig.tight_layout()
     return fig
 
 
 def figure_r1(table: pd.DataFrame):
-    """R@1 of every scored loop-closure row, best first, with chance's R@1 as a line: a Figure."""
+    """R@1 of every scored loop-closure row, best first, each bar with its 95 % interval over the
+    evaluation queries (``R@1_lo_%``..``R@1_hi_%``; none drawn where the table has none) and
+    chance's R@1 as a line; colours as in :func:`figure_pr`: a Figure."""
     order = table[(table["mode"] == "loop closure")].dropna(subset=["R@1_%"]).sort_values("R@1_%", ascending=False)
     chance_r1 = table[(table.method == "chance (random scores)") & (table["mode"] == "loop closure")]["R@1_%"].iloc[0]
-    fig, ax = plt.subplots(figsize=(9, 4.5))
-    ax.barh(order.method, order["R@1_%"],
-            color=["k" if m.startswith(("greenloop-seq", "SeqSLAM")) else "C0" for m in order.method])
+    colours = method_colours(table.method)
+    r1 = order["R@1_%"].to_numpy(float)
+    err = np.nan_to_num(np.vstack([r1 - order["R@1_lo_%"].to_numpy(float), order["R@1_hi_%"].to_numpy(float) - r1]))
+    fig, ax = plt.subplots(figsize=(9, 4.8))
+    ax.barh(order.method, r1, color=[colours[m] for m in order.method],
+            xerr=err, error_kw=dict(ecolor="k", lw=1, capsize=2), label="R@1, whisker: 95 % interval")
     ax.axvline(chance_r1, color="C3", ls="--", lw=1, label=f"chance R@1 {chance_r1:.2f} %")
-    ax.invert_yaxis(); ax.set_xlabel("R@1 on the evaluation queries (%), loop closure"); ax.legend(fontsize=8)
+    ax.invert_yaxis(); ax.set_xlabel("R@1 on the evaluation queries (%), loop closure")
+    ax.set_xlim(0, 100); ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1))
     ax.tick_params(axis="y", labelsize=7)
     fig.tight_layout()
     return fig
