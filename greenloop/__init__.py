@@ -9,8 +9,9 @@ interface, one registry), ``study`` (assembled tables, coverage, sweeps), ``expe
 per notebook's study) and ``util`` (building blocks). ``architecture.LAYERS`` says which may import
 which; docs/ARCHITECTURE.md draws the layout and what flows through it.
 """
-from greenloop.util.devices import quiet_cuda_probe
+from greenloop.util.devices import quiet_cuda_probe, quiet_tensorflow_import
 from greenloop.util.progress import log_to_terminal
 
 quiet_cuda_probe()     # no CUDA probe (and its cuInit error line) where there is no NVIDIA GPU
+quiet_tensorflow_import()   # nor TensorFlow's C++ start-up notices on stderr, whenever it is imported
 log_to_terminal()      # log lines in the terminal that runs make, never in a rendered notebook

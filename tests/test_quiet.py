@@ -136,3 +136,32 @@ def test_the_kernel_make_runs_prints_nothing_of_its_own(tmp_path):
     assert r.returncode == 0, r.stderr
     assert "WARNING" not in r.stderr and "encryption" not in r.stderr, r.stderr
     assert "hello from the cell" in (tmp_path / "out.ipynb").read_text()
+
+
+def test_backend_notices_are_dropped_and_every_other_line_kept():
+    """without_backend_notices: TensorFlow's start-up notices written to descriptor 2 (as its C++
+    code writes them) are dropped; other lines, C-level or Python, come back in order."""
+    code = ("import os, sys\n"
+            "from greenloop.util import devices\n"
+            "with devices.without_backend_notices():\n"
+            "    os.write(2, b'WARNING: All log messages before absl::InitializeLog() is called are written to STDERR\\n')\n"
+            "    os.write(2, b'E0000 cuda_platform.cc:52] failed call to cuInit: INTERNAL: CUDA error\\n')\n"
+            "    os.write(2, b'a real error from C\\n')\n"
+            "    print('a python warning', file=sys.stderr)\n"
+            "print('after', file=sys.stderr)\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
+                       env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    assert r.returncode == 0, r.stderr
+    assert r.stderr.splitlines() == ["a real error from C", "a python warning", "after"]
+
+
+def test_tensorflow_starts_quietly_after_import_greenloop():
+    """`import greenloop` then TensorFlow: no absl/oneDNN/CUDA notice on stderr, TensorFlow works,
+    and an error raised inside the quiet import would still reach the user (exceptions pass)."""
+    code = ("import greenloop, tensorflow as tf\n"
+            "assert int(tf.constant(2) + 1) == 3\n"
+            "print('ok')\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                       env=dict(os.environ, PYTHONPATH=str(ROOT), TF_CPP_MIN_LOG_LEVEL="2"))
+    assert r.returncode == 0 and r.stdout == "ok\n", r.stderr
+    assert not devices.NOTICES.search(r.stderr), r.stderr

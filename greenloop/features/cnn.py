@@ -25,6 +25,7 @@ from greenloop.backbones import shufflenet as _shufflenet
 from greenloop.features.frames import load, rgb_batch
 from greenloop.features.registry import BACKBONES, RANDOM_INIT_SEED, Backbone, Options
 from greenloop.features.weights import WeightsNotFoundError, _missing_weights_message, source_key
+from greenloop.util import devices
 from greenloop.util.progress import bar as tqdm  # in the terminal, never in a notebook
 
 # the Keras ports: build (input_shape -> headless pooled model), native weights suffix, its loader
@@ -175,7 +176,7 @@ def _lite_graph(model):
     # several-output models under Keras 3
     spec = tf.TensorSpec((None, *model.inputs[0].shape[1:]), tf.float32)
     fn = tf.function(lambda x: model(x, training=False), input_signature=[spec])
-    with contextlib.redirect_stdout(io.StringIO()):
+    with contextlib.redirect_stdout(io.StringIO()), devices.without_backend_notices():
         flat = tf.lite.TFLiteConverter.from_concrete_functions([fn.get_concrete_function()], model).convert()
     with warnings.catch_warnings():  # the interpreter's deprecation notice
         warnings.filterwarnings("ignore", message=r"(?s).*deprecated", category=UserWarning)

@@ -56,6 +56,7 @@ import numpy as np
 from greenloop import cnn
 from greenloop.datasets.sequence import preprocess_image
 from greenloop.dictionary import LoopDetector
+from greenloop.util import devices
 from greenloop.util.checks import positive_int
 from greenloop.util.files import write_atomic
 from greenloop.util.threads import one_blas_thread, run_chunked
@@ -223,7 +224,7 @@ def _convert(model, quantize: bool = False) -> bytes:
     conv = tf.lite.TFLiteConverter.from_keras_model(model)
     if quantize:
         conv.optimizations = [tf.lite.Optimize.DEFAULT]  # dynamic-range: int8 weights, float maths
-    with contextlib.redirect_stdout(io.StringIO()):
+    with contextlib.redirect_stdout(io.StringIO()), devices.without_backend_notices():
         return conv.convert()
 
 
