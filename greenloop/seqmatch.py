@@ -85,7 +85,7 @@ DEFAULT_KNOBS = dict(descriptor="gradients", seq_len=10, contrast_window=0, cent
 # tuning queries of the four streams the detector's targets name, then the threshold the "p95" rule
 # (choose_threshold) picks on the tuning part of the largest of them, Nordland at its full rate,
 # rounded to one decimal: a calibrated score (calibrate_scores). tests/test_seqspeed.py keeps it
-# silent on a drive that never comes back. calibrate "neighbourhood" (issue 50.5): the z-score
+# silent on a drive that never comes back. calibrate "neighbourhood" (one threshold for short and long recordings): the z-score
 # against every candidate ("zscore", 2.8) never fired on short recordings; this one, at its own p95
 # pick (3.0288 -> 3.0), finds the closures "zscore" found at scale and part of short recordings' revisits
 # (tools/calib_measure.py; the synthetic sequence's aliased places cost it some precision there).

@@ -1,4 +1,4 @@
-"""seqmatch.calibrate_scores' two methods (issue 50, point 5): "zscore" against every candidate,
+"""seqmatch.calibrate_scores' two methods (one threshold for 60-frame and 10^6-frame recordings): "zscore" against every candidate,
 "neighbourhood" against the candidates away from the best one, the named configurations'. What the
 second claims: the unit of a calibrated score is an unrelated candidate's spread, however many frames
 are stored; the stream still equals its score matrix."""

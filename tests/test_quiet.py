@@ -1,4 +1,4 @@
-"""A quiet terminal (issue 48, point 6): make passes each notebook only the parameters it declares,
+"""A quiet terminal (nothing a user would read as a failure): make passes each notebook only the parameters it declares,
 papermill parses every notebook's parameters cell, and TensorFlow does not probe CUDA where there
 is no NVIDIA GPU. One test runs a one-cell kernel: the one make runs is quiet too."""
 import json

@@ -104,7 +104,7 @@ def _closures(folder):
 
 @pytest.mark.parametrize("n, start", [(40, 300), (80, 1000)])
 def test_a_short_nordland_cut_closes_half_its_revisit(tmp_path, n, start):
-    """Issue 50.5: the named default on a Nordland cut (n summer frames, the same n in winter; 80 and
+    """A threshold that carries to short recordings: the named default on a Nordland cut (n summer frames, the same n in winter; 80 and
     160 frames) finds at least half of the revisit frames, >= 90 % of its closures correct. Calibrated
     against every candidate ("zscore", 2.8) it found 3 of 42 and 40 of 82: the matched place's own
     rows inflated the std of so few candidates."""
