@@ -393,11 +393,11 @@ def figure_pr(data: Data, tuned: Tuned, board: pd.DataFrame):
     """Per-query PR curves of every scored method (loop closure, evaluation queries), coloured as
     in :func:`figure_r1` for ``board`` (the leaderboard table), the legend beside the axes: a Figure."""
     curves = lb.pr_curves(tuned.S, data.GT, data.exclude, data.evalq)
-    colours = method_colours([*board.method, *curves])
+    colours = method_colours(board.method)     # figure_r1's mapping; a curve the board lacks is grey
     fig, ax = plt.subplots(figsize=(10, 6))
     for name, (p, r) in curves.items():
         seq = name.startswith(("greenloop-seq", "SeqSLAM"))
-        ax.step(r, p, where="post", lw=2.2 if seq else 1.1, color=colours[name], label=name)
+        ax.step(r, p, where="post", lw=2.2 if seq else 1.1, color=colours.get(name, "0.5"), label=name)
     ax.set_xlabel("recall (queries with a partner)"); ax.set_ylabel("precision (declared queries)")
     ax.set_xlim(0, 1); ax.set_ylim(0, 1.02)
     ax.set_title(f"{Path(data.dataset).name}: per-query PR over each query's best match, loop closure, "
