@@ -43,7 +43,7 @@ GARDENSPOINT := data/gardenspoint
 GARDENSPOINT_SRC ?= $(if $(wildcard ../shared/real/gardenspoint/night_right),../shared/real/gardenspoint,)
 GARDENSPOINT_URL ?= https://github.com/aghagol/loop-detection
 
-.PHONY: all help venv synthetic data nordland gardenspoint test quick sweep bench bench-scale clean-results readme-coverage default-choice verify provenance
+.PHONY: all help venv synthetic data nordland gardenspoint test quick sweep bench bench-scale clean-results readme default-choice verify provenance
 .DEFAULT_GOAL := help
 
 help: ## this list
@@ -116,7 +116,7 @@ DATA_DEP := $(DATASET)
 endif
 
 # the tables across the committed results folders; `make quick` (a first look) leaves them alone
-CROSS ?= results/datasets.md results/coverage.md results/PROVENANCE.md
+CROSS ?= results/datasets.md results/coverage.md results/verdict.md results/PROVENANCE.md
 all: $(HTML) $(RESULTS)/tables.md $(CROSS) ## run every notebook into results/, render HTML, assemble results/tables.md
 
 # One table across every dataset that has results: results/ (synthetic) and results/<name>/.
@@ -127,6 +127,11 @@ results/datasets.md: $(wildcard $(DATASET_RESULTS:%=%/*/summary.json)) $(RESULTS
 # Which table and figure of the papers the results reproduce (greenloop.study.coverage), read from them.
 results/coverage.md: $(wildcard $(DATASET_RESULTS:%=%/*/manifest.json)) greenloop/study/coverage.py
 	$(BIN)/python -m greenloop.study.report --coverage $@ $(DATASET_RESULTS)
+
+# Does each paper's claim hold, per dataset (greenloop.study.verdict), read from the tables; README.md's
+# verdict block is refilled by `make readme`, not by a run.
+results/verdict.md: $(wildcard $(DATASET_RESULTS:%=%/*/manifest.json)) $(RESULTS)/tables.md greenloop/study/verdict.py
+	$(BIN)/python -m greenloop.study.verdict --out $@ $(DATASET_RESULTS)
 
 # Each notebook's git commit, environment hash, CPU, date (its manifest) and duration (papermill's, in
 # the executed notebook), one table per results folder (greenloop.study.provenance). After tables.md, as
@@ -151,8 +156,9 @@ default-choice: | $(STAMP) ## the named default's centring windows, cell shift a
 	$(BIN)/python -m greenloop.experiments.default_choice --nordland $(NORDLAND) --gardenspoint $(GARDENSPOINT) \
 		--synthetic $(SYNTHETIC) --out results/default_choice
 
-readme-coverage: results/coverage.md ## refresh the README's coverage table from the results folders
-	$(BIN)/python -m greenloop.study.coverage README.md $(DATASET_RESULTS)
+readme: | $(STAMP) ## the README's verdict table, results/verdict.md and results/coverage.md, from the results folders
+	$(BIN)/python -m greenloop.study.report --coverage results/coverage.md $(DATASET_RESULTS)
+	$(BIN)/python -m greenloop.study.verdict --out results/verdict.md --readme README.md $(DATASET_RESULTS)
 
 # Each notebook gets, in increasing precedence: what the dataset says of itself (its sequence.yaml,
 # or an exclude that fits its ground truth: $(RESULTS)/sequence_params.yaml, written by

@@ -98,6 +98,19 @@ def paper_vs_run(rows):
     return pd.DataFrame(out, columns=["quantity", PAPER, RUN, "note"])
 
 
+def fill_block(markdown_file, name: str, content: str) -> Path:
+    """Replace what lies between ``<!-- {name}:start -->`` and ``<!-- {name}:end -->`` in a Markdown
+    file (the README's generated tables) with ``content``. Raises ValueError without the markers."""
+    path = Path(markdown_file)
+    text = path.read_text()
+    start, end = f"<!-- {name}:start -->\n", f"<!-- {name}:end -->"
+    if start not in text or end not in text:
+        raise ValueError(f"{path} has no {start.strip()} ... {end} block to fill")
+    head, rest = text.split(start, 1)
+    write_atomic(path, head + start + content + end + rest.split(end, 1)[1])
+    return path
+
+
 def save_figure(fig, path, dpi: int = 110) -> Path:
     """Save a matplotlib figure as PNG atomically (and leave it open for inline display)."""
     path = Path(path).with_suffix(".png")

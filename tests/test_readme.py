@@ -1,18 +1,33 @@
-"""The README's "Results at a glance" holds only numbers that a committed table under results/ holds."""
+"""The findings (docs/findings.md) hold only numbers that a committed table under results/ holds, and
+neither they nor the README claim an order ("ahead", "best", "higher", ...) that no comparison backs."""
 import re
 import subprocess
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 NUMBER = re.compile(r"(?<![\w.])\d+(?:\.\d+)?")
 
 
-def section(text: str, title: str = "## Results at a glance") -> str:
+FINDINGS = ROOT / "docs" / "findings.md"
+# a word that claims an order between methods, arms or settings
+COMPARISON = re.compile(r"\b(ahead|best|highest|lowest|higher than|lower than|outperform\w*|beats?|better|worse|"
+                        r"superior|first|wins?)\b", re.I)
+# what may follow "best"/"first" without claiming an order: a definition, not a finding
+NOT_AN_ORDER = re.compile(r"\b(best match\w*|best[- ]layer|best of the study's descriptors|first[- ]traversal|"
+                          r"first \w+ frames|first walk|first half|first seed|first epoch|first revisit|first "
+                          r"screen|first import|at first|first,|first \d)", re.I)
+# what backs an order: a table of paired comparisons or verdicts it names, or the words saying it is not one
+BACKED = re.compile(r"comparisons\.(md|csv)|verdict\.(md|csv)|not resolved|not a ranking|no order|"
+                    r"is not ranked|do not separate|overlap", re.I)
+
+
+def section(text: str, title: str = "## Findings") -> str:
     """The raw body of one '## ' section of a Markdown text."""
     if title not in text:
-        raise ValueError(f"the README has no section {title!r}")
+        raise ValueError(f"no section {title!r}")
     return re.split(r"^## ", text.split(title, 1)[1], maxsplit=1, flags=re.M)[0]
 
 
@@ -94,12 +109,37 @@ def test_the_matcher_fails_a_number_no_table_holds(tmp_path, monkeypatch):
     found = numbers("AP 44.6 %, R@1 87.2 %, AP 44.7 %, 12 closures")
     assert [f[0] for f in found] == ["44.6", "1", "87.2", "44.7", "12"]      # R@1's "1" is a number too
     assert unmatched(found, vals) == ["44.7", "12"]                          # 0.872 shown as 1 or 87.2: held
-    readme = ("## Results at a glance\n\nAP 44.6 % (`a/t.csv`, [x](docs/b1.md)).\n\n"
+    readme = ("## Findings\n\nAP 44.6 % (`a/t.csv`, [x](docs/b1.md)).\n\n"
               "* 7.5 and 44.6 in `b/u.md`\n* 12 in any table\n## Next\n9.9\n")
     assert missing_numbers(readme, tables) == ["44.6"]           # b/u.md holds 7.5, not 44.6; 9.9 is outside
     assert [n for n, _ in paragraphs(section(readme))] == [["a/t.csv"], ["b/u.md"], []]
 
 
-def test_every_number_of_results_at_a_glance_is_in_a_committed_table():
-    missing = missing_numbers((ROOT / "README.md").read_text(), committed_tables())
-    assert not missing, f"numbers in README 'Results at a glance' found in no table its finding names: {missing}"
+def test_every_number_of_the_findings_is_in_a_committed_table():
+    missing = missing_numbers(FINDINGS.read_text(), committed_tables())
+    assert not missing, f"numbers in docs/findings.md found in no table its finding names: {missing}"
+
+
+def unbacked_orders(text: str) -> list[str]:
+    """Each paragraph of a Markdown text (generated blocks left out) that claims an order no comparison
+    backs: it holds a :data:`COMPARISON` word, outside :data:`NOT_AN_ORDER`, and nothing :data:`BACKED`."""
+    text = re.sub(r"<!-- (\w+):start -->.*?<!-- \1:end -->", "", text, flags=re.S)
+    out = []
+    for names, body in paragraphs(text):
+        claims = COMPARISON.findall(NOT_AN_ORDER.sub(" ", body))
+        if claims and not BACKED.search(body + " ".join(names)):
+            out.append(" ".join(body.split())[:160])
+    return out
+
+
+def test_the_order_check_fails_an_unbacked_comparison():
+    assert unbacked_orders("* A is ahead of B (`x/leaderboard.csv`).\n") != []
+    assert unbacked_orders("* A is ahead of B (`x/comparisons.md`: +3 [1, 5]).\n") == []
+    assert unbacked_orders("* A and B: the order is not resolved.\n* the best match of each query.\n") == []
+    assert unbacked_orders("<!-- verdict:start -->\nbest\n<!-- verdict:end -->\n") == []
+
+
+@pytest.mark.parametrize("name", ["README.md", "docs/findings.md"])
+def test_no_order_is_claimed_without_a_comparison_behind_it(name):
+    unbacked = unbacked_orders((ROOT / name).read_text())
+    assert not unbacked, f"{name}: orders claimed with no comparisons/verdict table named: {unbacked}"

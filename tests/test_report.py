@@ -82,11 +82,11 @@ def test_coverage_status_comes_from_the_outputs(tmp_path):
     t = coverage.coverage([a, b]).set_index(["paper", "item"])
     assert len(t) == len(coverage.ITEMS) and t.index.is_unique
     row = t.loc[(coverage.QI, "Table 2")]
-    assert row.status == "partly" and row.datasets == "synthetic"       # declared, and found in a only
+    assert row.status == "protocol partly ran" and row.datasets == "synthetic"       # declared, and found in a only
     missing = t.loc[(coverage.QI, "Table 6")]                             # declared reproduced, no file
     assert missing.status == "not run" and "11_lsh_matching/table6.csv" in missing.note
     assert t.loc[(coverage.ZHANG, "Table I")].status == "not reproduced"  # no output: declared status kept
-    assert set(t.status) <= {"reproduced", "partly", "not reproduced", "not an experiment", "not run"}
+    assert set(t.status) <= {"protocol ran", "protocol partly ran", "not reproduced", "not an experiment", "not run"}
     assert (t.status != "not an experiment").sum() > 20
     # an RGB-D table whose every row says skipped (no depth) is no result; one run row is
     layers = "10_siamese_rgbd/table2_mid_level_layers.csv"
@@ -101,15 +101,12 @@ def test_coverage_status_comes_from_the_outputs(tmp_path):
     assert coverage.ran(a / layers) and not coverage.ran(b / layers) and not coverage.ran(b / "absent.csv")
 
 
-def test_readme_coverage_table_is_the_generated_one():
-    """The README's coverage table is what greenloop.study.coverage reads from the committed results."""
+def test_committed_coverage_table_is_the_generated_one():
+    """results/coverage.md is what greenloop.study.coverage reads from the committed results."""
     from pathlib import Path
     from greenloop.study import coverage
     root = Path(__file__).resolve().parents[1]
-    text = (root / "README.md").read_text()
-    start, end = "<!-- coverage:start -->\n", "<!-- coverage:end -->"
-    assert start in text and end in text, "README.md lost its coverage block"
-    block = text.split(start, 1)[1].split(end, 1)[0]
     dirs = [root / "results"] + sorted(p.parent for p in (root / "results").glob("*/07_feature_baselines"))
-    assert block.strip() == coverage.markdown(dirs).strip(), (
-        "README coverage table is stale: make readme-coverage")
+    committed = pd.read_csv(root / "results" / "coverage.csv", dtype=str, keep_default_na=False)
+    fresh = coverage.coverage(dirs).astype(str)
+    assert committed.equals(fresh), "results/coverage.md is stale: make readme"

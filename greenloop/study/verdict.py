@@ -1,0 +1,391 @@
+"""Does each paper's headline claim hold here? One row per claim, one cell per dataset, read from the tables.
+
+``python -m greenloop.study.verdict [--out results/verdict.md] [--readme README.md] RESULTS...``
+(``make readme``) reads the committed tables of each results folder (``results`` for the synthetic
+sequence, ``results/nordland``, ``results/gardenspoint``) and writes, per claim of :data:`CLAIMS`,
+the paper's value, the measured value with its spread, and a verdict, into ``results/verdict.csv``,
+``results/verdict.md`` and the README's ``<!-- verdict:start -->`` block. Nothing is typed by hand:
+a claim whose table is missing from a folder reads "not run".
+
+The verdicts (:data:`RULES`, printed under the table):
+
+* **holds** / **does not hold**: a claimed value is reached by at least one seed (the measured range
+  reaches it), or by none while at least half of the seeds converged; a claimed order is resolved
+  in the claimed / the opposite direction (below).
+* **budget-limited**: the claimed value is not reached and fewer than half of the seeds fit their
+  training frames (``converged``), so the run cannot say.
+* **not resolved**: a claimed order whose arms have fewer than :data:`MIN_SEEDS` seeds, or whose seed
+  ranges overlap, or a comparison of single values with no spread. With 5 seeds per arm, ranges that
+  do not overlap are a one-sided Mann-Whitney U of 0, p = 1/252; the rule is conservative: overlapping
+  ranges can still differ by a rank test.
+* **not testable here**: the claim is about networks with no ImageNet weights here (random-init rows
+  are never evidence for or against a paper's ranking), or needs data the folder lacks (depth).
+"""
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+from pathlib import Path
+
+import pandas as pd
+
+from greenloop.report import fill_block
+from greenloop.study import coverage
+from greenloop.util.files import write_atomic
+
+MIN_SEEDS = 5
+HOLDS, FAILS, BUDGET, UNRESOLVED, UNTESTABLE, NOT_RUN = (
+    "holds", "does not hold", "budget-limited", "not resolved", "not testable here", "not run")
+DATASETS = {"synthetic-greenhouse": "synthetic", "nordland": "Nordland", "gardenspoint": "Gardens Point"}
+RULES = (
+    "holds / does not hold: a claimed value reached by at least one seed (or the single measurement), or by "
+    "none with at least half of the seeds converged; a claimed order resolved for / against the paper. "
+    "budget-limited: not reached, and fewer than half of the seeds fit their training frames. "
+    f"not resolved: an order with fewer than {MIN_SEEDS} seeds per arm, overlapping seed ranges, or single "
+    "values without spread (with 5 seeds per arm, separate ranges are a one-sided Mann-Whitney U of 0, "
+    "p = 1/252). not testable here: networks without ImageNet weights here, or data the folder lacks.")
+
+
+def _csv(folder: Path, name: str) -> pd.DataFrame | None:
+    """A folder's table with "%" in column names read as "pct" (``acc_mean_%`` -> ``acc_mean_pct``), or None."""
+    path = folder / name
+    if not path.is_file():
+        return None
+    t = pd.read_csv(path)
+    t.columns = [c.replace("%", "pct") for c in t.columns]
+    return t
+
+
+def _g(x) -> str:
+    """A number as the tables print it: up to two decimals, no trailing zeros."""
+    return f"{round(float(x), 2):g}"
+
+
+def value_verdict(paper: float, best: float, converged: int, seeds: int, higher_is_better=True) -> str:
+    """Verdict on a claimed value: reached by the best seed (``best``, same unit) or not, and whether
+    at least half of the ``seeds`` runs converged when it is not."""
+    reached = best >= paper if higher_is_better else best <= paper
+    if reached:
+        return HOLDS
+    return FAILS if 2 * converged >= seeds else BUDGET
+
+
+def rank_verdict(claimed: str, arms: dict[str, tuple[int, float, float]]) -> str:
+    """Verdict on "``claimed`` ranks first": ``arms`` maps each arm to (seeds, min, max) of its metric.
+    holds: every arm has >= MIN_SEEDS seeds and the claimed arm's min lies above every other's max;
+    does not hold: as many seeds and some other arm's min lies above the claimed arm's max."""
+    n, lo, hi = arms[claimed]
+    others = {k: v for k, v in arms.items() if k != claimed}
+    if min([n] + [v[0] for v in others.values()]) < MIN_SEEDS:
+        return f"{UNRESOLVED} (fewer than {MIN_SEEDS} seeds per arm)"
+    if all(lo > v[2] for v in others.values()):
+        return HOLDS
+    if any(v[1] > hi for v in others.values()):
+        return FAILS
+    return f"{UNRESOLVED} (seed ranges overlap)"
+
+
+def _seeds_range(n, lo, hi) -> str:
+    return f"[{_g(lo)}, {_g(hi)}] ({int(n)} seeds)"
+
+
+def table1_accuracy(folder: Path):
+    """Table 1: a spot of L = 60 frames (or the paper's L nearest to the folder's) is classified at the
+    paper's accuracy. From ``01_spot_grouping/table1.csv`` (accuracy %, over seeds, random split)."""
+    t = _csv(folder, "01_spot_grouping/table1.csv")
+    if t is None or t.paper_acc_pct.isna().all():
+        return None
+    rows = t[t.frames_per_spot == 60]
+    r = (rows if len(rows) else t.dropna(subset=["paper_acc_pct"])).iloc[0]
+    text = (f"L = {int(r.frames_per_spot)}: {_g(r.acc_mean_pct)} ± {_g(r.acc_std_pct)} "
+            f"[{_g(r.acc_min_pct)}, {_g(r.acc_max_pct)}], {int(r.converged_seeds)} of {int(r.seeds)} seeds converged")
+    return text, value_verdict(r.paper_acc_pct, r.acc_max_pct, r.converged_seeds, r.seeds)
+
+
+def table1_ranking(folder: Path):
+    """Table 1: L = 60 ranks above L = 50 and 70 (seed ranges of ``01_spot_grouping/table1.csv``)."""
+    t = _csv(folder, "01_spot_grouping/table1.csv")
+    if t is None:
+        return None
+    arms = {int(r.frames_per_spot): (r.seeds, r.acc_min_pct, r.acc_max_pct) for r in t.itertuples()}
+    if 60 not in arms or len(arms) < 2:
+        return "L = 60 not run (too few frames per walk)", UNTESTABLE
+    text = "; ".join(f"L = {k}: {_seeds_range(*v)}" for k, v in sorted(arms.items()))
+    if 2 * t.converged_seeds.sum() < t.seeds.sum():
+        return text, BUDGET
+    return text, rank_verdict(60, arms)
+
+
+def learning_curves(folder: Path):
+    """Figures 3-4: validation accuracy never below 96 % after epoch 45 (random split, every seed of
+    ``02_training_over_seeds/per_seed.csv``)."""
+    t = _csv(folder, "02_training_over_seeds/per_seed.csv")
+    if t is None:
+        return None
+    t = t[t.split == "random"]
+    worst = t["min_val_acc_after_ep45_pct"].min()
+    text = f"lowest after epoch 45: {_g(worst)} % (worst of {len(t)} seeds, {int(t.converged.sum())} converged)"
+    return text, value_verdict(96, t["min_val_acc_after_ep45_pct"].max(), t.converged.sum(), len(t))
+
+
+def confusion(folder: Path):
+    """Figure 5 / Table 2: 10 of 452 test frames misclassified (2.21 %); per seed from
+    ``03_confusion_matrix/errors_per_seed.csv``, convergence from 02's per-seed table."""
+    t = _csv(folder, "03_confusion_matrix/errors_per_seed.csv")
+    seeds = _csv(folder, "02_training_over_seeds/per_seed.csv")
+    if t is None:
+        return None
+    t = t[t.split == "random"]
+    share = 100 * t.misclassified / t.test_frames
+    converged = int(seeds[seeds.split == "random"].converged.sum()) if seeds is not None else len(t)
+    text = (f"{int(t.misclassified.min())}-{int(t.misclassified.max())} of {int(t.test_frames.iloc[0])} "
+            f"({_g(share.min())}-{_g(share.max())} %, {len(t)} seeds)")
+    return text, value_verdict(100 * 10 / 452, share.min(), converged, len(t), higher_is_better=False)
+
+
+def shift(folder: Path):
+    """Table 3: 92 % accuracy with every frame shifted one pixel right (``04_shift_robustness/table3.csv``)."""
+    t = _csv(folder, "04_shift_robustness/table3.csv")
+    if t is None:
+        return None
+    a = t["shift1_all_frames_pct"]
+    seeds = _csv(folder, "02_training_over_seeds/per_seed.csv")
+    converged = int(seeds[seeds.split == "random"].converged.sum()) if seeds is not None else len(t)
+    text = f"{_g(a.mean())} {_seeds_range(len(a), a.min(), a.max())}"
+    return text, value_verdict(92, a.max(), converged, len(a))
+
+
+def revisit_queries(row) -> int:
+    """A leaderboard row's revisit queries: its column, or (tables written before it) the count its
+    ``scored_on`` note gives for the evaluation queries."""
+    if "revisit_queries" in row and pd.notna(row["revisit_queries"]):
+        return int(row["revisit_queries"])
+    return int(re.search(r"evaluation queries: frames \S+ \((\d+) revisit", row["scored_on"]).group(1))
+
+
+def dictionary(folder: Path):
+    """The dictionary at tau = L + Delta as a loop-closure detector: closure precision at least 90 %
+    (what the field asks of a loop-closure detector; the paper reports no precision) on the
+    leaderboard's evaluation queries (``13_leaderboard/leaderboard.csv``, the "main paper" row)."""
+    t = _csv(folder, "13_leaderboard/leaderboard.csv")
+    if t is None:
+        return None
+    rows = t[t.method.str.startswith("main paper")]
+    if not len(rows):
+        return None
+    r = rows.iloc[0]
+    declared, false = int(r.closures_declared), int(r.closures_false)
+    right = declared - false
+    revisits = revisit_queries(r)
+    text = (f"tau = {_g(r.threshold)}: {right} of {declared} closures right, "
+            f"recall {_g(100 * right / revisits)} % of {revisits} revisit queries")
+    if declared == 0:
+        return text, FAILS
+    return text, HOLDS if 100 * right / declared >= 90 else FAILS
+
+
+def speed(folder: Path):
+    """The paper's 920 frames/s (``06_speed/paper_vs_run.csv``: the 70-frame window pipeline, frames/s,
+    with the per-frame milliseconds' p95 beside it)."""
+    t = _csv(folder, "06_speed/paper_vs_run.csv")
+    if t is None:
+        return None
+    q = t.set_index("quantity")["this run"]
+    fps = float(q["frames per second"])
+    ms = str(q["ms per frame"]).replace(" (p95 ", " ms per frame, p95 ").rstrip(")")
+    return f"{_g(fps)} frames/s ({ms} ms)", HOLDS if fps >= 920 else FAILS
+
+
+def qi_ranking(folder: Path):
+    """Qi 2024 Table 2: GhostNet's features rank first of the CNNs (``07_feature_baselines/table2.csv``)."""
+    t = _csv(folder, "07_feature_baselines/table2.csv")
+    if t is None:
+        return None
+    g = t[t.backbone == "ghostnet"]
+    if len(g) and (g.weights == "random init").all():
+        return "GhostNet, VGG19, EfficientNet-B0, ShuffleNet v2 random-init here", UNTESTABLE
+    return f"GhostNet AP {_g(g.AP_pct.max())} %", UNRESOLVED + " (one AP per network, no spread)"
+
+
+def qi_depth(folder: Path):
+    """Qi 2024 Tables 3-4: depth adds to RGB; read on the one network here with ImageNet weights,
+    EfficientNet-Lite0 (``09_rgbd_features/rgbd.csv``, AP %)."""
+    t = _csv(folder, "09_rgbd_features/rgbd.csv")
+    if t is None:
+        return None
+    r = t[(t.backbone == "efficientnetlite0") & (t.weights == "imagenet")]
+    if not len(r) or "AP_RGB-D_pct" not in r or pd.isna(r.iloc[0]["AP_RGB-D_pct"]):
+        return "no depth", UNTESTABLE
+    r = r.iloc[0]
+    return (f"EfficientNet-Lite0 (ImageNet) AP {_g(r.AP_RGB_pct)} -> {_g(r['AP_RGB-D_pct'])} %",
+            UNRESOLVED + " (one AP each, no spread)")
+
+
+def qi_lsh(folder: Path):
+    """Qi 2024 Table 6: multi-probe QDP-RHLSH matches faster than brute force at about its AP, on the
+    ImageNet descriptor of ``11_lsh_matching/table6.csv`` (ms per query, mean ± sd over hyperplane seeds)."""
+    t = _csv(folder, "11_lsh_matching/table6.csv")
+    if t is None:
+        return None
+    t = t[t.weights.str.contains("imagenet")]
+    if not len(t):
+        return None
+    t = t[t.label == t.label.iloc[0]]                    # one descriptor: the first with ImageNet weights
+    b = t[t.variant == "brute force"].iloc[0]
+    q = t[t.variant == "QDP-RHLSH"].iloc[0]
+    text = (f"{b.label}: brute force {b.ms_per_query:.2g} ms, QDP {q.ms_per_query:.2g} ± {q.ms_sd:.1g} ms "
+            f"per query; pair AP {_g(b.AP_pairs_pct)} -> {_g(q.AP_pairs_pct)} %")
+    if q.ms_per_query + q.ms_sd < b.ms_per_query - b.ms_sd:
+        return text, HOLDS if q.AP_pairs_pct >= b.AP_pairs_pct - 1 else FAILS
+    return text, FAILS if q.ms_per_query - q.ms_sd > b.ms_per_query + b.ms_sd else UNRESOLVED
+
+
+def _postprocessing(folder: Path):
+    """08's rows for the one network there with ImageNet weights (AP % on the evaluation part), or None."""
+    t = _csv(folder, "08_descriptor_postprocessing/postprocessing.csv")
+    if t is None:
+        return None
+    t = t[t.weights.str.contains("imagenet")]
+    return t if len(t) else None
+
+
+def _ap(t: pd.DataFrame, variant: str, median: str) -> float:
+    return float(t[(t.variant == variant) & (t.median_filter == median)].AP_eval_pct.iloc[0])
+
+
+def zhang_whitening(folder: Path):
+    """Zhang 2017: PCA-whitened CNN features beat raw ones (08, raw vs whitened at the paper's dimension
+    and at the dimension picked on the tuning part, no median filter)."""
+    t = _postprocessing(folder)
+    if t is None:
+        return None
+    raw, paper = _ap(t, "raw", "none"), _ap(t, "PCA-whitened, paper dim", "none")
+    tuned = _ap(t, "PCA-whitened, tuned dim", "none")
+    return (f"{t.label.iloc[0]}: AP raw {_g(raw)}, whitened {_g(paper)} (paper's dim), {_g(tuned)} (tuned dim)",
+            UNRESOLVED + " (one split, no spread)")
+
+
+def zca_median(folder: Path):
+    """ResNet/Inception/ZCA: a median filter on the ZCA-whitened similarity matrix improves it (08)."""
+    t = _postprocessing(folder)
+    if t is None:
+        return None
+    before, after = _ap(t, "ZCA, tuned dim", "none"), _ap(t, "ZCA, tuned dim", "median (tuned)")
+    return f"{t.label.iloc[0]}: AP {_g(before)} -> {_g(after)}", UNRESOLVED + " (one split, no spread)"
+
+
+def _arms(t: pd.DataFrame, key: str) -> dict[str, tuple[int, float, float]]:
+    return {getattr(r, key): (r.seeds, r.AP_min, r.AP_max) for r in t.itertuples()}
+
+
+def xu_supervision(folder: Path):
+    """Xu 2022: multi-task supervision ranks above softmax and contrastive (10, held-out AP % over seeds)."""
+    t = _csv(folder, "10_siamese_rgbd/supervisions.csv")
+    if t is None:
+        return None
+    t = t[t.supervision.isin(["softmax", "contrastive", "multitask"])]
+    arms = _arms(t, "supervision")
+    return "; ".join(f"{k} {_seeds_range(*v)}" for k, v in arms.items()), rank_verdict("multitask", arms)
+
+
+def xu_fusion(folder: Path):
+    """Xu 2022: late fusion ranks above early and mid-level fusion at the paper's layer (conv2) (10)."""
+    t = _csv(folder, "10_siamese_rgbd/fusions.csv")
+    if t is None:
+        return None
+    if "fusion" not in t:
+        return "no depth", UNTESTABLE
+    t = t[(t.fusion.isin(["early", "late"])) | ((t.fusion == "mid") & (t.layer == "conv2"))]
+    if not len(t):
+        return "no depth", UNTESTABLE
+    arms = _arms(t, "fusion")
+    return "; ".join(f"{k} {_seeds_range(*v)}" for k, v in arms.items()), rank_verdict("late", arms)
+
+
+def xu_depth(folder: Path):
+    """Xu 2022: depth helps: late fusion above the same network on RGB only (10)."""
+    t = _csv(folder, "10_siamese_rgbd/fusions.csv")
+    if t is None:
+        return None
+    if "fusion" not in t:
+        return "no depth", UNTESTABLE
+    t = t[t.fusion.isin(["RGB only", "late"])]
+    if (t.fusion == "late").sum() == 0:
+        return "no depth", UNTESTABLE
+    arms = _arms(t, "fusion")
+    return "; ".join(f"{k} {_seeds_range(*v)}" for k, v in arms.items()), rank_verdict("late", arms)
+
+
+MAIN, QI, ZCA, ZHANG, XU = ("main paper", "Qi 2024", "ResNet/Inception/ZCA", "Zhang 2017", "Xu 2022")
+# (paper, item, the claim, the paper's value, reader); the reader returns (measured, verdict) or None
+CLAIMS = [
+    (MAIN, "Table 1", "spots of L = 60 frames are classified at 98 %", "97 / 98 / 97 % (L = 50 / 60 / 70)",
+     table1_accuracy),
+    (MAIN, "Table 1", "L = 60 is the best grouping", "60 > 50, 70", table1_ranking),
+    (MAIN, "Fig. 3-4", "validation accuracy stays >= 96 % after epoch 45", ">= 96 %", learning_curves),
+    (MAIN, "Fig. 5, Table 2", "few test frames misclassified", "10 of 452 (2.21 %)", confusion),
+    (MAIN, "Table 3", "a 1-pixel shift keeps the accuracy", "92 %", shift),
+    (MAIN, "dictionary", "tau = L + Delta declares loop closures", "loop closures detected (no precision given)", dictionary),
+    (MAIN, "speed", "920 frames/s", "920 frames/s (i7-8750H)", speed),
+    (QI, "Table 2", "GhostNet's features rank first", "GhostNet AP 53.1 % (TUM)", qi_ranking),
+    (QI, "Tables 3-4", "depth adds to RGB", "53.1 -> 59.4 % (GhostNet, TUM)", qi_depth),
+    (QI, "Table 6", "QDP-RHLSH is faster than brute force at its AP", "faster, AP kept", qi_lsh),
+    (ZHANG, "Fig. 4-5", "PCA-whitened CNN features beat raw ones", "qualitative (PR curves)", zhang_whitening),
+    (ZCA, "Table III", "a median filter on the ZCA similarity helps", "qualitative", zca_median),
+    (XU, "Fig. 8", "multi-task supervision ranks first", "multi-task > softmax, contrastive", xu_supervision),
+    (XU, "Fig. 9", "late fusion ranks first", "late > early, mid (conv2)", xu_fusion),
+    (XU, "Fig. 9", "depth helps (late fusion above RGB only)", "RGB-D > RGB", xu_depth),
+]
+
+
+def dataset_name(folder: Path) -> str:
+    """The dataset a results folder ran on, by its notebooks' manifests, as the table names it."""
+    name = coverage.dataset_name(Path(folder))
+    return DATASETS.get(name, name)
+
+
+def verdicts(results_dirs) -> pd.DataFrame:
+    """One row per claim of :data:`CLAIMS`: paper, item, claim, paper value, then one "measured: verdict"
+    cell per results folder, named by its dataset."""
+    folders = [Path(d) for d in results_dirs]
+    rows = []
+    for paper, item, claim, value, reader in CLAIMS:
+        row = {"paper": paper, "item": item, "claim": claim, "paper value": value}
+        for f in folders:
+            got = reader(f)
+            row[dataset_name(f)] = NOT_RUN if got is None else f"{got[0]}: **{got[1]}**"
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def markdown(results_dirs) -> str:
+    """:func:`verdicts` as a markdown table (cells unpadded: the README's source stays readable) with
+    the rules under it."""
+    t = verdicts(results_dirs)
+    lines = ["| " + " | ".join(t.columns) + " |", "|" + " --- |" * len(t.columns)]
+    lines += ["| " + " | ".join(str(v) for v in row) + " |" for row in t.itertuples(index=False)]
+    return "\n".join(lines) + "\n\n" + RULES + "\n"
+
+
+def main(argv=None) -> int:
+    """CLI (``make readme``): write results/verdict.md and .csv, and refill the README's verdict block."""
+    ap = argparse.ArgumentParser(prog="python -m greenloop.study.verdict", description=__doc__.split("\n")[0])
+    ap.add_argument("results", nargs="+", help="results folders, e.g. results results/nordland results/gardenspoint")
+    ap.add_argument("--out", default="results/verdict.md", help="the markdown page (a .csv beside it)")
+    ap.add_argument("--readme", help="a Markdown file whose <!-- verdict:start --> block to refill")
+    args = ap.parse_args(argv)
+    table = verdicts(args.results)
+    out = Path(args.out)
+    write_atomic(out.with_suffix(".csv"), table.replace(r"\*\*", "", regex=True).to_csv(index=False))
+    write_atomic(out, "# Does each paper's claim hold here?\n\nWritten by `make readme` "
+                 "(`python -m greenloop.study.verdict`) from the tables of " +
+                 ", ".join(f"`{d}`" for d in args.results) + ".\n\n" + markdown(args.results))
+    if args.readme:
+        fill_block(args.readme, "verdict", markdown(args.results))
+    print(out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
