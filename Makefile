@@ -43,7 +43,7 @@ GARDENSPOINT := data/gardenspoint
 GARDENSPOINT_SRC ?= $(if $(wildcard ../shared/real/gardenspoint/night_right),../shared/real/gardenspoint,)
 GARDENSPOINT_URL ?= https://github.com/aghagol/loop-detection
 
-.PHONY: all help venv synthetic data nordland gardenspoint test quick sweep bench bench-scale clean-results readme default-choice verify provenance
+.PHONY: all help venv synthetic data nordland gardenspoint test quick sweep bench bench-scale clean-results readme default-choice verify provenance summary
 .DEFAULT_GOAL := help
 
 help: ## this list
@@ -116,7 +116,7 @@ DATA_DEP := $(DATASET)
 endif
 
 # the tables across the committed results folders; `make quick` (a first look) leaves them alone
-CROSS ?= results/datasets.md results/coverage.md results/verdict.md results/PROVENANCE.md
+CROSS ?= results/datasets.md results/coverage.md results/verdict.md results/PROVENANCE.md results/summary.md
 all: $(HTML) $(RESULTS)/tables.md $(CROSS) ## run every notebook into results/, render HTML, assemble results/tables.md
 
 # One table across every dataset that has results: results/ (synthetic) and results/<name>/.
@@ -143,6 +143,17 @@ results/PROVENANCE.md: $(wildcard $(DATASET_RESULTS:%=%/*/manifest.json)) $(RESU
 provenance: | $(STAMP) ## results/PROVENANCE.md: each notebook's commit, environment hash, CPU, date and duration
 	$(BIN)/python -m greenloop.study.provenance --out results/PROVENANCE.md $(DATASET_RESULTS)
 
+# Every leaderboard row, the main paper's detector as a loop-closure detector, the detector's targets and
+# the long-recording benchmark, read from the folders' tables (greenloop.study.summary). After tables.md,
+# as PROVENANCE.md: in `make all` it reads the tables this run wrote. `make summary` runs nothing.
+results/summary.md: $(wildcard $(foreach t,leaderboard comparisons targets,$(DATASET_RESULTS:%=%/13_leaderboard/$(t).csv)) $(DATASET_RESULTS:%=%/01_spot_grouping/table1.csv) \
+		$(DATASET_RESULTS:%=%/06_speed/paper_vs_run.csv) results/bench/scale_decisions.csv results/bench/scale.md) \
+		$(RESULTS)/tables.md greenloop/study/summary.py
+	$(BIN)/python -m greenloop.study.summary --out $@ $(DATASET_RESULTS)
+
+summary: | $(STAMP) ## results/summary.md: every leaderboard row, the paper's detector, the targets, from the tables
+	$(BIN)/python -m greenloop.study.summary --out results/summary.md $(DATASET_RESULTS)
+
 # `make verify RESULTS=DIR`: did a rerun reproduce the committed tables? Every NN_name/*.csv of the
 # committed folder of DIR's dataset (REFERENCE, or REFERENCE/<dataset>) against DIR's, cell by cell,
 # timing columns aside, trained models' numbers within the committed seed spread (greenloop.study.verify).
@@ -156,8 +167,9 @@ default-choice: | $(STAMP) ## the named default's centring windows, cell shift a
 	$(BIN)/python -m greenloop.experiments.default_choice --nordland $(NORDLAND) --gardenspoint $(GARDENSPOINT) \
 		--synthetic $(SYNTHETIC) --out results/default_choice
 
-readme: | $(STAMP) ## the README's verdict table, results/verdict.md and results/coverage.md, from the results folders
+readme: | $(STAMP) ## the README's verdict table, results/verdict.md, summary.md and coverage.md, from the results folders
 	$(BIN)/python -m greenloop.study.report --coverage results/coverage.md $(DATASET_RESULTS)
+	$(BIN)/python -m greenloop.study.summary --out results/summary.md $(DATASET_RESULTS)
 	$(BIN)/python -m greenloop.study.verdict --out results/verdict.md --readme README.md $(DATASET_RESULTS)
 
 # Each notebook gets, in increasing precedence: what the dataset says of itself (its sequence.yaml,
