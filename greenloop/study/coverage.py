@@ -23,6 +23,7 @@ from pathlib import Path
 import pandas as pd
 
 from greenloop.report import fill_block
+from greenloop.study import provenance
 
 MAIN, QI, ZCA, ZHANG, XU = ("main paper (CNN + dictionary)", "Qi 2024", "ResNet/Inception/ZCA",
                             "Zhang 2017", "Xu 2022")
@@ -107,12 +108,6 @@ ITEMS: list[tuple[str, str, str, str | None, str, str]] = [
 ]
 
 
-def dataset_name(folder: Path) -> str:
-    """The dataset folder name a results folder's notebooks ran on (their first manifest's ``dataset``)."""
-    man = next(iter(sorted(folder.glob("[0-9][0-9]_*/manifest.json"))), None)
-    return Path(json.loads(man.read_text()).get("dataset", folder.name)).name if man else folder.name
-
-
 def ran(path: Path) -> bool:
     """Whether a notebook output holds a result: it exists and, for a csv, not every row has a
     cell that is "skipped" or starts with "skipped:" (what a notebook writes for rows it could not run)."""
@@ -134,7 +129,7 @@ def coverage(results_dirs) -> pd.DataFrame:
     "not run" when none does; items without an output keep their declared status.
     """
     folders = [Path(d) for d in results_dirs]
-    names = [dataset_name(f) for f in folders]
+    names = [provenance.dataset_name(f) or f.name for f in folders]
     rows = []
     for paper, item, content, output, status, note in ITEMS:
         found = [n for f, n in zip(folders, names) if output and ran(f / output)]

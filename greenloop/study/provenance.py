@@ -63,8 +63,10 @@ def rows(results_dir) -> list[dict]:
     return [row(d) for d in sorted(Path(results_dir).iterdir()) if (d / "manifest.json").is_file()]
 
 
-def _dataset(results_dir) -> str | None:
-    for man in sorted(Path(results_dir).glob("[0-9][0-9]_*/manifest.json")):
+def dataset_name(folder) -> str | None:
+    """The dataset a results folder's notebooks ran on (the first manifest's ``dataset``, last path part),
+    or None where no manifest names one. The one reading of it: coverage, verdict, summary and verify use it."""
+    for man in sorted(Path(folder).glob("[0-9][0-9]_*/manifest.json")):
         ds = (_json(man) or {}).get("dataset")
         if ds:
             return Path(str(ds).rstrip("/")).name
@@ -89,7 +91,7 @@ def markdown(results_dirs) -> str:
         table = rows(d)
         if not table:
             continue
-        ds = _dataset(d)
+        ds = dataset_name(d)
         parts.append(f"\n## `{d.as_posix()}`" + (f" ({ds})" if ds else "") + "\n\n")
         parts.append("| " + " | ".join(COLUMNS) + " |\n| " + " | ".join("---" for _ in COLUMNS) + " |\n")
         for r in table:

@@ -128,7 +128,7 @@ def pair_rates(note) -> tuple[float | None, float | None]:
 
 def name(folder) -> str:
     """A results folder as the page names it: its path and, where a manifest says, its dataset."""
-    ds = provenance._dataset(folder)              # the dataset name PROVENANCE.md gives the folder
+    ds = provenance.dataset_name(folder)              # the dataset name PROVENANCE.md gives the folder
     return f"`{Path(folder).as_posix()}`" + (f" ({ds})" if ds else "")
 
 

@@ -31,7 +31,7 @@ from pathlib import Path
 import pandas as pd
 
 from greenloop.report import fill_block
-from greenloop.study import coverage
+from greenloop.study import provenance
 from greenloop.util.files import write_atomic
 
 MIN_SEEDS = 5
@@ -341,7 +341,7 @@ CLAIMS = [
 
 def dataset_name(folder: Path) -> str:
     """The dataset a results folder ran on, by its notebooks' manifests, as the table names it."""
-    name = coverage.dataset_name(Path(folder))
+    name = provenance.dataset_name(folder) or Path(folder).name
     return DATASETS.get(name, name)
 
 

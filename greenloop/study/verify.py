@@ -40,6 +40,8 @@ from pathlib import Path
 
 import pandas as pd
 
+from greenloop.study import provenance
+
 RTOL = 1e-6          # relative tolerance for non-integer numbers
 ATOL = 1e-12         # absolute tolerance, for numbers around zero
 SHOW = 5             # differing cells printed per table
@@ -241,27 +243,15 @@ def notebook_tables(folder) -> list[Path]:
                   for p in d.rglob("*.csv") if not p.name.startswith(".tmp"))
 
 
-def dataset_name(folder) -> str | None:
-    """The dataset a results folder's notebooks ran on (its manifests' `dataset`, last path part)."""
-    for man in sorted(Path(folder).glob("[0-9][0-9]_*/manifest.json")):
-        try:
-            ds = json.loads(man.read_text()).get("dataset")
-        except (OSError, ValueError):
-            continue
-        if ds:
-            return Path(str(ds).rstrip("/")).name
-    return None
-
-
 def resolve_reference(reference, rerun) -> Path:
     """The committed folder of the rerun's dataset: REFERENCE itself when its manifests name the same
     dataset (or either names none), else REFERENCE/<dataset>. Raises FileNotFoundError otherwise."""
     reference, rerun = Path(reference), Path(rerun)
-    want, have = dataset_name(rerun), dataset_name(reference)
+    want, have = provenance.dataset_name(rerun), provenance.dataset_name(reference)
     if want is None or have is None or want == have:
         return reference
     sub = reference / want
-    if dataset_name(sub) == want:
+    if provenance.dataset_name(sub) == want:
         return sub
     raise FileNotFoundError(f"{rerun} ran on {want}, {reference} holds {have} and no {sub} holds {want}'s "
                             f"committed results: name the reference folder of that dataset")
