@@ -65,3 +65,11 @@ def test_the_committed_verdicts_are_what_the_tables_say():
     block = readme.split("<!-- verdict:start -->\n", 1)[1].split("<!-- verdict:end -->", 1)[0]
     assert block == expected, "README's verdict block is stale: run `make readme`"
     assert expected in (ROOT / "results" / "verdict.md").read_text(), "results/verdict.md is stale: `make readme`"
+
+
+def test_a_notebook_concludes_on_its_own_claims_for_its_dataset(tmp_path):
+    table1(tmp_path, [(50, 5, 80, 85, 5), (60, 5, 97, 99, 5), (70, 5, 86, 90, 5)])
+    text = verdict.conclusion(tmp_path, "01_spot_grouping")
+    assert text.count("\n") == 1 and "98 %" in text and text.count(f"**{verdict.HOLDS}**") == 2
+    assert f"**{verdict.NOT_RUN}**" in verdict.conclusion(tmp_path, "10_siamese_rgbd")   # no table: said so
+    assert verdict.conclusion(tmp_path, "00_dataset") == ""
