@@ -15,7 +15,7 @@ from pathlib import Path
 import pandas as pd
 
 from greenloop.report import PAPER, RUN, write_table
-from greenloop.study import coverage
+from greenloop.study import coverage, verdict
 from greenloop.util.files import write_atomic
 
 
@@ -129,10 +129,21 @@ def write_cross_dataset(results_dirs, out) -> Path:
 
 def write_coverage(results_dirs, out) -> Path:
     """Write :func:`greenloop.study.coverage.coverage` of these results folders as ``out`` (.md, .csv)."""
-    return write_table(coverage.coverage(results_dirs), Path(out).with_suffix(""),
+    return write_table(coverage_with_claims(results_dirs), Path(out).with_suffix(""),
                        title="Coverage: every table and figure of the five papers",
-                       note="Status read from the results folders (greenloop.study.coverage): an item whose "
-                            "output is in none of them is 'not run'. `datasets`: where its output is.")
+                       note="Status read from the results folders (greenloop.study.coverage): whether the "
+                            "protocol ran ('not run': its output is in none of them); `datasets`: where its output "
+                            "is; `claim holds`: the verdicts of the paper's claims on it, per dataset "
+                            "(greenloop.study.verdict, results/verdict.md).")
+
+
+def coverage_with_claims(results_dirs) -> pd.DataFrame:
+    """:func:`greenloop.study.coverage.coverage` with a ``claim holds`` column after ``status``:
+    :func:`greenloop.study.verdict.claim_holds` of each row."""
+    t = coverage.coverage(results_dirs)
+    t.insert(t.columns.get_loc("status") + 1, "claim holds",
+             [verdict.claim_holds(p, i, results_dirs) for p, i in zip(t.paper, t["item"])])
+    return t
 
 
 def main(argv=None) -> int:

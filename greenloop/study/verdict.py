@@ -27,6 +27,7 @@ import argparse
 import re
 import sys
 from pathlib import Path
+from typing import Callable, NamedTuple
 
 import pandas as pd
 
@@ -318,31 +319,52 @@ def xu_depth(folder: Path):
 
 
 MAIN, QI, ZCA, ZHANG, XU = ("main paper", "Qi 2024", "ResNet/Inception/ZCA", "Zhang 2017", "Xu 2022")
-# (paper, item, the claim, the paper's value, reader, the notebook that concludes on it); the reader
-# returns (measured, verdict) or None
+
+
+class Claim(NamedTuple):
+    """One headline claim. paper, item: where the paper makes it; claim: what it says; value: the
+    paper's number; reader: results folder -> (measured, verdict) or None (its table is missing);
+    notebook: the notebook that concludes on it; covers: the items of ``study.coverage.ITEMS`` (of
+    the same paper) whose "claim holds" cell it fills."""
+    paper: str
+    item: str
+    claim: str
+    value: str
+    reader: Callable
+    notebook: str
+    covers: tuple[str, ...]
+
+
 CLAIMS = [
-    (MAIN, "Table 1", "spots of L = 60 frames are classified at 98 %", "97 / 98 / 97 % (L = 50 / 60 / 70)",
-     table1_accuracy, "01_spot_grouping"),
-    (MAIN, "Table 1", "L = 60 is the best grouping", "60 > 50, 70", table1_ranking, "01_spot_grouping"),
-    (MAIN, "Fig. 3-4", "validation accuracy stays >= 96 % after epoch 45", ">= 96 %", learning_curves,
-     "02_training_over_seeds"),
-    (MAIN, "Fig. 5, Table 2", "few test frames misclassified", "10 of 452 (2.21 %)", confusion,
-     "03_confusion_matrix"),
-    (MAIN, "Table 3", "a 1-pixel shift keeps the accuracy", "92 %", shift, "04_shift_robustness"),
-    (MAIN, "dictionary", "tau = L + Delta declares loop closures", "loop closures detected (no precision given)",
-     dictionary, "13_leaderboard"),
-    (MAIN, "speed", "920 frames/s", "920 frames/s (i7-8750H)", speed, "06_speed"),
-    (QI, "Table 2", "GhostNet's features rank first", "GhostNet AP 53.1 % (TUM)", qi_ranking, "07_feature_baselines"),
-    (QI, "Tables 3-4", "depth adds to RGB", "53.1 -> 59.4 % (GhostNet, TUM)", qi_depth, "09_rgbd_features"),
-    (QI, "Table 6", "QDP-RHLSH is faster than brute force at its AP", "faster, AP kept", qi_lsh, "11_lsh_matching"),
-    (ZHANG, "Fig. 4-5", "PCA-whitened CNN features beat raw ones", "qualitative (PR curves)", zhang_whitening,
-     "08_descriptor_postprocessing"),
-    (ZCA, "Table III", "a median filter on the ZCA similarity helps", "qualitative", zca_median,
-     "08_descriptor_postprocessing"),
-    (XU, "Fig. 8", "multi-task supervision ranks first", "multi-task > softmax, contrastive", xu_supervision,
-     "10_siamese_rgbd"),
-    (XU, "Fig. 9", "late fusion ranks first", "late > early, mid (conv2)", xu_fusion, "10_siamese_rgbd"),
-    (XU, "Fig. 9", "depth helps (late fusion above RGB only)", "RGB-D > RGB", xu_depth, "10_siamese_rgbd"),
+    Claim(MAIN, "Table 1", "spots of L = 60 frames are classified at 98 %", "97 / 98 / 97 % (L = 50 / 60 / 70)",
+          table1_accuracy, "01_spot_grouping", ("Table 1",)),
+    Claim(MAIN, "Table 1", "L = 60 is the best grouping", "60 > 50, 70", table1_ranking, "01_spot_grouping",
+          ("Table 1",)),
+    Claim(MAIN, "Fig. 3-4", "validation accuracy stays >= 96 % after epoch 45", ">= 96 %", learning_curves,
+          "02_training_over_seeds", ("Fig. 3, Fig. 4",)),
+    Claim(MAIN, "Fig. 5, Table 2", "few test frames misclassified", "10 of 452 (2.21 %)", confusion,
+          "03_confusion_matrix", ("Fig. 5", "Table 2")),
+    Claim(MAIN, "Table 3", "a 1-pixel shift keeps the accuracy", "92 %", shift, "04_shift_robustness",
+          ("Table 3",)),
+    Claim(MAIN, "dictionary", "tau = L + Delta declares loop closures", "loop closures detected (no precision given)",
+          dictionary, "13_leaderboard", ("Sec. dictionary",)),
+    Claim(MAIN, "speed", "920 frames/s", "920 frames/s (i7-8750H)", speed, "06_speed", ("speed claim",)),
+    Claim(QI, "Table 2", "GhostNet's features rank first", "GhostNet AP 53.1 % (TUM)", qi_ranking,
+          "07_feature_baselines", ("Table 2",)),
+    Claim(QI, "Tables 3-4", "depth adds to RGB", "53.1 -> 59.4 % (GhostNet, TUM)", qi_depth, "09_rgbd_features",
+          ("Tables 3, 4",)),
+    Claim(QI, "Table 6", "QDP-RHLSH is faster than brute force at its AP", "faster, AP kept", qi_lsh,
+          "11_lsh_matching", ("Table 6",)),
+    Claim(ZHANG, "Fig. 4-5", "PCA-whitened CNN features beat raw ones", "qualitative (PR curves)", zhang_whitening,
+          "08_descriptor_postprocessing", ("Fig. 4", "Fig. 5")),
+    Claim(ZCA, "Table III", "a median filter on the ZCA similarity helps", "qualitative", zca_median,
+          "08_descriptor_postprocessing", ("Table III",)),
+    Claim(XU, "Fig. 8", "multi-task supervision ranks first", "multi-task > softmax, contrastive", xu_supervision,
+          "10_siamese_rgbd", ("Fig. 8",)),
+    Claim(XU, "Fig. 9", "late fusion ranks first", "late > early, mid (conv2)", xu_fusion, "10_siamese_rgbd",
+          ("Fig. 9",)),
+    Claim(XU, "Fig. 9", "depth helps (late fusion above RGB only)", "RGB-D > RGB", xu_depth, "10_siamese_rgbd",
+          ("Fig. 9",)),
 ]
 
 
@@ -357,10 +379,10 @@ def verdicts(results_dirs) -> pd.DataFrame:
     cell per results folder, named by its dataset."""
     folders = [Path(d) for d in results_dirs]
     rows = []
-    for paper, item, claim, value, reader, _ in CLAIMS:
-        row = {"paper": paper, "item": item, "claim": claim, "paper value": value}
+    for c in CLAIMS:
+        row = {"paper": c.paper, "item": c.item, "claim": c.claim, "paper value": c.value}
         for f in folders:
-            got = reader(f)
+            got = c.reader(f)
             row[dataset_name(f)] = NOT_RUN if got is None else f"{got[0]}: **{got[1]}**"
         rows.append(row)
     return pd.DataFrame(rows)
@@ -371,14 +393,26 @@ def conclusion(results_dir, notebook: str) -> str:
     dataset of ``results_dir``, as Markdown bullets ("" when the notebook has none): what a notebook's last
     cell shows, read from the tables it has just written."""
     folder, lines = Path(results_dir), []
-    for paper, item, claim, value, reader, stem in CLAIMS:
-        if stem != notebook:
+    for c in CLAIMS:
+        if c.notebook != notebook:
             continue
-        got = reader(folder)
+        got = c.reader(folder)
         measured, word = (NOT_RUN, NOT_RUN) if got is None else got
-        lines.append(f"* {paper}, {item}: *{claim}* (paper: {value}). On {dataset_name(folder)}: {measured}: "
+        lines.append(f"* {c.paper}, {c.item}: *{c.claim}* (paper: {c.value}). On {dataset_name(folder)}: {measured}: "
                      f"**{word}**.")
     return "\n".join(lines)
+
+
+def claim_holds(paper: str, item: str, results_dirs) -> str:
+    """The "claim holds" cell of a coverage row (``study.coverage``: its paper's full name and item):
+    "<claim>: <dataset> <verdict>, ..." for each claim covering it, "" where none does."""
+    folders = [Path(d) for d in results_dirs]
+    cells = []
+    for c in CLAIMS:
+        if paper.startswith(c.paper) and item in c.covers:
+            found = [(dataset_name(f), c.reader(f)) for f in folders]
+            cells.append(f"{c.claim}: " + ", ".join(f"{n} {got[1]}" for n, got in found if got is not None))
+    return "; ".join(cells)
 
 
 def markdown(results_dirs) -> str:
