@@ -43,7 +43,7 @@ GARDENSPOINT := data/gardenspoint
 GARDENSPOINT_SRC ?= $(if $(wildcard ../shared/real/gardenspoint/night_right),../shared/real/gardenspoint,)
 GARDENSPOINT_URL ?= https://github.com/aghagol/loop-detection
 
-.PHONY: all help venv synthetic data nordland gardenspoint test quick sweep bench bench-scale clean-results readme default-choice verify provenance summary
+.PHONY: all help venv synthetic data nordland gardenspoint test quick sweep bench bench-scale clean-results readme default-choice verify provenance summary book browser
 .DEFAULT_GOAL := help
 
 help: ## this list
@@ -229,6 +229,20 @@ bench-scale: | $(STAMP) ## retrieval indexes and greenloop-seq's whole decision 
 # machine has one (never the multi-GB CUDA build from PyPI), timm without its torchvision dependency,
 # and the Lite0 model code without its (unpinned) torch requirement.
 TORCH_WHEEL := $(firstword $(wildcard /opt/wheels/torch-2.13.0*cpu*.whl))
+# Debian's headless Chromium and its driver, for the book's browser test (tests/test_book.py), installed
+# where apt-get can (as root); elsewhere that test says it is skipped and why.
+browser:
+	@command -v chromium >/dev/null && command -v chromedriver >/dev/null || { \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+	    echo "installing Debian's chromium and chromium-driver for the book's browser test"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends \
+	      chromium chromium-driver >/dev/null; \
+	  else echo "no chromium/chromedriver and no root apt-get: tests/test_book.py skips its browser check"; fi; }
+
+book: | $(STAMP) ## a static site of every executed notebook of every dataset, the verdict table as its landing page -> build/book/ (nothing re-executed)
+	$(BIN)/python -m greenloop.study.book --out build/book $(DATASET_RESULTS)
+	@echo "open build/book/index.html"
+
 $(VENV)/.timm: $(STAMP)
 ifneq ($(TORCH_WHEEL),)
 	$(BIN)/python -m pip install -q $(TORCH_WHEEL)
@@ -243,7 +257,7 @@ endif
 # other worker's core (a whole run took about 12 % less wall time and 15 % less CPU time than without)
 TEST_THREADS := OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 TF_NUM_INTRAOP_THREADS=1 TF_NUM_INTEROP_THREADS=1
 
-test: $(VENV)/.timm | $(STAMP) ## run the test suite (unit tests and every notebook on tiny parameters)
+test: $(VENV)/.timm browser | $(STAMP) ## run the test suite (unit tests and every notebook on tiny parameters)
 	$(TEST_THREADS) $(BIN)/python -m pytest -q -n auto --dist worksteal tests
 
 clean-results: ## remove executed notebooks and tables (keeps the model cache)
