@@ -143,3 +143,12 @@ def test_a_folder_without_its_tables_gives_missing_lines(tmp_path):
     text = summary.markdown([planted, bare])
     assert f"`{(planted / '13_leaderboard' / 'leaderboard.csv').as_posix()}` is missing" in text
     assert "| greenloop-seq-grad | pixels (single frame) | R@1 |" in text    # its comparisons still shown
+
+
+def test_the_readme_standing_table_is_the_generated_one():
+    root = Path(__file__).resolve().parents[1]
+    dirs = [root / "results"] + sorted(p.parent for p in (root / "results").glob("*/07_feature_baselines")
+                                       if p.parent.name != "quick")
+    text = (root / "README.md").read_text()
+    block = text.split("<!-- standing:start -->\n", 1)[1].split("<!-- standing:end -->", 1)[0]
+    assert block == summary.standing(dirs), "README's standing table is stale: make readme"

@@ -31,6 +31,7 @@ import re
 import sys
 from pathlib import Path
 
+from greenloop.report import fill_block
 from greenloop.study import provenance
 from greenloop.util.files import write_atomic
 
@@ -208,6 +209,51 @@ def comparisons_section(folder: Path) -> str:
     return head + table(["protocol", "a", "b", "metric", "difference [lo, hi]", "resolved", "queries"], ours)
 
 
+DEFAULT, CNN, SEQSLAM = "greenloop-seq-grad", "greenloop-seq-cnn", "SeqSLAM (tuned)"
+STANDING = ["dataset", "mode", "queries", f"{DEFAULT} (the default) R@1 %", f"{CNN} R@1 %", f"{SEQSLAM} R@1 %",
+            "best single frame R@1 %", f"default minus {SEQSLAM}, paired", "default frames/s [slowest, fastest]"]
+
+
+def _r1(row: dict | None) -> str:
+    return DASH if row is None else interval(row.get("R@1_%"), row.get("R@1_lo_%"), row.get("R@1_hi_%"))
+
+
+def _paired(folder: Path, mode: str) -> str:
+    """The default minus SeqSLAM tuned in R@1, points [95 % paired interval], from comparisons.csv
+    (loop closure, the leaderboard's own rows; "–" where the folder wrote none)."""
+    rows = read_csv(folder / LB / "comparisons.csv") or []
+    for r in rows:
+        if (r.get("protocol") == "leaderboard" and r.get("a") == DEFAULT and r.get("b") == SEQSLAM
+                and r.get("metric") == "R@1" and mode == "loop closure"):
+            word = "resolved" if r.get("resolved") == "True" else "not resolved"
+            return f"{interval(r['difference'], r['lo'], r['hi'])}, {word}"
+    return DASH
+
+
+def standing_rows(folder: Path) -> list[list[str]]:
+    """One row per mode of a folder's leaderboard: the named configurations, SeqSLAM tuned and the
+    single-frame row with the highest R@1 point (ImageNet or hand-crafted; random-init rows left out)."""
+    board = read_csv(folder / LB / "leaderboard.csv") or []
+    out = []
+    for mode in dict.fromkeys(r["mode"] for r in board):
+        rows = {r["method"]: r for r in board if r["mode"] == mode}
+        single = [r for m, r in rows.items() if m.endswith("(single frame)") and ":random" not in m]
+        best = max(single, key=lambda r: _float(r.get("R@1_%")) or -1, default=None)
+        d = rows.get(DEFAULT)
+        out.append([provenance.dataset_name(folder) or folder.name, mode, (d or {}).get("queries", DASH),
+                    _r1(d), _r1(rows.get(CNN)), _r1(rows.get(SEQSLAM)),
+                    DASH if best is None else f"{_r1(best)} ({best['method'].replace(' (single frame)', '')})",
+                    _paired(folder, mode),
+                    DASH if d is None else interval(d.get("fps_median"), d.get("fps_min"), d.get("fps_max"))])
+    return out
+
+
+def standing(results_dirs) -> str:
+    """Where greenloop's detector stands: one table over every folder and mode (README and summary.md)."""
+    rows = [r for d in map(Path, results_dirs) for r in standing_rows(d)]
+    return table(STANDING, rows)
+
+
 def leaderboards(results_dirs) -> str:
     """Section 1: each folder's leaderboard tables and its named configurations' comparisons."""
     parts = ["\n## 1. Leaderboards\n\n",
@@ -358,7 +404,8 @@ def markdown(results_dirs, out=None, bench=None) -> str:
     ``<first folder>/bench``)."""
     first = Path(results_dirs[0])
     out, bench = Path(out or first / "summary.md"), Path(bench or first / "bench")
-    return (header(results_dirs) + leaderboards(results_dirs) + paper_detector(results_dirs)
+    return (header(results_dirs) + "\n## Where greenloop's detector stands\n\n" + standing(results_dirs)
+            + leaderboards(results_dirs) + paper_detector(results_dirs)
             + targets(results_dirs) + long_recordings(bench, out))
 
 
@@ -375,11 +422,14 @@ def main(argv=None) -> int:
     ap.add_argument("results", nargs="+", help="results folders (results results/nordland ...)")
     ap.add_argument("--out", default=None, help="file to write (default: summary.md in the first folder)")
     ap.add_argument("--bench", default=None, help="benchmark folder (default: bench in the first folder)")
+    ap.add_argument("--readme", help="a Markdown file whose <!-- standing:start --> block to refill")
     args = ap.parse_args(argv)
     missing_dirs = [d for d in args.results if not Path(d).is_dir()]
     if missing_dirs:
         ap.error(f"no such results folder: {', '.join(missing_dirs)}")
     print(write_summary(args.results, args.out or Path(args.results[0]) / "summary.md", args.bench))
+    if args.readme:
+        fill_block(args.readme, "standing", standing(args.results))
     return 0
 
 
