@@ -143,3 +143,10 @@ def test_the_order_check_fails_an_unbacked_comparison():
 def test_no_order_is_claimed_without_a_comparison_behind_it(name):
     unbacked = unbacked_orders((ROOT / name).read_text())
     assert not unbacked, f"{name}: orders claimed with no comparisons/verdict table named: {unbacked}"
+
+
+def test_the_readme_is_a_front_page():
+    """At most 150 lines, the verdict table and the two commands on it; findings live in docs/findings.md."""
+    text = (ROOT / "README.md").read_text()
+    assert len(text.splitlines()) <= 150, f"README.md has {len(text.splitlines())} lines (a front page: at most 150)"
+    assert "<!-- verdict:start -->" in text and "make all" in text and "make test" in text
