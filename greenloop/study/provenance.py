@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 from pathlib import Path
 
@@ -96,7 +97,40 @@ def markdown(results_dirs) -> str:
         parts.append("| " + " | ".join(COLUMNS) + " |\n| " + " | ".join("---" for _ in COLUMNS) + " |\n")
         for r in table:
             parts.append("| " + " | ".join(str(r[c]).replace("|", "\\|") for c in COLUMNS) + " |\n")
+    bench = bench_rows(Path(results_dirs[0]) / "bench") if results_dirs else []
+    if bench:
+        parts.append(f"\n## `{(Path(results_dirs[0]) / 'bench').as_posix()}` (the benchmarks)\n\n")
+        parts.append("| " + " | ".join(COLUMNS) + " |\n| " + " | ".join("---" for _ in COLUMNS) + " |\n")
+        for r in bench:
+            parts.append("| " + " | ".join(str(r[c]) for c in COLUMNS) + " |\n")
     return "".join(parts)
+
+
+BENCH = {"bench.json": "make bench", "scale.md": "make bench-scale"}
+
+
+def bench_rows(bench_dir) -> list[dict]:
+    """The benchmarks' provenance (``results/bench``): bench.json's own date, CPU and (newer runs)
+    commit and environment, and scale.md's "Machine: ...; written <date> ..." line; ``—`` where the
+    file says nothing. Duration: bench.json's ``wall_seconds``."""
+    out = []
+    for name, target in BENCH.items():
+        path = Path(bench_dir) / name
+        if not path.is_file():
+            continue
+        if name.endswith(".json"):
+            m = _json(path) or {}
+            commit = f"`{m['git_commit'][:12]}`" if m.get("git_commit") else MISSING
+            took = f"{m['wall_seconds']:.1f} s †" if isinstance(m.get("wall_seconds"), (int, float)) else MISSING
+            cpu, date, env = m.get("cpu_model") or m.get("cpu"), m.get("date"), m.get("environment_hash")
+        else:
+            line = next((t for t in path.read_text().splitlines() if t.startswith("Machine:")), "")
+            cpu = line.removeprefix("Machine:").split(",")[0].strip() or None
+            found = re.search(r"written (\S+ \S+ UTC)", line)
+            date, commit, env, took = found.group(1) if found else None, MISSING, None, MISSING
+        out.append({"notebook": f"{name} (`{target}`)", "commit": commit, "environment": f"`{env[:12]}`" if env else MISSING,
+                    "CPU": cpu or MISSING, "date": date or MISSING, "duration": took})
+    return out
 
 
 def write_provenance(results_dirs, out) -> Path:
