@@ -143,9 +143,9 @@ def _counts(e: pd.DataFrame, name: str) -> str:
     """Misclassified test frames per split (seed ranges) and whether the accuracy ranges order the splits."""
     parts, arms = [], {}
     for split, d in sorted(e.groupby("split"), key=lambda x: x[0] != "random"):
-        parts.append(f"the {split} split misclassifies {int(d.misclassified.min())}-{int(d.misclassified.max())} of "
-                     f"{int(d.test_frames.iloc[0])} test frames ({len(d)} seeds)")
-        arms[f"{split} split"] = (len(d), d["accuracy_%"].min(), d["accuracy_%"].max())
+        parts.append(f"the {split} split misclassifies {wording.between(d.misclassified.min(), d.misclassified.max())} of "
+                     f"{int(d.test_frames.iloc[0])} test frames ({wording.count(len(d), 'seed')})")
+        arms[f"the {split} split"] = (len(d), d["accuracy_%"].min(), d["accuracy_%"].max())
     return (f"On {name}, {' and '.join(parts)} (the paper: {PAPER_ERRORS} of {PAPER_TEST_FRAMES}); the order of "
             f"their accuracies is {wording.order(arms)}.")
 

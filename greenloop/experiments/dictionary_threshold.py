@@ -104,6 +104,8 @@ def figure_timeline(variants: dict, scores: dict, tau: int, revisit: np.ndarray)
                         label="ground-truth revisit frames")
         for e in s["event_list"]:
             ax.axvline(e["frame"], color="tab:blue" if e["true"] else "tab:red", lw=1)
+        ax.plot([], [], color="tab:blue", lw=1, label="true closure event")
+        ax.plot([], [], color="tab:red", lw=1, label="false closure event")
         ax.set_title(f"{name}: {s['true_events']} true / {s['false_events']} false closure events, "
                      f"{s['true_frames']} true / {s['false_frames']} false flagged frames")
         ax.set_ylabel("D(c), every spot"); ax.set_ylim(0, max(tau, PAPER_TAU) * 1.6)
@@ -190,8 +192,8 @@ def _over_sweep(sweep: pd.DataFrame) -> str:
     at = ", ".join(str(int(t)) for t in g[g.true_events == most].tau)
     true = "never declare a true closure event" if most == 0 else \
         f"declare at most {most} true closure events (at τ = {at})"
-    return (f"Over τ from {int(lo.tau)} to {int(hi.tau)}, the paper's labels {true}, and {int(lo.false_events)} false "
-            f"ones at τ = {int(lo.tau)}, {int(hi.false_events)} at τ = {int(hi.tau)}.")
+    return (f"Over τ from {int(lo.tau)} to {int(hi.tau)}, the paper's labels {true}; their false closure events number "
+            f"{int(lo.false_events)} at τ = {int(lo.tau)} and {int(hi.false_events)} at τ = {int(hi.tau)}.")
 
 
 def conclusion(out_dir) -> str:

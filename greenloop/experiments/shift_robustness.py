@@ -254,24 +254,24 @@ def _paper_protocol(t3: pd.DataFrame, name: str) -> str:
         v = t3[col]
         return f"{wording.num(v.mean())} % {wording.span(v.min(), v.max())}"
     return (f"On {name}, every frame shifted 1 px right is classified at {one('shift1_all_frames_%')} over "
-            f"{len(t3)} seeds (mean [seed min, max]; the paper: {PAPER_SHIFT1} %), the held-out test frames alone at "
+            f"{wording.count(len(t3), 'seed')} (mean [seed min, max]; the paper: {PAPER_SHIFT1} %), the held-out test frames alone at "
             f"{one('shift1_test_only_%')}, against {one('original_test_%')} unshifted.")
 
 
 def _training_frames(t3: pd.DataFrame) -> str:
     """What scoring the training frames too adds to the shifted accuracy, per seed, with its sign."""
     d = t3["shift1_all_frames_%"] - t3["shift1_test_only_%"]
-    flatter = ": the paper's protocol flatters the model here" if d.min() > 0 else ""
+    flatter = ": the paper's protocol flatters the model here" if d.min() > 0 and len(d) >= wording.verdict.MIN_SEEDS else ""
     return (f"Scoring all frames, training frames included, instead of the held-out ones changes the shifted "
             f"accuracy by {wording.signed(d.mean())} points (per seed {wording.signed(d.min())} to "
-            f"{wording.signed(d.max())}, {wording.sign(d.min(), d.max())}){flatter}.")
+            f"{wording.signed(d.max())}, {wording.sign(d.min(), d.max(), len(d))}){flatter}.")
 
 
 def _cost(t3: pd.DataFrame) -> str:
     """What the 1-px shift costs the held-out test frames, per seed, with its sign."""
     d = t3["original_test_%"] - t3["shift1_test_only_%"]
     return (f"On the held-out frames the shift costs {wording.num(d.mean())} points (per seed "
-            f"{wording.num(d.min())} to {wording.num(d.max())}, {wording.sign(d.min(), d.max())}).")
+            f"{wording.num(d.min())} to {wording.num(d.max())}, {wording.sign(d.min(), d.max(), len(d))}).")
 
 
 def conclusion(out_dir) -> str:

@@ -146,7 +146,7 @@ def _random_split(t: pd.DataFrame, name: str) -> str:
     """Table 1's accuracies per L with their seed ranges, and whether the ranges order the L values."""
     arms = {f"L = {int(r.frames_per_spot)}": (int(r.seeds), r["acc_min_%"], r["acc_max_%"]) for _, r in t.iterrows()}
     each = "; ".join(f"L = {int(r.frames_per_spot)}: {wording.num(r['acc_mean_%'])} "
-                     f"{wording.span(r['acc_min_%'], r['acc_max_%'])} ({int(r.seeds)} seeds, {int(r.converged_seeds)} "
+                     f"{wording.span(r['acc_min_%'], r['acc_max_%'])} ({wording.count(r.seeds, 'seed')}, {int(r.converged_seeds)} "
                      f"converged)" for _, r in t.iterrows())
     budget = (" Fewer than half of the seeds fit their training frames, so these accuracies measure the training "
               "budget more than the grouping." if 2 * t.converged_seeds.sum() < t.seeds.sum() else "")
@@ -161,7 +161,7 @@ def _controls(c: pd.DataFrame, epochs) -> str:
         arms = {f"L = {int(r.frames_per_spot)}": (int(r.seeds), r["acc_min_%"], r["acc_max_%"]) for _, r in d.iterrows()}
         ranges = ", ".join(f"{k} {wording.span(v[1], v[2])}" for k, v in arms.items())
         parts.append(f"{control}: {ranges} ({wording.order(arms)})")
-    return (f"Under the leakage control ({int(c.seeds.max())} seeds per L, {epochs} epochs; test accuracy %, seed "
+    return (f"Under the leakage control ({wording.count(c.seeds.max(), 'seed')} per L, {epochs} epochs; test accuracy %, seed "
             f"min-max), {'; '.join(parts)}.")
 
 

@@ -186,6 +186,7 @@ def figure_learning_curves(runs: dict, target_accuracy: float):
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(2, 4, figsize=(18, 7.5), sharex=True)
+    last = max(PAPER_EPOCH + 5, max(len(r["history"]["accuracy"]) for rs in runs.values() for r in rs))
     for row, scale in enumerate(("linear", "log")):
         for col, (split, metric) in enumerate([(s, m) for s in runs for m in ("accuracy", "loss")]):
             ax = axes[row, col]
@@ -197,7 +198,7 @@ def figure_learning_curves(runs: dict, target_accuracy: float):
             if metric == "accuracy":
                 ax.axhline(target_accuracy, color="r", lw=1, ls="--",
                            label=f"paper: {target_accuracy:.0%} validation accuracy by epoch {PAPER_EPOCH}")
-                ax.hlines(PAPER_FLOOR, PAPER_EPOCH, ax.get_xlim()[1], color="m", lw=1, ls="--",
+                ax.hlines(PAPER_FLOOR, PAPER_EPOCH, last, color="m", lw=1, ls="--",
                           label=f"paper: never below {PAPER_FLOOR:.0%} after epoch {PAPER_EPOCH}")
                 ax.axvline(PAPER_EPOCH, color="0.5", lw=0.8, ls=":")
             ax.set_yscale(scale); ax.set_title(f"{metric}, {split} split ({scale})"); ax.grid(alpha=0.3)
@@ -239,7 +240,7 @@ def _splits(per_seed: pd.DataFrame, name: str) -> str:
     conv = per_seed.groupby("split").converged.sum()
     each = " and ".join(f"{wording.num(a.mean())} % {wording.span(a.min(), a.max())} on the {s} split "
                         f"({int(conv[s])} of {len(a)} converged)" for s, a in sorted(g.items(), reverse=True))
-    arms = {f"{s} split": (len(a), a.min(), a.max()) for s, a in g.items()}
+    arms = {f"the {s} split": (len(a), a.min(), a.max()) for s, a in g.items()}
     return f"On {name}, the final test accuracy (mean [seed min, max]) is {each}; their order is {wording.order(arms)}."
 
 
@@ -267,10 +268,10 @@ def _memory(summary: pd.DataFrame, gap: int, epochs) -> str:
             m = m.iloc[0]
             parts.append(f"minus {what} is {wording.num(m.memory_points_median, 1)} points (median; per seed "
                          f"{wording.num(m.memory_points_min, 1)} to {wording.num(m.memory_points_max, 1)}, "
-                         f"{wording.sign(m.memory_points_min, m.memory_points_max)})")
+                         f"{wording.sign(m.memory_points_min, m.memory_points_max, m.seeds)})")
     if not parts:
         return ""
-    return (f"With training sets matched in size (gap {gap}, {epochs} epochs, {int(summary.seeds.max())} seeds), the "
+    return (f"With training sets matched in size (gap {gap}, {epochs} epochs, {wording.count(summary.seeds.max(), 'seed')}), the "
             f"random split's accuracy {', and '.join(parts)}.")
 
 

@@ -20,8 +20,19 @@ def num(x, places: int = 2) -> str:
 
 
 def span(lo, hi, places: int = 2) -> str:
-    """A range as "[lo, hi]" (numbers by :func:`num`)."""
-    return f"[{num(lo, places)}, {num(hi, places)}]"
+    """A range as "[lo, hi]" (numbers by :func:`num`), or the one number where both print alike."""
+    a, b = num(lo, places), num(hi, places)
+    return a if a == b else f"[{a}, {b}]"
+
+
+def between(lo, hi) -> str:
+    """A range of counts as "lo-hi", or the one count where lo equals hi."""
+    return f"{int(lo)}" if int(lo) == int(hi) else f"{int(lo)}-{int(hi)}"
+
+
+def count(n, noun: str) -> str:
+    """n and the noun, plural unless n is 1: "1 seed", "3 seeds"."""
+    return f"{int(n)} {noun}" + ("" if int(n) == 1 else "s")
 
 
 def signed(x, places: int = 2) -> str:
@@ -43,20 +54,22 @@ def order(arms: dict[str, tuple[int, float, float]], min_seeds: int = verdict.MI
     if not first:
         return f"{UNRESOLVED}: the ranges overlap"
     if min(v[0] for v in arms.values()) < min_seeds:
-        return (f"{UNRESOLVED}: {ranked[0]}'s range lies apart from the others', but with fewer than {min_seeds} "
-                f"seeds in an arm")
+        others = f"{ranked[1]}'s" if len(ranked) == 2 else "the others'"
+        return f"{UNRESOLVED}: {ranked[0]}'s range lies apart from {others}, but with fewer than {min_seeds} seeds in an arm"
     if all(apart):
         return f"resolved: {' > '.join(ranked)} (the ranges do not overlap)"
     return f"resolved for the first only: {ranked[0]} above every other range; the rest overlap"
 
 
-def sign(lo, hi) -> str:
-    """The sign of a per-seed difference whose range over seeds is [lo, hi]: "above zero in every
-    seed", "below zero in every seed", or "sign not resolved, ..." where the range holds zero."""
-    if lo > 0:
-        return "above zero in every seed"
-    if hi < 0:
-        return "below zero in every seed"
+def sign(lo, hi, seeds: int, min_seeds: int = verdict.MIN_SEEDS) -> str:
+    """The sign of a per-seed difference whose range over ``seeds`` seeds is [lo, hi]: "above zero in
+    every seed" / "below zero in every seed" with at least ``min_seeds`` seeds; with fewer, the one sign
+    is said with the count and left not resolved; "sign not resolved" where the range holds zero."""
+    if lo > 0 or hi < 0:
+        side = "above" if lo > 0 else "below"
+        if seeds < min_seeds:
+            return f"{side} zero in each of {count(seeds, 'seed')}, too few to resolve the sign, {min_seeds} needed"
+        return f"{side} zero in every seed"
     return f"sign {UNRESOLVED}, the seeds fall on both sides of zero"
 
 
