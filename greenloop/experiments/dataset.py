@@ -194,6 +194,6 @@ def conclusion(out_dir) -> str:
     if len(t) > 1:
         r = t.iloc[1]
         sentences.append(f"For comparison, the real GreenHouse trajectory holds {int(r.loop_pairs)} loop pairs over "
-                         f"{int(r.revisit_frames)} revisit frames from frame {int(r.first_revisit_frame)}, along "
-                         f"{wording.num(r.path_m, 1)} m.")
+                         f"{int(r.revisit_frames)} revisit frames from frame {int(r.first_revisit_frame)} under the "
+                         f"same definition and exclusion, along {wording.num(r.path_m, 1)} m.")
     return wording.compose(out_dir.parent, "00_dataset", sentences)

@@ -174,7 +174,7 @@ def _at_tau(scores: dict, tau: int) -> str:
     revisits = next(iter(scores.values()))["revisit_frames"]
     if not revisits:
         return (f"The ground truth holds no revisit frame outside the exclusion window, so no closure can be true: at "
-                f"τ = {tau} " + "; ".join(f"{LABELS.get(v, v)} declare {s['false_events']} false closure events"
+                f"τ = {tau} " + "; ".join(f"{LABELS.get(v, v)} declare {wording.count(s['false_events'], 'false closure event')}"
                                           for v, s in scores.items()) + ".")
     each = "; ".join(f"{LABELS.get(v, v)} declare {s['true_events']} true and {s['false_events']} false closure events "
                      f"and flag {wording.num(100 * s['revisits_detected'] / revisits, 1)} % of the {revisits} revisit "
