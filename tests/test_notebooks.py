@@ -762,3 +762,64 @@ def test_the_relative_accuracy_check_fails_on_a_wrong_rate():
     _assert_relative_accuracy(by, "ref", "AP_%")
     with pytest.raises(AssertionError):
         _assert_relative_accuracy(by.assign(**{"R_a_%": [0.0, 50.0]}), "ref", "AP_%")
+
+
+# Notebooks 00-06 read as documents that conclude: their last cell shows the conclusion their module
+# generates from the tables the run has just written, and no output is a bare path (the return value of
+# report.write_table) or an empty table. Wrapped around their checks in every run that checks them.
+CONCLUDES = {"00_dataset": "dataset", "01_spot_grouping": "spot_grouping",
+             "02_training_over_seeds": "training_over_seeds", "03_confusion_matrix": "confusion_matrix",
+             "04_shift_robustness": "shift_robustness", "05_dictionary_threshold": "dictionary_threshold",
+             "06_speed": "speed_claim"}
+
+
+def _check_concludes(folder):
+    """The executed notebook beside `folder` (<results>/<stem>.ipynb, where _run writes it): its last code
+    cell shows exactly the Markdown its module's conclusion(folder) returns (a heading naming the dataset,
+    the verdicts, the sentences), and no code cell shows a PosixPath(...) or an empty DataFrame."""
+    import importlib
+    nb = json.loads((folder.parent / f"{folder.name}.ipynb").read_text())
+    want = importlib.import_module(f"greenloop.experiments.{CONCLUDES[folder.name]}").conclusion(folder)
+    last = [c for c in nb["cells"] if c["cell_type"] == "code"][-1]
+    shown = "".join("".join(o.get("data", {}).get("text/markdown", "")) for o in last["outputs"])
+    assert want.startswith("### Conclusion on ") and shown.strip() == want.strip(), (shown[:300], want[:300])
+    plain = ["".join(o.get("data", {}).get("text/plain", "")) for c in nb["cells"] if c["cell_type"] == "code"
+             for o in c.get("outputs", [])]
+    assert not [p for p in plain if p.startswith("PosixPath(") or p.startswith("Empty DataFrame")], plain
+
+
+def _concluding(check):
+    """`check` (a folder check, or None), then :func:`_check_concludes`."""
+    def both(folder):
+        if check is not None:
+            check(folder)
+        _check_concludes(folder)
+    return both
+
+
+for _stem in CONCLUDES:
+    CHECKS[_stem] = _concluding(CHECKS.get(_stem))
+    if _stem in PAIR_CHECKS:
+        PAIR_CHECKS[_stem] = _concluding(PAIR_CHECKS[_stem])
+
+
+def test_the_conclusion_check_fails_on_a_bare_path_or_a_stale_conclusion(tmp_path):
+    """_check_concludes on a hand-made executed notebook: the conclusion shown must be the module's, and
+    an output "PosixPath('...')" fails."""
+    from greenloop.experiments import shift_robustness
+    folder = tmp_path / "04_shift_robustness"
+    folder.mkdir()
+    (folder / "manifest.json").write_text(json.dumps({"dataset": "data/gardenspoint", "parameters": {}}))
+    pd.DataFrame({"seed": [0, 1], "original_test_%": [90, 91], "shift1_all_frames_%": [80, 82],
+                  "shift1_test_only_%": [70, 71]}).to_csv(folder / "table3.csv", index=False)
+
+    def notebook(markdown, plain="x"):
+        cells = [{"cell_type": "code", "outputs": [{"data": {"text/plain": plain}}]},
+                 {"cell_type": "code", "outputs": [{"data": {"text/markdown": markdown}}]}]
+        (tmp_path / "04_shift_robustness.ipynb").write_text(json.dumps({"cells": cells}))
+        return folder
+    _check_concludes(notebook(shift_robustness.conclusion(folder)))
+    with pytest.raises(AssertionError):
+        _check_concludes(notebook(shift_robustness.conclusion(folder).replace("Gardens Point", "synthetic")))
+    with pytest.raises(AssertionError):
+        _check_concludes(notebook(shift_robustness.conclusion(folder), "PosixPath('results/x.md')"))

@@ -5,11 +5,16 @@ Every table comes back unrounded; ``report.write_table(..., decimals=...)`` roun
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 
 from greenloop import evaluate
 from greenloop.datasets import sequence
+from greenloop.study import wording
+
+PAPER_ERRORS, PAPER_TEST_FRAMES = 10, 452       # Figure 5 / Table 2: misclassified of the test frames
 
 
 def errors_per_seed(runs: dict, labels, gt=None) -> pd.DataFrame:
@@ -132,3 +137,55 @@ def figure_misclassified(dataset, run: dict, labels, n: int = 6):
                  "class it was taken for, and of its true class", fontsize=10)
     fig.tight_layout()
     return fig
+
+
+def _counts(e: pd.DataFrame, name: str) -> str:
+    """Misclassified test frames per split (seed ranges) and whether the accuracy ranges order the splits."""
+    parts, arms = [], {}
+    for split, d in sorted(e.groupby("split"), key=lambda x: x[0] != "random"):
+        parts.append(f"the {split} split misclassifies {wording.between(d.misclassified.min(), d.misclassified.max())} of "
+                     f"{int(d.test_frames.iloc[0])} test frames ({wording.count(len(d), 'seed')})")
+        arms[f"the {split} split"] = (len(d), d["accuracy_%"].min(), d["accuracy_%"].max())
+    return (f"On {name}, {' and '.join(parts)} (the paper: {PAPER_ERRORS} of {PAPER_TEST_FRAMES}); the order of "
+            f"their accuracies is {wording.order(arms)}.")
+
+
+def _adjacent(e: pd.DataFrame) -> str:
+    """The share of the random split's errors on an adjacent spot, pooled and per seed, against the
+    paper's "most" (more than half)."""
+    r = e[e.split == "random"]
+    share = r["adjacent_share_%"].dropna()
+    if not len(share):
+        return "The random split made no error, so no share of adjacent errors is measured."
+    pooled = 100 * r.errors_on_adjacent_spot.sum() / r.misclassified.sum()
+    if share.min() > 50:
+        word = "more than half in every seed, as the paper's 'most' says"
+    elif share.max() < 50:
+        word = "less than half in every seed, not the 'most' the paper says"
+    else:
+        word = f"on both sides of half across seeds: whether 'most' holds is {wording.UNRESOLVED}"
+    return (f"{wording.num(pooled, 1)} % of the random split's errors fall on an adjacent spot (per seed "
+            f"{wording.span(share.min(), share.max(), 1)} %): {word}.")
+
+
+def _same_place(e: pd.DataFrame) -> str:
+    """The share of the random split's errors that name the same place at another time (a revisit)."""
+    r = e[e.split == "random"]
+    same = r.errors_on_same_place_other_time
+    if same.isna().all() or r.misclassified.sum() == 0:
+        return ""
+    per = 100 * same / r.misclassified.where(r.misclassified > 0)
+    return (f"{wording.num(100 * same.sum() / r.misclassified.sum(), 1)} % of them (per seed "
+            f"{wording.span(per.min(), per.max(), 1)} %) take the frame for the spot of the same place seen at "
+            f"another time (a revisit), which labels by frame index count as an error.")
+
+
+def conclusion(out_dir) -> str:
+    """Notebook 03's last cell: the verdict on Figure 5 / Table 2 for its dataset, then the
+    misclassified test frames per split with their seed ranges, the share of errors on an adjacent
+    spot against the paper's "most", and the share on a revisited place. out_dir: the notebook's
+    folder (``<results_dir>/03_confusion_matrix``) holding errors_per_seed.csv. Returns Markdown."""
+    out_dir = Path(out_dir)
+    e = pd.read_csv(out_dir / "errors_per_seed.csv")
+    name = wording.verdict.dataset_name(out_dir.parent)
+    return wording.compose(out_dir.parent, "03_confusion_matrix", [_counts(e, name), _adjacent(e), _same_place(e)])

@@ -1,5 +1,5 @@
 """Notebook 00's study: what a sequence holds (frames, path, ground-truth loops), beside the real
-GreenHouse trajectory where one is found.
+GreenHouse trajectory where one is found; its figures, and the conclusion its last cell shows.
 
 Every table comes back unrounded; ``report.write_table(..., decimals=...)`` rounds it.
 """
@@ -12,6 +12,7 @@ import pandas as pd
 
 from greenloop import groundtruth, spots
 from greenloop.datasets import sequence
+from greenloop.study import wording
 
 # where notebook 00 looks for the real GreenHouse trajectory when none is named
 REFERENCE_CANDIDATES = ("data/greenhouse/CameraTrajectory.txt", "../shared/greenhouse/CameraTrajectory.txt")
@@ -66,7 +67,9 @@ def figure_trajectory(poses, gt, gt_metric, frames_per_spot: int, titles: tuple)
     for i, j in pairs[:: max(1, len(pairs) // 300)]:
         ax.plot(t[[i, j], 0], t[[i, j], 2], color="crimson", lw=0.4, alpha=0.5)
     ax.plot(*t[0, [0, 2]], "k^", ms=9, label="start"); ax.plot(*t[-1, [0, 2]], "ks", ms=8, label="end")
-    ax.set_aspect("equal"); ax.set_xlabel("x (m)"); ax.set_ylabel("z (m)"); ax.legend(loc="best")
+    ax.plot([], [], color="crimson", lw=0.8, label="loop pair (Eq. 5)")
+    ax.set_aspect("equal"); ax.set_xlabel("x (m)"); ax.set_ylabel("z (m)")
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=3, fontsize=8)
     ax.set_title(f"top view, {groundtruth.path_length(poses):.1f} m; red: loop pairs")
     fig.colorbar(sc, ax=ax, label="frame (capture order)")
     lab = spots.group(len(t), frames_per_spot)
@@ -84,6 +87,62 @@ def figure_trajectory(poses, gt, gt_metric, frames_per_spot: int, titles: tuple)
     return fig
 
 
+def figure_frames(paths, small: np.ndarray, pick, depth: np.ndarray | None = None):
+    """The frames ``pick`` (indices) along the path: RGB as recorded from ``paths`` (top), the CNN's
+    32x32 grayscale input from ``small`` ((N, 32, 32, 1) in [0, 1], middle) and, when given, ``depth``
+    ((len(pick), H, W) metres, bottom). Returns the figure."""
+    import cv2
+    import matplotlib.pyplot as plt
+
+    rows = 2 if depth is None else 3
+    fig, axes = plt.subplots(rows, len(pick), figsize=(2 * len(pick), 1.8 * rows), squeeze=False)
+    for col, k in enumerate(pick):
+        axes[0, col].imshow(cv2.cvtColor(cv2.imread(str(paths[k])), cv2.COLOR_BGR2RGB))
+        axes[0, col].set_title(f"frame {k}", fontsize=9)
+        axes[1, col].imshow(small[k, ..., 0], cmap="gray", vmin=0, vmax=1)
+        if depth is not None:
+            dm = axes[2, col].imshow(depth[col], cmap="magma", vmin=0, vmax=float(np.nanpercentile(depth, 99)))
+    for ax in axes.ravel():
+        ax.axis("off")
+    if depth is not None:
+        fig.colorbar(dm, ax=axes[2].tolist(), shrink=0.8, label="depth (m)")
+    fig.suptitle("frames along the path: RGB (top), the CNN's 32x32 grayscale input (middle)"
+                 + ("" if depth is None else ", depth (bottom)"))
+    return fig
+
+
+def figure_spots(small: np.ndarray, labels: np.ndarray, frames_per_spot: int):
+    """The first frame of every spot as the CNN sees it; small: (N, 32, 32, 1) in [0, 1], labels:
+    (N,) spots (``spots.group(N, frames_per_spot)``). Returns the figure."""
+    import matplotlib.pyplot as plt
+
+    k = int(labels.max()) + 1
+    cols = min(k, 12)
+    rows = int(np.ceil(k / cols))
+    fig, axes = plt.subplots(rows, cols, figsize=(1.3 * cols, 1.5 * rows), squeeze=False)
+    for ax in axes.ravel():
+        ax.axis("off")
+    for c in range(k):
+        first = int(np.flatnonzero(labels == c)[0])
+        a = axes.ravel()[c]
+        a.imshow(small[first, ..., 0], cmap="gray", vmin=0, vmax=1)
+        a.set_title(f"spot {c}\n#{first}", fontsize=7)
+    fig.suptitle(f"first frame of each of the {k} spots of {frames_per_spot} frames")
+    return fig
+
+
+def figure_pairs(gt, title: str):
+    """The loop matrix of a sequence without poses (gt: (N, N) bool, from its loop pairs), frame i
+    against frame j; title: the figure's title. Returns the figure."""
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 5.2))
+    im = ax.imshow(gt, cmap="gray_r", interpolation="nearest"); ax.set_title(title)
+    ax.set_xlabel("frame j (index)"); ax.set_ylabel("frame i (index)")
+    fig.colorbar(im, ax=ax, ticks=[0, 1], label="loop (1) or not (0)", shrink=0.8)
+    return fig
+
+
 def figure_reference(poses, pairs):
     """Top view of the real trajectory (poses (M, 4, 4)) with its loop pairs ((P, 2)) in red."""
     import matplotlib.pyplot as plt
@@ -96,3 +155,45 @@ def figure_reference(poses, pairs):
     ax.set_aspect("equal"); ax.set_title(f"real GreenHouse path: {len(pairs)} loop pairs")
     ax.set_xlabel("x (m)"); ax.set_ylabel("z (m)")
     return fig
+
+
+PAPER_FRAMES = 2260           # the main paper's frames of the real GreenHouse set (2261 recorded)
+
+
+def _frames(row, spots_row: pd.Series | None, name: str) -> str:
+    """Frames and spots of the sequence against the paper's 2260 frames and 38 spots of 60."""
+    text = f"The {name} sequence holds {int(row.frames)} frames (the paper's GreenHouse set: {PAPER_FRAMES})"
+    if spots_row is not None:
+        paper = "" if pd.isna(spots_row.paper) or spots_row.paper == "" else f" (the paper: {spots_row.paper})"
+        text += f", grouped into {spots_row['this run']} {spots_row.quantity}{paper}"
+    return text + "."
+
+
+def _loops(row) -> str:
+    """The ground truth of one row of dataset.csv: loop pairs, revisit frames, the first revisit, the path."""
+    if pd.isna(row.loop_pairs):
+        return "It carries no ground truth (neither poses nor loop pairs), so no loop can be scored on it."
+    path = "" if pd.isna(row.path_m) else f", along {wording.num(row.path_m, 1)} m of camera path"
+    if not row.loop_pairs:
+        return f"Its ground truth ({row.ground_truth}) leaves no loop pair outside the exclusion window{path}."
+    return (f"Its ground truth ({row.ground_truth}) holds {int(row.loop_pairs)} loop pairs over {int(row.revisit_frames)} "
+            f"revisit frames, the first revisit at frame {int(row.first_revisit_frame)}{path}.")
+
+
+def conclusion(out_dir) -> str:
+    """Notebook 00's last cell (no claim of the papers concludes here): the dataset's frames, spots and
+    ground-truth loops beside the paper's, and the real GreenHouse trajectory's loops where one was
+    found. out_dir: the notebook's folder (``<results_dir>/00_dataset``) holding dataset.csv and
+    paper_vs_run.csv. Returns Markdown."""
+    out_dir = Path(out_dir)
+    t = pd.read_csv(out_dir / "dataset.csv")
+    cmp = pd.read_csv(out_dir / "paper_vs_run.csv", keep_default_na=False)
+    spots_rows = cmp[cmp.quantity.str.startswith("spots of")]
+    name = wording.verdict.dataset_name(out_dir.parent)
+    sentences = [_frames(t.iloc[0], spots_rows.iloc[0] if len(spots_rows) else None, name), _loops(t.iloc[0])]
+    if len(t) > 1:
+        r = t.iloc[1]
+        sentences.append(f"For comparison, the real GreenHouse trajectory holds {int(r.loop_pairs)} loop pairs over "
+                         f"{int(r.revisit_frames)} revisit frames from frame {int(r.first_revisit_frame)} under the "
+                         f"same definition and exclusion, along {wording.num(r.path_m, 1)} m.")
+    return wording.compose(out_dir.parent, "00_dataset", sentences)

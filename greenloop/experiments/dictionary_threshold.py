@@ -6,10 +6,16 @@ Every table comes back unrounded; ``report.write_table(..., decimals=...)`` roun
 """
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 
 from greenloop import cnn, dictionary, spots
+from greenloop.study import wording
+
+PAPER_TAU = 70          # the paper's τ = L + Δ = 60 + 10 detections
 
 VARIANTS = ("paper (spots by frame index)", "loop-aware (spots by place)")
 
@@ -40,6 +46,14 @@ def events(scores: dict) -> pd.DataFrame:
     """Every closure event of :func:`variant_scores`: one row per event (variant, frame, spot,
     count, true), in variant then frame order."""
     return pd.DataFrame([dict(variant=name, **e) for name, s in scores.items() for e in s["event_list"]])
+
+
+def events_view(events: pd.DataFrame, tau: int):
+    """What the notebook shows of :func:`events`' table: the table, or a one-line Markdown note when no
+    variant declared a closure at τ (an empty table says nothing)."""
+    from IPython.display import Markdown
+
+    return events if len(events) else Markdown(f"No variant declares a closure event at τ = {tau}.")
 
 
 def scores_summary(scores: dict) -> dict:
@@ -75,23 +89,28 @@ def sweep(variants: dict, gt: np.ndarray, taus, exclude: int = 150) -> pd.DataFr
 
 
 def figure_timeline(variants: dict, scores: dict, tau: int, revisit: np.ndarray):
-    """Every spot's count D(c) over the stream per variant, with τ, the ground-truth revisit
-    frames (green) and each closure event (blue true, red false); revisit: (N,) bool."""
+    """Every spot's count D(c) (detections) over the stream per variant, with this run's τ (dotted),
+    the paper's τ = 70 (dashed), the ground-truth revisit frames (green) and each closure event (blue
+    true, red false); revisit: (N,) bool."""
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(len(scores), 1, figsize=(14, 6), sharex=True)
     for ax, (name, s) in zip(axes, scores.items()):
         pred, ref = variants[name]
         ax.plot(dictionary.counts(pred, int(ref.max() + 1)), lw=0.6, color="grey", alpha=0.5)
-        ax.axhline(tau, color="k", ls=":", label=f"τ = {tau}")
-        ax.fill_between(np.arange(len(revisit)), 0, tau * 1.6, where=revisit, color="tab:green", alpha=0.15,
+        ax.axhline(tau, color="k", ls=":", label=f"this run: τ = {tau}")
+        ax.axhline(PAPER_TAU, color="r", ls="--", lw=1, label=f"paper: τ = {PAPER_TAU}")
+        ax.fill_between(np.arange(len(revisit)), 0, max(tau, PAPER_TAU) * 1.6, where=revisit, color="tab:green", alpha=0.15,
                         label="ground-truth revisit frames")
         for e in s["event_list"]:
             ax.axvline(e["frame"], color="tab:blue" if e["true"] else "tab:red", lw=1)
+        ax.plot([], [], color="tab:blue", lw=1, label="true closure event")
+        ax.plot([], [], color="tab:red", lw=1, label="false closure event")
         ax.set_title(f"{name}: {s['true_events']} true / {s['false_events']} false closure events, "
                      f"{s['true_frames']} true / {s['false_frames']} false flagged frames")
-        ax.set_ylabel("D(c), every spot"); ax.set_ylim(0, tau * 1.6)
-    axes[0].legend(loc="upper left"); axes[-1].set_xlabel("frame (capture order)")
+        ax.set_ylabel("D(c), every spot"); ax.set_ylim(0, max(tau, PAPER_TAU) * 1.6)
+    axes[0].legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1)); axes[-1].set_xlabel("frame (capture order)")
+    fig.tight_layout()
     return fig
 
 
@@ -124,13 +143,70 @@ def figure_path(centres: np.ndarray, variants: dict, scores: dict, tau: int, rev
 
 
 def figure_sweep(sweep: pd.DataFrame, tau: int):
-    """True and false closure frames against τ, one panel per variant of :func:`sweep`'s table,
-    with the derived τ dotted."""
+    """True and false closure frames (counts) against τ, one panel per variant of :func:`sweep`'s
+    table, with this run's τ = L + Δ dotted and the paper's τ = 70 dashed. Returns the figure."""
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, sweep.variant.nunique(), figsize=(13, 4), sharey=False)
-    for ax, (name, g) in zip(np.atleast_1d(axes), sweep.groupby("variant", sort=False)):
+    fig, axes = plt.subplots(1, sweep.variant.nunique(), figsize=(13, 4), sharey=False, squeeze=False)
+    for ax, (name, g) in zip(axes[0], sweep.groupby("variant", sort=False)):
         ax.plot(g.tau, g.true_frames, "o-", label="true closure frames")
         ax.plot(g.tau, g.false_frames, "s-", color="tab:red", label="false closure frames")
-        ax.axvline(tau, color="k", ls=":"); ax.set_xlabel("τ"); ax.set_title(name); ax.legend()
+        ax.axvline(tau, color="k", ls=":", label=f"this run: τ = L + Δ = {tau}")
+        ax.axvline(PAPER_TAU, color="r", ls="--", lw=1, label=f"paper: τ = {PAPER_TAU}")
+        ax.set_xlabel("τ (detections)"); ax.set_ylabel("frames flagged as a closure"); ax.set_title(name)
+    axes[0, -1].legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1))
+    fig.tight_layout()
     return fig
+
+
+def _threshold(derived: dict, name: str) -> str:
+    """The derivation of τ with the error rate measured (the paper's ε = 0.10, τ = 70)."""
+    return (f"On {name}, the worst seed's error rate ε = {wording.num(derived['error_rate'], 3)} gives "
+            f"(1 − ε)·L = {wording.num(derived['expected_correct'], 1)} expected correct detections of a spot of "
+            f"L = {derived['frames_per_spot']} and τ = L + Δ = {derived['tau']} (the paper: ε = 0.10, 54, τ = {PAPER_TAU}).")
+
+
+LABELS = dict(zip(VARIANTS, ("the paper's labels (spots by frame index)", "the loop-aware labels (spots by place)")))
+
+
+def _at_tau(scores: dict, tau: int) -> str:
+    """Closure events and the revisit frames flagged at τ, per variant (one seed: no spread)."""
+    revisits = next(iter(scores.values()))["revisit_frames"]
+    if not revisits:
+        return (f"The ground truth holds no revisit frame outside the exclusion window, so no closure can be true: at "
+                f"τ = {tau} " + "; ".join(f"{LABELS.get(v, v)} declare {wording.count(s['false_events'], 'false closure event')}"
+                                          for v, s in scores.items()) + ".")
+    each = "; ".join(f"{LABELS.get(v, v)} declare {s['true_events']} true and {s['false_events']} false closure events "
+                     f"and flag {wording.num(100 * s['revisits_detected'] / revisits, 1)} % of the {revisits} revisit "
+                     f"frames" for v, s in scores.items())
+    return (f"At τ = {tau}, {each} (one seed, so no spread; the loop-aware labels come from the ground truth that "
+            f"scores them: an upper bound, not a detection result).")
+
+
+def _over_sweep(sweep: pd.DataFrame) -> str:
+    """What the τ sweep of the paper's labels declares at its lowest and its highest τ, and at most."""
+    g = sweep[sweep.variant == VARIANTS[0]].sort_values("tau")
+    if not len(g):
+        return ""
+    lo, hi, most = g.iloc[0], g.iloc[-1], int(g.true_events.max())
+    at = ", ".join(str(int(t)) for t in g[g.true_events == most].tau)
+    true = "never declare a true closure event" if most == 0 else \
+        f"declare at most {most} true closure events (at τ = {at})"
+    return (f"Over τ from {int(lo.tau)} to {int(hi.tau)}, the paper's labels {true}; their false closure events number "
+            f"{int(lo.false_events)} at τ = {int(lo.tau)} and {int(hi.false_events)} at τ = {int(hi.tau)}.")
+
+
+def conclusion(out_dir) -> str:
+    """Notebook 05's last cell (its claim, the dictionary as a detector, is concluded on in notebook 13):
+    the τ derived with the measured error rate, the closures each variant declares at it, and what the
+    τ sweep of the paper's labels declares. out_dir: the notebook's folder
+    (``<results_dir>/05_dictionary_threshold``) holding summary.json and tau_sweep.csv. Returns Markdown."""
+    out_dir = Path(out_dir)
+    s = json.loads((out_dir / "summary.json").read_text())
+    name = wording.verdict.dataset_name(out_dir.parent)
+    tau = s["derived"]["tau"]
+    return wording.compose(out_dir.parent, "05_dictionary_threshold",
+                           [_threshold(s["derived"], name), _at_tau(s["scores"], tau),
+                            _over_sweep(pd.read_csv(out_dir / "tau_sweep.csv")),
+                            "Whether the dictionary declares loop closures at the precision a detector needs is "
+                            "concluded in notebook 13, on held-out evaluation queries."])

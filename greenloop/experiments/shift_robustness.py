@@ -8,10 +8,15 @@ unrounded; ``report.write_table(..., decimals=...)`` rounds it.
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 
 from greenloop import shift as sh
+from greenloop.study import wording
+
+PAPER_SHIFT1 = 92        # Table 3: % of all 2260 frames shifted 1 px right, training frames included
 
 # the frames a shift is scored on: the paper's (all frames, training frames included), and apart
 FRAME_SETS = ("all frames (the paper's protocol)", "training frames only", "held-out test frames only")
@@ -178,29 +183,40 @@ def figure_examples(X: np.ndarray, k: int, degrees: float):
     return fig
 
 
-def figure_grid(grid: pd.DataFrame, no_shift: float):
-    """:func:`perturbation_grid`'s accuracy (mean ± std over runs) against the shift per
-    direction (left) and the rotation (right); no_shift: the unshifted accuracy (%)."""
+def figure_grid(grid: pd.DataFrame, no_shift: float, table3: pd.DataFrame | None = None):
+    """:func:`perturbation_grid`'s test accuracy (%, mean ± std over runs) against the shift per
+    direction (left) and the rotation (right); no_shift: the unshifted accuracy (%); the paper's 92 %
+    dashed, and beside it, from ``table3`` (:func:`paper_scores`, when given), this run's accuracy
+    under the paper's protocol (all frames, 1 px right: mean, whisker over the seeds' min-max)."""
     import matplotlib.pyplot as plt
 
-    fig, (a, b) = plt.subplots(1, 2, figsize=(13, 4.2))
+    fig, (a, b) = plt.subplots(1, 2, figsize=(13, 4.6))
     for name in sh.DIRECTIONS:
         g = grid[grid.perturbation == f"shift {name}"].groupby("amount")["accuracy_%"]
-        a.errorbar(g.mean().index, g.mean(), yerr=g.std().fillna(0), marker="o", capsize=3, label=name)
-    a.axhline(no_shift, color="k", ls=":", label="no shift")
+        a.errorbar(g.mean().index, g.mean(), yerr=g.std().fillna(0), marker="o", capsize=3,
+                   label=f"{name} (held-out frames, mean ± std)")
+    if table3 is not None:
+        v = table3["shift1_all_frames_%"]
+        a.errorbar([1], [v.mean()], yerr=[[v.mean() - v.min()], [v.max() - v.mean()]], fmt="k*", ms=11, capsize=4,
+                   label="1 px right, all frames (paper's protocol): mean, seed min-max")
+    a.axhline(PAPER_SHIFT1, color="r", ls="--", label=f"paper: {PAPER_SHIFT1} % (1 px right, all frames)")
+    a.axhline(no_shift, color="k", ls=":", label="no shift (held-out frames)")
     a.set_xscale("log", base=2); a.set_xlabel("shift (pixels at 32x32)"); a.set_ylabel("test accuracy (%)")
-    a.set_title("held-out test frames, shifted")
-    a.legend(title="direction", loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=5)
+    a.set_title("shifted"); a.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2)
     g = grid[grid.perturbation == "rotation"].groupby("amount")["accuracy_%"]
-    b.errorbar(g.mean().index, g.mean(), yerr=g.std().fillna(0), marker="o", capsize=3)
-    b.set_xlabel("rotation (degrees)"); b.set_ylabel("test accuracy (%)"); b.set_title("held-out test frames, rotated")
+    b.errorbar(g.mean().index, g.mean(), yerr=g.std().fillna(0), marker="o", capsize=3,
+               label="held-out frames, mean ± std")
+    b.axhline(no_shift, color="k", ls=":", label="no shift (held-out frames)")
+    b.set_xlabel("rotation (degrees)"); b.set_ylabel("test accuracy (%)"); b.set_title("rotated")
+    b.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2)
+    fig.tight_layout()
     return fig
 
 
 def figure_controls(controls: pd.DataFrame, shifts, no_shift: float, input_shape):
-    """:func:`control_scores`' table in four panels: accuracy of right shifts, of all four
-    directions, changed pixels and mean absolute change, against the shift, one line per input;
-    input_shape: (H, W) of the CNN input. Returns the figure."""
+    """:func:`control_scores`' table in four panels: test accuracy (%) of right shifts (mean ± std over
+    seeds, the paper's 92 % dashed), of all four directions, changed pixels and mean absolute change,
+    against the shift, one line per input; input_shape: (H, W) of the CNN input. Returns the figure."""
     import matplotlib.pyplot as plt
 
     H, W = input_shape
@@ -214,12 +230,57 @@ def figure_controls(controls: pd.DataFrame, shifts, no_shift: float, input_shape
               ("mean_abs_change_per_pixel", slice(None), "mean absolute change per pixel ([0, 1] intensity)", "how much they changed")]
     for ax, (col, rows, ylabel, title) in zip(axes.flat, panels):
         for control, style in styles.items():
-            g = controls[rows][controls[rows].input == control].groupby("shift_px")[col].mean()
-            ax.plot(g.index, g.values, label=control, **style)
+            d = controls[rows][controls[rows].input == control]
+            g = d.groupby("shift_px")[col].mean()
+            if rows is not slice(None) and col.startswith("accuracy"):     # one row per shift: its spread over seeds
+                ax.errorbar(g.index, g.values, yerr=d.groupby("shift_px")["accuracy_std_%"].mean().fillna(0).values,
+                            capsize=3, label=control, **style)
+            else:
+                ax.plot(g.index, g.values, label=control, **style)
         if col.startswith("accuracy"):
             ax.axhline(no_shift, color="k", ls=":", label="no shift")
+        if rows is not slice(None) and col.startswith("accuracy"):
+            ax.axhline(PAPER_SHIFT1, color="r", ls="--", label=f"paper: {PAPER_SHIFT1} % (1 px right, all frames)")
         ax.set_xscale("log", base=2); ax.set_xticks(shifts, [str(s) for s in shifts]); ax.minorticks_off()
         ax.set_xlabel(f"shift (pixels at {W}x{H})"); ax.set_ylabel(ylabel); ax.set_title(title)
-    fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="lower center", ncol=5, bbox_to_anchor=(0.5, 0))
-    fig.tight_layout(rect=(0, 0.05, 1, 1))
+    fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="lower center", ncol=4, bbox_to_anchor=(0.5, 0))
+    fig.tight_layout(rect=(0, 0.08, 1, 1))
     return fig
+
+
+def _paper_protocol(t3: pd.DataFrame, name: str) -> str:
+    """Table 3's accuracies (%) with their seed ranges: all frames shifted, test frames shifted, unshifted."""
+    def one(col):
+        v = t3[col]
+        return f"{wording.num(v.mean())} % {wording.span(v.min(), v.max())}"
+    return (f"On {name}, every frame shifted 1 px right is classified at {one('shift1_all_frames_%')} over "
+            f"{wording.count(len(t3), 'seed')} (mean [seed min, max]; the paper: {PAPER_SHIFT1} %), the held-out test frames alone at "
+            f"{one('shift1_test_only_%')}, against {one('original_test_%')} unshifted.")
+
+
+def _training_frames(t3: pd.DataFrame) -> str:
+    """What scoring the training frames too adds to the shifted accuracy, per seed, with its sign."""
+    d = t3["shift1_all_frames_%"] - t3["shift1_test_only_%"]
+    flatter = ": the paper's protocol flatters the model here" if d.min() > 0 and len(d) >= wording.verdict.MIN_SEEDS else ""
+    return (f"Scoring all frames, training frames included, instead of the held-out ones changes the shifted "
+            f"accuracy by {wording.signed(d.mean())} points (per seed {wording.signed(d.min())} to "
+            f"{wording.signed(d.max())}, {wording.sign(d.min(), d.max(), len(d))}){flatter}.")
+
+
+def _cost(t3: pd.DataFrame) -> str:
+    """What the 1-px shift costs the held-out test frames, per seed, with its sign."""
+    d = t3["original_test_%"] - t3["shift1_test_only_%"]
+    return (f"On the held-out frames the shift costs {wording.num(d.mean())} points (per seed "
+            f"{wording.num(d.min())} to {wording.num(d.max())}, {wording.sign(d.min(), d.max(), len(d))}).")
+
+
+def conclusion(out_dir) -> str:
+    """Notebook 04's last cell: the verdict on Table 3 for its dataset, then the shifted accuracies
+    with their seed ranges, what including the training frames adds (points, with its sign over
+    seeds) and what the shift costs the held-out frames. out_dir: the notebook's folder
+    (``<results_dir>/04_shift_robustness``) holding table3.csv. Returns Markdown."""
+    out_dir = Path(out_dir)
+    t3 = pd.read_csv(out_dir / "table3.csv")
+    name = wording.verdict.dataset_name(out_dir.parent)
+    return wording.compose(out_dir.parent, "04_shift_robustness",
+                           [_paper_protocol(t3, name), _training_frames(t3), _cost(t3)])

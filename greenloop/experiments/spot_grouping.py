@@ -5,11 +5,15 @@ Every table comes back unrounded; ``report.write_table(..., decimals=...)`` roun
 """
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 
 from greenloop import cnn, spots
 from greenloop.experiments import training_over_seeds
+from greenloop.study import wording
 
 PAPER_ACC = {50: 97, 60: 98, 70: 97}       # Table 1, %  (the reference column only)
 PAPER_SPOTS = {50: 46, 60: 38, 70: 33}
@@ -84,11 +88,12 @@ def controls_by_grouping(X: np.ndarray, frames_per_spot_list, seeds, gap: int, c
 
 
 def figure_table1(runs: dict, table1: pd.DataFrame, converged_at: float):
-    """Table 1 as a figure: every seed's accuracy per L (hollow: not converged), the median, the
-    mean ± std and the paper's values. Returns the figure."""
+    """Table 1 as a figure: every seed's test accuracy (%) per L (hollow: not converged), the median,
+    the mean ± std with a whisker over the seeds' min-max, and the paper's value per L as a dashed
+    segment. Returns the figure."""
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(6, 4))
+    fig, ax = plt.subplots(figsize=(7.5, 4))
     first = next(iter(runs))
     for L, rs in runs.items():
         acc = [r["test_accuracy"] * 100 for r in rs]
@@ -98,18 +103,23 @@ def figure_table1(runs: dict, table1: pd.DataFrame, converged_at: float):
         ax.hlines(np.median(acc), L - 2, L + 2, color="tab:orange", lw=2, label="median" if L == first else None)
     ax.errorbar(table1.frames_per_spot, table1["acc_mean_%"], yerr=table1["acc_std_%"], color="k", capsize=4,
                 label="this run: mean ± std")
-    paper = [(L, PAPER_ACC[L]) for L in runs if L in PAPER_ACC]
-    if paper:
-        ax.plot(*zip(*paper), "r*", ms=12, label="paper (real set)")
-    ax.set_xlabel("frames per spot L"); ax.set_ylabel("test accuracy (%)"); ax.legend()
+    paper = [L for L in runs if L in PAPER_ACC]
+    for k, L in enumerate(paper):
+        ax.hlines(PAPER_ACC[L], L - 3, L + 3, color="r", ls="--", lw=1.5,
+                  label="paper (real set): " + " / ".join(f"{PAPER_ACC[x]} %" for x in paper) if k == 0 else None)
+    ax.set_xticks(list(runs), [str(L) for L in runs])
+    ax.set_xlabel("frames per spot L"); ax.set_ylabel("test accuracy (%), random split")
+    ax.legend(fontsize=8, loc="center left", bbox_to_anchor=(1.01, 0.5))
     ax.set_title("Table 1: accuracy vs spot length")
+    fig.tight_layout()
     return fig
 
 
 def figure_controls(ctrl: pd.DataFrame, summary: pd.DataFrame, title: str):
-    """Table 1 under the leakage control: each control's median accuracy per L as bars, every run
-    as a dot (hollow: not converged); ctrl: :func:`controls_by_grouping`' table, summary its
-    ``training_over_seeds.summarise_controls`` by frames_per_spot and control. Returns the figure."""
+    """Table 1 under the leakage control: each control's median test accuracy (%) per L as bars with a
+    whisker over the seeds' min-max, every run as a dot (hollow: not converged); ctrl:
+    :func:`controls_by_grouping`' table, summary its ``training_over_seeds.summarise_controls`` by
+    frames_per_spot and control (with median, min and max). Returns the figure."""
     import matplotlib.pyplot as plt
 
     wide = summary.pivot(index="frames_per_spot", columns="control", values="acc_median_%")
@@ -119,7 +129,10 @@ def figure_controls(ctrl: pd.DataFrame, summary: pd.DataFrame, title: str):
         d = ctrl[ctrl.control == c]
         offset = (k - (len(wide.columns) - 1) / 2) * w
         x = np.array([list(wide.index).index(L) for L in d.frames_per_spot]) + offset
-        ax.bar(np.arange(len(wide)) + offset, wide[c].values, w, alpha=0.5, label=f"{c} (median)")
+        lo, hi = (summary[summary.control == c].set_index("frames_per_spot").loc[wide.index, f"acc_{s}_%"].values
+                  for s in ("min", "max"))
+        ax.bar(np.arange(len(wide)) + offset, wide[c].values, w, alpha=0.5, label=f"{c} (median, min-max)",
+               yerr=[wide[c].values - lo, hi - wide[c].values], capsize=3, error_kw={"lw": 0.8})
         ax.scatter(x, d["test_acc_%"], s=14, zorder=3, edgecolors="k", facecolors=np.where(d.converged, "k", "none"),
                    label="one seed (hollow: did not converge)" if k == 0 else None)
     ax.set_xticks(range(len(wide)), [f"L = {L}" for L in wide.index]); ax.set_ylabel("test accuracy (%)")
@@ -127,3 +140,41 @@ def figure_controls(ctrl: pd.DataFrame, summary: pd.DataFrame, title: str):
     ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5)); ax.grid(axis="y", alpha=0.3)
     fig.tight_layout()
     return fig
+
+
+def _random_split(t: pd.DataFrame, name: str) -> str:
+    """Table 1's accuracies per L with their seed ranges, and whether the ranges order the L values."""
+    arms = {f"L = {int(r.frames_per_spot)}": (int(r.seeds), r["acc_min_%"], r["acc_max_%"]) for _, r in t.iterrows()}
+    each = "; ".join(f"L = {int(r.frames_per_spot)}: {wording.num(r['acc_mean_%'])} "
+                     f"{wording.span(r['acc_min_%'], r['acc_max_%'])} ({wording.count(r.seeds, 'seed')}, {int(r.converged_seeds)} "
+                     f"converged)" for _, r in t.iterrows())
+    budget = (" Fewer than half of the seeds fit their training frames, so these accuracies measure the training "
+              "budget more than the grouping." if 2 * t.converged_seeds.sum() < t.seeds.sum() else "")
+    return (f"On {name}, the random split's test accuracy (%, mean [seed min, max]) is {each}; the order of L "
+            f"is {wording.order(arms)}.{budget}")
+
+
+def _controls(c: pd.DataFrame, epochs) -> str:
+    """Table 1 under the leakage control: per control, the seed range of every L and their order."""
+    parts = []
+    for control, d in c.groupby("control", sort=False):
+        arms = {f"L = {int(r.frames_per_spot)}": (int(r.seeds), r["acc_min_%"], r["acc_max_%"]) for _, r in d.iterrows()}
+        ranges = ", ".join(f"{k} {wording.span(v[1], v[2])}" for k, v in arms.items())
+        parts.append(f"{control}: {ranges} ({wording.order(arms)})")
+    return (f"Under the leakage control ({wording.count(c.seeds.max(), 'seed')} per L, {epochs} epochs; test accuracy %, seed "
+            f"min-max), {'; '.join(parts)}.")
+
+
+def conclusion(out_dir) -> str:
+    """Notebook 01's last cell: the verdicts on Table 1 for its dataset, then Table 1's accuracies with
+    their seed ranges and the order of L they resolve (or not), on the random split and under the
+    leakage control. out_dir: the notebook's folder (``<results_dir>/01_spot_grouping``) holding
+    table1.csv, table1_controls.csv and manifest.json. Returns Markdown."""
+    out_dir = Path(out_dir)
+    name = wording.verdict.dataset_name(out_dir.parent)
+    t = pd.read_csv(out_dir / "table1.csv")
+    sentences = [_random_split(t, name)]
+    if (out_dir / "table1_controls.csv").is_file():
+        epochs = json.loads((out_dir / "manifest.json").read_text())["parameters"].get("control_epochs", "?")
+        sentences.append(_controls(pd.read_csv(out_dir / "table1_controls.csv"), epochs))
+    return wording.compose(out_dir.parent, "01_spot_grouping", sentences)
