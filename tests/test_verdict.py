@@ -73,3 +73,8 @@ def test_a_notebook_concludes_on_its_own_claims_for_its_dataset(tmp_path):
     assert text.count("\n") == 1 and "98 %" in text and text.count(f"**{verdict.HOLDS}**") == 2
     assert f"**{verdict.NOT_RUN}**" in verdict.conclusion(tmp_path, "10_siamese_rgbd")   # no table: said so
     assert verdict.conclusion(tmp_path, "00_dataset") == ""
+
+
+def test_an_order_whose_claimed_arm_did_not_run_reads_not_run():
+    """Notebook 10 run with supervisions = ["softmax"]: the multi-task claim has no arm to judge."""
+    assert verdict.rank_verdict("multitask", {"softmax": (5, 1.0, 2.0)}) == f"{verdict.NOT_RUN} (multitask not in this run)"
