@@ -20,6 +20,7 @@ import sys
 import time
 from pathlib import Path
 
+import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 import psutil
@@ -109,6 +110,26 @@ def fill_block(markdown_file, name: str, content: str) -> Path:
     head, rest = text.split(start, 1)
     write_atomic(path, head + start + content + end + rest.split(end, 1)[1])
     return path
+
+
+def palette(names) -> dict:
+    """{name: colour}: one distinct colour per name, in the order given (tab20, then tab20b and
+    tab20c: up to 60 names), so that a method keeps its colour across a notebook's panels."""
+    colours = [plt.get_cmap(m)(i) for m in ("tab20", "tab20b", "tab20c") for i in range(20)]
+    return {n: colours[k % len(colours)] for k, n in enumerate(dict.fromkeys(names))}
+
+
+def mark_paper(ax, x, y, label: str, horizontal: bool = True, width: float = 0.8):
+    """The paper's value(s) on ``ax``: a dashed black segment of ``width`` centred on each (x, y)
+    (horizontal bars: along x; ``horizontal`` False: a dashed vertical segment at x = y for barh),
+    one legend entry ``label``. x, y: sequences of equal length (bar positions, values)."""
+    first = True
+    for xi, yi in zip(x, y):
+        if yi is None or yi != yi:
+            continue
+        seg = ([xi - width / 2, xi + width / 2], [yi, yi]) if horizontal else ([yi, yi], [xi - width / 2, xi + width / 2])
+        ax.plot(*seg, color="k", ls="--", lw=1.6, label=label if first else None, zorder=4)
+        first = False
 
 
 def save_figure(fig, path, dpi: int = 110) -> Path:

@@ -823,3 +823,71 @@ def test_the_conclusion_check_fails_on_a_bare_path_or_a_stale_conclusion(tmp_pat
         _check_concludes(notebook(shift_robustness.conclusion(folder).replace("Gardens Point", "synthetic")))
     with pytest.raises(AssertionError):
         _check_concludes(notebook(shift_robustness.conclusion(folder), "PosixPath('results/x.md')"))
+
+
+# ------------------------------------------------------- notebooks 07-13 read as documents that conclude
+DOCUMENTS = ("07_feature_baselines", "08_descriptor_postprocessing", "09_rgbd_features", "10_siamese_rgbd",
+             "11_lsh_matching", "12_revisit_protocol", "13_leaderboard")
+EMPTY_CELLS = {"", "nan", "none", "<na>", "nat"}
+
+
+def _empty_table(output) -> bool:
+    """Whether an output cell's HTML or Markdown table has no cell with content (an empty DataFrame, or
+    one whose every value is NaN / empty): a reader sees a header and nothing under it."""
+    data = output.get("data", {})
+    html = "".join(data.get("text/html", ""))
+    if "<table" in html:
+        cells = re.findall(r"<td[^>]*>(.*?)</td>", html, flags=re.S)
+        return all(c.strip().lower() in EMPTY_CELLS for c in cells)
+    rows = [r for r in "".join(data.get("text/markdown", "")).splitlines() if r.lstrip().startswith("|")]
+    if len(rows) >= 2:
+        cells = [c.strip().lower() for r in rows[2:] for c in r.strip().strip("|").split("|")]
+        return all(c in EMPTY_CELLS for c in cells)
+    return False
+
+
+def _assert_document(folder):
+    """The executed notebook of results folder ``folder`` reads as a document: no output is a bare path
+    (``PosixPath(...)``) or an empty table, and its last cell shows the generated conclusion for the
+    dataset it ran on (its name, and a verdict word where study.verdict holds a claim the notebook
+    concludes on)."""
+    from greenloop.study import verdict
+    cells = json.loads((folder.parent / f"{folder.name}.ipynb").read_text())["cells"]
+    for k, cell in enumerate(c for c in cells if c["cell_type"] == "code"):
+        for o in cell.get("outputs", []):
+            assert not "".join(o.get("data", {}).get("text/plain", "")).startswith("PosixPath("), (folder.name, k)
+            assert not _empty_table(o), (folder.name, k, "".join(cell["source"])[:120])
+    last = cells[-1]
+    assert last["cell_type"] == "code" and "conclusion(OUT)" in "".join(last["source"]), folder.name
+    shown = "".join("".join(o.get("data", {}).get("text/markdown", "")) for o in last["outputs"])
+    assert shown.startswith(f"### Conclusion on {verdict.dataset_name(folder.parent)}"), shown[:200]
+    if any(c.notebook == folder.name for c in verdict.CLAIMS):
+        words = (verdict.HOLDS, verdict.FAILS, verdict.BUDGET, verdict.UNRESOLVED, verdict.UNTESTABLE, verdict.NOT_RUN)
+        assert any(f"**{w}" in shown for w in words), shown[:400]
+    assert len(shown.split("\n\n")[-1]) > 80, shown          # the sentences generated from the tables follow
+
+
+def test_an_empty_table_is_told_from_a_table_with_values():
+    """_empty_table on planted outputs: an empty DataFrame's HTML and an all-NaN one are empty, one value is not."""
+    html = lambda df: {"data": {"text/html": df.to_html(), "text/plain": repr(df)}}
+    assert _empty_table(html(pd.DataFrame(columns=["a", "b"])))
+    assert _empty_table(html(pd.DataFrame({"a": [np.nan], "b": [None]})))
+    assert not _empty_table(html(pd.DataFrame({"a": [np.nan], "b": [1.5]})))
+    md = {"data": {"text/markdown": "| a | b |\n|---|---|\n|  |  |\n"}}
+    assert _empty_table(md) and not _empty_table({"data": {"text/markdown": "| a | b |\n|---|---|\n| 1 |  |\n"}})
+
+
+def _and_document(check):
+    """``check`` followed by :func:`_assert_document` on the same results folder."""
+    def run(folder):
+        check(folder)
+        _assert_document(folder)
+    return run
+
+
+for _stem in DOCUMENTS:              # every run of these notebooks (tiny, pairs, end loop) must conclude
+    CHECKS[_stem] = _and_document(CHECKS.get(_stem, lambda f: None))
+    if _stem in PAIR_CHECKS:
+        PAIR_CHECKS[_stem] = _and_document(PAIR_CHECKS[_stem])
+    if _stem[:2] in END_LOOP_CHECKS:
+        END_LOOP_CHECKS[_stem[:2]] = _and_document(END_LOOP_CHECKS[_stem[:2]])

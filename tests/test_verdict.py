@@ -85,3 +85,8 @@ def test_coverage_says_whether_the_claim_holds_beside_whether_the_protocol_ran(t
     assert t.loc[(coverage.MAIN, "Table 3"), "claim holds"] == "a 1-pixel shift keeps the accuracy: "  # no table
     assert t.loc[(coverage.MAIN, "Fig. 1, Fig. 2"), "claim holds"] == ""              # no claim
     assert list(t.columns).index("claim holds") == list(t.columns).index("status") + 1
+
+
+def test_an_order_whose_claimed_arm_did_not_run_reads_not_run():
+    """Notebook 10 run with supervisions = ["softmax"]: the multi-task claim has no arm to judge."""
+    assert verdict.rank_verdict("multitask", {"softmax": (5, 1.0, 2.0)}) == f"{verdict.NOT_RUN} (multitask not in this run)"

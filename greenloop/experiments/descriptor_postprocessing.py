@@ -12,19 +12,21 @@ The building blocks are ``similarity`` (whitening, median filter, S = 1 - D / ma
 """
 from __future__ import annotations
 
+from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
 import pandas as pd
 
 from greenloop import similarity
+from greenloop.study import verdict, wording
 from greenloop.evaluate import (average_precision, mean_per_class_accuracy, mpca_threshold,
                                 pr_curve, recall_at_100_precision)
 from greenloop import report
 
 __all__ = [
     "DECIMALS", "NOT_AVAILABLE", "tune_then_score", "whitened_variants", "median_scores",
-    "swapped_split", "Scored", "postprocessing", "second_split", "split_spread", "paper_rows",
+    "swapped_split", "Scored", "postprocessing", "second_split", "split_spread", "paper_rows", "conclusion",
     "figure_tuning", "figure_ap_by_variant", "figure_pr_raw_vs_whitened", "figure_similarity",
 ]
 
@@ -256,6 +258,55 @@ def paper_rows(table: pd.DataFrame, variants: dict, infos: dict, pca_dim: int, e
     return report.paper_vs_run(rows)
 
 
+def _gap_text(name: str, diff: float, spread_row) -> str:
+    """How a difference of ``diff`` points (one split) stands against the spread of its knob's pick over
+    the two splits (a row of :func:`split_spread`, or None): never an order (two splits are no seed range)."""
+    if spread_row is None:
+        return f"{name} {diff:+.2f} points (one split): not resolved"
+    within = abs(diff) <= spread_row["spread"]
+    return (f"{name} {diff:+.2f} points, {'within' if within else 'beyond'} the {wording.num(spread_row['spread'])}-point "
+            f"spread of its knob's pick over the two splits (AP {wording.span(spread_row['min'], spread_row['max'], unit=' %')})"
+            + ("" if within else ", but two splits are too few to call an order") + ": not resolved")
+
+
+def _variant_sentence(t: pd.DataFrame, label: str, ap: str, dataset: str) -> str:
+    """The variants' APs (%) of one network (rows of postprocessing.csv), unfiltered unless said."""
+    a = t.set_index(["variant", "median_filter"])[ap]
+    names = [("raw", "none", "raw"), ("L2", "none", "L2"), ("PCA-whitened, paper dim", "none", "PCA-whitened at the paper's dim"),
+             ("PCA-whitened, tuned dim", "none", "at the tuned dim"), ("ZCA, tuned dim", "none", "ZCA at the tuned dim"),
+             ("ZCA, tuned dim", "median (tuned)", "ZCA + the tuned median filter")]
+    parts = [f"{words} {wording.num(a[(v, m)])}" for v, m, words in names if (v, m) in a.index]
+    part = "evaluation part" if ap == "AP_eval_%" else "every query (no honest split, untuned rows only)"
+    return f"On {dataset}, {label} reaches AP (%, {part}): " + ", ".join(parts) + "."
+
+
+def conclusion(out_dir) -> str:
+    """Notebook 08's last cell, in Markdown: the verdicts on Zhang 2017's whitening and the ZCA paper's
+    median filter for this dataset, then the AP (%) of each variant of the network with ImageNet weights
+    (else the first network, said to be random-init) and how each gain stands against the spread of its
+    knob's pick over the two splits (postprocessing.csv and split_spread.csv under ``out_dir``)."""
+    out_dir = Path(out_dir)
+    t = pd.read_csv(out_dir / "postprocessing.csv")
+    pre = t[t.weights.str.startswith("imagenet")]
+    net = (pre if len(pre) else t).backbone.iloc[0]
+    rows, ap = t[t.backbone == net], "AP_eval_%" if "AP_eval_%" in t else "AP_all_%"
+    lines = ([] if len(pre) else ["No network here has ImageNet weights: what follows is about untrained features."])
+    lines.append(_variant_sentence(rows, rows.label.iloc[0], ap, verdict.dataset_name(out_dir.parent)))
+    spread = pd.read_csv(out_dir / "split_spread.csv")
+    if ap == "AP_eval_%" and "spread" in spread:
+        a = rows.set_index(["variant", "median_filter"])[ap]
+        by = spread[spread.label == rows.label.iloc[0]].set_index("knob")
+        knob = lambda k: by.loc[k] if k in by.index else None
+        lines.append("Gains on the one split: " + _gap_text(
+            "whitening at the tuned dim over raw", a[("PCA-whitened, tuned dim", "none")] - a[("raw", "none")],
+            knob("PCA-whitening dim")) + "; " + _gap_text(
+            "the median filter on ZCA", a[("ZCA, tuned dim", "median (tuned)")] - a[("ZCA, tuned dim", "none")],
+            knob("median size, L2")) + " (the filter size's spread is read on the L2 variant).")
+    else:
+        lines.append(f"No honest tuning/evaluation split here: {wording.NOT_A_RANKING}.")
+    return wording.heading(Path(out_dir).parent, "08_descriptor_postprocessing") + "\n\n" + " ".join(lines)
+
+
 # -------------------------------------------------------------------------------- figures
 def figure_tuning(tuning: pd.DataFrame, infos: dict):
     """AP on the tuning part against the whitening dimension (PCA, ZCA) and the median size (L2
@@ -270,9 +321,11 @@ def figure_tuning(tuning: pd.DataFrame, infos: dict):
             bi = t["AP_tune_%"].idxmax()
             ax.plot(t.value[bi], t["AP_tune_%"][bi], "*", ms=14, color=line.get_color())
     axes[0].set_xscale("log", base=2); axes[0].set_xlabel("whitening dimension"); axes[0].set_ylabel("AP on the TUNING part (%)")
-    axes[0].set_title("whitening dimension (★ = picked)"); axes[0].legend(fontsize=7)
+    axes[0].set_title("whitening dimension (★ = picked)")
     axes[1].set_xlabel("median filter size (frames)"); axes[1].set_ylabel("AP on the TUNING part (%)")
-    axes[1].set_title("median filter size, L2 variant (★ = picked)"); axes[1].legend(fontsize=7)
+    axes[1].set_title("median filter size, L2 variant (★ = picked)")
+    for ax in axes:
+        ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.15), ncol=2, borderaxespad=0)
     return fig
 
 
@@ -291,7 +344,9 @@ def figure_ap_by_variant(table: pd.DataFrame, infos: dict, split_ok: bool, score
         if split_ok:
             ax.bar(x + 0.2, [t[(v, "median (tuned)")] for v in order], 0.4, label="median filter (size tuned)")
         ax.set_xticks(x); ax.set_xticklabels(order, rotation=30, ha="right", fontsize=8); ax.set_title(infos[b].label, fontsize=9)
-    axes[0][0].set_ylabel(f"AP on the {scored_on} (%)"); axes[0][0].legend(fontsize=8)
+        ax.set_xlabel("descriptor variant", fontsize=8)
+    axes[0][0].set_ylabel(f"AP on the {scored_on} (%)")
+    axes[0][-1].legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1), borderaxespad=0)
     fig.tight_layout()
     return fig
 
@@ -310,7 +365,7 @@ def figure_pr_raw_vs_whitened(variants: dict, table: pd.DataFrame, infos: dict, 
             ap = table[(table.backbone == b) & (table.variant == v) & (table.median_filter == "none")][AP].iloc[0]
             ax.plot(r, p, ls, label=f"{'raw' if v == 'raw' else 'L2 + PCA-whitened'}: AP {ap:.1f} %")
         ax.set_title(infos[b].label, fontsize=8); ax.set_xlabel("recall"); ax.set_xlim(0, 1); ax.set_ylim(0, 1.02)
-        ax.legend(fontsize=7, loc="upper right")
+        ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.18), borderaxespad=0)
     axes[0][0].set_ylabel(f"precision ({scored_on.lower()})")
     fig.suptitle("Zhang 2017 Fig. 5 layout: raw vs L2 + PCA-whitened descriptors, S = 1 - D / max D", fontsize=10)
     fig.tight_layout()

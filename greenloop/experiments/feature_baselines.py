@@ -10,19 +10,23 @@ the main paper's dictionary detector (``dictionary.operating_points``) at each �
 """
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 
 from greenloop import evaluate, groundtruth, similarity
 from greenloop.features import layers
 from greenloop.speed import timing
+from greenloop.study import verdict, wording
 from greenloop import report
 
 __all__ = ["DECIMALS", "REFERENCE", "similarity_matrices", "table2", "layer_table", "chosen_layers",
            "layer_summary", "figure_layers",
            "ground_truth_sensitivity",
-           "operating_points_table", "paper_rows", "figure_sensitivity", "figure_pr_curves",
-           "figure_similarity_matrices"]
+           "operating_points_table", "paper_rows", "conclusion", "figure_sensitivity", "figure_pr_curves",
+           "figure_ap", "figure_similarity_matrices"]
 
 # decimals the notebook shows and writes each column with (pandas DataFrame.round); the ground-truth
 # sensitivity table (one column per descriptor label) shows 2, the operating points 4
@@ -163,17 +167,75 @@ def paper_rows(table: pd.DataFrame, ops: pd.DataFrame, paper: dict, frames_per_s
     return report.paper_vs_run(rows)
 
 
+def _descriptor_sentence(t: pd.DataFrame, chance: float, dataset: str) -> str:
+    """Table 2's APs (%) on ``dataset``: the ImageNet rows, the range of the random-init rows, SIFT-BoVW
+    and pixels, beside chance; single values, so no order."""
+    whole = t[~t.backbone.str.contains("@")]
+    pre = whole[whole.weights.str.startswith("imagenet")]
+    rand = whole[whole.weights == "random init"]
+    parts = [f"{r.label} {wording.num(r['AP_%'])} %" for _, r in pre.iterrows()]
+    if len(rand):
+        parts.append(f"the {len(rand)} random-init rows {wording.span(rand['AP_%'].min(), rand['AP_%'].max(), unit=' %')}")
+    parts += [f"{b} {wording.num(whole.set_index('backbone').loc[b, 'AP_%'])} %" for b in ("sift_bovw", "pixels")
+              if b in set(whole.backbone)]
+    head = "the descriptors with ImageNet weights reach AP " if len(pre) else "no descriptor has ImageNet weights here; AP: "
+    return (f"On {dataset} {head}" + ", ".join(parts) + f" (chance {wording.num(100 * chance)} %): one AP per "
+            f"descriptor over one sequence: {wording.NOT_A_RANKING}.")
+
+
+def _layer_sentence(t: pd.DataFrame) -> str:
+    """The layer chosen per network on the tuning queries beside the last map's global average, per-query
+    AUC-PR (%) on the evaluation queries; "" without a split or a layer network."""
+    if not len(t) or "AUC-PR_eval_%" not in t or not t.chosen.any():
+        return ""
+    parts = []
+    for net, g in t.groupby("backbone", sort=False):
+        pick, last = g[g.chosen], g[(g.depth == "last") & (g.pooling == "avg")]
+        if len(pick) and len(last):
+            same = pick.index[0] == last.index[0]
+            parts.append(f"{net} {pick.depth.iloc[0]}-{pick.pooling.iloc[0]} {wording.num(pick['AUC-PR_eval_%'].iloc[0])} %"
+                         + ("" if same else f" (last-avg {wording.num(last['AUC-PR_eval_%'].iloc[0])} %)"))
+    return ("Layer by layer, the map chosen on the tuning queries scores per-query AUC-PR " + "; ".join(parts)
+            + f" on the evaluation queries: one deterministic run each, {wording.NOT_A_RANKING}.") if parts else ""
+
+
+def _dictionary_sentence(ops: pd.DataFrame, tau: int) -> str:
+    """The main paper's dictionary at the τ of ``ops`` nearest ``tau`` (L + Δ): declared pairs, right
+    ones, precision and recall over the ground truth's pairs."""
+    r = ops.iloc[(ops.tau - tau).abs().argmin()]
+    declared = int(r.tp + r.fp)
+    if declared == 0:
+        return f"The main paper's dictionary at τ = {int(r.tau)} declares no pair (recall 0 of {int(r.fn)} loop pairs)."
+    return (f"The main paper's dictionary at τ = {int(r.tau)} declares {declared} pairs, {int(r.tp)} of them loops: "
+            f"precision {wording.num(r.precision)}, recall {wording.num(r.recall)} of {int(r.tp + r.fn)} loop pairs.")
+
+
+def conclusion(out_dir) -> str:
+    """Notebook 07's last cell, in Markdown: the verdict on Qi 2024's Table 2 ranking for this dataset,
+    then what this run's tables (table2, layers, dictionary_operating_points, summary.json and manifest
+    under ``out_dir``) say, with numbers; APs in %, one value per descriptor (no spread: no order)."""
+    out_dir = Path(out_dir)
+    t = pd.read_csv(out_dir / "table2.csv")
+    chance = json.loads((out_dir / "summary.json").read_text())["chance_ap"]
+    L = json.loads((out_dir / "manifest.json").read_text())["parameters"]["frames_per_spot"]
+    lines = [_descriptor_sentence(t, chance, verdict.dataset_name(out_dir.parent)),
+             _layer_sentence(pd.read_csv(out_dir / "layers.csv")),
+             _dictionary_sentence(pd.read_csv(out_dir / "dictionary_operating_points.csv"), L + 10)]
+    return wording.heading(Path(out_dir).parent, "07_feature_baselines") + "\n\n" + " ".join(x for x in lines if x)
+
+
 # -------------------------------------------------------------------------------- figures
 def figure_sensitivity(sensitivity: pd.DataFrame, labels):
     """AP of every descriptor label against the Eq. 5 threshold, the metric ground truth as ★ at
     the right. sensitivity: :func:`ground_truth_sensitivity`'s table. Returns the figure."""
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(9, 4.8))
+    colours = report.palette(labels)
     eq5 = sensitivity[sensitivity.ground_truth.str.startswith("Eq. 5")]
     thr = [float(t.split("<")[1]) for t in eq5.ground_truth]
     metric = sensitivity[~sensitivity.ground_truth.str.startswith("Eq. 5")]
     for lab in labels:
-        line, = ax.plot(thr, eq5[lab], marker="o", ms=3, lw=1, label=lab)
+        line, = ax.plot(thr, eq5[lab], marker="o", ms=3, lw=1, label=lab, color=colours[lab])
         ax.scatter([max(thr) + 0.12] * len(metric), metric[lab], marker="*", s=60, color=line.get_color())
     ax.set_xticks(thr + [max(thr) + 0.12], [f"{t:g}" for t in thr] + ["metric"])
     ax.set_xlabel("ground truth: Eq. 5 threshold (mixed units), and the metric variant (★)"); ax.set_ylabel("AP (%)")
@@ -184,20 +246,45 @@ def figure_sensitivity(sensitivity: pd.DataFrame, labels):
 
 
 def figure_pr_curves(S: dict, table: pd.DataFrame, ops: pd.DataFrame, GT, exclude: int, title: str):
-    """Every descriptor's PR curve (legend: its AP from ``table``) and the dictionary's operating
-    points (``ops``, ★ per τ with a precision). Returns the figure."""
+    """Every descriptor's PR curve (legend: its AP from ``table``; one colour per descriptor,
+    ``report.palette``) and the dictionary's operating points (``ops``, ★ per τ with a precision);
+    the legend beside the axes. Returns the figure."""
     import matplotlib.pyplot as plt
-    fig, ax = plt.subplots(figsize=(8, 6))
-    cmap = plt.get_cmap("tab10")
+    fig, ax = plt.subplots(figsize=(11, 6))
+    colours = report.palette(table.label)
     for k, b in enumerate(S):
         p, r, _ = evaluate.pr_curve(S[b], GT, exclude)
-        ax.plot(r, p, color=cmap(k % 10), lw=1.4, label=f"{table.loc[k, 'label']}: AP {table.loc[k, 'AP_%']:.1f} %")
+        ax.plot(r, p, color=colours[table.loc[k, "label"]], lw=1.4, label=f"{table.loc[k, 'label']}: AP {table.loc[k, 'AP_%']:.1f} %")
     ok = ops.dropna(subset=["precision"])
     ax.plot(ok.recall, ok.precision, "k*", ms=11, label=f"main paper's dictionary detector, τ ∈ {list(ok.tau)}")
     for _, o in ok.iterrows():
         ax.annotate(f"τ={o.tau}", (o.recall, o.precision), textcoords="offset points", xytext=(5, 4), fontsize=8)
     ax.set_xlabel("recall"); ax.set_ylabel("precision"); ax.set_xlim(0, 1); ax.set_ylim(0, 1.02)
-    ax.set_title(title); ax.legend(fontsize=7, loc="upper right")
+    ax.set_title(title, fontsize=9); ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1), borderaxespad=0)
+    fig.tight_layout()
+    return fig
+
+
+def figure_ap(table: pd.DataFrame, paper: dict):
+    """Every descriptor's AP (%) of ``table`` (:func:`table2`) as a bar, one colour per descriptor
+    (``report.palette``, as in :func:`figure_pr_curves`), and Qi 2024 Table 2's AP of the paper's
+    networks (paper = {backbone: (AP %, ...)}, TUM, ImageNet weights) as a dashed mark across the bar
+    of the same backbone, with its legend entry. One AP per descriptor: no whiskers (no spread)."""
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(10, 1.2 + 0.28 * len(table)))
+    colours = report.palette(table.label)
+    y = np.arange(len(table))
+    ax.barh(y, table["AP_%"], color=[colours[lab] for lab in table.label])
+    marked = [(k, paper[b][0]) for k, b in enumerate(table.backbone) if b in paper]
+    report.mark_paper(ax, [k for k, _ in marked], [v for _, v in marked],
+                       "Qi 2024 Table 2 (TUM, ImageNet weights)", horizontal=False)
+    ax.set_yticks(y, table.label, fontsize=7); ax.invert_yaxis()
+    ax.set_xlabel("AP (%), every pair more than the exclusion band apart"); ax.set_ylabel("descriptor (weights)")
+    ax.set_xlim(0, 100); ax.grid(axis="x", alpha=0.3)
+    if marked:
+        ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1), borderaxespad=0)
+    ax.set_title("AP of every descriptor here (bars) beside the paper's (dashed, another dataset)", fontsize=10)
+    fig.tight_layout()
     return fig
 
 
@@ -215,6 +302,7 @@ def figure_similarity_matrices(S: dict, infos: dict, GT, gt_name: str):
         ax.imshow(S[b], cmap="viridis", interpolation="nearest"); ax.set_title(infos[b].label, fontsize=8)
     for ax in axes:
         ax.set_xticks([]); ax.set_yticks([])
+        ax.set_xlabel("query frame (described index)", fontsize=7); ax.set_ylabel("earlier frame", fontsize=7)
     for ax in axes[n:]:
         ax.axis("off")
     fig.suptitle("cosine similarity matrices beside the ground truth (row = earlier frame, column = query)", fontsize=10)
@@ -244,10 +332,10 @@ def figure_layers(layers_table: pd.DataFrame):
             for bar, chosen in zip(bars, r.chosen.fillna(False)):
                 if chosen:
                     bar.set_edgecolor("black"); bar.set_linewidth(2)
-        ax.set_xticks(range(len(depths)), depths)
+        ax.set_xticks(range(len(depths)), depths); ax.set_xlabel("depth of the map read")
         ax.set_title(f"{net} ({t.weights.iloc[0]})", fontsize=9); ax.grid(axis="y", alpha=0.3)
     axes[0][0].set_ylabel(f"per-query AUC-PR, {'evaluation queries' if part == 'eval' else 'every query'} (%)")
-    axes[0][-1].legend(title="pooling", fontsize=7)
+    axes[0][-1].legend(title="pooling", fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1), borderaxespad=0)
     fig.suptitle("Descriptors layer by layer (outlined: chosen on the tuning queries)", fontsize=10)
     fig.tight_layout()
     return fig

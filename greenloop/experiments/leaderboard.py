@@ -30,9 +30,10 @@ from greenloop.detectors import single_frame
 from greenloop.detectors.interface import Data
 from greenloop.detectors.registry import REGISTRY
 from greenloop.speed import timing
-from greenloop.study import leaderboard as lb
+from greenloop.study import leaderboard as lb, wording
 from greenloop import report
 from greenloop.study import targets as goals
+from greenloop.study import verdict
 
 NAMED = tuple(seqmatch.NAMED)      # the named configurations (untuned, fixed thresholds)
 SEQ_ROWS = ("greenloop-seq", "greenloop-seq-fast", *NAMED)   # the rows the targets judge
@@ -382,11 +383,10 @@ def write_comparisons(result: Board, runs: dict, out_dir):
 
 
 def method_colours(methods) -> dict:
-    """{method: RGBA colour}: one tab20 colour per distinct name, in sorted order, so that a
-    board's figures (PR curves, R@1 bars) draw each method in the same colour (up to 20 methods
-    are distinct)."""
-    cmap = plt.get_cmap("tab20")
-    return {m: cmap(i % 20) for i, m in enumerate(sorted(set(methods)))}
+    """{method: RGBA colour}: one colour per distinct name, in sorted order (``report.palette``:
+    up to 60 distinct), so that a board's figures (PR curves, R@1 bars) draw each method in the
+    same colour."""
+    return report.palette(sorted(set(methods)))
 
 
 def figure_pr(data: Data, tuned: Tuned, board: pd.DataFrame):
@@ -462,6 +462,55 @@ def summary(data: Data, split: Split, tuned: Tuned, timed: Timed, result: Board,
             "split": {"honest": split.no_split is None, "not_available": split.no_split},
             **({} if step is None else {"frame_step_requested": step.requested, "frame_step_rule": step.why,
                                         "min_revisit_queries": step.minimum})}
+
+
+def _standing(lc: pd.DataFrame, comp: pd.DataFrame | None, name: str) -> str:
+    """One greenloop-seq row's R@1 (%, 95 % interval) and how many other rows its paired R@1 difference
+    is resolved above / below (comparisons.csv); "" where the board has no such scored row."""
+    if name not in lc.index or pd.isna(lc.loc[name, "R@1_%"]):
+        return ""
+    r = lc.loc[name]
+    text = f"{name} R@1 {wording.num(r['R@1_%'])} % {wording.span(r['R@1_lo_%'], r['R@1_hi_%'])}"
+    if comp is None:
+        return text + " (no paired comparisons in this folder: no order is called)"
+    c = comp[(comp.a == name) & (comp.metric == "R@1")]
+    up, down = int((c.resolved & (c.lo > 0)).sum()), int((c.resolved & (c.hi < 0)).sum())
+    return text + f", paired R@1 resolved above {up} and below {down} of the {len(c)} other rows, not resolved against {len(c) - up - down}"
+
+
+def _targets_sentence(targets: pd.DataFrame, name: str) -> str:
+    """How many of the named configuration ``name``'s targets are met on each protocol (targets.csv),
+    naming those not met; targets not measured (met empty) are counted apart."""
+    parts = []
+    for protocol, t in targets[targets.configuration == name].groupby("protocol", sort=False):
+        judged = t[t.met.notna() & (t.met.astype(str) != "")]
+        met = judged.met.astype(str).str.lower() == "true"
+        missed = "; ".join(judged[~met].target.str.split(": ").str[0])
+        where = "the leaderboard" if protocol == "leaderboard" else f"the stream {protocol}"
+        parts.append(f"{int(met.sum())} of its {len(judged)} targets judged on {where}" + (f" (not met: {missed})" if missed else "")
+                     + (f", {len(t) - len(judged)} not measured there" if len(t) > len(judged) else ""))
+    return f"The named default {name} meets " + "; ".join(parts) + "." if parts else ""
+
+
+def conclusion(out_dir) -> str:
+    """Notebook 13's last cell, in Markdown: the verdict on the main paper's dictionary as a detector for
+    this dataset (``study.verdict``), then where greenloop-seq (tuned here) and the named default stand on
+    the leaderboard (R@1 % with its 95 % interval; above / below only where comparisons.csv's paired
+    difference is resolved) and which of the named default's targets are met (leaderboard.csv,
+    comparisons.csv, targets.csv under ``out_dir``)."""
+    out_dir = Path(out_dir)
+    board = pd.read_csv(out_dir / "leaderboard.csv")
+    lc = board[board["mode"] == "loop closure"].set_index("method")
+    comp = pd.read_csv(out_dir / "comparisons.csv") if (out_dir / "comparisons.csv").is_file() else None
+    if comp is not None and "protocol" in comp:
+        comp = comp[comp.protocol == "leaderboard"]
+    rows = [x for x in (_standing(lc, comp, n) for n in ("greenloop-seq", seqmatch.DEFAULT_NAME)) if x]
+    n = lc.iloc[0]
+    counts = (f"{int(n.queries)} evaluation queries, " if "queries" in n else "") + f"{verdict.revisit_queries(n)} with a partner"
+    lines = [f"On {verdict.dataset_name(out_dir.parent)} ({counts}; loop closure): "
+             + ("; ".join(rows) if rows else "no greenloop-seq row was scored") + ".",
+             _targets_sentence(pd.read_csv(out_dir / "targets.csv"), seqmatch.DEFAULT_NAME)]
+    return wording.heading(Path(out_dir).parent, "13_leaderboard") + "\n\n" + " ".join(x for x in lines if x)
 
 
 def manifest_extra(data: Data, tuned: Tuned) -> dict:

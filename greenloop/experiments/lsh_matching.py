@@ -9,6 +9,8 @@ hashing, probing and matching themselves live in :mod:`greenloop.lsh`; the score
 """
 from __future__ import annotations
 
+import json
+from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
@@ -16,12 +18,13 @@ import pandas as pd
 
 from greenloop import evaluate, lsh, similarity
 from greenloop.speed import scale
+from greenloop.study import verdict, wording
 from greenloop import report
 
 __all__ = [
     "scanned_matrix", "best_match_matrix", "table6_variants", "query_matches", "run_scores",
     "compare_variants", "scanned_pr_curve", "Runs", "match_runs", "table6", "FIGURE7_STYLES",
-    "figure7_curves", "figure7_overlap", "figure_7", "figure_scaling", "paper_rows", "summary_lines",
+    "figure7_curves", "figure7_overlap", "figure_7", "figure_scaling", "figure_times", "paper_rows", "summary_lines", "conclusion",
 ]
 
 
@@ -231,7 +234,8 @@ def table6(runs: Runs, n_bits: int = 16, radius: int = 4, qdp_probes=(1000, 1500
 
 
 FIGURE7_STYLES = {"brute force": ("k", "-"), "SWP-RHLSH": ("tab:blue", "-"), "QDP-RHLSH": ("tab:orange", "-"),
-                  "SWP-RHLSH, centred": ("tab:blue", "--"), "QDP-RHLSH, centred": ("tab:orange", "--")}
+                  "SWP-RHLSH, centred": ("tab:green", "--"), "QDP-RHLSH, centred": ("tab:red", "--")}
+TIME_COLOURS = {**{k: c for k, (c, _) in FIGURE7_STYLES.items()}, "NearestNeighbors (sklearn)": "tab:gray"}
 
 
 def figure7_curves(runs: Runs, GT, exclude: int, seed: int) -> dict:
@@ -264,7 +268,8 @@ def figure_7(curves: dict, table: pd.DataFrame, infos: dict, title: str, seed: i
                 ax.plot(r, p, color=colour, ls=ls, lw=1.4,
                         label=f"{name}: AP {row['AP_pairs_%']:.1f} %, {row['ms_per_query']:.3f} ms/query")
         ax.set_xlabel("recall"); ax.set_ylabel("precision"); ax.set_xlim(0, 1); ax.set_ylim(0, 1.02)
-        ax.set_title(f"{infos[b].label}, hyperplane seed {seed}", fontsize=10); ax.legend(fontsize=7, loc="best")
+        ax.set_title(f"{infos[b].label}, hyperplane seed {seed}", fontsize=10)
+        ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.14), borderaxespad=0)
     fig.suptitle(title, fontsize=9)
     fig.tight_layout()
     return fig
@@ -280,9 +285,38 @@ def figure_scaling(scaling: pd.DataFrame):
             ax.plot(t.stored, t[col], marker=marker, label=method)
         ax.set_xscale("log"); ax.set_yscale("log"); ax.grid(True, which="both", alpha=0.3)
         ax.set_xlabel("stored frames"); ax.set_title(f"{col[:3]} per-query search time (ms)", fontsize=9)
-    axes[0].set_ylabel("ms per query (one thread)"); axes[1].legend(fontsize=7)
+    axes[0].set_ylabel("ms per query (one thread)")
+    axes[1].legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1), borderaxespad=0)
     fig.suptitle(f"{int(scaling.dim.iloc[0])}-D descriptors of augmented Nordland frames (results/bench/scale.md)",
                  fontsize=9)
+    return fig
+
+
+def figure_times(per_seed: pd.DataFrame, main: str, paper6: dict):
+    """Matching time of every matcher on the ``main`` descriptor (rows of :attr:`Runs.per_seed`): per
+    query (left, ms) and per sequence (right, s), each bar the mean over hyperplane seeds with its
+    [min, max] whisker (log scale), one colour per matcher (:data:`TIME_COLOURS`); on the right Qi 2024
+    Table 6's seconds (paper6 = {variant: (AP %, s, ...)}) as dashed marks with a legend entry (the paper
+    does not say per query or per sequence). Returns the matplotlib figure."""
+    import matplotlib.pyplot as plt
+    t = per_seed[per_seed.backbone == main]
+    g = t.groupby("variant", sort=False)
+    names = list(g.groups)
+    fig, axes = plt.subplots(1, 2, figsize=(13, 0.9 + 0.45 * len(names)), sharey=True)
+    y = np.arange(len(names))
+    for ax, col, xlabel in zip(axes, ("ms_per_query", "total_s"), ("ms per query (one thread)", "s per sequence (every query)")):
+        m, lo, hi = g[col].mean().to_numpy(), g[col].min().to_numpy(), g[col].max().to_numpy()
+        ax.barh(y, m, xerr=[m - lo, hi - m], color=[TIME_COLOURS.get(n, "0.5") for n in names],
+                error_kw=dict(ecolor="k", lw=1, capsize=3))
+        ax.set_xscale("log"); ax.set_xlabel(xlabel); ax.grid(axis="x", alpha=0.3, which="both")
+    marked = [(k, paper6[n][1]) for k, n in enumerate(names) if n in paper6]
+    report.mark_paper(axes[1], [k for k, _ in marked], [v for _, v in marked],
+                       "Qi 2024 Table 6 (s; per query or per sequence not stated)", horizontal=False)
+    axes[0].set_yticks(y, names, fontsize=8); axes[0].invert_yaxis(); axes[0].set_ylabel("matcher")
+    axes[1].legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1), borderaxespad=0)
+    fig.suptitle(f"Matching time, {t.label.iloc[0]}: bars the mean over {t.seed.nunique()} hyperplane seeds, "
+                 "whiskers their [min, max]", fontsize=10)
+    fig.tight_layout()
     return fig
 
 
@@ -345,6 +379,60 @@ def paper_rows(table: pd.DataFrame, overlap: pd.DataFrame, scaling: pd.DataFrame
     rows.append(("better choice (smaller accuracy loss per 1 % time saved)", "SWP-RHLSH",
                  loss.idxmin() if loss.notna().any() else "neither saves time", "on this run's descriptors and machine"))
     return report.paper_vs_run(rows + _scaling_rows(scaling))
+
+
+def _versus_brute(t: pd.DataFrame, n: int, value: str, sd: str, unit: str, words) -> list:
+    """SWP and QDP against brute force on one column of table6.csv (``value`` with its sd over the n
+    hyperplane seeds, rows by variant), ordered by ``study.verdict``'s rule for Table 6: mean ± sd
+    ranges that do not overlap (:func:`greenloop.study.wording.pair_order` with min_n 1)."""
+    arm = lambda r: (n, r[value] - r[sd], r[value] + r[sd])
+    text = lambda v, r: f"{v} {r[value]:.4g} ± {r[sd]:.2g}{unit}"
+    bf = t.loc["brute force"]
+    return [wording.pair_order(text(v, t.loc[v]), arm(t.loc[v]), text("brute force", bf), arm(bf), "hyperplane seeds", 1, words)
+            for v in ("SWP-RHLSH", "QDP-RHLSH") if v in t.index]
+
+
+def _time_sentence(t: pd.DataFrame, n: int, dataset: str) -> str:
+    """Per-query matching time (ms, mean ± sd over n hyperplane seeds) of SWP and QDP against brute
+    force's, with the share of stored frames each scans. t: one descriptor's rows of table6.csv by variant."""
+    scans = "; ".join(f"{v} scans {wording.num(t.loc[v, 'scanned_%'])} %" for v in ("SWP-RHLSH", "QDP-RHLSH") if v in t.index)
+    return (f"On {dataset}, {t.label.iloc[0]} (mean ± sd over {n} hyperplane seeds), time per query: "
+            + "; ".join(_versus_brute(t, n, "ms_per_query", "ms_sd", " ms", ("is slower than", "is faster than")))
+            + f" ({scans} of the stored frames).")
+
+
+def _accuracy_sentence(t: pd.DataFrame, n: int) -> str:
+    """Pair AP (%, mean ± sd over seeds) of SWP and QDP against brute force's, and the per-query R@1."""
+    r1 = ", ".join(f"{v} {wording.num(t.loc[v, 'R@1_%'])} %" for v in ("brute force", "SWP-RHLSH", "QDP-RHLSH") if v in t.index)
+    return ("Pair AP: " + "; ".join(_versus_brute(t, n, "AP_pairs_%", "AP_pairs_sd", " %", ("lies above", "lies below")))
+            + f" (paper: SWP -1.2 %, QDP -6.3 % of AP); R@1 {r1}.")
+
+
+def _scaling_sentence(cmp: pd.Series) -> str:
+    """The stored count from which each RHLSH variant's median search time drops below the exact
+    scan's in ``make bench-scale`` (paper_vs_run.csv's cells); "" where the run has none."""
+    rows = {m: cmp.get(f"stored frames from which {m} beats brute force (median search time)") for m in ("SWP-RHLSH", "QDP-RHLSH")}
+    if all(v is None for v in rows.values()):
+        return ""
+    return ("In make bench-scale's benchmark (64-D descriptors, medians of one run), the search time drops below the "
+            "exact scan's from " + ", ".join(f"{v} stored frames for {m}" for m, v in rows.items() if v is not None) + ".")
+
+
+def conclusion(out_dir) -> str:
+    """Notebook 11's last cell, in Markdown: the verdict on Qi 2024's Table 6 trade for this dataset, then,
+    on the descriptor the verdict reads (the first with ImageNet weights, else the notebook's main one),
+    the matching times with their spread over hyperplane seeds, the pair AP and R@1 (table6.csv,
+    per_seed.csv, summary.json under ``out_dir``) and the scaling benchmark's crossovers (paper_vs_run.csv)."""
+    out_dir = Path(out_dir)
+    t = pd.read_csv(out_dir / "table6.csv")
+    pre = t[t.weights.str.contains("imagenet")]
+    main = pre.backbone.iloc[0] if len(pre) else json.loads((out_dir / "summary.json").read_text())["main"]
+    seeds = pd.read_csv(out_dir / "per_seed.csv")
+    n = int(seeds[(seeds.backbone == main) & (seeds.variant == "SWP-RHLSH")].seed.nunique())
+    t = t[t.backbone == main].set_index("variant")
+    cmp = pd.read_csv(out_dir / "paper_vs_run.csv").set_index("quantity")["this run"]
+    lines = [_time_sentence(t, n, verdict.dataset_name(out_dir.parent)), _accuracy_sentence(t, n), _scaling_sentence(cmp)]
+    return wording.heading(Path(out_dir).parent, "11_lsh_matching") + "\n\n" + " ".join(x for x in lines if x)
 
 
 def summary_lines(table: pd.DataFrame, main: str, n_frames: int) -> list:

@@ -9,14 +9,17 @@ figures.
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 
 from greenloop import evaluate, features, similarity
 from greenloop import report
+from greenloop.study import verdict, wording
 
-__all__ = ["DECIMALS", "REFERENCE", "split_backbones", "rgbd_table", "skipped_table", "paper_rows",
-           "figure_pr_rgb_vs_rgbd", "figure_similarity", "figure_skipped"]
+__all__ = ["DECIMALS", "REFERENCE", "split_backbones", "rgbd_table", "skipped_table", "paper_rows", "conclusion",
+           "figure_pr_rgb_vs_rgbd", "figure_ap", "figure_similarity", "figure_skipped"]
 
 # decimals the notebook shows and writes each column with (pandas DataFrame.round)
 DECIMALS = {"AP_RGB_%": 2, "R@100P_RGB_%": 2, "AP_depth_%": 2, "R@100P_depth_%": 2, "AP_RGB-D_%": 2,
@@ -99,17 +102,56 @@ def paper_rows(table: pd.DataFrame, paper: dict, kind: str, dataset, has_depth: 
     return report.paper_vs_run(rows)
 
 
+def conclusion(out_dir) -> str:
+    """Notebook 09's last cell, in Markdown: the verdict on Qi 2024's "depth adds to RGB" for this
+    dataset, then each network's AP (%) on RGB, on depth alone and on RGB-D (rgbd.csv under
+    ``out_dir``): one AP each, so no order; a folder without depth says so."""
+    out_dir = Path(out_dir)
+    t, name = pd.read_csv(out_dir / "rgbd.csv"), verdict.dataset_name(out_dir.parent)
+    if "AP_RGB-D_%" not in t:
+        text = f"{name} has no depth/ folder: no RGB-D descriptor was described or compared here."
+    else:
+        parts = [f"{r.label} {wording.num(r['AP_RGB_%'])} -> {wording.num(r['AP_RGB-D_%'])} "
+                 f"(depth alone {wording.num(r['AP_depth_%'])})" for _, r in t.iterrows()]
+        text = (f"On {name}, AP RGB -> RGB-D (%): " + "; ".join(parts) + f": one AP per descriptor over one "
+                f"sequence, {wording.NOT_A_RANKING}. Only rows with ImageNet weights bear on the paper's claim.")
+    return wording.heading(Path(out_dir).parent, "09_rgbd_features") + "\n\n" + text
+
+
 def figure_pr_rgb_vs_rgbd(S: dict, table: pd.DataFrame, infos: dict, GT, exclude: int, title: str):
-    """PR curves of every backbone's RGB (dotted) and RGB-D (solid) descriptor. Returns the figure."""
+    """PR curves of every backbone's RGB (dotted) and RGB-D (solid) descriptor, one colour per
+    backbone (``report.palette``), the legend beside the axes. Returns the figure."""
     import matplotlib.pyplot as plt
-    fig, ax = plt.subplots(figsize=(8, 6))
-    cmap = plt.get_cmap("tab10")
+    fig, ax = plt.subplots(figsize=(11, 6))
+    colours = report.palette(S)
     for k, b in enumerate(S):
         for kind, ls in (("RGB", ":"), ("RGB-D", "-")):
             p, r, _ = evaluate.pr_curve(S[b][kind], GT, exclude)
-            ax.plot(r, p, ls, color=cmap(k), lw=1.4, label=f"{infos[b].label}, {kind}: AP {table.loc[k, f'AP_{kind}_%']:.1f} %")
+            ax.plot(r, p, ls, color=colours[b], lw=1.4, label=f"{infos[b].label}, {kind}: AP {table.loc[k, f'AP_{kind}_%']:.1f} %")
     ax.set_xlabel("recall"); ax.set_ylabel("precision"); ax.set_xlim(0, 1); ax.set_ylim(0, 1.02)
-    ax.legend(fontsize=7, loc="upper right"); ax.set_title(title)
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1), borderaxespad=0); ax.set_title(title, fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def figure_ap(table: pd.DataFrame, paper: dict):
+    """Each backbone's AP (%) on RGB, depth alone and RGB-D (:func:`rgbd_table`, grouped bars), and the
+    paper's RGB-D AP of the same network (paper = {backbone: dict(t3=(AP %, s), t4=(AP %, s))}: Table 4,
+    GreenHouse, dashed; Table 3, TUM, dotted) with their legend entries. One AP each: no whiskers."""
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(11, 4.5))
+    x = np.arange(len(table))
+    for k, (kind, colour) in enumerate((("RGB", "C0"), ("depth", "C2"), ("RGB-D", "C3"))):
+        ax.bar(x + (k - 1) * 0.27, table[f"AP_{kind}_%"], 0.27, color=colour, label=f"{kind}, this run")
+    at = [(k, paper[b]) for k, b in enumerate(table.backbone) if b in paper]
+    report.mark_paper(ax, [k + 0.27 for k, _ in at], [p["t4"][0] for _, p in at], "paper, RGB-D, Table 4 (GreenHouse)", width=0.4)
+    for n, (k, p) in enumerate(at):
+        ax.plot([k + 0.07, k + 0.47], [p["t3"][0]] * 2, "k:", lw=1.6, label="paper, RGB-D, Table 3 (TUM)" if n == 0 else None)
+    ax.set_xticks(x, table.label, rotation=25, ha="right", fontsize=8)
+    ax.set_xlabel("network (weights)"); ax.set_ylabel("AP (%), pairs beyond the exclusion band"); ax.set_ylim(0, 100)
+    ax.grid(axis="y", alpha=0.3); ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1), borderaxespad=0)
+    ax.set_title("RGB, depth and RGB-D AP of each network (bars) beside the paper's RGB-D AP (lines)", fontsize=10)
+    fig.tight_layout()
     return fig
 
 
@@ -122,6 +164,7 @@ def figure_similarity(S: dict, infos: dict, GT):
         ax.imshow(S[b]["RGB-D"], interpolation="nearest"); ax.set_title(f"{infos[b].label}, RGB-D", fontsize=8)
     for ax in axes:
         ax.set_xticks([]); ax.set_yticks([])
+        ax.set_xlabel("query frame", fontsize=7); ax.set_ylabel("earlier frame", fontsize=7)
     fig.tight_layout()
     return fig
 

@@ -10,6 +10,8 @@ similarity = 1 - L2 distance / its maximum (a monotone map of Xu 2022's Eq. 5).
 """
 from __future__ import annotations
 
+import json
+import re
 from pathlib import Path
 from typing import NamedTuple
 
@@ -19,6 +21,7 @@ import pandas as pd
 from greenloop import evaluate, features, groundtruth, siamese, similarity
 from greenloop.datasets import sequence
 from greenloop import report
+from greenloop.study import verdict, wording
 from greenloop.util.cache import cache_key
 
 # decimals of the written tables' columns (rounded only where the notebook writes them)
@@ -31,6 +34,10 @@ LEVELLING = "held-out AP gain, first -> second -> last third of the epochs"
 # and Table 3 (seconds per image: SCNN CPU and GPU, CNN CPU and GPU, GIST, BoVW)
 PAPER_T2 = dict(zip(siamese.LAYERS, [0.7444, 0.7644, 0.8111, 0.7778, 0.7222, 0.7444, 0.6667, 0.6333]))
 PAPER_T3 = {"scnn": (0.208, 0.029), "cnn": (0.142, 0.021), "gist": 0.524, "bovw": 1.517}
+# the paper's operating points drawn on the PR figures: (recall, precision, legend)
+PAPER_POINT_SUPERVISION = (0.83, 0.90, "Xu 2022: precision > 0.90 at 83 % recall (multi-task, New College)")
+PAPER_POINT_FUSION = (0.82, 0.92, "Xu 2022: precision 0.92 at 82 % recall (late fusion, NYU)")
+SUPERVISION_COLOURS = {"softmax": "C0", "contrastive": "C1", "multitask": "C3"}   # one colour per supervision
 
 
 class Setup(NamedTuple):
@@ -435,42 +442,75 @@ def paper_vs_run(s: Setup, sup: Runs, fus: Runs, tim: pd.DataFrame, supervisions
             report.paper_vs_run(_timing_rows(tim)))
 
 
-def findings(cmp: pd.DataFrame, tim: pd.DataFrame) -> str:
-    """Whether each of Xu 2022's findings holds here: one Markdown bullet each, read from
-    :func:`paper_vs_run`'s first table (cmp; its notes give the per-seed means and ranges) and
-    :func:`timing`'s table (tim)."""
-    run = cmp.set_index("quantity")
+def _supervision_sentence(sup: pd.DataFrame, chance: float, dataset: str) -> str:
+    """Training buys something (the condition for reading Figure 8): each supervision's held-out AP
+    over seeds (supervisions.csv, %) against the untrained network's and raw pixels'."""
+    t = sup.set_index("descriptor")
+    untrained, pixels = t.loc["scnn untrained, RGB"], t.loc["pixels (32x32 gray)"]
+    ceiling = max(untrained.AP_max, pixels.AP_max)
+    parts = [f"{r.supervision} {wording.span(r.AP_min, r.AP_max)}"
+             + (" (every seed above both)" if r.AP_min > ceiling else " (not separated from them)")
+             for _, r in t[t.supervision.isin(["softmax", "contrastive", "multitask"])].iterrows()]
+    n = int(t.seeds.max())
+    few = f"; with fewer than {verdict.MIN_SEEDS} seeds per arm none of this is an order" if n < verdict.MIN_SEEDS else ""
+    return (f"On {dataset}, held-out AP (%, [min, max] over {n} seeds): " + ", ".join(parts) + f", against the "
+            f"untrained network's {wording.span(untrained.AP_min, untrained.AP_max)} and raw pixels' "
+            f"{wording.num(pixels.AP_max)} (chance {wording.num(100 * chance)}){few}.")
 
-    def verdict(q, want):
-        got = run.loc[q, report.RUN]
-        if got == UNRESOLVED:
-            return "**not resolved** here: the seed ranges overlap"
-        return "**holds** here" if got == want else f"**does not hold** here: {got} is ahead, its seed range above the others'"
 
-    out = [f"- *Multi-task supervision is best* (Figure 8): {verdict('best supervision', 'scnn multitask, RGB')}. "
-           f"{run.loc['best supervision', 'note']}.",
-           f"- *Training buys something* (not the paper's claim, the condition for reading the others): "
-           f"{run.loc['each supervision above the untrained network and raw pixels', report.RUN]} "
-           f"({run.loc['each supervision above the untrained network and raw pixels', 'note']}). Held-out AP after "
-           f"the first -> the last epoch: {run.loc['held-out AP after the first -> the last epoch, per supervision (%)', report.RUN]}. "
-           f"How far the budget levels off, the held-out AP gained from the first to the second third of the "
-           f"epochs and from the second to the last: {run.loc[LEVELLING, report.RUN]}."]
-    if "best fusion" in run.index:
-        out += [f"- *Late fusion is best* (Figure 9): {verdict('best fusion', 'scnn late fusion')}. {run.loc['best fusion', 'note']}.",
-                f"- *conv2 is the best mid-level layer* (Table 2): {verdict('best mid-level layer (Table 2)', 'conv2')}. "
-                f"{run.loc['best mid-level layer (Table 2)', 'note']}.",
-                f"- *Depth helps* (late fusion over RGB only): {verdict('late fusion vs RGB only', 'scnn late fusion')}. "
-                f"{run.loc['late fusion vs RGB only', 'note']}."]
-    else:
-        out.append("- *Late fusion is best*, *conv2 is the best mid-level layer*, *depth helps*: **not tested** on this "
-                   "dataset (no depth/ folder).")
-    t = tim.set_index("descriptor")
+def _reached(cell: str, paper: float) -> str:
+    """'reached by no seed' / 'reached by the best seed' for a 'mean [min, max]' cell against a claimed
+    value ``paper`` (same unit); the cell itself where it holds no range."""
+    m = re.match(r"\s*[-\d.]+ \[([-\d.]+), ([-\d.]+)\]", str(cell))
+    if not m:
+        return str(cell)
+    return f"{cell}, {'reached by the best seed' if float(m.group(2)) >= paper else 'reached by no seed'}"
+
+
+def _budget_sentence(run: pd.Series) -> str:
+    """How far the budget levels off and the precision at the paper's recall (paper_vs_run.csv's cells)."""
+    text = f"Held-out AP gained from the first to the second third of the epochs, then to the last: {run[LEVELLING]}."
+    p83 = "precision at 83 % recall, multi-task"
+    if p83 in run.index:
+        text += f" Multi-task's precision at 83 % recall, mean [min, max]: {_reached(run[p83], 0.90)} (paper: > 0.90, New College)"
+        p82 = "precision at 82 % recall, late fusion"
+        text += (f"; late fusion's at 82 %: {_reached(run[p82], 0.92)} (paper: 0.92, NYU)." if p82 in run.index else ".")
+    return text
+
+
+def _layer_sentence(fus: pd.DataFrame) -> str:
+    """Table 2's claim, conv2 the best mid-level layer, by ``study.verdict.rank_verdict`` on the mid-level
+    rows of fusions.csv (AP %, [min, max] over seeds); "" without depth."""
+    if "fusion" not in fus or "conv2" not in set(fus[fus.fusion == "mid"].layer):
+        return ""
+    mid = fus[fus.fusion == "mid"]
+    arms = {r.layer: (r.seeds, r.AP_min, r.AP_max) for r in mid.itertuples()}
+    return (f"Mid-level fusion at each layer, AP [min, max]: " + ", ".join(f"{k} {wording.span(v[1], v[2])}" for k, v in arms.items())
+            + f"; conv2 first (Table 2): {verdict.rank_verdict('conv2', arms)}.")
+
+
+def _timing_sentence(tim: pd.DataFrame) -> str:
+    """Table 3's SCNN against SIFT-BoVW, one timing each (timing.csv, s per image one at a time)."""
+    t = tim.set_index("descriptor")["s_per_image_one_at_a_time"]
     net, sift = t.index[0], t.index[-1]
-    a_, b_ = t.loc[net, "s_per_image_one_at_a_time"], t.loc[sift, "s_per_image_one_at_a_time"]
-    out.append(f"- *An SCNN descriptor is faster than SIFT-BoVW* (Table 3): {'**holds**' if a_ < b_ else '**does not hold**'} "
-               f"on this CPU: {a_:.5f} s against {b_:.5f} s per image, one at a time (one timing each, a "
-               f"{max(a_, b_) / min(a_, b_):.0f}x ratio; the network here is about a hundredth of the paper's).")
-    return "\n".join(out)
+    return (f"Seconds per image one at a time on this CPU: {net} {t[net]:.5f}, SIFT-BoVW {t[sift]:.5f} (a "
+            f"{max(t[net], t[sift]) / min(t[net], t[sift]):.0f}x ratio; one timing each, {wording.NOT_A_RANKING}; "
+            "the network here has about a hundredth of the paper's multiply-adds).")
+
+
+def conclusion(out_dir) -> str:
+    """Notebook 10's last cell, in Markdown: the verdicts on Xu 2022's claims for this dataset
+    (``study.verdict``: multi-task first, late fusion first, depth helps), then what this run's tables
+    under ``out_dir`` (supervisions, fusions, paper_vs_run, timing, summary.json) say: whether training
+    lifts the networks above the untrained one and pixels, how far the budget levels off, the
+    precision at the paper's recall, conv2 among the layers and Table 3's timing. AP in %."""
+    out_dir = Path(out_dir)
+    read = lambda name: pd.read_csv(out_dir / name)
+    chance = json.loads((out_dir / "summary.json").read_text())["chance_ap"]
+    run = read("paper_vs_run.csv").set_index("quantity")["this run"]
+    lines = [_supervision_sentence(read("supervisions.csv"), chance, verdict.dataset_name(out_dir.parent)),
+             _budget_sentence(run), _layer_sentence(read("fusions.csv")), _timing_sentence(read("timing.csv"))]
+    return wording.heading(Path(out_dir).parent, "10_siamese_rgbd") + "\n\n" + " ".join(x for x in lines if x)
 
 
 def note(s: Setup, frame_step: int, dataset) -> str:
@@ -500,8 +540,12 @@ def summary(s: Setup, sup_table, fusion_table, timing_table, frame_step: int, tr
 
 
 # ----------------------------------------------------------------------------------- figures
-def _pr_axes(ax, chance, label=None):
+def _pr_axes(ax, chance, label=None, paper=None):
+    """Recall / precision axes with chance as a dotted line and, where given, the paper's operating
+    point paper = (recall, precision, legend) as an open black marker with its legend entry."""
     ax.axhline(chance, color="k", lw=0.6, ls=":", label=label)
+    if paper is not None:
+        ax.plot(paper[0], paper[1], marker="D", ms=9, mfc="none", mec="k", ls="none", label=paper[2])
     ax.set_xlabel("recall"); ax.set_ylabel("precision"); ax.set_xlim(0, 1); ax.set_ylim(0, 1.02); ax.grid(alpha=0.3)
 
 
@@ -517,8 +561,7 @@ def figure_supervisions(s: Setup, sup: Runs, supervisions, dataset):
 
     fig, ax = plt.subplots(figsize=(9, 5.5))
     summ = seed_summary(sup.table).set_index("descriptor")
-    styles = {"softmax": ":", "contrastive": "--", "multitask": "-"}
-    curves = [(x, f"scnn {x}, RGB", styles.get(x, "-"), "C3", 1.8 - 0.3 * k) for k, x in enumerate(supervisions)]
+    curves = [(x, f"scnn {x}, RGB", "-", SUPERVISION_COLOURS.get(x, f"C{k + 4}"), 1.6) for k, x in enumerate(supervisions)]
     curves += [("untrained", "scnn untrained, RGB", "-", "0.5", 1), ("pixels", "pixels (32x32 gray)", "-", "C2", 1)]
     for key, name, ls, colour, lw in curves:
         seed, S = _first_seed(sup, key)
@@ -526,7 +569,7 @@ def figure_supervisions(s: Setup, sup: Runs, supervisions, dataset):
         r_ = summ.loc[name]
         spread = f" [{r_.AP_min:.1f}, {r_.AP_max:.1f}] over {int(r_.seeds)} seeds" if r_.seeds > 1 else ""
         ax.plot(r, p, ls, color=colour, lw=lw, label=f"{name}: AP {r_.AP_mean:.1f} %{spread}")
-    _pr_axes(ax, s.chance, f"chance ({100 * s.chance:.1f} %)")
+    _pr_axes(ax, s.chance, f"chance ({100 * s.chance:.1f} %)", PAPER_POINT_SUPERVISION)
     ax.set_title(f"Figure 8 layout: supervisions, RGB, held-out part of {Path(dataset).name} "
                  f"({int(s.held.sum())} query frames; curves of the first seed)", fontsize=10)
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0)
@@ -554,7 +597,6 @@ def figure_fusions(s: Setup, fus: Runs, mid_layers, merge: str, fusion_supervisi
         axes[0].plot(r, p, ls, color=colour, lw=1.6,
                      label=f"{x.descriptor}: AP {x.AP_mean:.1f} % [{x.AP_min:.1f}, {x.AP_max:.1f}]")
     axes[0].set_title(f"Figure 9 layout: fusions ({fusion_supervision}), held-out part, first seed's curves", fontsize=10)
-    axes[0].legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=1, borderaxespad=0)
     cmap = plt.get_cmap("viridis")
     for k, layer in enumerate(mid_layers):
         p, r, _ = evaluate.pr_curve(_first_seed(fus, f"mid {layer}")[1], s.GT, s.exclude_steps, queries=s.held)
@@ -563,8 +605,9 @@ def figure_fusions(s: Setup, fus: Runs, mid_layers, merge: str, fusion_supervisi
                      label=f"at {layer}: AP {x.AP_mean:.1f} % [{x.AP_min:.1f}, {x.AP_max:.1f}]")
     axes[1].set_title(f"mid-level fusion at each layer ({merge}), held-out part", fontsize=10)
     axes[1].legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=4, borderaxespad=0)
-    for ax in axes:
-        _pr_axes(ax, s.chance)
+    _pr_axes(axes[0], s.chance, paper=PAPER_POINT_FUSION)
+    _pr_axes(axes[1], s.chance)
+    axes[0].legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=1, borderaxespad=0)
     fig.tight_layout()
     return fig, "figure9_fusions"
 
@@ -579,7 +622,7 @@ def figure_convergence(sup: Runs, fus: Runs, mid_layers, has_depth: bool):
     fig, axes = plt.subplots(1, 3, figsize=(16, 4))
     colours = {}
     for (key, seed), h in sup.hists.items():
-        c = colours.setdefault(key, f"C{len(colours)}")
+        c = colours.setdefault(key, SUPERVISION_COLOURS.get(key, f"C{len(colours) + 4}"))
         ep = np.arange(1, len(h["loss"]) + 1)
         label = key if seed == next(sd for k, sd in sup.hists if k == key) else None
         axes[0].plot(ep, h["loss"], color=c, lw=1, label=label)
@@ -594,11 +637,11 @@ def figure_convergence(sup: Runs, fus: Runs, mid_layers, has_depth: bool):
                          label=key if n == 0 else None)
     titles = ["training loss (each supervision's own units)", "held-out AP % per epoch, RGB",
               "held-out AP % per epoch, RGB-D" if has_depth else "RGB-D: skipped (no depth/)"]
-    for ax, title in zip(axes, titles):
+    for ax, title, ylabel in zip(axes, titles, ["training loss (log scale)", "held-out AP (%)", "held-out AP (%)"]):
         ax.set_title(title + " (one line per seed)" * bool(ax.lines), fontsize=10)
-        ax.set_xlabel("epoch"); ax.grid(alpha=0.3)
+        ax.set_xlabel("epoch"); ax.set_ylabel(ylabel); ax.grid(alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
-            ax.legend(fontsize=7)
+            ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.15), ncol=3, borderaxespad=0)
     axes[0].set_yscale("log")
     fig.tight_layout()
     return fig

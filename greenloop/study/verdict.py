@@ -75,7 +75,10 @@ def value_verdict(paper: float, best: float, converged: int, seeds: int, higher_
 def rank_verdict(claimed: str, arms: dict[str, tuple[int, float, float]]) -> str:
     """Verdict on "``claimed`` ranks first": ``arms`` maps each arm to (seeds, min, max) of its metric.
     holds: every arm has >= MIN_SEEDS seeds and the claimed arm's min lies above every other's max;
-    does not hold: as many seeds and some other arm's min lies above the claimed arm's max."""
+    does not hold: as many seeds and some other arm's min lies above the claimed arm's max; not run
+    where the run has no ``claimed`` arm (a notebook run with fewer supervisions or layers)."""
+    if claimed not in arms:
+        return f"{NOT_RUN} ({claimed} not in this run)"
     n, lo, hi = arms[claimed]
     others = {k: v for k, v in arms.items() if k != claimed}
     if min([n] + [v[0] for v in others.values()]) < MIN_SEEDS:
@@ -253,6 +256,9 @@ def _postprocessing(folder: Path):
     return t if len(t) else None
 
 
+NO_SPLIT = ("no honest tuning/evaluation split (untuned rows only)", UNTESTABLE)   # 08 run where every revisit is close
+
+
 def _ap(t: pd.DataFrame, variant: str, median: str) -> float:
     return float(t[(t.variant == variant) & (t.median_filter == median)].AP_eval_pct.iloc[0])
 
@@ -261,8 +267,8 @@ def zhang_whitening(folder: Path):
     """Zhang 2017: PCA-whitened CNN features beat raw ones (08, raw vs whitened at the paper's dimension
     and at the dimension picked on the tuning part, no median filter)."""
     t = _postprocessing(folder)
-    if t is None:
-        return None
+    if t is None or "AP_eval_pct" not in t:
+        return None if t is None else NO_SPLIT
     raw, paper = _ap(t, "raw", "none"), _ap(t, "PCA-whitened, paper dim", "none")
     tuned = _ap(t, "PCA-whitened, tuned dim", "none")
     return (f"{t.label.iloc[0]}: AP raw {_g(raw)}, whitened {_g(paper)} (paper's dim), {_g(tuned)} (tuned dim)",
@@ -272,8 +278,8 @@ def zhang_whitening(folder: Path):
 def zca_median(folder: Path):
     """ResNet/Inception/ZCA: a median filter on the ZCA-whitened similarity matrix improves it (08)."""
     t = _postprocessing(folder)
-    if t is None:
-        return None
+    if t is None or "AP_eval_pct" not in t:
+        return None if t is None else NO_SPLIT
     before, after = _ap(t, "ZCA, tuned dim", "none"), _ap(t, "ZCA, tuned dim", "median (tuned)")
     return f"{t.label.iloc[0]}: AP {_g(before)} -> {_g(after)}", UNRESOLVED + " (one split, no spread)"
 

@@ -14,15 +14,24 @@ from greenloop.study import verdict
 UNRESOLVED = verdict.UNRESOLVED
 
 
-def num(x, places: int = 2) -> str:
-    """A number as the tables print it: rounded to ``places`` decimals, no trailing zeros."""
-    return f"{round(float(x), places):g}"
+NOT_A_RANKING = "single values without spread, not a ranking"
 
 
-def span(lo, hi, places: int = 2) -> str:
-    """A range as "[lo, hi]" (numbers by :func:`num`), or the one number where both print alike."""
+def num(x, places: int = 2, unit: str = "") -> str:
+    """A number as the tables print it: rounded to ``places`` decimals, no trailing zeros, then
+    ``unit`` (e.g. " %"); "n/a" for NaN, None or text."""
+    try:
+        x = float(x)
+    except (TypeError, ValueError):
+        return "n/a"
+    return "n/a" if x != x else f"{round(x, places):g}{unit}"
+
+
+def span(lo, hi, places: int = 2, unit: str = "") -> str:
+    """A range as "[lo, hi]" (numbers by :func:`num`) then ``unit``, or the one number where both
+    print alike."""
     a, b = num(lo, places), num(hi, places)
-    return a if a == b else f"[{a}, {b}]"
+    return (a if a == b else f"[{a}, {b}]") + unit
 
 
 def between(lo, hi) -> str:
@@ -73,11 +82,32 @@ def sign(lo, hi, seeds: int, min_seeds: int = verdict.MIN_SEEDS) -> str:
     return f"sign {UNRESOLVED}, the seeds fall on both sides of zero"
 
 
+def pair_order(a: str, arm_a, b: str, arm_b, samples: str = "seeds", min_n: int = verdict.MIN_SEEDS,
+               words=("lies above", "lies below")) -> str:
+    """A sentence piece comparing a and b, each (n, lo, hi): n samples (``samples``: "seeds",
+    "hyperplane seeds", ...) whose spread is [lo, hi]. "a lies above b" (``words``) only where the
+    spreads separate and both n >= ``min_n``; "... in every one of the n <samples>, but fewer than
+    min_n per arm: not resolved" where they separate with fewer; "not resolved (the spreads overlap)"
+    otherwise. a, b: the arms as the reader should see them (names with their numbers)."""
+    (na, la, ha), (nb, lb, hb) = arm_a, arm_b
+    side = words[0] if la > hb else words[1] if ha < lb else None
+    if side is None:
+        return f"{a} and {b}: {UNRESOLVED} (the spreads overlap)"
+    n = int(min(na, nb))
+    if n < min_n:
+        return f"{a} {side} {b} in every one of the {n} {samples}, but fewer than {min_n} per arm: {UNRESOLVED}"
+    return f"{a} {side} {b} (the spreads separate)"
+
+
+def heading(results_dir, notebook: str) -> str:
+    """A conclusion's first lines: "### Conclusion on <dataset of results_dir>" and the verdicts of
+    the claims ``notebook`` concludes on (``verdict.conclusion``), where it has any."""
+    bullets = verdict.conclusion(Path(results_dir), notebook)
+    return f"### Conclusion on {verdict.dataset_name(Path(results_dir))}" + (f"\n\n{bullets}" if bullets else "")
+
+
 def compose(results_dir, notebook: str, sentences) -> str:
-    """A notebook's conclusion as Markdown: a heading naming the dataset of ``results_dir``, the
-    verdicts of the claims ``notebook`` concludes on (``verdict.conclusion``), then the sentences
-    (empty ones left out) as one paragraph."""
-    name = verdict.dataset_name(Path(results_dir))
-    parts = [f"### Conclusion on {name}", verdict.conclusion(Path(results_dir), notebook),
-             " ".join(s for s in sentences if s)]
-    return "\n\n".join(p for p in parts if p) + "\n"
+    """A notebook's conclusion as Markdown: :func:`heading`, then the sentences (empty ones left
+    out) as one paragraph."""
+    body = " ".join(s for s in sentences if s)
+    return heading(results_dir, notebook) + (f"\n\n{body}" if body else "") + "\n"
