@@ -147,6 +147,20 @@ def test_fusions_table_rgb_only_each_fusion_and_each_late_stream(setup, trained)
     assert sr.seed_summary(skipped.table) is skipped.table
 
 
+def test_the_arms_the_paper_ranks_get_their_own_seeds(setup, trained, tmp_path_factory):
+    """ranking_seeds train early, the paper's layer (conv2) and late fusion on more seeds than the other
+    mid-level layers; the table keeps Figure 9's order (early, each layer, late)."""
+    sup, _ = trained
+    kw = dict(epochs=1, n_pairs=20, batch_size=10, width=W, hard_fraction=0.5, cache=tmp_path_factory.mktemp("models2"))
+    fus = sr.fusions(setup, sup, "softmax", ["conv1", "conv2"], "sum", kw, [0], ranking_seeds=SEEDS)
+    t = fus.table[fus.table.fusion.isin(["early", "mid", "late"])]
+    assert list(zip(t.fusion, t.layer.fillna(""), t.seed)) == (
+        [("early", "", k) for k in SEEDS] + [("mid", "conv1", 0)] + [("mid", "conv2", k) for k in SEEDS]
+        + [("late", "", k) for k in SEEDS])
+    assert sr.seed_summary(fus.table).set_index("descriptor").seeds.to_dict()["scnn mid-level fusion at conv1"] == 1
+    assert (fus.table[fus.table.fusion == "RGB only"].seed.tolist()) == SEEDS
+
+
 def test_timing_paper_vs_run_conclusion_and_summary(setup, trained, tiny_sequence, tmp_path):
     s, (sup, fus) = setup, trained
     tim, n_native = sr.timing(s, sup, fus, tiny_sequence, "softmax", ["conv2"], 4)

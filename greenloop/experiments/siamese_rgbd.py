@@ -225,26 +225,38 @@ def _paper_layer(mid_layers) -> str:
     return "conv2" if "conv2" in mid_layers else mid_layers[0]
 
 
-def fusions(s: Setup, sup: Runs, fusion_supervision: str, mid_layers, merge: str, train_kw: dict, seeds) -> Runs:
+def fusions(s: Setup, sup: Runs, fusion_supervision: str, mid_layers, merge: str, train_kw: dict, seeds,
+            ranking_seeds=None) -> Runs:
     """Figure 9's and Table 2's table over seeds: RGB only, early, mid-level at each layer, late,
     and each stream of the late network alone; all with ``fusion_supervision``.
 
     s: :func:`setup`; sup: :func:`supervisions` (its rows of the same supervision are "RGB only").
     mid_layers: layers of ``siamese.LAYERS``; merge: "sum" or "concat"; train_kw, seeds: as
-    supervisions. Without depth the table is three "skipped" rows and nothing is trained.
+    supervisions. ranking_seeds: the seeds of the arms Xu 2022 ranks (early, mid-level at the paper's
+    layer, late, and RGB only: ``sup`` must hold them), so that an order of them can rest on enough
+    seeds while the other mid-level layers keep ``seeds`` (default: ``seeds`` for all). Without depth
+    the table is three "skipped" rows and nothing is trained.
     """
     if not s.has_depth:
         rows = [{"descriptor": f, "weights": "trained here", "label": f"scnn {f} fusion (trained here)",
                  "status": "skipped: the dataset has no depth/ folder"} for f in ("early", "mid-level", "late")]
         return Runs(pd.DataFrame(rows), {}, {}, {}, [])
-    kw = {"supervision": fusion_supervision}
-    mids = [(f"mid {layer}", f"scnn mid-level fusion at {layer}",
-             dict(kw, fusion="mid", fusion_layer=layer, merge=merge)) for layer in mid_layers]
-    specs = ([("early", "scnn early fusion", dict(kw, fusion="early"))] + mids
-             + [("late", "scnn late fusion", dict(kw, fusion="late"))])
-    runs = _fit_all(s, specs, train_kw, s.X, seeds)
-    rows = runs.table.to_dict("records")
-    ref = sup.table[(sup.table.supervision == fusion_supervision) & sup.table.seed.isin(list(seeds))]
+    kw, ranked = {"supervision": fusion_supervision}, list(seeds if ranking_seeds is None else ranking_seeds)
+    mid = lambda layer: (f"mid {layer}", f"scnn mid-level fusion at {layer}",
+                         dict(kw, fusion="mid", fusion_layer=layer, merge=merge))
+    paper = _paper_layer(mid_layers)
+    first = [("early", "scnn early fusion", dict(kw, fusion="early")), mid(paper)]
+    runs = _fit_all(s, first + [("late", "scnn late fusion", dict(kw, fusion="late"))], train_kw, s.X, ranked)
+    rest = _fit_all(s, [mid(layer) for layer in mid_layers if layer != paper], train_kw, s.X, seeds)
+    for d in ("sims", "models", "hists"):
+        getattr(runs, d).update(getattr(rest, d))
+    runs.trained.extend(rest.trained)
+    order = {f"scnn mid-level fusion at {layer}": k for k, layer in enumerate(mid_layers)}
+    table = pd.concat([runs.table, rest.table], ignore_index=True)
+    key = table.descriptor.map(lambda d: -1 if d == "scnn early fusion" else order.get(d, len(order)))
+    table = table.assign(_k=key).sort_values(["_k", "seed"], kind="stable").drop(columns="_k")
+    rows = table.to_dict("records")
+    ref = sup.table[(sup.table.supervision == fusion_supervision) & sup.table.seed.isin(ranked)]
     for k, r in enumerate(ref.to_dict("records")):   # the RGB networks of the same supervision, for reference
         rows.insert(k, dict(r, descriptor=f"RGB only ({fusion_supervision})", fusion="RGB only"))
         runs.sims["RGB only", r["seed"]] = sup.sims[fusion_supervision, r["seed"]]
