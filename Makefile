@@ -169,6 +169,7 @@ default-choice: | $(STAMP) ## the named default's centring windows, cell shift a
 
 readme: | $(STAMP) ## the README's verdict table, results/verdict.md, summary.md and coverage.md, from the results folders
 	$(BIN)/python -m greenloop.study.report --coverage results/coverage.md $(DATASET_RESULTS)
+	$(BIN)/python -m greenloop.study.report results
 	$(BIN)/python -m greenloop.study.summary --out results/summary.md --readme README.md $(DATASET_RESULTS)
 	$(BIN)/python -m greenloop.study.verdict --out results/verdict.md --readme README.md $(DATASET_RESULTS)
 
