@@ -64,8 +64,12 @@ def test_preload_shorter_than_the_window_and_bad_input():
     head.preload(X[:3])                                    # fewer frames than seq_len, none indexed
     got, _ = _tail(head, X[3:40])
     assert all(np.array_equal(a[0], b[0]) for a, b in zip(streamed[3:], got))
-    with pytest.raises(ValueError, match="candidate mode"):
-        seqstream.Detector(None).preload(X)
+    ref, ref_head = (seqstream.Detector(None, seq_len=5, exclude=20) for _ in range(2))   # the reference too
+    ref_streamed, _ = _tail(ref, X[:120])
+    ref_head.preload(X[:90])
+    assert ref_head.frame_index == 90 and ref_head.last_scores.size == 0
+    ref_got = [(ref_head.update_descriptor(x), ref_head.last_scores.copy())[1] for x in X[90:120]]
+    assert all(np.array_equal(a[0], b) for a, b in zip(ref_streamed[90:], ref_got))
     with pytest.raises(ValueError, match=r"\(N, D\)"):
         head.preload(X[0])
     with pytest.raises(ValueError, match="NaN"):
