@@ -119,19 +119,26 @@ def _compile_pair_scores(njit, opts: dict):
     @njit(cache=True, nogil=True)
     def pair_scores(cand, db, Q, off, qc, qpad, out, first):
         nv, L = off.shape
+        lo = off.min()
+        nu = off.max() - lo + 1
+        need = np.zeros((nu, L), np.bool_)             # which queries a row at offset o is needed for
+        for v in range(nv):
+            for k in range(L):
+                need[off[v, k] - lo, k] = True
         size = 16
-        while size < 2 * len(cand) * nv * L:
+        while size < 2 * len(cand) * nu * L:
             size *= 2
         keys = np.full(size, -1, np.int64)            # open addressing: key p * L + k, value its cosine
         vals = np.empty(size, np.float32)
+        local = np.empty((nu, L), np.float32)         # one candidate's points: (offset, query)
         for c in range(len(cand)):
-            best = -np.inf
-            for v in range(nv):
-                acc = 0.0
+            for o in range(nu):                       # row by row: a row is read once per candidate
+                p = cand[c] - (o + lo)
                 for k in range(L):
-                    p = cand[c] - off[v, k]
+                    if not need[o, k]:
+                        continue
                     if p < 0 or p >= qc[k]:
-                        acc += np.float64(np.float32(qpad[k]))
+                        local[o, k] = np.float32(qpad[k])
                         continue
                     key = p * L + k
                     h = (key * 40503) & (size - 1)
@@ -140,11 +147,16 @@ def _compile_pair_scores(njit, opts: dict):
                     if keys[h] == -1:
                         keys[h] = key
                         vals[h] = dot_max(db[p], Q[k])
-                    if k == 0:
-                        first[c] = vals[h]
-                    acc += np.float64(vals[h])
+                    local[o, k] = vals[h]
+            best = -np.inf
+            for v in range(nv):
+                acc = 0.0
+                for k in range(L):
+                    acc += np.float64(local[off[v, k] - lo, k])
                 best = max(best, acc)
             out[c] = np.float32(best / L)
+            if 0 <= cand[c] < qc[0]:
+                first[c] = local[-lo, 0]
         return out
     return pair_scores
 
@@ -406,10 +418,11 @@ def pair_scores(cand, db, Q, off, qc, qpad) -> tuple[np.ndarray, np.ndarray]:
     under its S cell shifts (``seqmatch.shift_cells``; S = 1 without). off (V, L) int64: the
     trajectories' row offsets (negative: a reverse revisit). qc (L,) int64: the rows each query had
     (a point p counts when 0 <= p < qc[k]); qpad (L,) float64: the value of a point outside them.
-    A point's value is the best cosine of stored row p with query k's shifted copies (float32
-    sums, vectorised, so reordered as a BLAS product may be), computed once however many
-    trajectories pass through it; rounded to float32, summed over k in float64, maximised over v,
-    divided by L, rounded to float32, as :func:`candidate_scores`. Needs numba (:func:`available`).
+    A point's value is the best cosine of stored row p with query k's shifted copies (float32 sums,
+    vectorised, so reordered as a BLAS product may be), computed once however many trajectories
+    pass through it (a candidate's rows in order, each read once); rounded to float32, summed over
+    k in float64, maximised over v, divided by L, rounded to float32, as :func:`candidate_scores`.
+    Needs numba (:func:`available`).
     """
     out, first = np.empty(len(cand), np.float32), np.full(len(cand), np.nan, np.float32)
     _compiled()["pair_scores"](np.ascontiguousarray(cand, dtype=np.int64), db, np.ascontiguousarray(Q, dtype=np.float32),
