@@ -27,19 +27,21 @@ from greenloop.util import numba_kernels
 __all__ = ["reservoir", "IndexSpace", "CandidateMode", "INDEX_FIT", "NULL_SAMPLE", "INDEX_DIM", "FOLLOW", "AROUND",
            "NULL_GROUPS", "FOLLOW_DEPTH", "WARMUP"]
 
-# Candidate mode's defaults (``seqstream.Detector``): the PCA of the index is fitted on the first INDEX_FIT
-# candidate rows, and a calibrated query scores NULL_SAMPLE sampled rows as its null beside the
-# retrieved ones. INDEX_DIM: the index's dims where a caller asks for a reduced index (the CLI's
-# --index and speed.scale's decisions for the named configurations).
+# Candidate mode's defaults (``seqstream.Detector``): the PCA of the index is fitted on the first
+# INDEX_FIT candidate rows, and a calibrated query scores NULL_SAMPLE sampled rows as its null beside
+# the retrieved ones. INDEX_DIM: the index's dims where a caller asks for a reduced index (the CLI's
+# --index and speed.scale's decisions).
 INDEX_FIT, NULL_SAMPLE, INDEX_DIM = 1000, 128, 64
-# Candidate mode's rows beyond the retrieved ones (:meth:`CandidateMode._match_candidates`): the FOLLOW best
-# rows of the previous frame moved one frame along (a trajectory the index's single frame missed),
-# the rows within AROUND of the best, and the sample scored NULL_GROUPS-th by NULL_GROUPS-th, one
-# part per frame (each sampled row's score at most NULL_GROUPS - 1 frames old).
-FOLLOW, AROUND, NULL_GROUPS = 3, 16, 4
-FOLLOW_DEPTH = 8
-# Candidate mode's preload streams this many frames more than the reference's (``seqstream.Detector.preload``):
-# the rows followed, and the sample's scores, come from the frames before.
+# The rows a frame scores beyond the retrieved ones (:meth:`CandidateMode._match_candidates`): the
+# FOLLOW best of the previous frame's retrieved or followed rows moved one frame on (a trajectory
+# the single-frame retrieval missed this frame; a row is followed at most FOLLOW_DEPTH frames
+# without being retrieved again), the rows within AROUND of the best (the matched place's
+# neighbours, the top of the exact null), and a NULL_GROUPS-th of the sample (the rest keep the
+# scores of their last turn, at most NULL_GROUPS - 1 frames old). Chosen with
+# tools/candidate_measure.py on Nordland (agreement with the exact scan against rows scored).
+FOLLOW, AROUND, NULL_GROUPS, FOLLOW_DEPTH = 3, 16, 4, 8
+# Candidate mode's preload streams this many frames more than the reference's
+# (``seqstream.Detector.preload``): the rows followed and the sample's scores come from the frames before.
 WARMUP = 4 * FOLLOW_DEPTH + NULL_GROUPS
 
 _MASK = (1 << 64) - 1
