@@ -14,8 +14,8 @@ candidate mode, over the frames that have candidates:
   of the frames both declare, the share with the same match within +-2 frames;
 * p50 / p99 ms per frame (the whole decision, descriptor given) on this machine, as loaded as it is.
 
-A drive that never comes back (summer frames only, 2N of them) is streamed too: the closures each
-mode declares there (all false).
+A drive that never comes back (summer frames only, 2N of them or as many as there are) is
+streamed too: the closures each mode declares there (all false).
 
     PYTHONPATH=. .venv/bin/python tools/candidate_measure.py [--nordland data/nordland] [--n 750]
         [--start 0] [--k 10] [--kinds scan hnsw ivf] [--null-sample 64] [--exclude 150]
@@ -86,12 +86,12 @@ def main(argv=None) -> int:
     knobs = {k: v for k, v in knobs.items() if k != "descriptor"}
     rgb = Path(a.nordland) / "rgb"
     frames = [rgb / f"{a.start + k}.png" for k in range(a.n)] + [rgb / f"{WINTER + a.start + k}.png" for k in range(a.n)]
-    once = [rgb / f"{a.start + k}.png" for k in range(2 * a.n)]
+    once = [rgb / f"{k}.png" for k in range(a.start, min(a.start + 2 * a.n, WINTER))]     # summer only
     print(f"# {seqmatch.DEFAULT_NAME} at {threshold:g}, exclude {a.exclude}, k {a.k}, index {seqstream.INDEX_DIM} dims "
           f"(PCA on the first {seqstream.INDEX_FIT} candidate rows), null sample {a.null_sample}")
     retrieval.one_thread()
     for label, paths, revisit in ((f"Nordland summer {a.start}..{a.start + a.n - 1} then winter", frames, np.arange(2 * a.n) >= a.n),
-                                  (f"no revisit: Nordland summer {a.start}..{a.start + 2 * a.n - 1}", once, np.zeros(2 * a.n, bool))):
+                                  (f"no revisit: Nordland summer {a.start}..{a.start + len(once) - 1}", once, np.zeros(len(once), bool))):
         X = seqmatch.describe_frames([_read(q) for q in paths], seqmatch.DEFAULT_KNOBS["descriptor"])
         ref = stream(seqstream.Detector(threshold, exclude=a.exclude, **knobs), X)
         print(f"{label}: {len(X)} frames; exact scan: {len(ref[3])} closures, p50 {1e3 * np.median(ref[2]):.3g} ms, "

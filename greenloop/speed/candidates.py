@@ -302,10 +302,11 @@ class CandidateMode:
 
     def _candidates(self, Q: np.ndarray, c: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The rows query Q (S, D) scores first, (m,) int64 ascending, whether each was picked (m,)
-        bool, and the rows retrieved (ascending): every candidate while c <= k (none retrieved);
-        else the rows retrieved (:meth:`_retrieve`) and the rows the previous frame retrieved whose
-        scores were its FOLLOW best, moved -1, 0, +1 and +2 rows (the next point of a trajectory
-        they ended, at any velocity), picked, and when calibrating this frame's part of the sample
+        bool, and each one's depth (m,) int64, the frames since it was last retrieved (FOLLOW_DEPTH:
+        not to be followed): every candidate while c <= k (depth 0); else the rows retrieved
+        (:meth:`_retrieve`, depth 0) and the previous frame's FOLLOW best retrieved or followed rows
+        moved -1, 0, +1 and +2 rows (the next point of a trajectory they ended, at any velocity;
+        their depth + 1), picked, and when calibrating this frame's part of the sample
         (:meth:`_group`), picked only if also picked otherwise."""
         if c <= self.k:
             return np.arange(c, dtype=np.int64), np.ones(c, bool), np.zeros(c, np.int64)

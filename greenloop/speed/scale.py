@@ -222,7 +222,8 @@ def run(src, out, sizes=SIZES, dim: int = 64, queries=(2000, 1000, 300), n_inser
     metrics = long_run_metrics(X, len(real), min(100_000, len(X)))
     print(metrics.to_string(), flush=True)
     del X, Qall
-    G = descriptors(real, gradients, 0, max(decision_sizes) + decision_queries, seed)
+    G = descriptors(real, gradients, 0, max(decision_sizes) + decision_queries, seed, chunk=1000)   # small chunks: the
+    # histograms' intermediate arrays grow with the chunk
     decide = decisions(G, len(real), decision_sizes, decision_queries)
     decide = decide.assign(**describe_ms(real, gradients, max(decision_sizes), decision_queries, seed))
     _write(out, table, nb, dim, len(real), seed, decide, note, metrics)
@@ -541,7 +542,7 @@ def _decision_budget(decide: pd.DataFrame) -> list[str]:
     said = [f"At {int(big.stored.iloc[0]):,} stored frames the benchmark peaked at {big.peak_rss_GB.max():.1f} GB "
             f"resident (the machine's memory: {_ram_gb():.0f} GB)"]
     if len(ex):
-        said.append(f"the exact scan took {ex.stream_s.iloc[0]:.0f} s for its {int(ex.queries.iloc[0]):,} frames "
+        said.append(f"the exact scan took {ex.stream_s.iloc[0]:.3g} s for its {int(ex.queries.iloc[0]):,} frames "
                     f"({ex.mean_ms.iloc[0]:.4g} ms per frame: it reads every stored row)")
     return ["; ".join(said) + ". Preload builds the stored rows and the index in 65,536-row chunks, so beyond the "
             "stored rows (N x 2048 B in each detector, one detector at a time) and the recording's raw descriptors "
