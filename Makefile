@@ -221,7 +221,7 @@ bench: | $(STAMP) ## speed benchmark: streaming detector and training vs plain K
 
 # SCALE_NOTE: a sentence for scale.md's header, e.g. what else shared the cores during the run
 SCALE_NOTE ?=
-bench-scale: | $(STAMP) ## retrieval indexes and greenloop-seq's whole decision at 10^4..10^6 stored frames (augmented Nordland) -> results/bench/scale.md (6-12 min on 2 cores)
+bench-scale: | $(STAMP) ## retrieval indexes and the named default's whole decision (candidate mode vs the exact scan) at 10^4..10^6 stored frames (augmented Nordland) -> results/bench/scale.md (about an hour on 2 cores)
 	test -d "$(NORDLAND_SRC)" || { echo "bench-scale needs Nordland's frames: set NORDLAND_SRC=path (summer/, winter/), e.g. from git clone --depth 1 $(NORDLAND_URL)"; exit 1; }
 	OMP_NUM_THREADS=1 $(BIN)/python -m greenloop.speed.scale --src $(NORDLAND_SRC) --out $(RESULTS)/bench --note "$(SCALE_NOTE)"
 

@@ -253,9 +253,10 @@ def _seq_detector(args, kn: dict, paths) -> seqstream.Detector:
             raise ValueError(f"--state {args.state} was saved for another run ({saved.get('key')}); "
                              f"pass the same folder and options, or delete the file to start over")
         return saved["detector"]
-    if args.index is not None:
-        retrieval.one_thread()
     extra = {k: kn[k] for k in ("velocities", "center_window", "calibrate", "repeat_cos", "cell_shift") if k in kn}
+    if args.index is not None:              # the index holds a PCA of the stored rows (seqstream.INDEX_DIM)
+        retrieval.one_thread()
+        extra["index_dim"] = seqstream.INDEX_DIM
     return seqstream.Detector(kn["threshold"], descriptor=kn["descriptor"], seq_len=kn["seq_len"],
                              exclude=kn["exclude"], contrast_window=kn["contrast_window"],
                              index=args.index, k=args.candidates, **extra)
@@ -529,6 +530,8 @@ _DETECT_DESCRIPTION = (
     f"{seqmatch.DEFAULT_KNOBS['seq_len']}, threshold {seqmatch.DEFAULT_THRESHOLD:g}): no model, no poses, no "
     f"tuning. {seqmatch.CNN_NAME} adds an ImageNet CNN (threshold {seqmatch.CNN_THRESHOLD:g}). The frames it "
     f"never compares with a query (the exclusion) follow one rule, the one make uses, printed at the start. "
+    f"For long recordings --index hnsw (or ivf, ...) runs the same configuration and threshold on the frames "
+    f"an index retrieves, at a cost per frame that does not grow with the recording; --state makes it resumable. "
     f"--matches writes every frame's best match for your own scoring.")
 
 
@@ -547,8 +550,9 @@ def build_parser() -> argparse.ArgumentParser:
                         f"the named default, which needs no model and no tuning")
     d.add_argument("--threshold", "--tau", type=float, default=None,
                    help="the score to reach: " + "; ".join(f"{n}: {t:g}" for n, (_, t) in seqmatch.NAMED.items())
-                        + " (calibrated z-scores); greenloop-seq: needed unless --tuned; dictionary: tau, an "
-                          "integer (default frames-per-spot + margin)")
+                        + " (calibrated z-scores, with or without --index; a value given overrides it); "
+                          "--method greenloop-seq with --threshold: the plain knobs (--help's defaults); "
+                          "dictionary: tau, an integer (default frames-per-spot + margin)")
     d.add_argument("--matches", default=None, metavar="FILE.csv",
                    help="also write every frame's best stored match, its score and the decision (1: closure) to "
                         "this CSV, to score the detector against your own ground truth or pick your own threshold")
@@ -578,9 +582,14 @@ def build_parser() -> argparse.ArgumentParser:
                    help="SeqSLAM local contrast window in frames, 0 = off (default: "
                         + _knob_defaults("contrast_window") + ")")
     g.add_argument("--index", default=None, choices=retrieval.KINDS,
-                   help="verify sequences on the --candidates frames this index retrieves (scan, flat: "
-                        "exact; ivf, hnsw, swp, qdp: approximate) instead of on every stored frame: "
-                        "the per-frame cost stops growing with the recording (greenloop.retrieval)")
+                   help="long recordings: verify sequences on the --candidates frames this index retrieves (scan, "
+                        "flat: exact; ivf, hnsw, swp, qdp: approximate) instead of on every stored frame, so the "
+                        "per-frame cost stops growing with the recording (greenloop.retrieval). The method's "
+                        "configuration and fixed threshold apply as they are (the named default's calibration, "
+                        "repeat gate, cell shift and reverse velocities included; the calibration's null from "
+                        f"{seqstream.NULL_SAMPLE} sampled stored frames); the index holds the stored descriptors "
+                        f"reduced to {seqstream.INDEX_DIM} dims by a PCA fitted on the first {seqstream.INDEX_FIT} "
+                        "candidate frames, the verification reads them in full")
     g.add_argument("--candidates", type=int, default=20, help="--index: frames retrieved per query (default 20)")
     g.add_argument("--state", default=None, metavar="FILE",
                    help="save the detector here (every --save-every frames, on Ctrl-C, at the end) and "

@@ -113,7 +113,7 @@ SHIFTABLE_DIMS = (features.GRADIENT_DIM, features.FUSED_DIM)
 
 __all__ = ["DESCRIPTORS", "DEFAULT_NAME", "DEFAULT_KNOBS", "DEFAULT_THRESHOLD", "CNN_NAME", "CNN_KNOBS", "CNN_THRESHOLD", "NAMED",
            "CELL_GRID", "SHIFTABLE_DIMS", "shift_cells", "cell_shifts", "center", "center_stored", "center_windows",
-           "CALIBRATIONS", "NEIGHBOURHOOD", "NULL_MIN", "check_calibration", "calibrate_scores", "describe", "describe_frames", "normalise", "fit_projection", "contrast_normalise", "columns_to_scores",
+           "CALIBRATIONS", "NEIGHBOURHOOD", "NULL_MIN", "check_calibration", "calibrate_scores", "calibrate_sampled", "describe", "describe_frames", "normalise", "fit_projection", "contrast_normalise", "columns_to_scores",
            "closures", "choose_threshold", "threshold_range", "pick_knobs", "matrix_events"]
 
 
@@ -353,6 +353,52 @@ def calibrate_scores(scores, method: str = "zscore") -> np.ndarray:
     if sd <= _EPS:
         return np.zeros(s.size, np.float32)
     return ((s - null.mean()) / sd - math.sqrt(2 * math.log(s.size))).astype(np.float32)
+
+
+def calibrate_sampled(scores, rows, known, sampled, c: int, method: str = "neighbourhood",
+                      best_of: int | None = None) -> np.ndarray:
+    """:func:`calibrate_scores` of a query that scored only some of its c candidate rows: the
+    retrieved ones (``known``) and a uniform sample of the others (``sampled``).
+
+    The null of :func:`calibrate_scores` (every candidate, or those more than NEIGHBOURHOOD rows
+    from the best when NULL_MIN or more remain) splits into the known rows in it, whose scores are
+    all here, and the rest, U, of which only the sampled rows outside the known ones and the best's
+    neighbourhood were scored: the null's mean and second moment are those of the known rows plus
+    |U| times the sample's (a stratified estimate, unbiased for the exact null's, whatever c).
+    C in sqrt(2 ln C) is c, as the exact calibration has it. When every row 0..c-1 is known, U is
+    empty and this is :func:`calibrate_scores` (to float rounding).
+
+    scores (m,) float: the trajectory scores of ``rows`` (m,) int, distinct stored rows < c.
+    known, sampled: (m,) bool (a row both known and sampled counts as known). best_of: the best
+    (whose neighbourhood leaves the null) is the best of the first best_of rows (default all).
+    Returns (m,) float32 calibrated scores in the order of rows; all 0 when c < 2 or the null is flat.
+    """
+    if method not in CALIBRATIONS:
+        raise ValueError(f"method must be one of {CALIBRATIONS}, got {method!r}")
+    s, rows = np.asarray(scores, dtype=np.float64), np.asarray(rows)
+    known, sampled = np.asarray(known, bool), np.asarray(sampled, bool)
+    if c < 2 or not s.size:
+        return np.zeros(s.size, np.float32)
+    near, n_near = np.zeros(s.size, bool), 0
+    if method == "neighbourhood":
+        b = int(rows[np.argmax(s[:best_of])])
+        lo, hi = max(b - NEIGHBOURHOOD, 0), min(b + NEIGHBOURHOOD, c - 1)
+        if c - (hi - lo + 1) >= NULL_MIN:
+            near, n_near = (rows >= lo) & (rows <= hi), hi - lo + 1
+    exact = known & ~near
+    n_rest = c - int(known.sum()) - (n_near - int((known & near).sum()))
+    rest = sampled & ~known & ~near
+    n_rest = n_rest if rest.any() else 0
+    n = int(exact.sum()) + n_rest
+    if n < 1:
+        return np.zeros(s.size, np.float32)
+    w = n_rest / max(int(rest.sum()), 1)
+    mean = (s[exact].sum() + w * s[rest].sum()) / n
+    var = (np.square(s[exact]).sum() + w * np.square(s[rest]).sum()) / n - mean * mean
+    sd = math.sqrt(max(var, 0.0))
+    if sd <= _EPS:
+        return np.zeros(s.size, np.float32)
+    return ((s - mean) / sd - math.sqrt(2 * math.log(c))).astype(np.float32)
 
 
 def threshold_range(contrast_window: int) -> tuple[float, float]:

@@ -94,6 +94,6 @@ def test_cell_shift_refuses_what_it_cannot_shift():
     proj = seqmatch.fit_projection(np.random.default_rng(0).normal(size=(50, D)), dim=8)
     with pytest.raises(ValueError, match="projection"):
         seqstream.Detector(None, cell_shift=1, projection=proj)
-    with pytest.raises(ValueError, match="cell_shift"):
-        seqstream.Detector(None, cell_shift=1, index="flat")
+    with pytest.raises(ValueError, match="gradients"):        # candidate mode shifts as the exact scan does
+        seqstream.Detector(None, exclude=5, cell_shift=1, index="flat").update_descriptor(np.ones(32, np.float32))
     assert isinstance(proj, similarity.Projection)

@@ -64,8 +64,12 @@ def test_preload_shorter_than_the_window_and_bad_input():
     head.preload(X[:3])                                    # fewer frames than seq_len, none indexed
     got, _ = _tail(head, X[3:40])
     assert all(np.array_equal(a[0], b[0]) for a, b in zip(streamed[3:], got))
-    with pytest.raises(ValueError, match="candidate mode"):
-        seqstream.Detector(None).preload(X)
+    ref, ref_head = (seqstream.Detector(None, seq_len=5, exclude=20) for _ in range(2))   # the reference too
+    ref_streamed, _ = _tail(ref, X[:120])
+    ref_head.preload(X[:90])
+    assert ref_head.frame_index == 90 and ref_head.last_scores.size == 0
+    ref_got = [(ref_head.update_descriptor(x), ref_head.last_scores.copy())[1] for x in X[90:120]]
+    assert all(np.array_equal(a[0], b) for a, b in zip(ref_streamed[90:], ref_got))
     with pytest.raises(ValueError, match=r"\(N, D\)"):
         head.preload(X[0])
     with pytest.raises(ValueError, match="NaN"):
@@ -73,31 +77,42 @@ def test_preload_shorter_than_the_window_and_bad_input():
 
 
 def test_decisions_agree_with_an_uninterrupted_stream(tmp_path):
-    """speed.scale.decisions (preload N, stream the next frames) against detectors streamed from
-    frame 0: recall@1 and correct_% recomputed by hand from their best matches."""
-    X = l2_normalise(_route())
-    n, nq, kw = 240, 100, dict(seq_len=5, exclude=20, contrast_window=4, k=8)
-    methods = (("scan", "scan", {}), ("SWP", "swp", {"n_bits": 10, "radius": 1}))
-    got = scale.decisions(X, 2 * N_PLACE, sizes=[n], n_queries=nq, methods=methods, **kw).set_index("method")
-    best = {}
+    """speed.scale.decisions (the named configuration, preload N, stream the next frames) against
+    detectors streamed from frame 0, the exact scan and candidate mode: the agreement columns,
+    closures and correct_% recomputed by hand from their best matches and closures."""
+    X = _route(dim=256)
+    n, nq = 240, 100
+    methods = (("exact", None, {}), ("SWP", "swp", {"n_bits": 10, "radius": 1}))
+    got = scale.decisions(X, 2 * N_PLACE, sizes=[n], n_queries=nq, methods=methods, k=8, exclude=20,
+                          index_dim=None).set_index("method")
+    knobs, threshold = seqmatch.NAMED[scale.DECISION_NAME]
+    knobs = {key: v for key, v in knobs.items() if key != "descriptor"}
+    res = {}
     for label, kind, opts in methods:
-        det = seqstream.Detector(0.0, index=kind, index_options={"nlist": 16, "train_size": n, **opts}, **kw)
-        out, _ = _tail(det, X[:n + nq])
-        best[label] = np.array([c[np.argmax(s)] for s, c in out[n:]])
+        index = {} if kind is None else dict(index=kind, k=8, index_options={"nlist": 16, "train_size": n, **opts})
+        det = seqstream.Detector(threshold, exclude=20, **knobs, **index)
+        best, fired = [], []
+        for x in X[:n + nq]:
+            event = det.update_descriptor(x)
+            best.append(seqstream.best_candidate(det)[0])
+            fired.append(event is not None)
+        res[label] = (np.array(best[n:]), np.array(fired[n:]))
+    (b0, f0), (b1, f1) = res["exact"], res["SWP"]
     place = np.arange(len(X)) % N_PLACE
-    for label in best:
-        correct = np.abs(place[best[label]] - place[n:n + nq]) <= 2
-        assert got.loc[label, "correct_%"] == pytest.approx(100 * correct.mean())
-    recall = 100 * np.mean(best["SWP"] == best["scan"])
-    assert got.loc["scan", "recall@1_%"] == 100 and 0 < recall < 100
-    assert got.loc["SWP", "recall@1_%"] == pytest.approx(recall)
+    assert got.loc["SWP", "best_agree_%"] == pytest.approx(100 * np.mean(np.abs(b1 - b0) <= 2))
+    assert got.loc["SWP", "events_agree_%"] == pytest.approx(100 * np.mean(f1 == f0))
+    assert got.loc["SWP", "closures"] == f1.sum() and got.loc["exact", "closures"] == f0.sum()
+    for label, (b, _) in res.items():
+        assert got.loc[label, "correct_%"] == pytest.approx(100 * np.mean(np.abs(place[b] - place[n:n + nq]) <= 2))
+    assert got.loc["exact", "best_agree_%"] == got.loc["exact", "events_agree_%"] == 100
+    assert 5 < f0.sum() < nq and got.loc["exact", "correct_%"] > 90           # the third pass closes loops
+    assert got.loc["exact", "bytes_per_frame"] == 2 * 256 * 4 + 4 * knobs["seq_len"]
     assert (got.p50_ms <= got.p99_ms).all() and got.frames_per_s.values == pytest.approx(1e3 / got.mean_ms.values)
     lines = scale._decision_section(tmp_path, got.reset_index())
     assert pd.read_csv(tmp_path / "scale_decisions.csv").shape[0] == 2 and (tmp_path / "scale_decisions.png").is_file()
     assert any(line.startswith("| method") for line in lines)
     t = scale.decision_targets(got.reset_index()).set_index("method")
-    assert t.loc["SWP", "recall@1 within 1 pt of exact"].startswith("not met")
-    assert t.loc["scan", "correct_% within 1 pt of exact"] == "met (100.0 % vs 100.0 %)"
+    assert list(t.index) == ["SWP"] and t.loc["SWP", "bytes per stored frame"] == f"{got.loc['SWP', 'bytes_per_frame']:.0f} B"
 
 
 def test_descriptors_are_the_single_frame_path():

@@ -7,7 +7,9 @@ the stream sees at query j; :func:`tune_knobs` scores a knob grid by it, and
 :func:`stream_check` compares a stream's events with a matrix. The stages the detector is built
 of (descriptors, normalisation, contrast normalisation, calibration) and the scoring of its
 matrices stay in ``greenloop.seqmatch`` (its module doc describes the method, its units and the
-memory per stored frame); ``greenloop.detectors.greenloop_seq`` registers it.
+memory per stored frame); ``greenloop.detectors.greenloop_seq`` registers it. Candidate mode's own
+methods (``index=...``: what a frame retrieves and scores, the calibration's sampled null) are in
+``greenloop.speed.candidates`` (``CandidateMode``, which ``Detector`` inherits).
 """
 from __future__ import annotations
 
@@ -16,16 +18,19 @@ import math
 import numpy as np
 
 from greenloop import evaluate, features, retrieval
-from greenloop.seqmatch import (_EPS, COLORS, DEFAULT_VELOCITIES, STORE_DTYPES, _check_descriptor, _join,
+from greenloop.seqmatch import (COLORS, DEFAULT_VELOCITIES, STORE_DTYPES, _check_descriptor, _join,
                                 SHIFTABLE_DIMS, calibrate_scores, cell_shifts, check_calibration, center, center_stored, center_windows,
                                 columns_to_scores, contrast_normalise, describe_frames, matrix_events, normalise,
                                 shift_cells, threshold_range)
 from greenloop.similarity import l2_normalise
+from greenloop.speed import candidates
+from greenloop.speed.candidates import (AROUND, FOLLOW, FOLLOW_DEPTH, INDEX_DIM, INDEX_FIT, NULL_GROUPS,  # noqa: F401
+                                        NULL_SAMPLE, WARMUP, CandidateMode)
 from greenloop.util import numba_kernels
 from greenloop.util.checks import positive_int
 from greenloop.util.threads import one_blas_thread
 
-__all__ = ["Detector", "best_candidate", "score_matrix", "tune_knobs", "stream_disagreements", "stream_matches_matrix", "stream_check"]
+__all__ = ["Detector", "INDEX_FIT", "NULL_SAMPLE", "INDEX_DIM", "best_candidate", "score_matrix", "tune_knobs", "stream_disagreements", "stream_matches_matrix", "stream_check"]
 
 
 def _offsets(seq_len: int, velocities) -> np.ndarray:
@@ -70,7 +75,7 @@ def _check_threshold(threshold, contrast_window: int, calibrated: bool = False):
         raise ValueError(f"threshold must lie in [{lo:.3g}, {hi:.3g}] for {kind} scores, got {threshold!r}")
     return t
 
-class Detector:
+class Detector(CandidateMode):
     """Streaming greenloop-seq: one frame (or descriptor) in, a closure event or None out.
 
     threshold: declare a closure at query j when its best sequence score >= threshold (range:
@@ -83,9 +88,23 @@ class Detector:
     store_dtype: "float32" or "float16" for the stored descriptors. color: "bgr" or "rgb".
     index: None (the reference: every stored frame is scored) or a ``greenloop.retrieval`` kind
         ("scan", "flat", "ivf", "hnsw", "swp", "qdp"): candidate mode, the sequence score is
-        computed only for the ``k`` stored frames the index retrieves for the newest query
-        (``index_options``: keyword arguments of ``retrieval.make_index``). See
-        :meth:`_match_candidates` for what it computes and where it may differ from the reference.
+        computed only for the ``k`` stored frames the index retrieves for the newest query (for
+        each of its cell shifts) and, when calibrating, a fixed-size sample of the others
+        (``index_options``: keyword arguments of ``retrieval.make_index``). Every option below
+        applies to it as to the reference. See :meth:`_match_candidates` for what it computes and
+        where it may differ from the reference.
+    index_dim: candidate mode: the index holds the stored rows (the centred, normalised descriptor
+        the detector compares) reduced to index_dim dims by a PCA fitted on the first ``index_fit``
+        candidate rows (``speed.candidates.IndexSpace``; causal: until that many rows are
+        candidates the stored rows are scanned exactly, and the PCA never changes afterwards);
+        None: the rows as they are. The sequence scores always use the full stored rows. Bytes
+        per stored frame in candidate mode (``bytes_per_frame``): the stored row, D x itemsize (the
+        named default: two centred 256-d parts joined, 512 float32 = 2048 B), plus the index's copy
+        (index_dim float32 and what the kind adds: IVF's list ids, HNSW's links); no column buffer.
+    null_sample: candidate mode with calibrate: the size of the sample of stored rows scored as
+        the calibration's null beside the retrieved ones (``speed.candidates.reservoir``, seeded);
+        with cell_shift also what the mean of a shifted column (a point outside the stored frames)
+        is estimated from.
     Options (off by default, the behaviour before them):
     center_window: W > 0 subtracts from each raw descriptor the mean of the last W raw descriptors
         (itself included, :func:`center`) before normalising: a buffer of W x D float32, fixed.
@@ -113,14 +132,15 @@ class Detector:
     column's mean, as one before the first stored frame.
     Attributes: ``events`` (list of {'frame', 'match', 'score'}), ``frame_index``, ``last_scores``
     ((C,) float32 scores of the newest query's candidates: every stored row 0..C-1, or in candidate
-    mode the rows ``last_candidates`` (C,) int64, ascending), ``bytes_per_frame``.
+    mode the rows scored, ``last_candidates`` (C,) int64, ascending), ``bytes_per_frame``.
     """
 
     def __init__(self, threshold=None, descriptor: str = "pixels", seq_len: int = 10,
                  velocities=DEFAULT_VELOCITIES, exclude: int = 150, contrast_window: int = 10,
                  projection=None, store_dtype: str = "float32", color: str = "bgr", weights="auto",
                  index: str | None = None, k: int = 20, index_options: dict | None = None,
-                 center_window: int | list = 0, calibrate: bool | str = False, repeat_cos=None, cell_shift: int = 0):
+                 center_window: int | list = 0, calibrate: bool | str = False, repeat_cos=None, cell_shift: int = 0,
+                 index_dim: int | None = None, index_fit: int = INDEX_FIT, null_sample: int = NULL_SAMPLE):
         if index is not None and index not in retrieval.KINDS:
             raise ValueError(f"index must be None (score every stored frame) or one of "
                              f"{retrieval.KINDS}, got {index!r}")
@@ -149,10 +169,9 @@ class Detector:
             raise ValueError(f"store_dtype must be one of {STORE_DTYPES}, got {store_dtype!r}")
         if color not in COLORS:
             raise ValueError(f"color must be one of {COLORS}, got {color!r}")
-        if index is not None and (self.calibrate or repeat_cos is not None or min(v) < 0 or self.cell_shift):
-            raise ValueError("candidate mode (index=...) scores the retrieved frames only and does not yet "
-                             "support calibrate, repeat_cos, cell_shift or negative (reverse) velocities: pass index=None, "
-                             "or knobs without them (e.g. the CLI's --threshold with --index)")
+        self._space = candidates.IndexSpace(None if index_dim is None else positive_int("index_dim", index_dim, 1),
+                                            positive_int("index_fit", index_fit, 2))
+        self.null_sample = positive_int("null_sample", null_sample, 2)
         self.velocities, self.projection, self.color, self.weights = tuple(v), projection, color, weights
         self._resolved = None   # features.resolve(descriptor, weights), at the first frame
         self.store_dtype = np.dtype(store_dtype)
@@ -176,10 +195,17 @@ class Detector:
         self.last_candidates = np.zeros(0, np.int64)
         self._frame_shape = None
         self._index = None                    # candidate mode: the retrieval index, made at frame 0
-        self._Q = None                        # (L, D) the last L query descriptors, newest first
+        self._Q = None                        # (L, S, D) the last L queries (S cell shifts), newest first
         self._qc = np.zeros(L, np.int64)      # their candidate counts c = j - exclude (0: none yet)
         self._qpad = np.zeros(L, np.float32)  # their columns' pads (points outside stored frames)
-        self._sum = None                      # (D,) float64 sum of the indexed rows (cosine pads)
+        self._sum = None                      # (D,) float64 sum of the candidate rows (cosine pads)
+        self._seen = 0                        # candidate rows seen (summed, offered to the sample)
+        self._space.mean = self._space.components = None    # the index's PCA, fitted again
+        sample = self.index_kind is not None and (self.calibrate or self.cell_shift)
+        self._slots = np.full(self.null_sample, -1, np.int64) if sample else None   # sampled candidate rows
+        self._nrow = np.full(self.null_sample, -1, np.int64)    # the row each slot's score belongs to
+        self._nscore = np.zeros(self.null_sample, np.float32)   # its score when its group was last scored
+        self._follow = None                   # the previous frame's best rows (candidate mode)
         self._recent = None                   # (center_window, D) raw descriptors, oldest first
         self._n_recent = 0
         self._previous = None                 # the previous frame's normalised descriptor
@@ -187,12 +213,15 @@ class Detector:
     @property
     def bytes_per_frame(self) -> int:
         """Bytes held per stored frame: D * itemsize (descriptor) + 4 * seq_len (column buffer);
-        in candidate mode D * itemsize + the index's ``bytes_per_frame()`` (no column buffer);
-        0 before the first frame (D unknown)."""
+        in candidate mode D * itemsize + the index's ``bytes_per_frame()`` (no column buffer; the
+        index holds index_dim or D dims per row); 0 before the first frame (D unknown). What does
+        not grow with the stream is left out: the last seq_len queries (seq_len x shifts x D
+        float32), the sample (null_sample rows), the index's PCA ((D + 1) x index_dim)."""
         if self._db is None:
             return 0
-        if self._index is not None:
-            return int(self._db.shape[1] * self.store_dtype.itemsize + self._index.bytes_per_frame())
+        if self.index_kind is not None:
+            index = self._index.bytes_per_frame() if self._index is not None else 0
+            return int(self._db.shape[1] * self.store_dtype.itemsize + index)
         return int(self._db.shape[1] * self.store_dtype.itemsize + 4 * self.seq_len)
 
     def _store(self, y: np.ndarray) -> None:
@@ -244,9 +273,10 @@ class Detector:
         j, c = self.frame_index, max(self.frame_index - self.exclude, 0)
         if self._db is not None and y.size != self._db.shape[1]:
             raise ValueError(f"descriptor {j} has {y.size} dims, the stream's first had {self._db.shape[1]}")
-        if self.index_kind is not None:
-            return self._match_candidates(y)
         gate = normalise(x)[0] if self.repeat_cos is not None else y
+        if self.index_kind is not None:
+            with one_blas_thread():   # every product of candidate mode (and a scan index's) on one thread
+                return self._match_candidates(Q if self.cell_shift else y[None], gate)
         if not c:
             return self._match(y, np.zeros(0, np.float32), gate)
         with one_blas_thread():   # a 2-thread gemv stalls on a loaded 2-core machine
@@ -293,17 +323,17 @@ class Detector:
     def _recenter_stored(self) -> None:
         """While the centring window fills (frame j < center_window), centre the stored frames 0..j-1
         again on the mean of frames 0..j, the mean frame j was centred on (:func:`center_stored`);
-        in candidate mode the index (at most center_window rows) is rebuilt from them."""
+        in candidate mode the index and the sum of the candidate rows (at most center_window rows)
+        are made again from them."""
         W, j = self._W, self.frame_index
         if not W or not 0 < j < W or self._db is None:
             return
         raw = self._recent[W - self._n_recent:]           # frames 0..j, oldest first
         self._db[:j] = normalise(center_stored(raw, self.center_window), self.projection)[:j]
-        if self._index is not None and self._index.n_stored:
-            n_in = self._index.n_stored
-            self._index = retrieval.make_index(self.index_kind, self._db.shape[1], **self.index_options)
-            self._index.add(self._db[:n_in].astype(np.float32))
-            self._sum = self._db[:n_in].astype(np.float32).sum(0, dtype=np.float64)
+        if self._seen:
+            self._index, self._space.mean, self._space.components = None, None, None
+            self._sum = self._db[:self._seen].astype(np.float32).sum(0, dtype=np.float64)
+            self._grow_index(self._seen)
 
     def _is_repeat(self, y: np.ndarray) -> bool:
         prev, self._previous = self._previous, y.copy()
@@ -336,134 +366,96 @@ class Detector:
                 return event
         return None
 
-    def _match_candidates(self, y: np.ndarray) -> dict | None:
-        """Candidate mode: the sequence score of the k frames the index retrieves for query j.
-
-        Frames 0..c-1 (c = j - exclude) are added to the index before query j (delayed insertion
-        keeps the exclusion window). For each candidate i the trajectory points (i - round(v k),
-        column j - k) are scored as in the reference: the cosine of query j - k with that stored
-        row, contrast-normalised over rows within contrast_window // 2 clipped to the c_k rows that
-        query had (:func:`contrast_normalise`), computed for the rows the points need only (one
-        (rows, L) product). Where the index returns every stored row the scores equal the
-        reference's except at points outside the stored frames: those count as the column's pad,
-        the exact column mean for cosine scores (contrast_window 0, from a running sum of the
-        stored rows) but 0 (a z-score's expected value) instead of the column's mean z-score
-        otherwise, since that mean needs the whole column. Cost per frame: k x L x (window + 1)
-        dot products, independent of the number stored (plus the index's search).
-        """
-        j, c, L = self.frame_index, max(self.frame_index - self.exclude, 0), self.seq_len
-        if self._index is None:
-            self._index = retrieval.make_index(self.index_kind, y.size, **self.index_options)
-            self._Q, self._sum = np.zeros((L, y.size), np.float32), np.zeros(y.size)
-        n_in = self._index.n_stored
-        if c > n_in:
-            new = self._db[n_in:c].astype(np.float32)
-            self._index.add(new)
-            self._sum += new.sum(0, dtype=np.float64)
-        pad = float(self._sum @ y / c) if c and self.contrast_window == 0 else 0.0
-        self._Q[1:], self._qc[1:], self._qpad[1:] = self._Q[:-1], self._qc[:-1], self._qpad[:-1]
-        self._Q[0], self._qc[0], self._qpad[0] = y, c, pad
-        self._qpad[self._qc == 0] = pad            # empty / pre-stream columns: the newest pad
-        self.last_candidates, self.last_scores = np.zeros(0, np.int64), np.zeros(0, np.float32)
-        if c:
-            self.last_candidates, self.last_scores = self._candidate_scores(self._index.search(y, self.k)[1][0])
-        self._store(y)
-        self.frame_index += 1
-        if c and self.threshold is not None and self.last_scores.size:
-            i = int(np.argmax(self.last_scores))
-            if self.last_scores[i] >= self.threshold:
-                event = {"frame": j, "match": int(self.last_candidates[i]),
-                         "score": float(self.last_scores[i])}
-                self.events.append(event)
-                return event
-        return None
-
-    def _candidate_scores(self, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The retrieved rows ids (k,) (-1: none) -> (candidates (m,) int64 ascending and distinct,
-        their best-trajectory scores (m,) float32): numba_kernels.candidate_rows / candidate_scores
-        over the similarities of the rows they need to the last seq_len queries (one BLAS product),
-        or :meth:`_candidate_scores_numpy` without numba (the same values to float rounding)."""
-        if not numba_kernels.available():
-            cand = np.unique(ids[ids >= 0])
-            return cand, self._candidate_scores_numpy(cand)
-        h = self.contrast_window // 2
-        cand, R = numba_kernels.candidate_rows(ids, self._margin + h, h, int(self._qc.max()))
-        with one_blas_thread():
-            G = (self._db[R].astype(np.float32) @ self._Q.T).astype(np.float64)   # (|R|, L)
-        return cand, numba_kernels.candidate_scores(cand, R, G, self._margin - self._base, self._qc, self._qpad,
-                                                    h if self.contrast_window else -1, _EPS)
-
-    def _candidate_scores_numpy(self, cand: np.ndarray) -> np.ndarray:
-        """Best-trajectory scores (m,) float32 of the candidate rows cand (m,) (ascending), in NumPy."""
-        off = self._margin - self._base                               # (V, L) row offsets
-        P = cand[:, None, None] - off[None]                           # (m, V, L) trajectory rows
-        ck = self._qc[None, None, :]
-        inside = (P >= 0) & (P < ck)
-        h = self.contrast_window // 2
-        W = P[..., None] + np.arange(-h, h + 1)                       # (m, V, L, 2h + 1) window rows
-        need = inside[..., None] & (W >= 0) & (W < ck[..., None])
-        R = np.unique(W[need])                                        # every row a point needs
-        with one_blas_thread():
-            G = (self._db[R].astype(np.float32) @ self._Q.T).astype(np.float64)   # (|R|, L)
-        col = np.broadcast_to(np.arange(self.seq_len), P.shape)
-        pi, pk = P[inside], col[inside]
-        s = G[np.searchsorted(R, pi), pk]
-        if self.contrast_window:
-            lo, hi = np.maximum(pi - h, 0), np.minimum(pi + h + 1, self._qc[pk])
-            C1 = np.vstack([np.zeros(self.seq_len), np.cumsum(G, 0)])
-            C2 = np.vstack([np.zeros(self.seq_len), np.cumsum(G * G, 0)])
-            a, b, n = np.searchsorted(R, lo), np.searchsorted(R, hi), hi - lo
-            mu = (C1[b, pk] - C1[a, pk]) / n
-            sd = np.sqrt(np.maximum((C2[b, pk] - C2[a, pk]) / n - mu * mu, 0.0))
-            s = np.where(sd > _EPS, (s - mu) / np.maximum(sd, _EPS), 0.0)
-        vals = np.broadcast_to(self._qpad, P.shape).astype(np.float32)
-        vals[inside] = s.astype(np.float32)
-        return (vals.sum(2, dtype=np.float64).max(1) / self.seq_len).astype(np.float32)
+    def _declare(self, j: int, rows=None) -> dict | None:
+        """The closure of query j when the best of ``last_scores`` reaches the threshold: an event
+        {'frame': j, 'match': its stored frame (rows[i], or i without rows), 'score'}, or None."""
+        if self.threshold is None or not self.last_scores.size:
+            return None
+        i = int(np.argmax(self.last_scores))
+        if self.last_scores[i] < self.threshold:
+            return None
+        event = {"frame": j, "match": int(rows[i]) if rows is not None else i, "score": float(self.last_scores[i])}
+        self.events.append(event)
+        return event
 
     def preload(self, X) -> None:
-        """Candidate mode: start as if the raw descriptors X (N, D) of an already-recorded stream
-        had been fed to :meth:`update_descriptor` in order, without deciding on them (a long
-        recording's store in seconds, instead of N decisions).
+        """Start as if the raw descriptors X (N, D) of an already-recorded stream had been fed to
+        :meth:`update_descriptor` in order, without deciding on most of them (a long recording's
+        store in seconds instead of N decisions); in candidate mode and in the reference.
 
-        Resets, then sets what later frames read: the N stored descriptors, the index holding the
-        first max(N - 1 - exclude, 0) of them (one ``add``), the running sum of those rows, the last
-        seq_len queries (descriptors, candidate counts, pads), the centring buffer; frame_index = N.
-        The frames streamed after it then get the uninterrupted stream's scores and events, bit for
-        bit, for "scan", "flat", "ivf" (its quantiser learns the first train_size frames either way),
-        "swp" and "qdp"; an HNSW graph depends on the order of insertion (faiss inserts a batch
-        level by level, shuffled), so its approximate neighbours may differ. ``events`` stays empty
-        and ``last_scores`` / ``last_candidates`` hold nothing: preloaded frames are stored, not
-        decided. Memory while it runs: about three float32 copies of X beyond what it keeps.
+        Resets; sets the stored rows of the frames before the tail at once, and what a stream holds
+        after them: candidate mode's running sum, sample and index of the candidate rows (one
+        ``add``; the PCA fitted on the same first rows), the centring buffer, the repeat gate's last
+        frame; then streams the tail through update_descriptor, which fills the last seq_len
+        queries (candidate mode) or the ring of columns (the reference) as an uninterrupted stream
+        does. The tail begins where the last seq_len frames that were no repeat and had candidates
+        begin (:meth:`_tail_start`; all N frames when that is within the centring window), in
+        candidate mode WARMUP frames earlier. Later frames then get the uninterrupted stream's
+        scores and events, bit for bit, in the reference; in candidate mode too with "scan",
+        "flat", "ivf" (its quantiser learns the first train_size rows either way), "swp" and "qdp"
+        once the rows followed from frame to frame (FOLLOW) are the same, which the warm-up makes
+        them in the tests but cannot promise (a row followed for FOLLOW_DEPTH frames may have won
+        its place over one from long before); an HNSW graph depends on the order of insertion
+        (faiss inserts a batch level by level, shuffled), so its approximate neighbours may differ. ``events`` stays empty and
+        ``last_scores`` / ``last_candidates`` hold nothing. Memory while it runs: about three
+        float32 copies of the stored rows beyond what it keeps.
         """
-        if self.index_kind is None:
-            raise ValueError("preload needs candidate mode (index=...): the reference detector keeps every "
-                             "stored frame's similarity columns; stream the frames through update_descriptor")
         X = np.asarray(X, dtype=np.float32)
         if X.ndim != 2 or 0 in X.shape or not np.all(np.isfinite(X)):
             raise ValueError(f"X must be (N, D) finite descriptors with N, D >= 1, got shape {X.shape} "
                              f"(NaN/inf: fix the descriptors first)")
         self.reset()
-        n, d, L, W = len(X), X.shape[1], self.seq_len, self._W
-        Y = normalise(center(X, self.center_window), self.projection)           # each frame as a query
-        self._db = np.empty((256 * 2 ** max(math.ceil(math.log2(n / 256)), 0), Y.shape[1]), self.store_dtype)
-        self._db[:n] = normalise(center_stored(X, self.center_window), self.projection) if W else Y
-        c = max(n - 1 - self.exclude, 0)                   # rows indexed before query n - 1
-        self._index = retrieval.make_index(self.index_kind, Y.shape[1], **self.index_options)
-        if c:
-            self._index.add(self._db[:c].astype(np.float32))
-        first = max(c - L, 0)
-        S = _running_sums(self._db[:c], first)             # S[i]: sum of rows 0..first + i - 1
-        self._sum, self._Q = S[-1].copy(), np.zeros((L, Y.shape[1]), np.float32)
-        for k, j in enumerate(range(n - 1, max(n - 1 - L, -1), -1)):     # query j, k frames back
-            cj = max(j - self.exclude, 0)
-            self._Q[k], self._qc[k] = Y[j], cj
-            self._qpad[k] = float(S[cj - first].copy() @ Y[j] / cj) if cj and self.contrast_window == 0 else 0.0
-        self._qpad[self._qc == 0] = self._qpad[0]          # pre-stream columns: the newest pad
+        self._check_shiftable(X.shape[1])
+        t0 = self._tail_start(X)
+        if t0:
+            self._bulk(X, t0)
+        for x in X[t0:]:
+            self.update_descriptor(x)
+        self.events = []
+        self.last_scores, self.last_candidates = np.zeros(0, np.float32), np.zeros(0, np.int64)
+
+    def _bulk(self, X: np.ndarray, t0: int, chunk: int = 65536) -> None:
+        """:meth:`preload`'s state after frames 0..t0-1 of X (N, D), with room for N stored rows. The
+        stored rows are made chunk rows at a time (a row's centring reads the W raw rows up to it,
+        so a chunk starts W - 1 rows early and gives the bits of the whole: row-wise operations)."""
+        n, d, W = len(X), X.shape[1], self._W
+        for a in range(0, t0, chunk):
+            b = min(a + chunk, t0)
+            if not W:
+                Y = normalise(X[a:b], self.projection)
+            elif a == 0:
+                Y = normalise(center_stored(X[:b], self.center_window), self.projection)
+            else:
+                Y = normalise(center(X[a - W + 1:b], self.center_window), self.projection)[W - 1:]
+            if self._db is None:
+                self._db = np.empty((256 * 2 ** max(math.ceil(math.log2(n / 256)), 0), Y.shape[1]), self.store_dtype)
+            self._db[a:b] = Y
+        self.frame_index = t0
+        if self.index_kind is not None:
+            self._grow_index(max(t0 - 1 - self.exclude, 0))     # the rows indexed before query t0 - 1
         if W:
-            m = min(n, W)
+            m = min(t0, W)
             self._recent, self._n_recent = np.zeros((W, d), np.float32), m
-            self._recent[W - m:] = X[n - m:]
-        self.frame_index = n
+            self._recent[W - m:] = X[t0 - m:t0]
+        if self.repeat_cos is not None:
+            self._previous = normalise(X[t0 - 1:t0])[0]
+
+    def _tail_start(self, X: np.ndarray) -> int:
+        """The first frame :meth:`preload` streams: the earliest of the last seq_len frames of X
+        (N, D) that had candidates (j > exclude) and were no repeat (the gate of ``repeat_cos``,
+        on each frame alone as the stream computes it), in candidate mode WARMUP frames before it;
+        0 when there are fewer or it lies within the centring window (every frame is then streamed)."""
+        found, prev = 0, None
+        for j in range(len(X) - 1, self.exclude, -1):
+            repeat = False
+            if self.repeat_cos is not None:            # frame j's gate, then frame j - 1's
+                cur, prev = (normalise(X[j:j + 1])[0] if prev is None else prev), normalise(X[j - 1:j])[0]
+                repeat = float(prev @ cur) >= self.repeat_cos
+            found += not repeat
+            if found == self.seq_len:
+                j -= WARMUP if self.index_kind is not None else 0
+                return j if j >= max(self._W, 1) else 0
+        return 0
 
     def _check_frame(self, frame, index: int) -> None:
         if not isinstance(frame, np.ndarray) or frame.dtype != np.uint8 or frame.ndim not in (2, 3) \
@@ -520,15 +512,6 @@ def best_candidate(det) -> tuple[int, float]:
     i = int(np.argmax(s))
     rows = getattr(det, "last_candidates", None) if det.index_kind is not None else None
     return (int(rows[i]) if rows is not None else i), float(s[i])
-
-def _running_sums(R, first: int, chunk: int = 65536) -> np.ndarray:
-    """Running float64 sums of the rows R (c, D) added one at a time, as a candidate-mode stream
-    adds them (so bit for bit the same): (c - first + 1, D), row i = the sum of R[:first + i]."""
-    acc = np.zeros((1, R.shape[1]))
-    for a in range(0, first, chunk):
-        acc = np.add.accumulate(np.vstack([acc, R[a:min(a + chunk, first)]]), axis=0)[-1:]
-    return np.add.accumulate(np.vstack([acc, R[first:]]), axis=0)
-
 
 def score_matrix(X, exclude: int = 150, seq_len: int = 10, velocities=DEFAULT_VELOCITIES,
                  contrast_window: int = 10, projection=None, store_dtype: str = "float32",

@@ -14,6 +14,9 @@
   mode (``speed.seqstream.Detector``): the stored rows its candidates' trajectories and contrast
   windows need, and the best-trajectory score of each candidate from those rows' similarities to
   the last seq_len queries, in one compiled pass instead of some thirty small NumPy calls.
+* ``pair_scores``: the same verification for cosine columns (no contrast window) under a cell
+  shift: each (stored row, query) point a trajectory needs is computed once, as the best of the
+  query's shifted copies, in one compiled pass (no product of every needed row with every query).
 * ``ring_best``: greenloop-seq's search over straight trajectories in its ring of columns.
 * ``max_dot``: greenloop-seq's similarity under a cell shift (``seqmatch.shift_cells``): each
   stored row's best cosine with the query's shifted copies, reading the stored rows once.
@@ -48,8 +51,8 @@ def available() -> bool:
 def _compiled():
     """The numba kernels, compiled (or loaded from numba's disk cache) once per process.
 
-    Returns {'conv3_relu', 'conv3_grad', 'adam1d', 'area_u8', 'cand_rows', 'cand_scores', 'max_dot3',
-    'ring_best'}:
+    Returns {'conv3_relu', 'conv3_grad', 'adam1d', 'area_u8', 'cand_rows', 'cand_scores', 'pair_scores',
+    'max_dot3', 'ring_best'}:
     serial kernels that release the
     GIL; ``run_slices`` spreads them over the cores, so numba's own thread pool is never started
     (its spinning workers would compete with the BLAS calls on the other cores).
@@ -65,7 +68,8 @@ def _compiled():
     opts = dict(fastmath={"reassoc", "contract"}, error_model="numpy", cache=True, nogil=True)
     return {"conv3_relu": _compile_conv_relu(njit, opts), "conv3_grad": _compile_conv_grad(njit, opts),
             "adam1d": _compile_adam(njit, opts), "area_u8": _compile_area(njit),
-            **_compile_candidates(njit), "max_dot3": _compile_max_dot3(njit, opts), "ring_best": _compile_ring_best(njit)}
+            **_compile_candidates(njit), "pair_scores": _compile_pair_scores(njit, opts),
+            "max_dot3": _compile_max_dot3(njit, opts), "ring_best": _compile_ring_best(njit)}
 
 
 def _compile_ring_best(njit):
@@ -87,6 +91,74 @@ def _compile_ring_best(njit):
                     out[i] = max(out[i], acc[i])
         return out
     return ring_best
+
+
+def _compile_pair_scores(njit, opts: dict):
+    """pair_scores(cand, db, Q, off, qc, qpad, out, first): see :func:`pair_scores`. The dot products are
+    compiled with ``opts`` (fastmath: vectorised); the trajectory sums without (in the order written)."""
+    @njit(**opts)
+    def dot_max(a, Qk):
+        if Qk.shape[0] == 3:                          # a cell shift of one: one pass over the row
+            q0, q1, q2 = Qk[0], Qk[1], Qk[2]
+            t0, t1, t2 = np.float32(0.0), np.float32(0.0), np.float32(0.0)
+            for d in range(a.shape[0]):
+                x = a[d]
+                t0 += x * q0[d]
+                t1 += x * q1[d]
+                t2 += x * q2[d]
+            return max(t0, max(t1, t2))
+        best = np.float32(-np.inf)
+        for s in range(Qk.shape[0]):
+            q = Qk[s]
+            t = np.float32(0.0)
+            for d in range(a.shape[0]):
+                t += a[d] * q[d]
+            best = max(best, t)
+        return best
+
+    @njit(cache=True, nogil=True)
+    def pair_scores(cand, db, Q, off, qc, qpad, out, first):
+        nv, L = off.shape
+        lo = off.min()
+        nu = off.max() - lo + 1
+        need = np.zeros((nu, L), np.bool_)             # which queries a row at offset o is needed for
+        for v in range(nv):
+            for k in range(L):
+                need[off[v, k] - lo, k] = True
+        size = 16
+        while size < 2 * len(cand) * nu * L:
+            size *= 2
+        keys = np.full(size, -1, np.int64)            # open addressing: key p * L + k, value its cosine
+        vals = np.empty(size, np.float32)
+        local = np.empty((nu, L), np.float32)         # one candidate's points: (offset, query)
+        for c in range(len(cand)):
+            for o in range(nu):                       # row by row: a row is read once per candidate
+                p = cand[c] - (o + lo)
+                for k in range(L):
+                    if not need[o, k]:
+                        continue
+                    if p < 0 or p >= qc[k]:
+                        local[o, k] = np.float32(qpad[k])
+                        continue
+                    key = p * L + k
+                    h = (key * 40503) & (size - 1)
+                    while keys[h] != -1 and keys[h] != key:
+                        h = (h + 1) & (size - 1)
+                    if keys[h] == -1:
+                        keys[h] = key
+                        vals[h] = dot_max(db[p], Q[k])
+                    local[o, k] = vals[h]
+            best = -np.inf
+            for v in range(nv):
+                acc = 0.0
+                for k in range(L):
+                    acc += np.float64(local[off[v, k] - lo, k])
+                best = max(best, acc)
+            out[c] = np.float32(best / L)
+            if 0 <= cand[c] < qc[0]:
+                first[c] = local[-lo, 0]
+        return out
+    return pair_scores
 
 
 def _compile_max_dot3(njit, opts: dict):
@@ -336,6 +408,27 @@ def candidate_scores(cand, rows, G, off, qc, qpad, half_window: int, eps: float)
                                       np.ascontiguousarray(qc, dtype=np.int64),
                                       np.ascontiguousarray(qpad, dtype=np.float64), int(half_window),
                                       float(eps), out)
+
+
+def pair_scores(cand, db, Q, off, qc, qpad) -> tuple[np.ndarray, np.ndarray]:
+    """Best-trajectory scores (m,) float32 of the candidate rows cand (m,) int64, for cosine columns,
+    and each row's point in the newest column, (m,) float32 (NaN where outside it).
+
+    db (N, D) float32: the stored rows (C-contiguous); Q (L, S, D) float32: the last L queries, each
+    under its S cell shifts (``seqmatch.shift_cells``; S = 1 without). off (V, L) int64: the
+    trajectories' row offsets (negative: a reverse revisit). qc (L,) int64: the rows each query had
+    (a point p counts when 0 <= p < qc[k]); qpad (L,) float64: the value of a point outside them.
+    A point's value is the best cosine of stored row p with query k's shifted copies (float32 sums,
+    vectorised, so reordered as a BLAS product may be), computed once however many trajectories
+    pass through it (a candidate's rows in order, each read once); rounded to float32, summed over
+    k in float64, maximised over v, divided by L, rounded to float32, as :func:`candidate_scores`.
+    Needs numba (:func:`available`).
+    """
+    out, first = np.empty(len(cand), np.float32), np.full(len(cand), np.nan, np.float32)
+    _compiled()["pair_scores"](np.ascontiguousarray(cand, dtype=np.int64), db, np.ascontiguousarray(Q, dtype=np.float32),
+                               np.ascontiguousarray(off, dtype=np.int64), np.ascontiguousarray(qc, dtype=np.int64),
+                               np.ascontiguousarray(qpad, dtype=np.float64), out, first)
+    return out, first
 
 
 def conv_relu(X: np.ndarray, K: np.ndarray, bias: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
