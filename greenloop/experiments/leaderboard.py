@@ -506,7 +506,7 @@ def conclusion(out_dir) -> str:
         comp = comp[comp.protocol == "leaderboard"]
     rows = [x for x in (_standing(lc, comp, n) for n in ("greenloop-seq", seqmatch.DEFAULT_NAME)) if x]
     n = lc.iloc[0]
-    counts = (f"{int(n.queries)} evaluation queries, " if "queries" in n else "") + f"{verdict.revisit_queries(n)} with a partner"
+    counts = f"{int(n.queries)} evaluation queries, {int(n.revisit_queries)} with a partner"
     lines = [f"On {verdict.dataset_name(out_dir.parent)} ({counts}; loop closure): "
              + ("; ".join(rows) if rows else "no greenloop-seq row was scored") + ".",
              _targets_sentence(pd.read_csv(out_dir / "targets.csv"), seqmatch.DEFAULT_NAME)]

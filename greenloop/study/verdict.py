@@ -24,7 +24,6 @@ The verdicts (:data:`RULES`, printed under the table):
 from __future__ import annotations
 
 import argparse
-import re
 import sys
 from pathlib import Path
 from typing import Callable, NamedTuple
@@ -32,7 +31,7 @@ from typing import Callable, NamedTuple
 import pandas as pd
 
 from greenloop.report import fill_block
-from greenloop.study import provenance
+from greenloop.study import provenance, summary
 from greenloop.util.files import write_atomic
 
 MIN_SEEDS = 5
@@ -162,14 +161,6 @@ def shift(folder: Path):
     return text, value_verdict(92, a.max(), converged, len(a))
 
 
-def revisit_queries(row) -> int:
-    """A leaderboard row's revisit queries: its column, or (tables written before it) the count its
-    ``scored_on`` note gives for the evaluation queries."""
-    if "revisit_queries" in row and pd.notna(row["revisit_queries"]):
-        return int(row["revisit_queries"])
-    return int(re.search(r"evaluation queries: frames \S+ \((\d+) revisit", row["scored_on"]).group(1))
-
-
 def dictionary(folder: Path):
     """The dictionary at tau = L + Delta as a loop-closure detector: closure precision at least 90 %
     (what the field asks of a loop-closure detector; the paper reports no precision) on the
@@ -182,13 +173,10 @@ def dictionary(folder: Path):
         return None
     r = rows.iloc[0]
     declared, false = int(r.closures_declared), int(r.closures_false)
-    right = declared - false
-    revisits = revisit_queries(r)
-    text = (f"tau = {_g(r.threshold)}: {right} of {declared} closures right, "
-            f"recall {_g(100 * right / revisits)} % of {revisits} revisit queries")
-    if declared == 0:
-        return text, FAILS
-    return text, HOLDS if 100 * right / declared >= 90 else FAILS
+    precision, recall = summary.closure_rates(r.to_dict())
+    text = (f"tau = {_g(r.threshold)}: {declared - false} of {declared} closures right, "
+            f"recall {_g(recall)} % of {int(r.revisit_queries)} revisit queries")
+    return text, HOLDS if precision is not None and precision >= 90 else FAILS
 
 
 def speed(folder: Path):
@@ -427,9 +415,7 @@ def markdown(results_dirs) -> str:
     """:func:`verdicts` as a markdown table (cells unpadded: the README's source stays readable) with
     the rules under it."""
     t = verdicts(results_dirs)
-    lines = ["| " + " | ".join(t.columns) + " |", "|" + " --- |" * len(t.columns)]
-    lines += ["| " + " | ".join(str(v) for v in row) + " |" for row in t.itertuples(index=False)]
-    return "\n".join(lines) + "\n\n" + RULES + "\n"
+    return summary.table(list(t.columns), t.itertuples(index=False)) + "\n" + RULES + "\n"
 
 
 def main(argv=None) -> int:
