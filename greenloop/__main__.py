@@ -3,14 +3,14 @@
 Commands
     detect SEQUENCE_FOLDER [--method NAME] [--matches FILE.csv] [--exclude N] [--step N] ...
         stream a recording (a sequence folder or a folder of .jpg/.png frames of any size, in
-        numeric order) through a registered detector (greenloop.detectors.registry) and print each
+        numeric order) through a registered detector (greenloop.methods.registry) and print each
         declared loop closure (query frame, matched earlier frame, score) and a summary. With no
         flags: the named default (seqmatch.DEFAULT_NAME), no model, no poses, no tuning; the
         exclusion follows greenloop.exclusion (make's rule), printed. The greenloop-seq
         methods (greenloop.seqstream.Detector) take [--tuned SUMMARY_JSON] [--descriptor ...]
         [--seq-len L] [--contrast-window R] [--index KIND [--candidates K]] [--state FILE ...];
         ``--method dictionary --model MODEL`` is the main paper's CNN + frequency dictionary
-        (greenloop.speed.stream.Detector). ``--matches`` writes every frame's best match, its score
+        (greenloop.methods.dictionary.stream.Detector). ``--matches`` writes every frame's best match, its score
         and the decision (MATCH_COLUMNS) for scoring against your own ground truth.
     sweep NOTEBOOK --grid NAME=V1,V2,... [--grid ...] --out OUT [-f PARAMS.yaml] [-p NAME VALUE]
           [--dataset DIR] [--scheduler local|tcp://HOST:8786|slurm|pbs] [--workers N] [--metric SPEC]
@@ -37,13 +37,17 @@ import yaml  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from greenloop import exclusion, retrieval, seqmatch  # noqa: E402
+from greenloop import exclusion  # noqa: E402
+from greenloop.methods.greenloop_seq import seqmatch
+from greenloop.methods.lsh import retrieval
 from greenloop.datasets import groundtruth_formats as gt_formats  # noqa: E402
 from greenloop.datasets.sequence import (DESCRIPTION_NAME, GROUND_TRUTH_NAME, layout, list_frames,  # noqa: E402
                                          read_description, traversals, write_loop_pairs)
-from greenloop.detectors import registry as detectors  # noqa: E402
-from greenloop.detectors.interface import Data  # noqa: E402
-from greenloop.speed import seqstream, stream, timing  # noqa: E402
+from greenloop.methods import registry as detectors  # noqa: E402
+from greenloop.methods.interface import Data  # noqa: E402
+from greenloop.speed import timing  # noqa: E402
+from greenloop.methods.dictionary import stream
+from greenloop.methods.greenloop_seq import seqstream
 from greenloop.study import params as study_params  # noqa: E402
 from greenloop.study import sweep  # noqa: E402
 from greenloop.util.files import write_atomic  # noqa: E402
@@ -298,7 +302,7 @@ def _seq_stream(det: seqstream.Detector, paths, args, kn: dict) -> tuple[bool, f
 
 def _registered_stream(args):
     """The streaming detector and frame describer of a registered detector (``--method NAME``,
-    greenloop.detectors.registry): its ``cli_knobs``, or ``--tuned``'s record of ``--variant``;
+    greenloop.methods.registry): its ``cli_knobs``, or ``--tuned``'s record of ``--variant``;
     the threshold from --threshold, --tuned or the record's fixed one. Returns (detector,
     describe, knobs, step, paths)."""
     entry = detectors.get(args.method)
@@ -353,7 +357,7 @@ def _detect_registered(args) -> int:
 
 def _detect(args) -> int:
     """``detect``: frames decoded in colour (BGR) as a camera delivers them, fed to
-    greenloop.speed.stream.Detector (``--method dictionary``), greenloop.seqstream.Detector
+    greenloop.methods.dictionary.stream.Detector (``--method dictionary``), greenloop.seqstream.Detector
     (``--method greenloop-seq``, with --index / --state) or any other registered detector's
     stream (:func:`_detect_registered`) in windows; prints events as they are declared."""
     if args.model is not None and args.method != "dictionary":
@@ -374,8 +378,8 @@ def _detect(args) -> int:
         raise ValueError(f"--threshold (tau) must be an integer for --method dictionary, got {args.threshold:g}")
     if not Path(args.model).is_file():
         raise FileNotFoundError(f"model file {args.model} not found: pass a trained .keras model "
-                                f"(greenloop.cnn.train saves results/models/<key>/model.keras) or a "
-                                f".tflite file (greenloop.speed.stream.export_tflite)")
+                                f"(greenloop.methods.dictionary.cnn.train saves results/models/<key>/model.keras) or a "
+                                f".tflite file (greenloop.methods.dictionary.stream.export_tflite)")
     paths = list_frames(args.folder)
     if args.frames_per_spot is not None and args.frames_per_spot < 1:
         raise ValueError(f"--frames-per-spot must be >= 1, got {args.frames_per_spot}")
@@ -546,7 +550,7 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("folder", metavar="SEQUENCE_FOLDER",
                    help="sequence folder (its rgb/) or folder of .jpg/.png frames, any size")
     d.add_argument("--method", default=seqmatch.DEFAULT_NAME, choices=list(detectors.REGISTRY),
-                   help=f"a registered detector (greenloop.detectors.registry); default {seqmatch.DEFAULT_NAME}, "
+                   help=f"a registered detector (greenloop.methods.registry); default {seqmatch.DEFAULT_NAME}, "
                         f"the named default, which needs no model and no tuning")
     d.add_argument("--threshold", "--tau", type=float, default=None,
                    help="the score to reach: " + "; ".join(f"{n}: {t:g}" for n, (_, t) in seqmatch.NAMED.items())
@@ -584,7 +588,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--index", default=None, choices=retrieval.KINDS,
                    help="long recordings: verify sequences on the --candidates frames this index retrieves (scan, "
                         "flat: exact; ivf, hnsw, swp, qdp: approximate) instead of on every stored frame, so the "
-                        "per-frame cost stops growing with the recording (greenloop.retrieval). The method's "
+                        "per-frame cost stops growing with the recording (greenloop.methods.lsh.retrieval). The method's "
                         "configuration and fixed threshold apply as they are (the named default's calibration, "
                         "repeat gate, cell shift and reverse velocities included; the calibration's null from "
                         f"{seqstream.NULL_SAMPLE} sampled stored frames); the index holds the stored descriptors "
@@ -597,7 +601,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--save-every", type=int, default=10000, help="--state: frames between saves (default 10000)")
     g.add_argument("--stop-after", type=int, default=None, metavar="N",
                    help="process at most N frames in this run, then save --state and stop")
-    m = d.add_argument_group("dictionary (the main paper's CNN + frequency dictionary, greenloop.speed.stream)")
+    m = d.add_argument_group("dictionary (the main paper's CNN + frequency dictionary, greenloop.methods.dictionary.stream)")
     m.add_argument("--model", default=None, help="trained model, .keras or .tflite file (needed)")
     m.add_argument("--frames-per-spot", type=int, default=None, metavar="L",
                    help="frames per spot the model was trained with (default 60)")

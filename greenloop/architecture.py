@@ -47,13 +47,11 @@ LAYERS: tuple[Layer, ...] = (
           "the one definition of a loop, the one exclusion rule, scoring against them"),
     Layer("descriptors", ("backbones", "similarity", "features"),
           "CNN ports and weights, similarity and whitening, whole-image descriptors"),
-    Layer("methods", ("spots", "cnn", "shift", "dictionary", "lsh", "retrieval", "seqmatch", "seqslam",
-                      "siamese"),
-          "the papers' methods and greenloop's own detector, as functions"),
+    Layer("methods", ("methods",),
+          "one home per method (the paper's CNN + dictionary, SeqSLAM, greenloop-seq, the Siamese CNN, the "
+          "single-frame matcher, RHLSH): its stages, its streaming detector, its registry entry; the registry"),
     Layer("speed", ("speed",),
-          "streaming detectors, the one timing definition, the benchmarks"),
-    Layer("detectors", ("detectors",),
-          "every detector behind one interface, and the one registry"),
+          "measuring only: the one timing definition, the speed benchmark, the scaling benchmark"),
     Layer("study", ("study",),
           "around the pipeline: assembled tables, coverage, notebook parameters, sweeps, targets, "
           "leaderboard rows, provenance, verify"),

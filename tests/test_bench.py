@@ -63,7 +63,7 @@ class _FakeKeras:
 
 
 def test_paper_window_one_batch_then_the_dictionary_loop():
-    from greenloop.dictionary import LoopDetector
+    from greenloop.methods.dictionary.dictionary import LoopDetector
 
     model, det = _FakeKeras(), LoopDetector(10, 2)
     X = np.repeat(np.array([0.05, 0.35, 0.35, 0.05, 0.35], np.float32)[:, None, None, None], 4, axis=1)
@@ -95,8 +95,8 @@ def test_stream_rows_and_raw_agreement():
     single = {"reference": {"median_ms": 50.12345, "p99_ms": 80.0}, "numpy": {"median_ms": 0.2, "p99_ms": 0.9},
               "tflite": {"median_ms": 0.3, "p99_ms": 1.5}}
     rows = bench.stream_rows(windows, single, {"numpy": 9, "tflite": 10}, 10)
-    assert [r["pipeline"].split(" (")[0].split(":")[0] for r in rows] == ["reference", "greenloop.speed.stream",
-                                                                           "greenloop.speed.stream", "floor"]
+    assert [r["pipeline"].split(" (")[0].split(":")[0] for r in rows] == ["reference", "greenloop.methods.dictionary.stream",
+                                                                           "greenloop.methods.dictionary.stream", "floor"]
     assert [r["window_speed-up"] for r in rows] == [1.0, 10.0, 5.0, 100.0]
     assert [r["window_frames_per_s"] for r in rows] == [700, 7004, 3502, 70040]
     assert [r["labels_equal"] for r in rows] == ["10/10", "9/10", "10/10", ""]

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from greenloop import seqmatch
-from greenloop.speed import seqstream
+from greenloop.methods.greenloop_seq import seqmatch
+from greenloop.methods.greenloop_seq import seqstream
 
 
 def test_neighbourhood_by_hand():

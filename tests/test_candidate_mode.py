@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from greenloop import seqmatch
-from greenloop.speed import candidates, seqstream
+from greenloop.methods.greenloop_seq import seqmatch
+from greenloop.methods.greenloop_seq import candidates, seqstream
 from tests.test_seqspeed import D, DEFAULT, EXCLUDE, N0, REVISIT, _detect, _drive, make_route, replay
 
 

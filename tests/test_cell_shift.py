@@ -4,8 +4,9 @@ side, on a small sequence the test makes; the stream equals its score matrix; wh
 import numpy as np
 import pytest
 
-from greenloop import evaluate, seqmatch, similarity
-from greenloop.speed import seqstream
+from greenloop import evaluate, similarity
+from greenloop.methods.greenloop_seq import seqmatch
+from greenloop.methods.greenloop_seq import seqstream
 from greenloop.util import numba_kernels
 
 ROWS, COLS, BINS = seqmatch.CELL_GRID

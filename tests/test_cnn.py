@@ -3,7 +3,7 @@ import json
 import numpy as np
 import pytest
 
-from greenloop import cnn, spots
+from greenloop.methods.dictionary import cnn, spots
 from greenloop.util.cache import cache_key
 
 
@@ -137,7 +137,7 @@ def test_keras_private_array_data_adapter_still_exists():
         adapter = cnn._array_data_adapter()
     except ImportError as e:
         pytest.fail(f"keras.src.trainers.data_adapters.array_data_adapter.ArrayDataAdapter is gone "
-                    f"in this Keras ({e}); greenloop.cnn._array_data_adapter must follow it, or the "
+                    f"in this Keras ({e}); greenloop.methods.dictionary.cnn._array_data_adapter must follow it, or the "
                     f"fused trainer cannot reproduce model.fit's batch order")
     batches = list(adapter(np.arange(10), batch_size=4, shuffle=True).get_numpy_iterator())
     assert [len(b) for b in batches] == [4, 4, 2], "ArrayDataAdapter no longer yields index batches"

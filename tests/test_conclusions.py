@@ -172,7 +172,7 @@ def test_speed_claim_places_920_frames_per_second_against_the_median_and_p95_win
 def test_speed_claim_meets_a_speed_up_target_only_against_the_slow_windows(tmp_path):
     table = pd.DataFrame([{"pipeline": "reference: cv2", "window_frames_per_s": 1000, "single_median_ms": 40,
                            "single_p99_ms": 50, "window_speed-up": 1.0},
-                          {"pipeline": "greenloop.speed.stream (tflite)", "window_frames_per_s": 12000,
+                          {"pipeline": "greenloop.methods.dictionary.stream (tflite)", "window_frames_per_s": 12000,
                            "single_median_ms": 0.2, "single_p99_ms": 0.5, "window_speed-up": 12.0}])
     windows = {"reference": {"median_ms": 60.0, "p99_ms": 70.0}, "tflite": {"median_ms": 5.0, "p99_ms": 8.0}}
     text = speed_claim.conclusion(_folder(tmp_path, "06_speed", {"summary.json": _speed(0.05, 0.06),

@@ -1,4 +1,4 @@
-"""greenloop.detectors: the interface, each registered entry, the registry's readers (the
+"""greenloop.methods: the interface, each registered entry, the registry's readers (the
 leaderboard experiment, `detect --method`) and the example of docs/ARCHITECTURE.md."""
 import re
 from pathlib import Path
@@ -7,12 +7,18 @@ import cv2
 import numpy as np
 import pytest
 
-from greenloop import seqmatch, seqslam
-from greenloop.detectors import cnn_layers, dictionary, greenloop_seq, registry, scnn, single_frame
-from greenloop.detectors import seqslam as slam_entry
-from greenloop.detectors.interface import Data
+from greenloop.methods.greenloop_seq import seqmatch
+from greenloop.methods.seqslam import seqslam
+from greenloop.methods import registry
+from greenloop.methods.dictionary import entry as dictionary
+from greenloop.methods.greenloop_seq import entry as greenloop_seq
+from greenloop.methods.siamese import entry as scnn
+from greenloop.methods.single_frame import cnn_layers, entry as single_frame
+from greenloop.methods.seqslam import entry as slam_entry
+from greenloop.methods.interface import Data
 from greenloop.experiments import leaderboard as experiment
-from greenloop.speed import seqslam_stream, seqstream
+from greenloop.methods.greenloop_seq import seqstream
+from greenloop.methods.seqslam import seqslam_stream
 
 ROOT = Path(__file__).resolve().parents[1]
 N0, REPEAT, EX, DIM = 80, 40, 20, int(np.prod(seqmatch.CELL_GRID))   # the gradients layout (the default shifts cells)
@@ -219,7 +225,7 @@ SIAMESE = dict(siamese_rows=["contrastive"], siamese_input_size=32, siamese_widt
 
 
 def test_the_siamese_row_trains_only_before_the_evaluation_part_and_streams_its_descriptors(tmp_path, monkeypatch):
-    from greenloop import siamese
+    from greenloop.methods.siamese import siamese
     from greenloop.util import cache
 
     monkeypatch.setattr(cache, "CACHE_DIR", tmp_path / "models")

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from conftest import revisit_example
-from greenloop import dictionary
+from greenloop.methods.dictionary import dictionary
 
 
 def test_threshold_derivation_matches_paper_arithmetic():
@@ -107,7 +107,7 @@ def _brute_counts(labels, n, start=None):
 
 @pytest.mark.parametrize("seed", range(6))
 def test_one_counting_rule_on_random_label_streams(seed):
-    from greenloop.speed import stream
+    from greenloop.methods.dictionary import stream
 
     rng = np.random.default_rng(seed)
     n, T, tau = int(rng.integers(1, 8)), int(rng.integers(0, 300)), int(rng.integers(1, 40))

@@ -10,7 +10,8 @@ import cv2
 import numpy as np
 import pytest
 
-from greenloop import exclusion, seqmatch
+from greenloop import exclusion
+from greenloop.methods.greenloop_seq import seqmatch
 from greenloop.datasets import sequence
 from greenloop.study import params
 

@@ -5,7 +5,8 @@ import pandas as pd
 import pytest
 
 from conftest import revisit_example
-from greenloop import cnn, dictionary, evaluate, groundtruth, shift, spots
+from greenloop import evaluate, groundtruth
+from greenloop.methods.dictionary import cnn, dictionary, shift, spots
 from greenloop.experiments import (confusion_matrix, dataset, dictionary_threshold, shift_robustness,
                                    speed_claim, spot_grouping, training_over_seeds as tos)
 from greenloop import report

@@ -7,7 +7,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from greenloop import dictionary, evaluate, lsh, similarity
+from greenloop import evaluate, similarity
+from greenloop.methods.dictionary import dictionary
+from greenloop.methods.lsh import lsh
 from greenloop.datasets import sequence
 from greenloop.experiments import descriptor_postprocessing as dp
 from greenloop.experiments import feature_baselines as fb
@@ -274,7 +276,7 @@ def test_ground_truth_sensitivity_is_the_ap_under_each_variant(tmp_path):
 
 # ------------------------------------------------------------------- 07 / 13: the dictionary
 def test_operating_points_compose_the_dictionary_stages(tmp_path):
-    from greenloop import cnn, spots
+    from greenloop.methods.dictionary import cnn, spots
     rng = np.random.default_rng(0)
     places = rng.random((4, 32, 32, 1)).astype(np.float32)
     X = np.concatenate([places.repeat(5, 0), places[:2].repeat(5, 0)])            # 30 frames: spots 0..5, 4 and 5 revisit 0 and 1

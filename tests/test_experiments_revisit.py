@@ -4,7 +4,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from greenloop import cnn, dictionary, evaluate, groundtruth, spots
+from greenloop import evaluate, groundtruth
+from greenloop.methods.dictionary import cnn, dictionary, spots
 from greenloop.datasets import sequence
 from greenloop.experiments import revisit_protocol as rp
 

@@ -6,7 +6,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from greenloop import evaluate, features, groundtruth, siamese as sm
+from greenloop import evaluate, features, groundtruth
+from greenloop.methods.siamese import siamese as sm
 from greenloop.experiments import siamese_rgbd as sr
 
 matplotlib.use("Agg")

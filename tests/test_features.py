@@ -304,7 +304,7 @@ def test_sift_bovw(frames):
 # ---- the main paper's CNN ---------------------------------------------------------------------
 
 def paper_cnn(n_classes=5):
-    """The architecture of greenloop.cnn.build: Conv2D(32, 3x3, relu) -> Flatten -> Dense(68, relu)
+    """The architecture of greenloop.methods.dictionary.cnn.build: Conv2D(32, 3x3, relu) -> Flatten -> Dense(68, relu)
     -> Dense(n, softmax) on (32, 32, 1); fewer filters here to stay fast."""
     keras.utils.set_random_seed(3)
     inp = keras.Input((32, 32, 1))
@@ -422,7 +422,7 @@ def test_random_init_fallback_is_reported_in_one_line_without_paths(frames, caps
 def test_sequence_descriptors_are_registry_entries():
     """greenloop-seq's names are the features registry's: every one a BACKBONES entry with an
     extractor, and seqmatch's tuple is that same object (no second list)."""
-    from greenloop import seqmatch
+    from greenloop.methods.greenloop_seq import seqmatch
     assert seqmatch.DESCRIPTORS is F.SEQUENCE_DESCRIPTORS
     assert seqmatch.DESCRIPTORS == ("pixels", "pixels-patchnorm", "mobilenetv2", "gradients", "gradients+efficientnetlite0")
     for name in seqmatch.DESCRIPTORS:

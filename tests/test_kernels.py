@@ -6,7 +6,7 @@ import pytest
 pytest.importorskip("numba")
 keras = pytest.importorskip("keras")
 
-from greenloop import cnn  # noqa: E402
+from greenloop.methods.dictionary import cnn  # noqa: E402
 from greenloop.datasets import sequence  # noqa: E402
 from greenloop.util import numba_kernels as kernels  # noqa: E402
 from greenloop.util import threads  # noqa: E402
@@ -223,7 +223,7 @@ def test_candidate_kernel_equals_the_numpy_verification(contrast_window, velocit
     """A candidate-mode stream over a revisit: every frame's candidates and scores from the kernels
     equal the NumPy verification's of the same state (np.unique of the retrieved rows, then
     _candidate_scores_numpy), and a revisit frame's best candidate is its own first visit."""
-    from greenloop.speed import seqstream
+    from greenloop.methods.greenloop_seq import seqstream
 
     rng = np.random.default_rng(0)
     base = rng.normal(size=(200, 32)).astype(np.float32)
@@ -263,7 +263,7 @@ def test_max_dot_equals_the_best_of_the_products():
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 def test_ring_best_is_the_numpy_trajectory_search_bit_for_bit(dtype):
-    from greenloop.speed import seqstream
+    from greenloop.methods.greenloop_seq import seqstream
     rng = np.random.default_rng(6)
     R = rng.normal(size=(10, 900)).astype(np.float32)
     base = rng.integers(0, 40, (8, 10))

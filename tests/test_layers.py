@@ -72,7 +72,7 @@ def test_extract_all_runs_one_cached_pass_per_network(tmp_path, frames):
 
 def test_a_streams_frame_describer_reads_the_layer_entry(frames):
     """detect / the leaderboard's timed path: one BGR frame -> the same vector as the entry's batch."""
-    from greenloop.detectors import greenloop_seq
+    from greenloop.methods.greenloop_seq import entry as greenloop_seq
     f = np.ascontiguousarray(frames[0][..., ::-1])                  # as cv2 decodes it
     one = greenloop_seq.frame_describer("efficientnetlite0@early-grid2", None)(f)
     batch = features.extract_spec(frames, "efficientnetlite0@early-grid2", None, progress=False)

@@ -6,8 +6,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from greenloop import evaluate, seqmatch
-from greenloop.speed import seqstream
+from greenloop import evaluate
+from greenloop.methods.greenloop_seq import seqmatch
+from greenloop.methods.greenloop_seq import seqstream
 from greenloop.study import leaderboard as lb
 
 N0, REPEAT, EX, DIM = 80, 40, 20, 16
@@ -244,7 +245,7 @@ def test_targets_table_says_when_a_dataset_is_not_one_of_its_own():
 def test_targets_table_judges_each_named_configuration_on_its_own_sequence_length(monkeypatch):
     """Each named configuration on the board gets its rows, its "frames of sequence" from its own knobs:
     one with 20 frames fails Nordland's <= 10 while the named default (10) meets it."""
-    from greenloop import seqmatch
+    from greenloop.methods.greenloop_seq import seqmatch
     long = dict(seqmatch.CNN_KNOBS, seq_len=20)
     monkeypatch.setattr(seqmatch, "NAMED", {**seqmatch.NAMED, seqmatch.CNN_NAME: (long, seqmatch.CNN_THRESHOLD)})
     board = pd.DataFrame([{"method": m, "mode": "loop closure", "R@1_%": 50.0}
@@ -267,7 +268,7 @@ def test_threshold_check_without_an_honest_split_reports_the_fixed_threshold_onl
     """A recording without a tuning part (data.tune None, every query an evaluation query) has no
     p95 pick: the fixed threshold's closures are still counted, the pick's columns are NaN (this
     raised KeyError: 'precision' and stopped make quick on a user's recording)."""
-    from greenloop.detectors.interface import Data
+    from greenloop.methods.interface import Data
     from greenloop.experiments import leaderboard as exp
     X, GT = revisit
     n, name = len(X), exp.NAMED[0]
@@ -285,7 +286,7 @@ def test_threshold_check_without_an_honest_split_reports_the_fixed_threshold_onl
 
 
 def test_targets_table_says_how_many_queries_each_measured_target_rests_on():
-    from greenloop import seqmatch
+    from greenloop.methods.greenloop_seq import seqmatch
     name = seqmatch.DEFAULT_NAME
     board = pd.DataFrame([{"method": name, "mode": "loop closure", "queries": 180, "revisit_queries": 150, "R@1_%": 80.0,
                            "R@100P_%": 40.0, "fps_min": 1000.0, "closures_declared": 10, "closures_false": 0},

@@ -1,11 +1,12 @@
-"""Unit tests of greenloop.lsh: hashing, SWP and QDP probe orders, incremental matching."""
+"""Unit tests of greenloop.methods.lsh.lsh: hashing, SWP and QDP probe orders, incremental matching."""
 import itertools
 from math import comb
 
 import numpy as np
 import pytest
 
-from greenloop import evaluate, lsh
+from greenloop import evaluate
+from greenloop.methods.lsh import lsh
 from greenloop.experiments import lsh_matching
 from greenloop.similarity import cosine_matrix, l2_normalise
 

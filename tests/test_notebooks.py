@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 import yaml
 
-from greenloop import seqmatch
+from greenloop.methods.greenloop_seq import seqmatch
 from greenloop.experiments import siamese_rgbd
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -197,7 +197,7 @@ def _check_03(folder):
 
 
 def _check_04(folder):
-    from greenloop import shift
+    from greenloop.methods.dictionary import shift
     t = pd.read_csv(folder / "shift_controls.csv")
     assert t.input.unique().tolist() == list(shift.CONTROLS)
     assert len(t) == 4 * 4 * len(shift.CONTROLS)                   # 4 directions x shifts 1, 2, 4, 8

@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 
 from greenloop import evaluate
-from greenloop.speed import seqstream
+from greenloop.methods.greenloop_seq import seqstream
 from greenloop.study import leaderboard as lb
 
 Q, BLOCK = 300, 10

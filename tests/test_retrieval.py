@@ -1,11 +1,12 @@
-"""greenloop.retrieval: every index against the exact scan, the exclusion window, LSH reuse,
+"""greenloop.methods.lsh.retrieval: every index against the exact scan, the exclusion window, LSH reuse,
 per-query metrics from top-k lists, and greenloop-seq's candidate mode against its reference."""
 import numpy as np
 import pytest
 import scipy.sparse
 
-from greenloop import evaluate, lsh, retrieval
-from greenloop.speed import seqstream
+from greenloop import evaluate
+from greenloop.methods.lsh import lsh, retrieval
+from greenloop.methods.greenloop_seq import seqstream
 
 
 def _route(n_place=300, dim=32, passes=3, noise=0.25, seed=0):

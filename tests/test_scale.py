@@ -4,9 +4,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from greenloop import seqmatch
+from greenloop.methods.greenloop_seq import seqmatch
 from greenloop.similarity import l2_normalise
-from greenloop.speed import scale, seqstream
+from greenloop.speed import scale
+from greenloop.methods.greenloop_seq import seqstream
 
 N_PLACE, PASSES, TAIL = 120, 3, 120     # the tail: the third pass, from the route's first place
 

@@ -1,4 +1,4 @@
-"""greenloop.seqmatch (the greenloop-seq detector) and `python -m greenloop detect --method greenloop-seq`.
+"""greenloop.methods.greenloop_seq.seqmatch (the greenloop-seq detector) and `python -m greenloop detect --method greenloop-seq`.
 Fast: random descriptors and raw pixels only, no network weights."""
 import json
 import os
@@ -10,10 +10,11 @@ import cv2
 import numpy as np
 import pytest
 
-from greenloop import evaluate, features, seqmatch
+from greenloop import evaluate, features
+from greenloop.methods.greenloop_seq import seqmatch
 from greenloop.datasets import sequence
-from greenloop.speed import seqstream
-from greenloop.speed.seqstream import Detector
+from greenloop.methods.greenloop_seq import seqstream
+from greenloop.methods.greenloop_seq.seqstream import Detector
 
 from conftest import write_frames
 

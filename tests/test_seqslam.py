@@ -1,13 +1,16 @@
-"""greenloop.seqslam: SeqSLAM at OpenSeqSLAM's parameters, causal, stream equal to its matrix."""
+"""greenloop.methods.seqslam.seqslam: SeqSLAM at OpenSeqSLAM's parameters, causal, stream equal to its matrix."""
 import math
 
 import cv2
 import numpy as np
 import pytest
 
-from greenloop import evaluate, seqmatch, seqslam
+from greenloop import evaluate
+from greenloop.methods.greenloop_seq import seqmatch
+from greenloop.methods.seqslam import seqslam
 from greenloop.datasets import sequence
-from greenloop.speed import seqslam_stream, seqstream
+from greenloop.methods.greenloop_seq import seqstream
+from greenloop.methods.seqslam import seqslam_stream
 
 from conftest import write_frames
 

@@ -11,8 +11,9 @@ import cv2
 import numpy as np
 import pytest
 
-from greenloop import evaluate, features, seqmatch
-from greenloop.speed import seqstream
+from greenloop import evaluate, features
+from greenloop.methods.greenloop_seq import seqmatch
+from greenloop.methods.greenloop_seq import seqstream
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -264,7 +265,7 @@ def test_a_stream_looks_its_weights_up_once_not_at_every_frame(monkeypatch):
     """Resolving weights searches folders (every frame it cost a tenth of a millisecond and repeated the
     random-init warning): a Detector and a leaderboard describer resolve once and give the same
     descriptors as describing each frame on its own."""
-    from greenloop.detectors import greenloop_seq
+    from greenloop.methods.greenloop_seq import entry as greenloop_seq
     from greenloop.features import extraction
     calls = []
     real = extraction.resolve

@@ -2,7 +2,7 @@ import cv2
 import numpy as np
 import pytest
 
-from greenloop import shift
+from greenloop.methods.dictionary import shift
 from greenloop.datasets import sequence
 
 

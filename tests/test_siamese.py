@@ -6,7 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from greenloop import evaluate, siamese as sm
+from greenloop import evaluate
+from greenloop.methods.siamese import siamese as sm
 
 W = 0.25            # small networks: the tests check structure and numbers, not accuracy
 S = 32              # input size (any size works: "same" padding)

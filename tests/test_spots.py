@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from greenloop import spots
+from greenloop.methods.dictionary import spots
 
 
 @pytest.mark.parametrize("L, k, last", [(50, 46, 10), (60, 38, 40), (70, 33, 20)])

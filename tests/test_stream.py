@@ -1,4 +1,4 @@
-"""greenloop.speed.stream (Detector, preprocessing, TFLite export) and the `python -m greenloop detect` CLI.
+"""greenloop.methods.dictionary.stream (Detector, preprocessing, TFLite export) and the `python -m greenloop detect` CLI.
 Correctness only; speed is measured by `python -m greenloop.speed.bench`."""
 import os
 import subprocess
@@ -12,9 +12,9 @@ import pytest
 os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
 keras = pytest.importorskip("keras")
 
-from greenloop import cnn, dictionary  # noqa: E402
+from greenloop.methods.dictionary import cnn, dictionary  # noqa: E402
 from greenloop.datasets import sequence  # noqa: E402
-from greenloop.speed.stream import Detector, export_tflite, preprocess  # noqa: E402
+from greenloop.methods.dictionary.stream import Detector, export_tflite, preprocess  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -5,8 +5,9 @@ import cv2
 import numpy as np
 import pytest
 
-from greenloop.dictionary import LoopDetector
-from greenloop.speed import seqstream, timing
+from greenloop.methods.dictionary.dictionary import LoopDetector
+from greenloop.speed import timing
+from greenloop.methods.greenloop_seq import seqstream
 
 
 def _sleeper(name, log, ms=2.0, start_ms=150.0):

@@ -29,9 +29,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from greenloop import evaluate, groundtruth, seqmatch  # noqa: E402
+from greenloop import evaluate, groundtruth  # noqa: E402
+from greenloop.methods.greenloop_seq import seqmatch
 from greenloop import exclusion  # noqa: E402
-from greenloop.speed import seqstream  # noqa: E402
+from greenloop.methods.greenloop_seq import seqstream  # noqa: E402
 from tests import user_folders as u  # noqa: E402
 
 SHORT = {   # name: builder(out) -> folder

@@ -33,8 +33,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from greenloop import retrieval, seqmatch  # noqa: E402
-from greenloop.speed import seqstream  # noqa: E402
+from greenloop.methods.greenloop_seq import seqmatch  # noqa: E402
+from greenloop.methods.lsh import retrieval  # noqa: E402
+from greenloop.methods.greenloop_seq import seqstream  # noqa: E402
 from greenloop.util.threads import one_blas_thread  # noqa: E402
 
 WINTER = 3576          # data/nordland: winter frame k is frame 3576 + k

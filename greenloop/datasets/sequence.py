@@ -130,7 +130,7 @@ def preprocess_image(img: np.ndarray, size=(32, 32), gray: bool = True, color: s
     (H, W, 1) gray. size: (width, height) or None to keep the size. gray: convert to gray with
     OpenCV's cvtColor (else return RGB).
     Returns (h, w) uint8 gray or (h, w, 3) uint8 RGB, resized with INTER_AREA when shrinking and
-    INTER_LINEAR when enlarging. ``load_frames`` and ``greenloop.speed.stream`` both call this, so a
+    INTER_LINEAR when enlarging. ``load_frames`` and ``greenloop.methods.dictionary.stream`` both call this, so a
     frame from disk and the same frame from a live camera give identical model inputs.
     """
     if img.ndim == 3 and img.shape[2] == 1:

@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from greenloop import groundtruth, spots
+from greenloop import groundtruth
+from greenloop.methods.dictionary import spots
 from greenloop.datasets import sequence
 from greenloop.study import wording
 

@@ -57,12 +57,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from greenloop import evaluate, features, seqmatch
+from greenloop import evaluate, features
+from greenloop.methods.greenloop_seq import seqmatch
 from greenloop.datasets import sequence
 from greenloop.experiments import leaderboard as ex
 from greenloop.features.layers import extract_layers
 from greenloop.similarity import l2_normalise
-from greenloop.speed import seqstream
+from greenloop.methods.greenloop_seq import seqstream
 from greenloop import report
 from greenloop.study import targets
 

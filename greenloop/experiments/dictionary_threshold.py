@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from greenloop import cnn, dictionary, spots
+from greenloop.methods.dictionary import cnn, dictionary, spots
 from greenloop.study import wording
 
 PAPER_TAU = 70          # the paper's τ = L + Δ = 60 + 10 detections

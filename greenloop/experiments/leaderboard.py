@@ -1,5 +1,5 @@
 """Notebook 13's experiment: every registered detector on the same frames, ground truth, split,
-tuning budget and timing (``greenloop.detectors.registry``; the rows are ``study.leaderboard``'s).
+tuning budget and timing (``greenloop.methods.registry``; the rows are ``study.leaderboard``'s).
 
 The calls, in the notebook's order (each returns what one table or figure shows):
 
@@ -23,12 +23,13 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
-from greenloop import evaluate, groundtruth, seqmatch
+from greenloop import evaluate, groundtruth
+from greenloop.methods.greenloop_seq import seqmatch
 from greenloop.datasets import nordland, sequence
 from greenloop.datasets.sequence import list_frames
-from greenloop.detectors import single_frame
-from greenloop.detectors.interface import Data
-from greenloop.detectors.registry import REGISTRY
+from greenloop.methods.single_frame import entry as single_frame
+from greenloop.methods.interface import Data
+from greenloop.methods.registry import REGISTRY
 from greenloop.speed import timing
 from greenloop.study import leaderboard as lb, wording
 from greenloop import report
@@ -229,7 +230,7 @@ def stream_and_time(data: Data, tuned: Tuned, decisions=(), registry=None, only=
     raw, paths = lb.decode_window(list_frames(data.dataset), data.frames, start, stop)
     knobs = {m: k for m, k in tuned.knobs.items() if only is None or m in only}
     methods, preload = lb.timing_methods(knobs, dets, describers, data.descriptors, start)
-    methods += [d["method"] for d in decisions]
+    methods += [timing.dictionary_method(d["name"], d["detector"]) for d in decisions]
     preload.update({d["name"]: d["preload"] for d in decisions})
     speed = pd.DataFrame(timing.time_methods(methods, raw, preload, p["timing_repeats"])).set_index("method")
     decode = timing.decode_ms(paths, p["timing_repeats"])

@@ -1,10 +1,10 @@
 """Notebook 11's study: Qi 2024's multi-probe LSH against brute force (Tables 5-6, Figure 7).
 
-Every frame is matched incrementally (``greenloop.lsh.incremental_match``) by each matcher of
+Every frame is matched incrementally (``greenloop.methods.lsh.lsh.incremental_match``) by each matcher of
 :func:`table6_variants`, once per hyperplane seed (:func:`match_runs`); :func:`table6` averages the
 runs, :func:`figure7_curves` / :func:`figure7_overlap` give Figure 7's PR curves over the scanned
 pairs and how far each stays with brute force's, :func:`paper_rows` the paper-vs-run rows. The
-hashing, probing and matching themselves live in :mod:`greenloop.lsh`; the scores in
+hashing, probing and matching themselves live in :mod:`greenloop.methods.lsh.lsh`; the scores in
 :mod:`greenloop.evaluate`. Tables come back unrounded (percentages in %, times in ms / s).
 """
 from __future__ import annotations
@@ -16,7 +16,8 @@ from typing import NamedTuple
 import numpy as np
 import pandas as pd
 
-from greenloop import evaluate, lsh, similarity
+from greenloop import evaluate, similarity
+from greenloop.methods.lsh import lsh
 from greenloop.speed import scale
 from greenloop.study import verdict, wording
 from greenloop import report
@@ -60,7 +61,7 @@ def scanned_matrix(S, result: lsh.MatchResult, floor: float = -2.0) -> np.ndarra
 
 def best_match_matrix(result: lsh.MatchResult, floor: float = -2.0) -> np.ndarray:
     """Only each query's best match: (N, N) float32 with [best_j, j] = score_j, ``floor``
-    elsewhere (queries without a match add nothing). result: from :func:`greenloop.lsh.incremental_match`."""
+    elsewhere (queries without a match add nothing). result: from :func:`greenloop.methods.lsh.lsh.incremental_match`."""
     n = _incremental(result)
     out = np.full((n, n), floor, np.float32)
     ok = result.best >= 0
@@ -69,7 +70,7 @@ def best_match_matrix(result: lsh.MatchResult, floor: float = -2.0) -> np.ndarra
 
 
 def table6_variants(centre: bool = True, centre_frames: int = 1) -> list:
-    """The matchers of Table 6: [(name, method, centre_frames)] for :func:`greenloop.lsh.incremental_match`.
+    """The matchers of Table 6: [(name, method, centre_frames)] for :func:`greenloop.methods.lsh.lsh.incremental_match`.
 
     Brute force, scikit-learn, SWP and QDP with hyperplanes through the origin (the paper); with
     centre, SWP and QDP again with hyperplanes through the mean of the first ``centre_frames``
@@ -85,7 +86,7 @@ def table6_variants(centre: bool = True, centre_frames: int = 1) -> list:
 def query_matches(result: lsh.MatchResult, GT, exclude: int, floor: float = -2.0):
     """The per-query :class:`greenloop.evaluate.Matches` of one incremental run (loop-closure mode).
 
-    result: from :func:`greenloop.lsh.incremental_match`. GT: (N, N) bool ground truth; exclude: band in
+    result: from :func:`greenloop.methods.lsh.lsh.incremental_match`. GT: (N, N) bool ground truth; exclude: band in
     frames (the run's). Queries: every frame with a stored candidate (j - i > exclude for some
     i). match/score: the method's best scanned frame and its cosine; a query that scanned nothing
     has no match and gets score ``floor`` (below every cosine: it fires only at the lowest
@@ -108,7 +109,7 @@ def query_matches(result: lsh.MatchResult, GT, exclude: int, floor: float = -2.0
 def run_scores(r: lsh.MatchResult, S, brute: lsh.MatchResult, GT, exclude: int) -> dict:
     """The scores of one incremental run (notebook 11's Table 6 columns).
 
-    r, brute: :func:`greenloop.lsh.incremental_match` results (keep_candidates=True) of the method and of brute
+    r, brute: :func:`greenloop.methods.lsh.lsh.incremental_match` results (keep_candidates=True) of the method and of brute
     force on the same N frames. S: (N, N) cosine matrix of the frames. GT: (N, N) bool ground
     truth; exclude: band in frames. Returns the per-query metrics of :func:`query_matches`
     (``evaluate.query_metrics``, loop-closure mode): R@1_%, AUC-PR_%, R@100P_%, R@95P_%; then

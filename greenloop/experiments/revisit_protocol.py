@@ -2,8 +2,8 @@
 
 One function per table of ``notebooks/12_revisit_protocol.ipynb``; each returns unrounded values
 (accuracies in %, precision and recall as fractions), and the notebook rounds them by
-``DECIMALS`` where it writes the tables. The main paper's CNN (``greenloop.cnn``), its spots
-(``greenloop.spots``) and the dictionary's counting rule (``greenloop.dictionary``) are the
+``DECIMALS`` where it writes the tables. The main paper's CNN (``greenloop.methods.dictionary.cnn``), its spots
+(``greenloop.methods.dictionary.spots``) and the dictionary's counting rule (``greenloop.methods.dictionary.dictionary``) are the
 building blocks; what is here is the protocol: train on the frames before the first revisit,
 name every revisit frame, then choose the dictionary's τ on one part of the revisits and score
 it on the other.
@@ -17,7 +17,8 @@ from typing import NamedTuple
 import numpy as np
 import pandas as pd
 
-from greenloop import cnn, dictionary, evaluate, groundtruth, spots
+from greenloop import evaluate, groundtruth
+from greenloop.methods.dictionary import cnn, dictionary, spots
 from greenloop.datasets import sequence
 from greenloop import report
 from greenloop.study import verdict, wording

@@ -1,9 +1,9 @@
 """Notebook 04's study: the paper's CNN scored under pixel shifts (Table 3) and small rotations,
 on all frames (the paper's protocol) and on held-out frames only, with the border and
-full-resolution controls of ``greenloop.shift``.
+full-resolution controls of ``greenloop.methods.dictionary.shift``.
 
 The scoring functions take the classifier's predict function as an argument
-(``predict(model, X) -> (M,) labels``, e.g. ``greenloop.cnn.predict``). Every table comes back
+(``predict(model, X) -> (M,) labels``, e.g. ``greenloop.methods.dictionary.cnn.predict``). Every table comes back
 unrounded; ``report.write_table(..., decimals=...)`` rounds it.
 """
 from __future__ import annotations
@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from greenloop import shift as sh
+from greenloop.methods.dictionary import shift as sh
 from greenloop.study import wording
 
 PAPER_SHIFT1 = 92        # Table 3: % of all 2260 frames shifted 1 px right, training frames included

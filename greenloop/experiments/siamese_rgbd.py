@@ -2,7 +2,7 @@
 
 One function per table of ``notebooks/10_siamese_rgbd.ipynb``; each returns unrounded values
 (AP and R@100P in %, seconds per image), and the notebook rounds them by ``DECIMALS`` where it
-writes the tables. The model, its losses, pairs and training stay in :mod:`greenloop.siamese`.
+writes the tables. The model, its losses, pairs and training stay in :mod:`greenloop.methods.siamese.siamese`.
 
 Every table is scored on the same held-out part of the sequence (:func:`setup`): scikit-learn's
 step-wise AP over pairs more than ``exclude`` steps apart whose later frame is held out, with
@@ -18,7 +18,8 @@ from typing import NamedTuple
 import numpy as np
 import pandas as pd
 
-from greenloop import evaluate, features, groundtruth, siamese, similarity
+from greenloop import evaluate, features, groundtruth, similarity
+from greenloop.methods.siamese import siamese
 from greenloop.datasets import sequence
 from greenloop import report
 from greenloop.study import verdict, wording

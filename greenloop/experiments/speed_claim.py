@@ -13,7 +13,7 @@ import pandas as pd
 
 from greenloop.datasets import sequence
 from greenloop.speed import bench
-from greenloop.speed.stream import Detector
+from greenloop.methods.dictionary.stream import Detector
 from greenloop.study import wording
 
 BACKENDS = ("numpy", "tflite")
@@ -75,7 +75,7 @@ def figure_speedups(table: pd.DataFrame, cpu: str, windows: dict | None = None):
     name for the axis label. Returns the figure."""
     import matplotlib.pyplot as plt
 
-    names = [p.replace("greenloop.speed.stream ", "stream ").split(":")[0] for p in table.pipeline]
+    names = [p.replace("greenloop.methods.dictionary.stream ", "stream ").split(":")[0] for p in table.pipeline]
     fps = table["window_frames_per_s"].to_numpy(float)
     err = None
     if windows is not None:

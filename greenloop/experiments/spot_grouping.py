@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from greenloop import cnn, spots
+from greenloop.methods.dictionary import cnn, spots
 from greenloop.experiments import training_over_seeds
 from greenloop.study import wording
 

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from greenloop import cnn
+from greenloop.methods.dictionary import cnn
 from greenloop.study import wording
 
 # the runs of ``leakage_controls``: a blocked split, a random split with its number of training

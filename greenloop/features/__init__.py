@@ -29,7 +29,7 @@ Backbones (``BACKBONES[name].dim`` is D)::
     pixels            1024  the 32x32 grayscale frame in [0, 1], flattened (the      32x32
                             main paper's preprocessing)
     spot_cnn          68    penultimate layer (Dense 68, ReLU) of the main paper's   the model's
-                            trained CNN (greenloop.cnn.build)                         (32x32 gray)
+                            trained CNN (greenloop.methods.dictionary.cnn.build)                         (32x32 gray)
     pixels-patchnorm  1024  pixels, SeqSLAM patch-normalised (8x8 blocks to zero      32x32
                             mean, unit std); greenloop-seq's descriptor
     gradients         256   16x16-cell orientation histograms (8 bins, L2 per cell)   128x64

@@ -1,4 +1,4 @@
-"""The spot_cnn extractor: the penultimate layer of the main paper's trained CNN (greenloop.cnn.build).
+"""The spot_cnn extractor: the penultimate layer of the main paper's trained CNN (greenloop.methods.dictionary.cnn.build).
 
 ``extract_spot`` follows the extractor protocol (``registry.Options``); the input size is the
 model's own, whatever ``size`` says.
@@ -22,7 +22,7 @@ def _spot_model(path: str, mtime):
     import keras
     if not path.endswith(".keras"):
         raise ValueError(f"spot_cnn weights must be a .keras model file saved from "
-                         f"greenloop.cnn.build (got {path})")
+                         f"greenloop.methods.dictionary.cnn.build (got {path})")
     try:
         return keras.models.load_model(path, compile=False)
     except Exception as e:
@@ -32,7 +32,7 @@ def _spot_model(path: str, mtime):
 def spot_feature_model(model):
     """The sub-model of a main-paper CNN that outputs its penultimate layer.
 
-    model: a keras Model of greenloop.cnn.build (Conv2D -> Flatten -> Dense(68, relu) ->
+    model: a keras Model of greenloop.methods.dictionary.cnn.build (Conv2D -> Flatten -> Dense(68, relu) ->
     Dense(n, softmax)). Returns a Model from the same inputs to the input of the last Dense layer,
     i.e. the (N, 68) Dense-68 ReLU activations. Raises ValueError if the model has no Dense layer
     or was never built.

@@ -108,7 +108,7 @@ def resolve(backbone: str, weights, warn: bool = True) -> Resolved:
     if b.kind == "spot_cnn":
         if weights is None or (isinstance(weights, str) and weights in ("auto", "imagenet")):
             raise ValueError("spot_cnn needs the trained model: pass weights=<keras Model> or the "
-                             "path of a .keras file saved from greenloop.cnn.build")
+                             "path of a .keras file saved from greenloop.methods.dictionary.cnn.build")
         if hasattr(weights, "layers") and hasattr(weights, "predict"):
             return Resolved(f"model:{weights.name}", weights)
         path = Path(weights)

@@ -1,4 +1,4 @@
-"""Speed benchmark: the paper's pipeline as written vs greenloop.speed.stream, in one process.
+"""Speed benchmark: the paper's pipeline as written vs greenloop.methods.dictionary.stream, in one process.
 
     python -m greenloop.speed.bench [--out results/bench] [--dataset data/synthetic-greenhouse] [--quick]
                               [--accuracy-seeds 10]
@@ -12,7 +12,7 @@ Measures, interleaving reference and candidates so that load from other jobs hit
     reach on this machine;
 (b) single frames, preprocessing included: median and p99 latency, reference (``model.predict`` on
     one frame) vs ``Detector.update``;
-(c) training seconds per epoch: plain ``model.fit`` (``greenloop.cnn.train(trainer="plain")``) vs
+(c) training seconds per epoch: plain ``model.fit`` (``greenloop.methods.dictionary.cnn.train(trainer="plain")``) vs
     the fast path ("fast": ``trainer="auto"``, the fused numba trainer on a CPU) and XLA
     ``model.fit`` (``trainer="xla"``), and the test accuracy of each after the same epochs;
 (c') the full 200-epoch protocol over seeds, plain vs fast: both accuracy distributions and the
@@ -36,10 +36,10 @@ os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
 import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
-from greenloop import cnn, spots  # noqa: E402
+from greenloop.methods.dictionary import cnn, spots  # noqa: E402
 from greenloop.datasets import sequence  # noqa: E402
-from greenloop.dictionary import LoopDetector  # noqa: E402
-from greenloop.speed.stream import Detector, export_tflite, preprocess  # noqa: E402
+from greenloop.methods.dictionary.dictionary import LoopDetector  # noqa: E402
+from greenloop.methods.dictionary.stream import Detector, export_tflite, preprocess  # noqa: E402
 from greenloop.speed.timing import timed  # noqa: E402
 from greenloop import report  # noqa: E402
 from greenloop.util.threads import run_chunked  # noqa: E402
@@ -225,7 +225,7 @@ def stream_rows(windows: dict, single: dict, same: dict, n_frames: int) -> list[
              "single_median_ms": round(single["reference"]["median_ms"], 3), "single_p99_ms": round(single["reference"]["p99_ms"], 3),
              "window_speed-up": 1.0, "labels_equal": f"{n_frames}/{n_frames}"}]
     for b in same:
-        rows.append({"pipeline": f"greenloop.speed.stream ({b})", "window_frames_per_s": round(windows[b]["frames_per_s"]),
+        rows.append({"pipeline": f"greenloop.methods.dictionary.stream ({b})", "window_frames_per_s": round(windows[b]["frames_per_s"]),
                      "single_median_ms": round(single[b]["median_ms"], 3), "single_p99_ms": round(single[b]["p99_ms"], 3),
                      "window_speed-up": round(ref["median_ms"] / windows[b]["median_ms"], 1),
                      "labels_equal": f"{same[b]}/{n_frames}"})
@@ -273,7 +273,7 @@ def bench_accuracy(X, y, seeds, epochs: int) -> dict:
     with plain ``model.fit`` and once with the fast path: test accuracy of each, so the two
     distributions over seeds can be compared, and the wall time of each training.
 
-    Runs go through greenloop.cnn's model cache: the fast-path models of the notebooks are reused
+    Runs go through greenloop.methods.dictionary.cnn's model cache: the fast-path models of the notebooks are reused
     and plain models are trained once, then reused. A cached run keeps the wall time recorded when
     it was trained, so these times are not interleaved (the per-epoch rows are).
     Returns {kind: {'seeds', 'test_accuracy', 'training_seconds'}, 'epochs': epochs}.
@@ -300,7 +300,7 @@ def same_distribution(plain, fast) -> dict:
 
 
 def main(argv=None) -> int:
-    """CLI: time the reference and greenloop.speed.stream, train both ways, write bench.json / .md / .csv."""
+    """CLI: time the reference and greenloop.methods.dictionary.stream, train both ways, write bench.json / .md / .csv."""
     args = _parse_args(argv)
     (result, rows, best), result_wall = timed(_measure, args)
     result["wall_seconds"] = result_wall
@@ -414,7 +414,7 @@ def _quantized_accuracy(quick: bool, fast_run: dict, epochs: int, X, y, u8, tmpd
         q_model, q_split, q_desc = fast_run["model"], fast_run["split"], f"fast-path model, seed {fast_run['seed']}, {epochs} epochs"
     else:
         q_model, _, q_split = cnn.train(X, y, 0, epochs=200)
-        q_desc = "paper protocol, seed 0, 200 epochs (greenloop.cnn cache)"
+        q_desc = "paper protocol, seed 0, 200 epochs (greenloop.methods.dictionary.cnn cache)"
     test = q_split["test"]
     q = Detector(export_tflite(q_model, tmpdir / "q.tflite", quantize=True), None)
     f = Detector(export_tflite(q_model, tmpdir / "f.tflite"), None)
@@ -540,10 +540,10 @@ def _write(out: Path, result: dict, rows: list[dict]) -> None:
     report.write_json(out / "bench.json", result)
     note = (f"Run {result['date']} on {result['cpu']}, {'random frames' if info['random_frames'] else info['dataset']}"
             f"{', --quick' if result['quick'] else ''}. Reference: cv2 preprocessing + Keras model.predict + Python "
-            f"dictionary loop; ours: greenloop.speed.stream.Detector (default backend {result['default_backend']}). "
+            f"dictionary loop; ours: greenloop.methods.dictionary.stream.Detector (default backend {result['default_backend']}). "
             f"Reference and ours interleaved in one process; tflite-int8 is the dynamic-range quantised "
             f"export, judged by its test-accuracy change, not by label equality.")
-    md = report.write_table(pd.DataFrame(rows), out / "bench", title="Speed: reference vs greenloop.speed.stream", note=note)
+    md = report.write_table(pd.DataFrame(rows), out / "bench", title="Speed: reference vs greenloop.methods.dictionary.stream", note=note)
     print(md.read_text())
 
 

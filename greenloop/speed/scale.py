@@ -35,9 +35,11 @@ import numpy as np
 import pandas as pd
 import scipy.sparse
 
-from greenloop import evaluate, retrieval, seqmatch
+from greenloop import evaluate
+from greenloop.methods.greenloop_seq import seqmatch
+from greenloop.methods.lsh import retrieval
 from greenloop.datasets import augment
-from greenloop.speed import seqstream
+from greenloop.methods.greenloop_seq import seqstream
 from greenloop.speed.timing import timed
 from greenloop.similarity import l2_normalise
 from greenloop import report

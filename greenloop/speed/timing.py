@@ -81,7 +81,7 @@ def detector_method(name: str, detector, describe) -> Method:
 
 
 def dictionary_method(name: str, detector) -> Method:
-    """The main paper's detector (``greenloop.speed.stream.Detector``) as a :class:`Method`.
+    """The main paper's detector (``greenloop.methods.dictionary.stream.Detector``) as a :class:`Method`.
 
     preload of ``start``: (n0,) int spot labels of the frames before the window (counted into the
     dictionary, no event). step: ``detector.update(frame)`` (preprocess, classify, count, decide).

@@ -94,7 +94,7 @@ ITEMS: list[tuple[str, str, str, str | None, str, str]] = [
     (XU, "Fig. 1, 2, 3", "example scenes, SIFT matches, an RGB-D image", "00_dataset/frames.png",
      "not an experiment", ""),
     (XU, "Fig. 4, Table 1", "Siamese network and its layers", "10_siamese_rgbd/supervisions.csv",
-     "protocol partly ran", "AlexNet-like trunk scaled down to fit 2 CPU cores (greenloop.siamese)"),
+     "protocol partly ran", "AlexNet-like trunk scaled down to fit 2 CPU cores (greenloop.methods.siamese.siamese)"),
     (XU, "Fig. 5, Fig. 6", "early and mid-level fusion pipelines", "10_siamese_rgbd/fusions.csv",
      "protocol ran", "needs depth"),
     (XU, "Fig. 8", "PR curves of the three supervisions", "10_siamese_rgbd/figure8_supervisions.png",

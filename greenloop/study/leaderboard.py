@@ -1,6 +1,6 @@
 """Notebook 13's leaderboard rows: metrics, spreads, chance, closures, tables, the statement, the writes.
 
-The detectors, their knobs and their tuning are registered in ``greenloop.detectors`` (one entry
+The detectors, their knobs and their tuning are registered in ``greenloop.methods`` (one entry
 per family); ``greenloop.experiments.leaderboard`` runs them on one dataset under one tuning
 budget (per-query AUC-PR on the tuning queries) and builds the tables with the functions here,
 which know nothing of any one detector: a row is a method's (M, M) score matrix, its threshold,
@@ -14,8 +14,10 @@ import cv2
 import numpy as np
 import pandas as pd
 
-from greenloop import evaluate, seqmatch
-from greenloop.speed import seqstream, timing
+from greenloop import evaluate
+from greenloop.methods.greenloop_seq import seqmatch
+from greenloop.speed import timing
+from greenloop.methods.greenloop_seq import seqstream
 from greenloop.study import targets as goals
 from greenloop.util.files import write_atomic
 
@@ -211,23 +213,18 @@ def chance_rows(GT, exclude: int, queries, reference=None, scored_on: str = "") 
     return rows
 
 
-def timing_methods(knobs: dict, dets: dict, describers: dict, descriptors: dict, start: int, dictionary=None):
+def timing_methods(knobs: dict, dets: dict, describers: dict, descriptors: dict, start: int):
     """The :class:`greenloop.speed.timing.Method` list and preloads of every method.
 
     knobs: {method: knob record}; dets: {method: its streaming detector (``Entry.stream``)};
     describers: {method: frame -> descriptor (``Entry.describer``)}; descriptors: {descriptor: (N, D)}; start: the first
     timed frame of the stream (described index): frames 0..start-1 are preloaded.
-    dictionary: optional (name, speed.stream.Detector, (n0,) spot labels of the original frames
-    before the window). Returns (methods, preload).
+    Returns (methods, preload).
     """
     methods, preload = [], {}
     for name, k in knobs.items():
         methods.append(timing.detector_method(name, dets[name], describers[name]))
         preload[name] = descriptors[k["descriptor"]][:start]
-    if dictionary is not None:
-        name, det, labels = dictionary
-        methods.append(timing.dictionary_method(name, det))
-        preload[name] = labels
     return methods, preload
 
 

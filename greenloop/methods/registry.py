@@ -7,7 +7,11 @@ detector: its module in ``greenloop/detectors/`` and one line in ``ENTRIES``.
 """
 from __future__ import annotations
 
-from greenloop.detectors import cnn_layers, dictionary, greenloop_seq, scnn, seqslam, single_frame
+from greenloop.methods.dictionary import entry as dictionary
+from greenloop.methods.greenloop_seq import entry as greenloop_seq
+from greenloop.methods.seqslam import entry as seqslam
+from greenloop.methods.siamese import entry as scnn
+from greenloop.methods.single_frame import cnn_layers, entry as single_frame
 
 ENTRIES = (
     single_frame.ENTRY,            # "single-frame": CNNs, SIFT-BoVW, pixels

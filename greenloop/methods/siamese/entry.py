@@ -1,7 +1,7 @@
 """Xu 2022's Siamese CNN as a single-frame matcher: trained on the frames before the evaluation part.
 
 One row per supervision of ``params["siamese_rows"]`` (e.g. ["multitask"]), "siamese-<supervision>
-(single frame)". Its network (``greenloop.siamese``, notebook 10's model and training with its
+(single frame)". Its network (``greenloop.methods.siamese.siamese``, notebook 10's model and training with its
 budget: ``siamese_epochs`` x ``siamese_pairs`` pairs, hard negatives, augmentation, seed
 ``siamese_seeds[0]``) is trained on every described frame that is not an evaluation query nor
 within the split's gap (the longest of ``seq_lens``) of one; places are spots of
@@ -16,10 +16,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from greenloop import siamese
+from greenloop.methods.siamese import siamese
 from greenloop.datasets import sequence
-from greenloop.detectors import greenloop_seq, single_frame
-from greenloop.detectors.interface import Data, Entry
+from greenloop.methods.greenloop_seq import entry as greenloop_seq
+from greenloop.methods.single_frame import entry as single_frame
+from greenloop.methods.interface import Data, Entry
 
 NAME = "siamese"
 

@@ -20,8 +20,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from greenloop import retrieval
-from greenloop.seqmatch import _EPS, calibrate_sampled
+from greenloop.methods.lsh import retrieval
+from greenloop.methods.greenloop_seq.seqmatch import _EPS, calibrate_sampled
 from greenloop.util import numba_kernels
 
 __all__ = ["reservoir", "IndexSpace", "CandidateMode", "INDEX_FIT", "NULL_SAMPLE", "INDEX_DIM", "FOLLOW", "AROUND",
@@ -95,7 +95,7 @@ def reservoir(slots: np.ndarray, lo: int, hi: int, seed: int = 0) -> np.ndarray:
 
 class IndexSpace:
     """The rows an index holds: the stored rows (dim None, or >= theirs), or their first ``dim``
-    principal components (L2-normalised afterwards by ``greenloop.retrieval``).
+    principal components (L2-normalised afterwards by ``greenloop.methods.lsh.retrieval``).
 
     dim: the index's dimensions; fit: the candidate rows the PCA is fitted on, the stream's first
     ``fit`` (no later frame changes it). ``ready(c)``: whether an index can be built with c rows

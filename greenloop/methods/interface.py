@@ -63,7 +63,7 @@ class Entry(NamedTuple):
     knob_text: (knob record) -> one line for the table.
     checked: its rows get the stream-vs-matrix check over the whole stream (summary.json).
     cli_knobs: the knob record ``detect --method NAME`` streams without ``--tuned``.
-    decide: for score=None: (Data) -> dict(row=leaderboard row fields, method=speed.timing.Method,
+    decide: for score=None: (Data) -> dict(row=leaderboard row fields, detector=its streaming detector,
         preload=what its start takes); None otherwise.
     """
     name: str

@@ -4,8 +4,8 @@ It declares closures and gives no per-query score (``Entry.score`` is None): :fu
 runs ``dictionary.operating_points`` (the one chain, notebook 07's too): the spot CNN trained on the
 original frames before the evaluation part only (every frame without a split), every frame's spot
 predicted, the declared pairs scored on the evaluation queries. Its stream is
-``speed.stream.Detector`` (the CLI's ``detect --method dictionary``), timed by
-``speed.timing.dictionary_method``.
+``methods.dictionary.stream.Detector`` (the CLI's ``detect --method dictionary``), which the leaderboard
+times with ``speed.timing.dictionary_method``.
 
 params read: frames_per_spot, seeds, epochs, batch_size, margin, exclude (ORIGINAL frames) and
 timing_window ((start, stop) described indices: training stops at the window's first frame).
@@ -14,10 +14,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from greenloop import dictionary as counts
+from greenloop.methods.dictionary import dictionary as counts
 from greenloop.datasets import sequence
-from greenloop.detectors.interface import Data, Entry, no_descriptors
-from greenloop.speed import stream, timing
+from greenloop.methods.interface import Data, Entry, no_descriptors
+from greenloop.methods.dictionary import stream
 
 NAME = "dictionary"
 
@@ -31,7 +31,7 @@ def decide(data: Data) -> dict:
     """Train, predict, declare and score (the chain of notebook 13; module doc).
 
     Returns dict(name, tau, n_train (original frames trained on), closures (``query_closures`` on
-    the evaluation queries), op (``operating_point``), method (``speed.timing.Method``), preload
+    the evaluation queries), op (``operating_point``), detector (its ``stream.Detector``), preload
     (spot labels of the frames before the timed window), text (one line for the notebook))."""
     p, frames = data.params, np.asarray(data.frames)
     start = int(p["timing_window"][0])
@@ -49,7 +49,7 @@ def decide(data: Data) -> dict:
             f"seed {run['seed']}, held-out accuracy {run['test_accuracy']:.3f}; tau = {tau}")
     return {"name": name, "tau": tau, "n_train": n_train,
             "closures": point["closures"], "op": point["op"],
-            "method": timing.dictionary_method(name, stream.Detector(run["model"], tau)),
+            "detector": stream.Detector(run["model"], tau),
             "preload": pred[:int(frames[start])], "text": text}
 
 

@@ -1,11 +1,11 @@
 """SeqSLAM's streaming detector (Milford & Wyeth 2012, at OpenSeqSLAM's parameters), and what is
 computed by streaming it: the score matrix and the tuning grid (the speed path).
 
-``Detector`` (moved here from ``greenloop.seqslam``: streaming code lives in ``speed/``) is
+``Detector`` (moved here from ``greenloop.methods.seqslam.seqslam``: streaming code lives in ``speed/``) is
 ``speed.seqstream.Detector`` with SeqSLAM's similarity (negated mean absolute difference of the
-patch-normalised 64x32 frames) and floor-rounded trajectory offsets; ``greenloop.seqslam`` holds
+patch-normalised 64x32 frames) and floor-rounded trajectory offsets; ``greenloop.methods.seqslam.seqslam`` holds
 the parameters, descriptors and similarity and says what differs from OpenSeqSLAM and why;
-``greenloop.detectors.seqslam`` registers it.
+``greenloop.methods.seqslam.entry`` registers it.
 """
 from __future__ import annotations
 
@@ -13,10 +13,11 @@ import math
 
 import numpy as np
 
-from greenloop import evaluate, seqmatch
-from greenloop.seqslam import (DS, R_WINDOW, describe_frames, difference_similarity, offsets, similarity_matrix,
+from greenloop import evaluate
+from greenloop.methods.greenloop_seq import seqmatch
+from greenloop.methods.seqslam.seqslam import (DS, R_WINDOW, describe_frames, difference_similarity, offsets, similarity_matrix,
                                velocities)
-from greenloop.speed import seqstream
+from greenloop.methods.greenloop_seq import seqstream
 from greenloop.util.checks import positive_int
 
 __all__ = ["Detector", "score_matrix", "tune_knobs"]

@@ -28,11 +28,11 @@ What differs from OpenSeqSLAM, and why (the causal stream of a loop-closure dete
     * Patch normalisation keeps float z-scores (OpenSeqSLAM rounds them to integers around 127), and
       the contrast std is the population std (``seqmatch.contrast_normalise``; OpenSeqSLAM: sample).
 
-Where it streams: ``greenloop.speed.seqslam_stream`` (streaming code lives in ``speed/``) holds the
+Where it streams: ``greenloop.methods.seqslam.seqslam_stream`` (streaming code lives in ``speed/``) holds the
 streaming ``Detector`` and the ``score_matrix`` / ``tune_knobs`` computed by streaming it; this
 module holds its parameters, descriptors and similarity.
 
-How it relates to greenloop-seq (``greenloop.seqmatch``): the same stages after the similarity
+How it relates to greenloop-seq (``greenloop.methods.greenloop_seq.seqmatch``): the same stages after the similarity
 (contrast normalisation ``seqmatch.contrast_normalise``, the ring of normalised columns and the
 trajectory search of ``speed.seqstream.Detector``), reused by subclassing; it differs in more than
 knobs: the similarity (mean absolute difference of unnormalised 64x32 patch-normalised frames,

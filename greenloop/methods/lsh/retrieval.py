@@ -12,7 +12,7 @@ One interface, six implementations (``make_index(kind, dim, ...)``):
 * ``"hnsw"``: faiss ``IndexHNSWFlat`` (graph with ``M`` links per node, ``ef_search``,
   ``ef_construction``).
 * ``"swp"`` / ``"qdp"``: the paper's random-hyperplane LSH with step-wise or query-directed
-  probing (greenloop.lsh, reused): the stored rows of the probed buckets, ranked by cosine.
+  probing (greenloop.methods.lsh.lsh, reused): the stored rows of the probed buckets, ranked by cosine.
 
 Every index has ``add(X)`` (X (M, D) float rows, stored after the earlier ones: ids are the
 order of arrival 0, 1, ...), ``search(Q, k) -> (scores (M, k) float32 cosine, ids (M, k) int64)``
@@ -39,7 +39,8 @@ import faiss
 import numpy as np
 import scipy.sparse
 
-from greenloop import evaluate, lsh
+from greenloop import evaluate
+from greenloop.methods.lsh import lsh
 from greenloop.similarity import l2_normalise
 from greenloop.util.checks import positive_int
 
@@ -183,7 +184,7 @@ class _Faiss:
 
 
 class _Lsh:
-    """The paper's RHLSH (greenloop.lsh): a growing BucketIndex, candidates ranked by cosine."""
+    """The paper's RHLSH (greenloop.methods.lsh.lsh): a growing BucketIndex, candidates ranked by cosine."""
     exact = False
 
     def __init__(self, kind: str, dim: int, n_bits: int, seed: int, radius: int, qdp_probes, offset):
@@ -225,7 +226,7 @@ def make_index(kind: str, dim: int, nlist: int = 1024, nprobe: int = 16, train_s
     40 * nlist; exact flat search until then). hnsw: M links, ef_search, ef_construction.
     swp / qdp: n_bits hyperplanes (seed), Hamming radius (SWP), qdp_probes (QDP, Table 5's
     (small, large, threshold)), offset None or (D,) the point the hyperplanes pass through
-    (see greenloop.lsh). Returns the index object (add / search / n_stored / exact /
+    (see greenloop.methods.lsh.lsh). Returns the index object (add / search / n_stored / exact /
     bytes_per_frame, module doc).
     """
     dim = positive_int("dim", dim, 1)

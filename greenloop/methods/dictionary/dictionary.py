@@ -6,7 +6,7 @@ Counters never decay (as in the paper), so misclassifications accumulate over a 
 One counting rule: the running count of frame t is the number of frames 0..t (t included) with
 its label, plus the counter's value before the stream (:func:`running_count`). ``counts`` (every
 spot's count after every frame), ``run`` (the state D(f_t) >= tau), ``LoopDetector`` (one frame at
-a time) and ``greenloop.speed.stream.Detector`` (raw frames; its events are the frames where the count
+a time) and ``greenloop.methods.dictionary.stream.Detector`` (raw frames; its events are the frames where the count
 EQUALS tau, once per spot) all follow it; tests/test_dictionary.py checks them against each
 other on random label streams.
 """
@@ -16,7 +16,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from greenloop import cnn, spots
+from greenloop.methods.dictionary import cnn, spots
 from greenloop.evaluate import closure_counts, operating_point
 from greenloop.groundtruth import far_in_time, revisit_frames
 from greenloop.util.checks import positive_int
@@ -50,7 +50,7 @@ class LoopDetector:
     counting alone).
     ``update(label)`` returns True when that label's count has reached tau (at that frame and every
     later frame of the class: a closure is a STATE, D >= tau, not an edge). Not to be confused
-    with ``greenloop.speed.stream.Detector.update(frame)``, which returns an EVENT dict only at the one
+    with ``greenloop.methods.dictionary.stream.Detector.update(frame)``, which returns an EVENT dict only at the one
     frame where a spot's count becomes equal to tau (else None). ``add``/``add_many`` count and
     return the new running counts. ``counts`` is the (N,) int32 array D, ``nbytes`` its memory
     (4 bytes per counter, the paper's 152 bytes for 38 classes).

@@ -15,9 +15,10 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from greenloop import features, seqmatch
-from greenloop.detectors.interface import Data, Entry
-from greenloop.speed import seqstream
+from greenloop import features
+from greenloop.methods.greenloop_seq import seqmatch
+from greenloop.methods.interface import Data, Entry
+from greenloop.methods.greenloop_seq import seqstream
 
 NAME, FAST = "greenloop-seq", "greenloop-seq-fast"
 NAMED = seqmatch.NAMED   # the named configurations: {name: (knobs, fixed threshold)}

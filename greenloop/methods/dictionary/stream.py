@@ -2,7 +2,7 @@
 
 ``Detector`` takes raw frames one at a time (``update``) or in windows (``update_many``), applies
 the main paper's preprocessing (gray, 32x32, [0, 1]), classifies them with the paper's CNN and
-updates the frequency-count dictionary (``greenloop.dictionary.LoopDetector``: a closure is declared
+updates the frequency-count dictionary (``greenloop.methods.dictionary.dictionary.LoopDetector``: a closure is declared
 the first time a spot's count reaches tau, exactly like ``dictionary.closure_events``).
 
 Frames
@@ -19,7 +19,7 @@ Preprocessing and training data
 Backends (all give the labels of ``argmax(model.predict(x))``; checked by tests/test_stream.py
 and by ``python -m greenloop.speed.bench`` on every frame of the dataset)
     "numpy":  the paper's CNN written out in NumPy with the weights pulled from the Keras model
-              (``greenloop.cnn.forward``, the fused trainer's own forward pass): conv 3x3 + ReLU
+              (``greenloop.methods.dictionary.cnn.forward``, the fused trainer's own forward pass): conv 3x3 + ReLU
               (numba's ``kernels.conv_relu``, or im2col without numba), the 28800 x 68 dense layer
               as float32 matmuls (split over the worker threads for a window), argmax of the logits
               (softmax is monotonic). No extra dependency, instant to build.
@@ -53,9 +53,9 @@ from pathlib import Path
 
 import numpy as np
 
-from greenloop import cnn
+from greenloop.methods.dictionary import cnn
 from greenloop.datasets.sequence import preprocess_image
-from greenloop.dictionary import LoopDetector
+from greenloop.methods.dictionary.dictionary import LoopDetector
 from greenloop.util import devices
 from greenloop.util.checks import positive_int
 from greenloop.util.files import write_atomic
@@ -117,8 +117,8 @@ def _load_model(model):
         path = Path(model)
         if not path.is_file():
             raise FileNotFoundError(f"model file {path} not found: pass a trained .keras model "
-                                    f"(greenloop.cnn.train saves them under results/models/<key>/"
-                                    f"model.keras) or a .tflite file from greenloop.speed.stream.export_tflite")
+                                    f"(greenloop.methods.dictionary.cnn.train saves them under results/models/<key>/"
+                                    f"model.keras) or a .tflite file from greenloop.methods.dictionary.stream.export_tflite")
         suffix = path.suffix.lower()
         if suffix == ".keras":
             import keras
@@ -133,7 +133,7 @@ def _load_model(model):
 
 
 class _NumpyNet:
-    """The paper's CNN in NumPy (``greenloop.cnn.forward``, the fused trainer's forward pass) on
+    """The paper's CNN in NumPy (``greenloop.methods.dictionary.cnn.forward``, the fused trainer's forward pass) on
     one BLAS thread. params: ``cnn.paper_weights``' arrays; hw: (H, W) of the input.
     labels(X (N, H, W) float32) -> (N,) int64."""
 
@@ -256,7 +256,7 @@ class Detector:
     model: a keras Model of the paper's CNN (input (32, 32, 1)), or a path to a .keras or .tflite
         file.
     threshold: tau >= 1; a closure of spot c is declared at the frame where its count reaches tau
-        (once per spot, like ``greenloop.dictionary.closure_events``; the dictionary never decays).
+        (once per spot, like ``greenloop.methods.dictionary.dictionary.closure_events``; the dictionary never decays).
         None: count every frame but declare no closure (``events`` stays empty; for timing).
     n_classes: size of the dictionary; defaults to the model's number of outputs.
     backend: "auto", "numpy", "tflite" or "keras" (see the module docstring).

@@ -1,15 +1,15 @@
 """greenloop-seq's streaming detector, and what is computed by streaming it (the speed path).
 
-``Detector`` (moved here from ``greenloop.seqmatch``: streaming code lives in ``speed/``) takes one
+``Detector`` (moved here from ``greenloop.methods.greenloop_seq.seqmatch``: streaming code lives in ``speed/``) takes one
 frame or descriptor at a time and declares closures; :func:`score_matrix` is the (N, N) matrix
 the stream thresholds, computed by feeding a Detector column by column, so S[:, j] is exactly what
 the stream sees at query j; :func:`tune_knobs` scores a knob grid by it, and
 :func:`stream_check` compares a stream's events with a matrix. The stages the detector is built
 of (descriptors, normalisation, contrast normalisation, calibration) and the scoring of its
-matrices stay in ``greenloop.seqmatch`` (its module doc describes the method, its units and the
-memory per stored frame); ``greenloop.detectors.greenloop_seq`` registers it. Candidate mode's own
+matrices stay in ``greenloop.methods.greenloop_seq.seqmatch`` (its module doc describes the method, its units and the
+memory per stored frame); ``greenloop.methods.greenloop_seq.entry`` registers it. Candidate mode's own
 methods (``index=...``: what a frame retrieves and scores, the calibration's sampled null) are in
-``greenloop.speed.candidates`` (``CandidateMode``, which ``Detector`` inherits).
+``greenloop.methods.greenloop_seq.candidates`` (``CandidateMode``, which ``Detector`` inherits).
 """
 from __future__ import annotations
 
@@ -17,14 +17,15 @@ import math
 
 import numpy as np
 
-from greenloop import evaluate, features, retrieval
-from greenloop.seqmatch import (COLORS, DEFAULT_VELOCITIES, STORE_DTYPES, _check_descriptor, _join,
+from greenloop import evaluate, features
+from greenloop.methods.lsh import retrieval
+from greenloop.methods.greenloop_seq.seqmatch import (COLORS, DEFAULT_VELOCITIES, STORE_DTYPES, _check_descriptor, _join,
                                 SHIFTABLE_DIMS, calibrate_scores, cell_shifts, check_calibration, center, center_stored, center_windows,
                                 columns_to_scores, contrast_normalise, describe_frames, matrix_events, normalise,
                                 shift_cells, threshold_range)
 from greenloop.similarity import l2_normalise
-from greenloop.speed import candidates
-from greenloop.speed.candidates import (AROUND, FOLLOW, FOLLOW_DEPTH, INDEX_DIM, INDEX_FIT, NULL_GROUPS,  # noqa: F401
+from greenloop.methods.greenloop_seq import candidates
+from greenloop.methods.greenloop_seq.candidates import (AROUND, FOLLOW, FOLLOW_DEPTH, INDEX_DIM, INDEX_FIT, NULL_GROUPS,  # noqa: F401
                                         NULL_SAMPLE, WARMUP, CandidateMode)
 from greenloop.util import numba_kernels
 from greenloop.util.checks import positive_int
@@ -86,7 +87,7 @@ class Detector(CandidateMode):
         i with j - i > exclude are candidates. contrast_window: SeqSLAM R_window (0 = off).
     projection: optional ``similarity.Projection`` (see :func:`fit_projection`).
     store_dtype: "float32" or "float16" for the stored descriptors. color: "bgr" or "rgb".
-    index: None (the reference: every stored frame is scored) or a ``greenloop.retrieval`` kind
+    index: None (the reference: every stored frame is scored) or a ``greenloop.methods.lsh.retrieval`` kind
         ("scan", "flat", "ivf", "hnsw", "swp", "qdp"): candidate mode, the sequence score is
         computed only for the ``k`` stored frames the index retrieves for the newest query (for
         each of its cell shifts) and, when calibrating, a fixed-size sample of the others
@@ -120,7 +121,7 @@ class Detector(CandidateMode):
         matched and stored, but its column does not enter the trajectory ring, so a stop or a
         half-speed replay keeps the trajectories' velocities. None: off.
     cell_shift: s > 0 matches the query's "gradients" grid moved sideways by -s..s cell columns
-        (:func:`greenloop.seqmatch.shift_cells`, after centring) against each stored frame as it
+        (:func:`greenloop.methods.greenloop_seq.seqmatch.shift_cells`, after centring) against each stored frame as it
         was stored, keeping the best cosine: a revisit seen from a little to the left or right
         (another aisle side, a camera mounted elsewhere). The stored frames are not shifted, so
         memory is unchanged; the match reads every stored frame once for s = 1

@@ -89,7 +89,8 @@ import time
 
 import numpy as np
 
-from greenloop import evaluate, features, groundtruth, spots
+from greenloop import evaluate, features, groundtruth
+from greenloop.methods.dictionary import spots
 from greenloop.datasets import sequence
 from greenloop.util.cache import cache_key, cached_model, is_cached
 from greenloop.util.checks import positive_int
@@ -182,7 +183,7 @@ def _check(supervision, fusion, fusion_layer, merge, channels):
         raise ValueError(f"unknown merge {merge!r}; choose one of {MERGES}")
     if fusion != "none" and channels != 4:
         raise ValueError(f"{fusion} fusion needs RGB-D input of 4 channels (RGB, then depth), got "
-                         f"{channels}; build RGB-D frames with greenloop.siamese.load_inputs, or use "
+                         f"{channels}; build RGB-D frames with greenloop.methods.siamese.siamese.load_inputs, or use "
                          f"fusion='none' for RGB or depth alone")
 
 
@@ -658,7 +659,7 @@ def train(X, labels, seed: int = 0, supervision: str = "multitask", fusion: str 
     image (0, 0: the frames as they are).
     monitor: optional (key, fn): fn(descriptor model) -> float is recorded after every epoch in
     history["monitor"] (e.g. the held-out AP, watched and never used to stop or choose); key (a
-    string) names what fn measures in the cache key. cache: as ``greenloop.cnn.train``
+    string) names what fn measures in the cache key. cache: as ``greenloop.methods.dictionary.cnn.train``
     (results/models/ or $GREENLOOP_CACHE, keyed by ``util.cache.cache_key`` of the data, labels,
     ground truth and every parameter). progress: a tqdm bar on stderr. was_cached: optional list;
     True is appended when the network is read from the cache, False when it is trained here.

@@ -1,4 +1,4 @@
-"""SeqSLAM (``greenloop.seqslam``) as a registered detector: OpenSeqSLAM's published parameters,
+"""SeqSLAM (``greenloop.methods.seqslam.seqslam``) as a registered detector: OpenSeqSLAM's published parameters,
 and the same method tuned on greenloop-seq's grid (seq_len L = ds + 1, R_window) as a second row.
 
 Knob records: descriptor "seqslam", whitening "none", seq_len (ds + 1), contrast_window
@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from greenloop import seqmatch
-from greenloop import seqslam as slam
-from greenloop.detectors.interface import Data, Entry
-from greenloop.speed import seqslam_stream
+from greenloop.methods.greenloop_seq import seqmatch
+from greenloop.methods.seqslam import seqslam as slam
+from greenloop.methods.interface import Data, Entry
+from greenloop.methods.seqslam import seqslam_stream
 
 PUBLISHED, TUNED = "SeqSLAM (published)", "SeqSLAM (tuned)"
 SEQSLAM_PUBLISHED = {"descriptor": "seqslam", "whitening": "none", "seq_len": slam.DS + 1,

@@ -39,7 +39,7 @@ Units and shapes
     frame, column = query. Scores are cosine similarities in [-1, 1] when ``contrast_window`` is 0,
     z-scores otherwise (bounded by +-sqrt(contrast_window + 1)).
 
-Where the detector streams: ``greenloop.speed.seqstream`` (streaming code lives in ``speed/``) holds
+Where the detector streams: ``greenloop.methods.greenloop_seq.seqstream`` (streaming code lives in ``speed/``) holds
 the streaming ``Detector`` and what is computed by streaming it (``score_matrix``, ``tune_knobs``,
 ``stream_check``); this module holds the stages it is built of (descriptors, normalisation,
 contrast normalisation, calibration, the column-to-matrix loop) and the scoring of its matrices
@@ -414,7 +414,7 @@ def threshold_range(contrast_window: int) -> tuple[float, float]:
 def columns_to_scores(det, Y, G, gate=None) -> np.ndarray:
     """The (N, N) score matrix of a detector fed, column by column, a precomputed similarity.
 
-    det: a fresh ``greenloop.speed.seqstream.Detector`` (or a subclass, e.g. ``speed.seqslam_stream``'s) whose stages after
+    det: a fresh ``greenloop.methods.greenloop_seq.seqstream.Detector`` (or a subclass, e.g. ``speed.seqslam_stream``'s) whose stages after
     the similarity (contrast normalisation, trajectory search) make the scores. Y: (N, D) stored
     descriptors in stream order; G: (N, N) similarity, G[i, j] = what the stream computes between
     stored frame i and query j. Query j sees only G[:j - exclude, j], so every column is causal.

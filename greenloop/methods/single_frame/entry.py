@@ -20,11 +20,12 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from greenloop import features, seqmatch
+from greenloop import features
+from greenloop.methods.greenloop_seq import seqmatch
 from greenloop.datasets.sequence import list_frames
-from greenloop.detectors import greenloop_seq
-from greenloop.detectors.interface import Data, Entry
-from greenloop.speed import seqstream
+from greenloop.methods.greenloop_seq import entry as greenloop_seq
+from greenloop.methods.interface import Data, Entry
+from greenloop.methods.greenloop_seq import seqstream
 
 
 def row_name(descriptor: str) -> str:

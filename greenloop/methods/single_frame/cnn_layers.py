@@ -11,8 +11,9 @@ Matching, streaming and timing are greenloop-seq's at seq_len 1, as for every si
 from __future__ import annotations
 
 from greenloop import features
-from greenloop.detectors import greenloop_seq, single_frame
-from greenloop.detectors.interface import Data, Entry
+from greenloop.methods.greenloop_seq import entry as greenloop_seq
+from greenloop.methods.single_frame import entry as single_frame
+from greenloop.methods.interface import Data, Entry
 from greenloop.features import layers
 
 
