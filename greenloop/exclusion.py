@@ -26,9 +26,9 @@ from typing import NamedTuple
 import numpy as np
 
 from greenloop import groundtruth
+from greenloop.groundtruth import DEFAULT_EXCLUDE
 from greenloop.datasets import sequence
 
-DEFAULT_EXCLUDE = 150        # frames: the paper's neighbour window (Qi 2024, Eq. 5), GreenHouse's protocol
 EXCLUDE_SECONDS = 10.0       # seconds of recording: a walking or driving camera has left a place by then
 EXCLUDE_FRACTION = 0.1       # of the recording, when neither ground truth nor frame times are known
 MIN_EXCLUDE = 20             # frames: two sequences of the named detectors (seq_len 10) never overlap

@@ -40,6 +40,8 @@ from scipy.spatial.distance import cdist
 from greenloop.datasets import sequence
 from greenloop.util.checks import positive_int
 
+DEFAULT_EXCLUDE = 150   # frames: the paper's neighbour window (Qi 2024, Eq. 5), GreenHouse's protocol; every default exclusion
+
 
 class NoGroundTruthError(FileNotFoundError):
     """A sequence folder has neither poses (CameraTrajectory.txt) nor loop pairs (ground_truth.csv)."""
@@ -75,7 +77,7 @@ def pose_error(poses) -> np.ndarray:
     return e
 
 
-def loop_matrix(poses, threshold: float = 0.5, exclude: int = 150) -> np.ndarray:
+def loop_matrix(poses, threshold: float = 0.5, exclude: int = DEFAULT_EXCLUDE) -> np.ndarray:
     """Ground-truth loops by Qi 2024 Eq. 5.
 
     poses: (N, 4, 4) camera-to-world matrices (metres).
@@ -88,7 +90,7 @@ def loop_matrix(poses, threshold: float = 0.5, exclude: int = 150) -> np.ndarray
 
 
 def loop_matrix_metric(poses, max_distance: float = 1.0, max_angle: float = 30.0,
-                       exclude: int = 150) -> np.ndarray:
+                       exclude: int = DEFAULT_EXCLUDE) -> np.ndarray:
     """Ground-truth loops by camera distance and viewing angle.
 
     poses: (N, 4, 4) camera-to-world matrices (metres).
@@ -139,7 +141,7 @@ def far_in_time(frames, exclude) -> np.ndarray:
     return (cols[None, :] < lo[:, None]) | (cols[None, :] >= hi[:, None])
 
 
-def pair_matrix(pairs, n_frames: int, frames=None, exclude: int = 150) -> np.ndarray:
+def pair_matrix(pairs, n_frames: int, frames=None, exclude: int = DEFAULT_EXCLUDE) -> np.ndarray:
     """Ground-truth loops from loop pairs (module doc), over a chosen subset of frames.
 
     pairs: (P, 2) or (P, 3) integers (i, j[, tolerance]), 0-based frame numbers, tolerance in
@@ -174,7 +176,7 @@ def pair_matrix(pairs, n_frames: int, frames=None, exclude: int = 150) -> np.nda
     return (G | G.T) & far
 
 
-def for_sequence(folder, frames=None, threshold: float = 0.5, exclude: int = 150) -> np.ndarray:
+def for_sequence(folder, frames=None, threshold: float = 0.5, exclude: int = DEFAULT_EXCLUDE) -> np.ndarray:
     """The ground-truth loop matrix of a sequence folder: the one call notebooks and users make.
 
     folder: a sequence folder (greenloop.datasets.sequence). Its poses (CameraTrajectory.txt, one per frame)
@@ -213,7 +215,7 @@ class Described(NamedTuple):
     summary: str         # one line naming the frames, the exclusion band and the ground truth
 
 
-def described_frames(folder, frame_step: int, threshold: float = 0.5, exclude: int = 150) -> Described:
+def described_frames(folder, frame_step: int, threshold: float = 0.5, exclude: int = DEFAULT_EXCLUDE) -> Described:
     """Every frame_step-th frame of a sequence, its exclusion band in steps and its ground truth.
 
     folder: a sequence folder. frame_step: describe frames 0, frame_step, 2 frame_step, ...
@@ -233,7 +235,7 @@ def described_frames(folder, frame_step: int, threshold: float = 0.5, exclude: i
     return Described(frames, exclude_steps, gt, summary)
 
 
-def variants(folder, frames=None, thresholds=(0.3, 0.4, 0.5, 0.6, 0.7, 0.8), exclude: int = 150,
+def variants(folder, frames=None, thresholds=(0.3, 0.4, 0.5, 0.6, 0.7, 0.8), exclude: int = DEFAULT_EXCLUDE,
              max_distance: float = 1.0, max_angle: float = 30.0) -> dict:
     """The ground truths a pose-tracked sequence admits, to show how scores move with the definition.
 
@@ -256,7 +258,7 @@ def variants(folder, frames=None, thresholds=(0.3, 0.4, 0.5, 0.6, 0.7, 0.8), exc
     return out
 
 
-def definition(folder, threshold: float = 0.5, exclude: int = 150) -> str:
+def definition(folder, threshold: float = 0.5, exclude: int = DEFAULT_EXCLUDE) -> str:
     """One line saying which ground truth ``for_sequence(folder, ..., threshold, exclude)`` uses,
     for table notes and printouts (names the file and, for pairs, their count and tolerances)."""
     folder = Path(folder)

@@ -11,6 +11,7 @@ from sklearn.metrics import average_precision_score, precision_recall_curve, roc
 
 from greenloop.groundtruth import far_in_time
 from greenloop.util.checks import positive_int
+from greenloop.groundtruth import DEFAULT_EXCLUDE
 
 _NO_LOOPS = ("the ground truth has no loops among the counted pairs (|i - j| > exclude={exclude}"
              "{q}): use a larger pose threshold (greenloop.groundtruth.for_sequence), a larger "
@@ -60,7 +61,7 @@ def _check_queries(queries, n: int):
     return q
 
 
-def pair_mask(n: int, exclude: int = 150, queries=None) -> np.ndarray:
+def pair_mask(n: int, exclude: int = DEFAULT_EXCLUDE, queries=None) -> np.ndarray:
     """The counted pairs: (n, n) bool, True at [i, j] iff i < j, j - i > exclude and
     (queries is None or queries[j]). ``S[pair_mask(...)]`` lists them in row-major order,
     the order used by :func:`pair_samples` and by a (P,) ``predicted`` in :func:`operating_point`.
@@ -74,7 +75,7 @@ def pair_mask(n: int, exclude: int = 150, queries=None) -> np.ndarray:
 
 
 # ------------------------------------------------------------------------------ scores
-def pair_samples(S, GT, exclude: int = 150, queries=None):
+def pair_samples(S, GT, exclude: int = DEFAULT_EXCLUDE, queries=None):
     """Labels and scores of the counted pairs, ready for scikit-learn metrics.
 
     S: (N, N) similarity matrix, higher = more similar; S[i, j], i < j, is used (earlier frame
@@ -100,7 +101,7 @@ def pair_samples(S, GT, exclude: int = 150, queries=None):
     return y_true, y_score
 
 
-def pr_curve(S, GT, exclude: int = 150, queries=None):
+def pr_curve(S, GT, exclude: int = DEFAULT_EXCLUDE, queries=None):
     """Precision-recall curve over the counted pairs (sklearn.metrics.precision_recall_curve).
 
     Arguments as in :func:`pair_samples`. Returns (precision, recall, thresholds) exactly as
@@ -112,7 +113,7 @@ def pr_curve(S, GT, exclude: int = 150, queries=None):
     return precision_recall_curve(y_true, y_score)
 
 
-def average_precision(S, GT, exclude: int = 150, queries=None) -> float:
+def average_precision(S, GT, exclude: int = DEFAULT_EXCLUDE, queries=None) -> float:
     """Average precision over the counted pairs (sklearn.metrics.average_precision_score).
 
     Step-wise: AP = sum_n (R_n - R_{n-1}) P_n over the distinct thresholds, highest first;
@@ -123,7 +124,7 @@ def average_precision(S, GT, exclude: int = 150, queries=None) -> float:
     return float(average_precision_score(y_true, y_score))
 
 
-def recall_at_precision(S, GT, precision: float = 0.95, exclude: int = 150, queries=None) -> float:
+def recall_at_precision(S, GT, precision: float = 0.95, exclude: int = DEFAULT_EXCLUDE, queries=None) -> float:
     """The largest pair recall reached with precision >= ``precision`` (0 < precision <= 1).
 
     Arguments otherwise as in :func:`pair_samples`. Thresholds are the distinct scores, so tied
@@ -136,14 +137,14 @@ def recall_at_precision(S, GT, precision: float = 0.95, exclude: int = 150, quer
     return float(r[ok].max()) if ok.any() else 0.0
 
 
-def recall_at_100_precision(S, GT, exclude: int = 150, queries=None) -> float:
+def recall_at_100_precision(S, GT, exclude: int = DEFAULT_EXCLUDE, queries=None) -> float:
     """The largest recall reached with precision exactly 1 (no false loop declared):
     :func:`recall_at_precision` at 1. 0.0 if the top-scored pair (or any pair tied with it) is
     not a loop."""
     return recall_at_precision(S, GT, 1.0, exclude, queries)
 
 
-def recall_at_k(S, GT, k: int = 1, exclude: int = 150, queries=None) -> float:
+def recall_at_k(S, GT, k: int = 1, exclude: int = DEFAULT_EXCLUDE, queries=None) -> float:
     """Place-recognition recall@k (per query, not per pair): ``per_query(...)[f"R@{k}"]``.
 
     A query is a frame j with at least one ground-truth loop partner among its candidates (the
@@ -181,7 +182,7 @@ class Matches(NamedTuple):
     k: int
 
 
-def candidate_mask(n: int, exclude: int = 150, queries=None, reference=None) -> np.ndarray:
+def candidate_mask(n: int, exclude: int = DEFAULT_EXCLUDE, queries=None, reference=None) -> np.ndarray:
     """(n, n) bool: [i, j] True iff database frame i is a candidate of query frame j.
 
     Two database modes. Loop closure (``reference`` None, the default): every earlier frame
@@ -226,7 +227,7 @@ def matches(query, match, score, correct, has_partner, hit_rank, k: int) -> Matc
     return Matches(q, mt, sc, ok, hp, hr, k)
 
 
-def best_matches(S, GT, exclude: int = 150, queries=None, reference=None, k: int = 10) -> Matches:
+def best_matches(S, GT, exclude: int = DEFAULT_EXCLUDE, queries=None, reference=None, k: int = 10) -> Matches:
     """Each query's best candidate and the rank of its best-ranked partner, from a score matrix.
 
     S: (N, N) float, higher = more similar, row = database frame, column = query. GT: (N, N)
@@ -305,13 +306,13 @@ def query_metrics(m: Matches, ks=(1, 5, 10)) -> dict:
     return out
 
 
-def per_query(S, GT, exclude: int = 150, queries=None, reference=None, ks=(1, 5, 10)) -> dict:
+def per_query(S, GT, exclude: int = DEFAULT_EXCLUDE, queries=None, reference=None, ks=(1, 5, 10)) -> dict:
     """:func:`query_metrics` of a score matrix: ``query_metrics(best_matches(S, GT, exclude,
     queries, reference, k=max(ks)), ks)``. Arguments as in :func:`best_matches`."""
     return query_metrics(best_matches(S, GT, exclude, queries, reference, k=max(ks)), ks)
 
 
-def query_chance(GT, exclude: int = 150, queries=None, reference=None, ks=(1, 5, 10)) -> dict:
+def query_chance(GT, exclude: int = DEFAULT_EXCLUDE, queries=None, reference=None, ks=(1, 5, 10)) -> dict:
     """What a random score gets on :func:`query_metrics`' keys (fractions), for a chance row.
 
     With c_j candidates and t_j partners at query j: R@K = mean over queries with a partner of
@@ -349,7 +350,7 @@ def query_chance(GT, exclude: int = 150, queries=None, reference=None, ks=(1, 5,
 
 
 # -------------------------------------------------------------- mean per-class accuracy
-def mean_per_class_accuracy(S, GT, threshold: float, exclude: int = 150, queries=None) -> float:
+def mean_per_class_accuracy(S, GT, threshold: float, exclude: int = DEFAULT_EXCLUDE, queries=None) -> float:
     """Mean per-class accuracy (MPCA) of declaring every counted pair with S >= threshold a loop.
 
     The two classes are the counted pairs (:func:`pair_samples`) that are loops and those that
@@ -364,7 +365,7 @@ def mean_per_class_accuracy(S, GT, threshold: float, exclude: int = 150, queries
     return float((declared[y_true].mean() + (~declared[~y_true]).mean()) / 2)
 
 
-def mpca_threshold(S, GT, exclude: int = 150, queries=None) -> float:
+def mpca_threshold(S, GT, exclude: int = DEFAULT_EXCLUDE, queries=None) -> float:
     """The threshold on S that maximises :func:`mean_per_class_accuracy` over the counted pairs
     (the point of the ROC curve furthest above the diagonal, max TPR - FPR). Arguments as in
     :func:`pair_samples`; call it with the tuning part's ``queries``. Returns a float in S's units
@@ -377,7 +378,7 @@ def mpca_threshold(S, GT, exclude: int = 150, queries=None) -> float:
 
 
 # -------------------------------------------------------------------- decision detectors
-def operating_point(predicted, GT, exclude: int = 150, queries=None) -> dict:
+def operating_point(predicted, GT, exclude: int = DEFAULT_EXCLUDE, queries=None) -> dict:
     """Precision and recall of a detector that outputs loop decisions, not scores.
 
     predicted: either an (N, N) bool matrix of declared loop pairs (a pair i < j counts as
@@ -451,7 +452,7 @@ def closure_counts(declared, correct, revisit, at=None) -> dict:
 
 
 # ------------------------------------------------- the notebooks' scoring protocol (07-11)
-def pair_metrics(S, GT, exclude: int = 150, queries=None, tag: str = "") -> dict:
+def pair_metrics(S, GT, exclude: int = DEFAULT_EXCLUDE, queries=None, tag: str = "") -> dict:
     """AP and recall at 100 % precision of one similarity matrix, in % (unrounded).
 
     S, GT, exclude, queries: as in :func:`pair_samples`. tag: inserted in the keys, e.g. "_RGB".
@@ -461,7 +462,7 @@ def pair_metrics(S, GT, exclude: int = 150, queries=None, tag: str = "") -> dict
             f"R@100P{tag}_%": 100 * recall_at_100_precision(S, GT, exclude, queries=queries)}
 
 
-def chance_level(GT, exclude: int = 150, queries=None) -> float:
+def chance_level(GT, exclude: int = DEFAULT_EXCLUDE, queries=None) -> float:
     """The fraction of counted pairs that are loops: the AP a random score gets on average.
 
     GT: (N, N) bool ground truth; exclude, queries: as in :func:`pair_samples`. Returns a float in
@@ -472,7 +473,7 @@ def chance_level(GT, exclude: int = 150, queries=None) -> float:
     return float(pair_samples(np.zeros((n, n), np.float32), G, exclude, queries)[0].mean())
 
 
-def revisit_queries(GT, exclude: int = 150, queries=None, reference=None) -> np.ndarray:
+def revisit_queries(GT, exclude: int = DEFAULT_EXCLUDE, queries=None, reference=None) -> np.ndarray:
     """(N,) bool: the queries with a loop partner among their candidates: frame j with some
     GT[i, j], i < j - exclude (:func:`pair_mask`, loop closure), or with i a ``reference`` frame
     (place recognition); within ``queries`` when given (:func:`candidate_mask`). These are the
@@ -482,7 +483,7 @@ def revisit_queries(GT, exclude: int = 150, queries=None, reference=None) -> np.
     return (G & candidate_mask(G.shape[0], exclude, queries, reference)).any(0)
 
 
-def precision_at_recall(S, GT, recall: float, exclude: int = 150, queries=None) -> float:
+def precision_at_recall(S, GT, recall: float, exclude: int = DEFAULT_EXCLUDE, queries=None) -> float:
     """The best precision at a recall of at least ``recall`` (a fraction in [0, 1]).
 
     S, GT, exclude, queries: as in :func:`pr_curve`. Returns max precision over the points of the

@@ -14,6 +14,7 @@ from greenloop import groundtruth
 from greenloop.methods.dictionary import spots
 from greenloop.datasets import sequence
 from greenloop.study import wording
+from greenloop.groundtruth import DEFAULT_EXCLUDE
 
 # where notebook 00 looks for the real GreenHouse trajectory when none is named
 REFERENCE_CANDIDATES = ("data/greenhouse/CameraTrajectory.txt", "../shared/greenhouse/CameraTrajectory.txt")
@@ -35,7 +36,7 @@ def find_reference(reference_trajectory: str = ""):
     return next((Path(c) for c in candidates if c and Path(c).is_file()), None)
 
 
-def reference(path, loop_threshold: float = 0.5, exclude: int = 150):
+def reference(path, loop_threshold: float = 0.5, exclude: int = DEFAULT_EXCLUDE):
     """The real trajectory at ``path``: (row, poses, pairs): its summary row (as :func:`summary`'s),
     its (M, 4, 4) poses and its (P, 2) Eq. 5 loop pairs (``groundtruth.loop_matrix``)."""
     _, poses = sequence.read_trajectory(path)

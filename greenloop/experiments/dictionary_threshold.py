@@ -14,6 +14,7 @@ import pandas as pd
 
 from greenloop.methods.dictionary import cnn, dictionary, spots
 from greenloop.study import wording
+from greenloop.groundtruth import DEFAULT_EXCLUDE
 
 PAPER_TAU = 70          # the paper's τ = L + Δ = 60 + 10 detections
 
@@ -36,7 +37,7 @@ def variant_predictions(X: np.ndarray, gt: np.ndarray, frames_per_spot: int, pap
             VARIANTS[1]: (cnn.predict(aware["model"], X), y_place)}
 
 
-def variant_scores(variants: dict, gt: np.ndarray, tau: int, exclude: int = 150) -> dict:
+def variant_scores(variants: dict, gt: np.ndarray, tau: int, exclude: int = DEFAULT_EXCLUDE) -> dict:
     """``dictionary.score_closures`` of each variant at τ: {variant: its dict}; variants:
     :func:`variant_predictions`' dict, gt: (N, N) bool, tau: detections, exclude: frames."""
     return {name: dictionary.score_closures(pred, ref, gt, tau, exclude) for name, (pred, ref) in variants.items()}
@@ -61,7 +62,7 @@ def scores_summary(scores: dict) -> dict:
     return {name: {k: v for k, v in s.items() if k != "flags"} for name, s in scores.items()}
 
 
-def tau_sweep(pred, reference_labels, gt, taus, exclude: int = 150) -> list[dict]:
+def tau_sweep(pred, reference_labels, gt, taus, exclude: int = DEFAULT_EXCLUDE) -> list[dict]:
     """The detector scored at every threshold of a sweep (``dictionary.score_closures`` per tau).
 
     pred, reference_labels, gt, exclude: as in ``dictionary.score_closures``; taus: thresholds
@@ -81,7 +82,7 @@ def tau_sweep(pred, reference_labels, gt, taus, exclude: int = 150) -> list[dict
     return rows
 
 
-def sweep(variants: dict, gt: np.ndarray, taus, exclude: int = 150) -> pd.DataFrame:
+def sweep(variants: dict, gt: np.ndarray, taus, exclude: int = DEFAULT_EXCLUDE) -> pd.DataFrame:
     """The τ sweep of every variant: :func:`tau_sweep`'s rows with a first column 'variant';
     variants: :func:`variant_predictions`' dict."""
     return pd.DataFrame([{"variant": name, **row} for name, (pred, ref) in variants.items()

@@ -22,6 +22,7 @@ from greenloop.methods.dictionary import cnn, dictionary, spots
 from greenloop.datasets import sequence
 from greenloop import report
 from greenloop.study import verdict, wording
+from greenloop.groundtruth import DEFAULT_EXCLUDE
 
 # decimals of the written tables' columns (rounded only where the notebook writes them)
 DECIMALS = {"final_train_acc_%": 2, "in_traversal_test_acc_%": 2, "revisit_acc_%": 2, "mean": 2, "std": 2,
@@ -124,7 +125,7 @@ def accuracy_summary(per_seed: pd.DataFrame) -> pd.DataFrame:
 
 
 def tune_and_score(pred, reference_labels, gt, taus, tune, score, paper_tau: int,
-                   exclude: int = 150) -> tuple[list[dict], list[dict]]:
+                   exclude: int = DEFAULT_EXCLUDE) -> tuple[list[dict], list[dict]]:
     """The dictionary's τ chosen on a tuning part and scored on a scoring part, beside the paper's τ.
 
     pred, reference_labels, gt, exclude: as in ``dictionary.score_closures`` ((T,) labels, (T, T)

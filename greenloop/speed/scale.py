@@ -45,6 +45,7 @@ from greenloop.similarity import l2_normalise
 from greenloop import report
 from greenloop.util.threads import one_blas_thread
 from greenloop.util.progress import bar
+from greenloop.groundtruth import DEFAULT_EXCLUDE
 
 SIZES = (10_000, 100_000, 1_000_000)
 K = 10
@@ -233,7 +234,7 @@ def run(src, out, sizes=SIZES, dim: int = 64, queries=(2000, 1000, 300), n_inser
 
 
 def decisions(X, m: int, sizes=SIZES, n_queries: int = 2000, methods=DECISIONS, k: int = K,
-              exclude: int = 150, tolerance: int = 2, name: str = DECISION_NAME,
+              exclude: int = DEFAULT_EXCLUDE, tolerance: int = 2, name: str = DECISION_NAME,
               index_dim: int = seqstream.INDEX_DIM) -> pd.DataFrame:
     """A named configuration's whole per-frame decision with N frames already stored, candidate
     mode against the exact scan.
@@ -342,7 +343,7 @@ def route_ground_truth(n: int, m: int, tolerance: int = 2) -> scipy.sparse.csr_a
 
 
 def long_run_metrics(X, m: int, n: int = 100_000, kinds=("scan", "hnsw"), k: int = K,
-                     exclude: int = 150) -> pd.DataFrame:
+                     exclude: int = DEFAULT_EXCLUDE) -> pd.DataFrame:
     """Per-query metrics of single-frame retrieval over an n-frame stream, no N x N matrix:
     retrieval.stream_search (top-k lists, O(N k)) -> candidate_matches with the sparse
     :func:`route_ground_truth` -> evaluate.query_metrics, for each index kind."""
@@ -488,7 +489,7 @@ def _write(out: Path, table, nb, dim: int, n_real: int, seed: int, decide: pd.Da
     if metrics is not None:
         report.write_atomic(out / "long_run_metrics.csv", lambda p: metrics.to_csv(p, index=False))
         md += ["## Per-query metrics of a long stream without an N x N matrix", "",
-               f"Single-frame retrieval (k = {K}, exclusion 150 frames) over the first {int(metrics.frames.iloc[0]):,} "
+               f"Single-frame retrieval (k = {K}, exclusion {DEFAULT_EXCLUDE} frames) over the first {int(metrics.frames.iloc[0]):,} "
                "frames of the recording, scored from the (N, k) top-k lists (retrieval.candidate_matches -> "
                "evaluate.query_metrics, loop-closure mode) against a sparse ground truth: frames of the same "
                "place +-2 route frames in any pass or season (speed.scale.route_ground_truth). Metrics in %; "
@@ -511,7 +512,7 @@ def _decision_section(out: Path, decide: pd.DataFrame) -> list[str]:
             f"The named configuration {DECISION_NAME} as `detect --index` runs it ({knobs['descriptor']} of the same "
             f"augmented frames, centred over windows {list(knobs['center_window'])}, cell shift {knobs['cell_shift']}, "
             f"velocities {list(knobs['velocities'])}, repeat gate {knobs['repeat_cos']}, calibration "
-            f"'{knobs['calibrate']}', fixed threshold {threshold:g}; exclude 150) in a seqstream.Detector preloaded "
+            f"'{knobs['calibrate']}', fixed threshold {threshold:g}; exclude {DEFAULT_EXCLUDE}) in a seqstream.Detector preloaded "
             f"with the recording's first N descriptors (Detector.preload: the state streaming them leaves; "
             f"preload_s), then its next {int(r.queries):,} frames (a later pass: every one revisits the route) "
             f"streamed one per call. Exact scan: every stored frame scored (the reference). Candidate mode: k = "

@@ -20,6 +20,7 @@ from greenloop.methods.dictionary import cnn, spots
 from greenloop.evaluate import closure_counts, operating_point
 from greenloop.groundtruth import far_in_time, revisit_frames
 from greenloop.util.checks import positive_int
+from greenloop.groundtruth import DEFAULT_EXCLUDE
 
 
 def threshold(frames_per_spot: int, error_rate: float, margin: int) -> dict:
@@ -148,7 +149,7 @@ def run(labels, n_classes: int, threshold: int) -> np.ndarray:
     return running_count(labels, n_classes) >= threshold
 
 
-def declared_pairs(pred, reference_labels, threshold: int, exclude: int = 150) -> np.ndarray:
+def declared_pairs(pred, reference_labels, threshold: int, exclude: int = DEFAULT_EXCLUDE) -> np.ndarray:
     """The loop pairs the dictionary declares: (T, T) bool, True at [t, i] when frame t is flagged
     (:func:`run` at ``threshold``) and frame i belongs to the spot predicted for t
     (reference_labels[i] == pred[t]) with |i - t| > exclude (``groundtruth.far_in_time``).
@@ -195,7 +196,7 @@ def closure_events(labels, n_classes: int, threshold: int) -> list[dict]:
     return events
 
 
-def score_closures(pred, reference_labels, gt, threshold: int, exclude: int = 150,
+def score_closures(pred, reference_labels, gt, threshold: int, exclude: int = DEFAULT_EXCLUDE,
                    queries=None) -> dict:
     """Score the detector's closures against pose ground truth.
 
@@ -253,7 +254,7 @@ def score_closures(pred, reference_labels, gt, threshold: int, exclude: int = 15
             "recall": float((flags & true_at & revisit).sum() / max(int(revisit.sum()), 1))}
 
 
-def choose_threshold(pred, reference_labels, gt, taus, tune, exclude: int = 150):
+def choose_threshold(pred, reference_labels, gt, taus, tune, exclude: int = DEFAULT_EXCLUDE):
     """Pick tau on a tuning part only: the tau with the highest frame-level F1 there.
 
     pred, reference_labels, gt, exclude: as in :func:`score_closures`. taus: candidate thresholds
@@ -289,7 +290,7 @@ class SpotDetector(NamedTuple):
     n_train: int
 
 
-def operating_points(X, frames_per_spot: int, taus, frames, gt, exclude: int = 150, exclude_steps: int | None = None,
+def operating_points(X, frames_per_spot: int, taus, frames, gt, exclude: int = DEFAULT_EXCLUDE, exclude_steps: int | None = None,
                      n_train: int | None = None, queries=None, seed: int = 0, progress: bool = True,
                      **train_kw) -> tuple[SpotDetector, list[dict]]:
     """Train the spot CNN on the first frames, predict every frame, score the dictionary at each tau.

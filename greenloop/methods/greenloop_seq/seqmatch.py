@@ -59,6 +59,7 @@ import numpy as np
 
 from greenloop import evaluate, features
 from greenloop.similarity import apply_projection, l2_normalise, pca_whiten
+from greenloop.groundtruth import DEFAULT_EXCLUDE
 
 DESCRIPTORS = features.SEQUENCE_DESCRIPTORS   # each a features.BACKBONES entry (one registry)
 COLORS = ("bgr", "rgb")
@@ -444,7 +445,7 @@ def _best_per_query(S, GT, exclude: int, queries):
     return js, best, score, G[best, js], (G & m)[:, js].any(0)
 
 
-def closures(S, GT, threshold: float, exclude: int = 150, queries=None) -> dict:
+def closures(S, GT, threshold: float, exclude: int = DEFAULT_EXCLUDE, queries=None) -> dict:
     """Per-query closures of a score matrix at a threshold (what a streaming detector declares).
 
     At every query frame j (j in ``queries`` if given) whose best candidate i* (largest S[i, j],
@@ -458,7 +459,7 @@ def closures(S, GT, threshold: float, exclude: int = 150, queries=None) -> dict:
     return evaluate.closure_counts(score >= threshold, ok, rev, at=js)
 
 
-def choose_threshold(S, GT, exclude: int = 150, queries=None, rule: str = "f1") -> float:
+def choose_threshold(S, GT, exclude: int = DEFAULT_EXCLUDE, queries=None, rule: str = "f1") -> float:
     """The threshold of per-query closures (:func:`closures`) picked on the given (tuning) queries.
 
     rule: "f1" (default): the best-query score that maximises closure F1; "p95": the lowest one

@@ -30,6 +30,7 @@ from greenloop.methods.greenloop_seq.candidates import (AROUND, FOLLOW, FOLLOW_D
 from greenloop.util import numba_kernels
 from greenloop.util.checks import positive_int
 from greenloop.util.threads import one_blas_thread
+from greenloop.groundtruth import DEFAULT_EXCLUDE
 
 __all__ = ["Detector", "INDEX_FIT", "NULL_SAMPLE", "INDEX_DIM", "best_candidate", "score_matrix", "tune_knobs", "stream_disagreements", "stream_matches_matrix", "stream_check"]
 
@@ -137,7 +138,7 @@ class Detector(CandidateMode):
     """
 
     def __init__(self, threshold=None, descriptor: str = "pixels", seq_len: int = 10,
-                 velocities=DEFAULT_VELOCITIES, exclude: int = 150, contrast_window: int = 10,
+                 velocities=DEFAULT_VELOCITIES, exclude: int = DEFAULT_EXCLUDE, contrast_window: int = 10,
                  projection=None, store_dtype: str = "float32", color: str = "bgr", weights="auto",
                  index: str | None = None, k: int = 20, index_options: dict | None = None,
                  center_window: int | list = 0, calibrate: bool | str = False, repeat_cos=None, cell_shift: int = 0,
@@ -514,7 +515,7 @@ def best_candidate(det) -> tuple[int, float]:
     rows = getattr(det, "last_candidates", None) if det.index_kind is not None else None
     return (int(rows[i]) if rows is not None else i), float(s[i])
 
-def score_matrix(X, exclude: int = 150, seq_len: int = 10, velocities=DEFAULT_VELOCITIES,
+def score_matrix(X, exclude: int = DEFAULT_EXCLUDE, seq_len: int = 10, velocities=DEFAULT_VELOCITIES,
                  contrast_window: int = 10, projection=None, store_dtype: str = "float32",
                  center_window: int | list = 0, calibrate: bool | str = False, repeat_cos=None,
                  cell_shift: int = 0) -> np.ndarray:

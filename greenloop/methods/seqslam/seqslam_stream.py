@@ -19,6 +19,7 @@ from greenloop.methods.seqslam.seqslam import (DS, R_WINDOW, describe_frames, di
                                velocities)
 from greenloop.methods.greenloop_seq import seqstream
 from greenloop.util.checks import positive_int
+from greenloop.groundtruth import DEFAULT_EXCLUDE
 
 __all__ = ["Detector", "score_matrix", "tune_knobs"]
 
@@ -33,7 +34,7 @@ class Detector(seqstream.Detector):
     Attributes as ``speed.seqstream.Detector`` (``events``, ``last_scores``, ``bytes_per_frame``, ...).
     """
 
-    def __init__(self, threshold=None, exclude: int = 150, ds: int = DS,
+    def __init__(self, threshold=None, exclude: int = DEFAULT_EXCLUDE, ds: int = DS,
                  contrast_window: int = R_WINDOW, vs=None, color: str = "bgr"):
         vs = velocities(ds) if vs is None else tuple(vs)
         super().__init__(None, descriptor="pixels", seq_len=positive_int("ds", ds, 0) + 1,
@@ -67,7 +68,7 @@ class Detector(seqstream.Detector):
         return [self.update_descriptor(x) for x in describe_frames(frames, self.color)]
 
 
-def score_matrix(X, exclude: int = 150, ds: int = DS, contrast_window: int = R_WINDOW,
+def score_matrix(X, exclude: int = DEFAULT_EXCLUDE, ds: int = DS, contrast_window: int = R_WINDOW,
                  vs=None, S0=None) -> np.ndarray:
     """The (N, N) score matrix the streaming :class:`Detector` thresholds, for greenloop.evaluate.
 
