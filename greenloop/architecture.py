@@ -57,8 +57,10 @@ LAYERS: tuple[Layer, ...] = (
           "leaderboard rows, provenance, verify"),
     Layer("experiments", ("experiments",),
           "one module per notebook's study, and default_choice"),
-    Layer("entry", ("__main__",),
-          "the command line"),
+    Layer("run", ("detect",),
+          "a user's recording streamed through a registered detector: knobs, exclusion, windows, state"),
+    Layer("entry", ("cli", "__main__"),
+          "the command line: one module per command, argument parsing and printing only"),
 )
 
 

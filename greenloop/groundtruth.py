@@ -37,8 +37,9 @@ from typing import NamedTuple
 import numpy as np
 from scipy.spatial.distance import cdist
 
-from greenloop.datasets import sequence
+from greenloop.datasets import groundtruth_formats as gt_formats, sequence
 from greenloop.util.checks import positive_int
+from greenloop.util.files import write_atomic
 
 DEFAULT_EXCLUDE = 150   # frames: the paper's neighbour window (Qi 2024, Eq. 5), GreenHouse's protocol; every default exclusion
 
@@ -290,3 +291,36 @@ def path_length(poses) -> float:
     """Length of the camera path in metres (sum of frame-to-frame translation)."""
     t = np.asarray(poses)[:, :3, 3]
     return float(np.linalg.norm(np.diff(t, axis=0), axis=1).sum())
+
+
+class Imported(NamedTuple):
+    """An imported ground-truth file: pairs (P, 3) int64 loop pairs written to ``out``; fmt its format
+    (``groundtruth_formats.FORMATS``); n_frames, n_reference: the frames of out's folder they were
+    checked against (None: not a sequence folder)."""
+    pairs: np.ndarray
+    out: Path
+    fmt: str
+    n_frames: int | None
+    n_reference: int | None
+
+
+def import_file(src, out=None, fmt: str = "auto", threshold_m: float | None = None,
+                reference_frames: int | None = None) -> Imported:
+    """Read a ground-truth file of another format (``datasets.groundtruth_formats``) and write it as
+    ground_truth.csv loop pairs at ``out`` (default beside ``src``), its frame numbers checked against
+    the frames of out's folder where it is a sequence folder. reference_frames: VPR-Bench's reference
+    images before the queries (default: the folder's first traversal)."""
+    src = Path(src)
+    out = Path(out) if out else src.parent / sequence.GROUND_TRUTH_NAME
+    n_frames = n_ref = None
+    try:
+        n_frames = len(sequence.list_frames(out.parent))
+        ts = sequence.traversals(out.parent)
+        n_ref = ts[0].stop if sequence.layout(out.parent) in ("traversals", "reference/query") else None
+    except (FileNotFoundError, ValueError):
+        pass                                   # not a sequence folder: nothing to check against
+    n_ref = reference_frames if reference_frames is not None else n_ref
+    fmt = gt_formats.detect_format(src) if fmt == "auto" else fmt
+    pairs = gt_formats.read(src, fmt, n_frames=n_frames, n_reference=n_ref, threshold_m=threshold_m)
+    write_atomic(out, lambda p: sequence.write_loop_pairs(p, pairs))
+    return Imported(pairs, out, fmt, n_frames, n_ref)

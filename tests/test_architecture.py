@@ -25,7 +25,8 @@ def test_the_reader_sees_every_form_of_import():
     found = {(i.module, i.target): i for i in architecture.imports(PACKAGE)}
     assert ("greenloop.speed.bench", "greenloop.report") in found                 # from greenloop import report
     assert ("greenloop.experiments.default_choice", "greenloop.experiments.leaderboard") in found
-    assert ("greenloop.__main__", "greenloop.methods.registry") in found       # from ...registry import REGISTRY
+    assert ("greenloop.cli.detect", "greenloop.methods.registry") in found       # from greenloop.methods import registry
+    assert ("greenloop.__main__", "greenloop.cli") in found                   # from greenloop.cli import main
     assert not any(i.local for i in found.values())
     assert architecture.unit("greenloop.speed.bench") == "speed" and architecture.unit("greenloop") == "__init__"
 

@@ -288,7 +288,7 @@ def test_the_dictionary_decides_and_has_no_score():
 
 
 
-STREAMED = [e for e in registry.ENTRIES if e.stream is not None and e.cli_knobs is not None]
+STREAMED = [e for e in registry.ENTRIES if e.score is not None and e.stream is not None and e.cli_knobs is not None]
 
 
 @pytest.mark.parametrize("entry", STREAMED, ids=[e.name for e in STREAMED])

@@ -165,7 +165,7 @@ def _detect(argv, capsys):
 
 
 def test_detect_resumes_from_its_state_with_the_same_closures(tmp_path, capsys, monkeypatch):
-    import greenloop.__main__ as cli
+    from greenloop import detect
     folder = _folder(tmp_path / "rec")
     base = ["detect", str(folder), "--method", "greenloop-seq", "--descriptor", "pixels-patchnorm",
             "--exclude", "10", "--seq-len", "3", "--contrast-window", "0", "--threshold", "0.8",
@@ -176,17 +176,17 @@ def test_detect_resumes_from_its_state_with_the_same_closures(tmp_path, capsys, 
     rc, part1, out = _detect(base + ["--state", str(state), "--stop-after", "30", "--save-every", "8"], capsys)
     assert rc == 0 and "stopped" in out and state.is_file() and part1 == []
     calls = {"n": 0}
-    real_read = cli._read_window
+    real_read = detect.read_window
 
     def interrupted(paths):                       # Ctrl-C during the 3rd window of the next run
         calls["n"] += 1
         if calls["n"] == 3:
             raise KeyboardInterrupt
         return real_read(paths)
-    monkeypatch.setattr(cli, "_read_window", interrupted)
+    monkeypatch.setattr(detect, "read_window", interrupted)
     rc, part2, _ = _detect(base + ["--state", str(state)], capsys)
     assert rc == 130
-    monkeypatch.setattr(cli, "_read_window", real_read)
+    monkeypatch.setattr(detect, "read_window", real_read)
     rc, part3, out = _detect(base + ["--state", str(state)], capsys)
     assert rc == 0 and "resumed at frame 38" in out and "65 frames" in out
     assert part1 + part2 + part3 == full

@@ -207,8 +207,9 @@ def test_cli_detect_by_method(tmp_path):
     assert none.returncode == 0, none.stderr
     assert f"{seqmatch.DEFAULT_NAME} (gradients, seq_len 10, exclude 20," in none.stdout, none.stdout
     assert "# exclude 20 (fraction)" in none.stdout and "10% of the 45 frames" in none.stdout
-    plain = subprocess.run(cmd[:7], capture_output=True, text=True, env=env, timeout=60)   # greenloop-seq, no threshold
-    assert plain.returncode == 0 and "(default greenloop-seq-grad)" in plain.stdout, plain.stderr
+    # greenloop-seq (the tuned family) without --tuned or --threshold: refused, pointing at the named default
+    plain = subprocess.run(cmd[:7], capture_output=True, text=True, env=env, timeout=60)
+    assert plain.returncode == 2 and "needs a threshold" in plain.stderr and seqmatch.DEFAULT_NAME in plain.stderr
     wrong = subprocess.run(cmd[:7] + ["--tuned", str(summary), "--variant", "greenloop-seq"], capture_output=True,
                            text=True, env=env, timeout=60)
     assert wrong.returncode == 2 and "no variant 'greenloop-seq'" in wrong.stderr

@@ -122,7 +122,7 @@ def _drive(folder: Path, places) -> Path:
 
 def _detect(folder, *flags):
     env = dict(os.environ, PYTHONPATH=str(ROOT), TF_CPP_MIN_LOG_LEVEL="3")
-    res = subprocess.run([sys.executable, "-m", "greenloop", "detect", str(folder), "--method", "greenloop-seq", *flags],
+    res = subprocess.run([sys.executable, "-m", "greenloop", "detect", str(folder), *flags],   # the named default
                          capture_output=True, text=True, env=env, timeout=120)
     assert res.returncode == 0, res.stderr
     return [line.split("\t") for line in res.stdout.splitlines() if line[:1].isdigit()]

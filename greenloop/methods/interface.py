@@ -62,7 +62,10 @@ class Entry(NamedTuple):
         (``speed.timing.detector_method``).
     knob_text: (knob record) -> one line for the table.
     checked: its rows get the stream-vs-matrix check over the whole stream (summary.json).
-    cli_knobs: the knob record ``detect --method NAME`` streams without ``--tuned``.
+    cli_knobs: the knob record ``detect --method NAME`` streams without ``--tuned`` (its keys are the
+        knobs ``detect``'s flags may set; ``fixed_threshold``: the threshold it streams at).
+    cli_threshold: (knob record) -> the default threshold where it follows the knobs (the
+        dictionary's tau = L + margin); None: ``fixed_threshold`` or a threshold given.
     decide: for score=None: (Data) -> dict(row=leaderboard row fields, detector=its streaming detector,
         preload=what its start takes); None otherwise.
     """
@@ -75,6 +78,7 @@ class Entry(NamedTuple):
     knob_text: Callable
     checked: bool = False
     cli_knobs: dict | None = None
+    cli_threshold: Callable | None = None
     decide: Callable | None = None
 
 

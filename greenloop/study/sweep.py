@@ -61,6 +61,24 @@ _METRIC = re.compile(r"^(?P<file>[^:\[\]]+\.csv)(?:\[(?P<key>[^=\]]+)=(?P<val>[^
 
 # ----------------------------------------------------------------------------- the plan
 
+def base_parameters(notebook, dataset, files=(), given=()) -> tuple[dict, list[str]]:
+    """The parameters of every point, in increasing precedence: what the dataset implies (its
+    sequence.yaml: ``study.params.sequence_parameters``, as make passes them), each YAML file of
+    ``files``, each (name, YAML text) of ``given``. Returns (parameters, one warning line per name
+    the notebook does not declare: a typo?)."""
+    base = dict(study_params.sequence_parameters(dataset)[0]) if Path(dataset).is_dir() else {}
+    for path in files:
+        if not os.path.isfile(path):
+            raise FileNotFoundError(f"parameters file {path} not found: pass a YAML file such as params/quick.yaml")
+        base.update(yaml.safe_load(open(path)) or {})
+    for name, value in given:
+        base[name] = yaml.safe_load(value)
+    if not Path(notebook).is_file():
+        return base, []
+    named = {**{k: path for path in files for k in yaml.safe_load(open(path)) or {}}, **{n: "-p" for n, _ in given}}
+    return base, study_params.undeclared(named, notebook)
+
+
 def parse_grid(specs) -> dict[str, list]:
     """``["name=v1,v2", ...]`` -> ``{"name": [v1, v2], ...}``, in the order given.
 

@@ -12,10 +12,13 @@ timing_window ((start, stop) described indices: training stops at the window's f
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from greenloop.methods.dictionary import dictionary as counts
 from greenloop.datasets import sequence
+from greenloop.methods.greenloop_seq import seqmatch
 from greenloop.methods.interface import Data, Entry, no_descriptors
 from greenloop.methods.dictionary import stream
 
@@ -58,4 +61,37 @@ def tune(data: Data) -> tuple[list, dict, dict]:
     return [], {}, {}
 
 
-ENTRY = Entry(NAME, no_descriptors, tune, None, None, None, lambda k: "tau = L + margin", decide=decide)
+CLI_KNOBS = dict(model=None, frames_per_spot=None, margin=10, backend="auto")   # detect's record: L (unknown), Delta
+FRAMES_PER_SPOT = 60   # L where detect is not told the model's: the paper's
+
+
+def tau(k: dict) -> int:
+    """The paper's threshold tau = L + Delta of a knob record (``CLI_KNOBS``' keys; L unknown: FRAMES_PER_SPOT)."""
+    return int(k["frames_per_spot"] or FRAMES_PER_SPOT) + int(k["margin"])
+
+
+def stream_frames(k: dict, threshold, data: Data) -> stream.Detector:
+    """``detect --method dictionary``'s streaming detector: the trained CNN ``k["model"]`` (a .keras
+    or .tflite file) counting spots to tau = ``threshold`` (an integer >= L; None: :func:`tau`).
+    Takes decoded frames (``update_many``); its events are {frame, spot, count}."""
+    L = k["frames_per_spot"]
+    if L is not None and L < 1:
+        raise ValueError(f"--frames-per-spot must be >= 1, got {L}")
+    t = tau(k) if threshold is None else threshold
+    if int(t) != t:
+        raise ValueError(f"--threshold (tau) must be an integer for --method dictionary, got {t:g}")
+    if L is not None and t < L:
+        raise ValueError(f"--threshold {int(t)} is below --frames-per-spot {k['frames_per_spot']}: the paper's "
+                         f"tau = L + margin must be >= L")
+    if k["model"] is None:
+        raise ValueError(f"--method dictionary needs --model (a trained .keras or .tflite file); without --method, "
+                         f"detect runs the named default {seqmatch.DEFAULT_NAME}, which needs no model")
+    if not Path(k["model"]).is_file():
+        raise FileNotFoundError(f"model file {k['model']} not found: pass a trained .keras model "
+                                f"(greenloop.methods.dictionary.cnn.train saves results/models/<key>/model.keras) or "
+                                f"a .tflite file (greenloop.methods.dictionary.stream.export_tflite)")
+    return stream.Detector(k["model"], int(t), backend=k["backend"])
+
+
+ENTRY = Entry(NAME, no_descriptors, tune, None, stream_frames, None, lambda k: "tau = L + margin", decide=decide,
+              cli_knobs=CLI_KNOBS, cli_threshold=tau)

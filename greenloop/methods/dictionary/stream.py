@@ -269,6 +269,8 @@ class Detector:
     int32), ``frame_index`` (frames seen), ``backend`` (the one in use), ``size`` (width, height).
     """
 
+    event_columns = ("spot", "count")   # an event: {frame, spot, count} (the detect table's columns)
+
     def __init__(self, model, threshold: int | None, n_classes: int | None = None, backend: str = "auto",
                  color: str = "bgr", num_threads: int | None = None):
         if backend not in BACKENDS:

@@ -68,12 +68,16 @@ def _weights(k: dict, data: Data):
 
 
 def stream(k: dict, threshold, data: Data) -> seqstream.Detector:
-    """The streaming ``seqstream.Detector`` of a knob record (threshold None or NaN: scores only)."""
+    """The streaming ``seqstream.Detector`` of a knob record (threshold None or NaN: scores only).
+    ``data.params`` "index" (a ``retrieval.KINDS`` name, or None) and "candidates" (k) put it in
+    candidate mode, whose index holds the stored rows reduced to ``seqstream.INDEX_DIM`` dims."""
     t = None if threshold is None or not np.isfinite(threshold) else float(threshold)
     desc = k["descriptor"] if k["descriptor"] in seqmatch.DESCRIPTORS else "pixels"
+    index = data.params.get("index")
+    mode = {} if index is None else dict(index=index, k=data.params.get("candidates", 20), index_dim=seqstream.INDEX_DIM)
     return seqstream.Detector(t, descriptor=desc, seq_len=k["seq_len"], exclude=data.exclude,
                              contrast_window=k["contrast_window"], projection=projection(k, data),
-                             weights=_weights(k, data), **_extra(k, data.params["velocities"]))
+                             weights=_weights(k, data), **_extra(k, data.params["velocities"]), **mode)
 
 
 def frame_describer(descriptor: str, weights="auto", input_size=None, vocabulary=None):

@@ -1,0 +1,41 @@
+"""The command line, in one place: ``python -m greenloop COMMAND ...``.
+
+One module per command, each with ``add_parser(subparsers)`` (its arguments) and ``run(args)``
+(calls the library, prints, returns the exit status); the work lives in the library (evo's style).
+``COMMANDS`` lists them in ``--help`` order; a new command is a module and one line there.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
+
+from greenloop.cli import detect, import_gt, sweep  # noqa: E402
+
+COMMANDS = (detect, sweep, import_gt)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser: one subparser per module of ``COMMANDS``."""
+    ap = argparse.ArgumentParser(prog="python -m greenloop",
+                                 description="greenloop: CNN visual loop-closure detection for agricultural robots.")
+    sub = ap.add_subparsers(dest="command", metavar="COMMAND")
+    for command in COMMANDS:
+        command.add_parser(sub)
+    return ap
+
+
+def main(argv=None) -> int:
+    """Parse ``argv`` and run the command; errors print one line ``error: ...`` and return 2."""
+    ap = build_parser()
+    args = ap.parse_args(argv)
+    if not getattr(args, "func", None):
+        ap.print_help()
+        return 0
+    try:
+        return args.func(args)
+    except (FileNotFoundError, ValueError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2

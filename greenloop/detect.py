@@ -1,0 +1,340 @@
+"""Stream a user's recording through a registered detector: what ``python -m greenloop detect`` runs.
+
+Every method goes one way: its registry entry (``greenloop.methods.registry``) gives the knob
+record (``Entry.cli_knobs``, or a notebook 13 ``summary.json`` row with ``tuned``), the streaming
+detector (``Entry.stream``) and, for a detector fed descriptors, the frame -> descriptor step
+(``Entry.describer``); a detector with ``update_many`` (greenloop-seq's, the dictionary's) takes
+the decoded frames itself. The exclusion follows ``greenloop.exclusion`` (make's rule) unless
+given. Frames are decoded in colour (BGR, as a camera delivers them) in windows.
+
+Units: ``step``, ``exclude`` and ``seq_len`` count streamed frames (every ``step``-th frame of
+the folder); an event is a dict with ``frame`` (streamed frame number) and the detector's
+``event_columns`` (default ``match``, ``score``).
+"""
+from __future__ import annotations
+
+import json
+import pickle
+import sys
+from pathlib import Path
+from typing import NamedTuple
+
+import cv2
+import numpy as np
+
+from greenloop import exclusion
+from greenloop.datasets.sequence import DESCRIPTION_NAME, list_frames, read_description
+from greenloop.methods import registry
+from greenloop.methods.greenloop_seq import seqmatch, seqstream
+from greenloop.methods.interface import Data
+from greenloop.methods.lsh import retrieval
+from greenloop.speed import timing
+from greenloop.util.files import write_atomic
+from greenloop.util.progress import bar
+
+MATCH_COLUMNS = ("frame", "file", "match", "match_file", "score", "closure")
+OVERRIDES = ("descriptor", "seq_len", "contrast_window", "model", "frames_per_spot", "margin", "backend")
+
+
+class Plan(NamedTuple):
+    """What one detect run streams. name: the method; knobs: its knob record (with where each
+    came from in ``lines``); threshold: the score (or tau) to reach; step, exclude: streamed frames;
+    paths: the streamed frames' files; lines: the header lines printed before the stream."""
+    name: str
+    knobs: dict
+    threshold: float
+    step: int
+    exclude: int
+    paths: list
+    lines: list
+
+
+def read_window(paths) -> list[np.ndarray]:
+    """Frames (H, W, 3) uint8 BGR decoded from ``paths``; ValueError naming an unreadable file."""
+    frames = []
+    for p in paths:
+        img = cv2.imread(str(p), cv2.IMREAD_COLOR)
+        if img is None:
+            raise ValueError(f"cannot read image {p}: the file is missing, empty or not an image; replace or delete it")
+        frames.append(img)
+    return frames
+
+
+def read_tuned(path, variant: str) -> tuple[dict, float, int, int]:
+    """A notebook 13 summary.json's row ``variant``: (knobs, threshold, frame_step, exclude in ORIGINAL frames)."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"--tuned {path}: no such file; run notebook 13 on a recording of your site "
+                                f"(make all DATASET=...), then pass its <results>/13_leaderboard/summary.json")
+    summary = json.loads(path.read_text())
+    if variant not in summary.get("knobs", {}):
+        raise ValueError(f"--tuned {path} has no variant {variant!r} (it has {sorted(summary.get('knobs', {}))})")
+    step = int(summary["frame_step"])
+    return summary["knobs"][variant], summary["thresholds"][variant], step, int(summary["exclude_steps"]) * step
+
+
+def default_variant(name: str) -> str | None:
+    """The summary.json row ``--tuned`` streams without ``--variant``: greenloop-seq-fast (no CNN) for
+    greenloop-seq, none for the others (they must name it)."""
+    return "greenloop-seq-fast" if name == "greenloop-seq" else None
+
+
+def _base(name: str, entry, tuned, variant) -> tuple[dict, float | None, str, int | None, int | None]:
+    """(knobs, threshold, origin, tuned frame_step, tuned exclude) before the flags."""
+    if tuned:
+        variant = variant or default_variant(name)
+        if variant is None:
+            raise ValueError(f"--tuned needs --variant: the leaderboard row whose knobs --method {name} streams")
+        knobs, threshold, step, ex = read_tuned(tuned, variant)
+        return dict(entry.cli_knobs, **knobs), threshold, "--tuned", step, ex
+    knobs = dict(entry.cli_knobs)
+    return knobs, knobs.get("fixed_threshold"), f"default {name}", None, None
+
+
+def knobs_for(name: str, folder, tuned=None, variant=None, threshold=None, step=None, **flags) -> tuple:
+    """The knob record, threshold and step ``detect`` streams with, and one line per knob saying
+    where it came from (the entry's defaults, ``tuned``'s row, sequence.yaml's frame_step, a flag,
+    which wins). flags: OVERRIDES given (None: not given). Returns (knobs, threshold, step, lines,
+    tuned exclude in original frames or None)."""
+    entry = registry.get(name)
+    if entry.stream is None or entry.cli_knobs is None:
+        raise ValueError(f"--method {name} has no streaming form for detect")
+    knobs, threshold0, where, tuned_step, tuned_ex = _base(name, entry, tuned, variant)
+    origin = dict.fromkeys(knobs, where)
+    for k, v in flags.items():
+        if v is None:
+            continue
+        if k not in entry.cli_knobs:
+            takes = [n for n, e in registry.REGISTRY.items() if e.cli_knobs and k in e.cli_knobs]
+            raise ValueError(f"--{k.replace('_', '-')} does not apply to --method {name}"
+                             + (" (it needs no model)" if k == "model" else "")
+                             + f": it is a knob of --method {' / '.join(takes)}")
+        knobs[k], origin[k] = v, f"--{k.replace('_', '-')}"
+    if entry.cli_threshold is not None:        # a default that follows the knobs (the dictionary's tau = L + margin)
+        threshold0 = entry.cli_threshold(knobs)
+    threshold = threshold if threshold is not None else threshold0
+    if threshold is None:
+        raise ValueError(f"--method {name} needs a threshold chosen on your own data: pass --threshold T or --tuned "
+                         f"<results>/13_leaderboard/summary.json (notebook 13 picks knobs and threshold on a tuning "
+                         f"part); --method {seqmatch.DEFAULT_NAME} (the default) has a fixed one")
+    desc = read_description(folder) if Path(folder).is_dir() else {}
+    step_from = "--step" if step is not None else (DESCRIPTION_NAME if desc.get("frame_step") else "default")
+    step = step or desc.get("frame_step") or 1
+    if step < 1:
+        raise ValueError(f"--step must be >= 1, got {step}")
+    lines = [f"# {k} {knobs[k]} ({origin[k]})" for k in knobs if k != "fixed_threshold"]
+    lines += [f"# threshold {threshold:g} ({'--threshold' if threshold != threshold0 else where})",
+              f"# step {step} ({step_from})"]
+    if tuned_step is not None and tuned_step != step:
+        lines.append(f"# --tuned picked its knobs streaming every {tuned_step}th frame; here every {step} (no frame "
+                     f"is dropped unless asked): pass --step {tuned_step} to stream at the tuned rate")
+    return knobs, float(threshold), int(step), lines, tuned_ex
+
+
+def exclusion_for(folder, n: int, step: int, exclude=None, tuned_exclude=None) -> tuple[int, str, str]:
+    """The exclusion in streamed frames, its source and the rule's sentence: ``exclude`` (streamed frames), else
+    the folder's sequence.yaml, else ``tuned_exclude`` (original frames), else greenloop.exclusion's
+    rule. Warns on stderr when fewer than half of the ``n`` streamed frames have a candidate."""
+    if exclude is not None:
+        frames, source, rule = exclude, "--exclude", f"--exclude {exclude} streamed frames"
+    else:
+        found = exclusion.exclusion(folder)
+        if tuned_exclude is not None and found.source != DESCRIPTION_NAME:
+            found = exclusion.Exclusion(tuned_exclude, "--tuned", f"exclude {tuned_exclude} frames, from --tuned")
+        frames, source = found.frames // step, found.source
+        rule = found.rule + ("" if step == 1 else f"; {frames} streamed frames at step {step}")
+    if exclusion.candidate_share(n, frames) < 0.5:
+        print(f"warning: exclude {frames} leaves only {max(n - frames - 1, 0)} of the {n} streamed frames any "
+              f"candidate (a loop is searched among frames more than {frames} frames older): pass --exclude N "
+              f"or write `exclude: N` in {Path(folder) / DESCRIPTION_NAME}", file=sys.stderr, flush=True)
+    return frames, source, rule
+
+
+def plan(folder, name: str = seqmatch.DEFAULT_NAME, tuned=None, variant=None, threshold=None, step=None,
+         exclude=None, **flags) -> Plan:
+    """Everything a detect run decides before its first frame (:func:`knobs_for`, :func:`exclusion_for`)."""
+    knobs, threshold, step, lines, tuned_ex = knobs_for(name, folder, tuned, variant, threshold, step, **flags)
+    paths = list_frames(folder)[::step]
+    ex, source, rule = exclusion_for(folder, len(paths), step, exclude, tuned_ex)
+    return Plan(name, knobs, threshold, step, ex, paths, lines + [f"# exclude {ex} ({source})", f"# exclusion: {rule}"])
+
+
+def header(p: Plan, folder, index=None, candidates: int = 20) -> str:
+    """The line before the stream: frames, method, its main knobs, exclusion, threshold, candidates."""
+    k = p.knobs
+    main = (f"{k['descriptor']}, seq_len {k['seq_len']}, exclude {p.exclude}, contrast window {k['contrast_window']}"
+            if "seq_len" in k else f"exclude {p.exclude}")
+    return (f"# {len(p.paths)} frames from {folder} (every {p.step}); {p.name} ({main}); threshold {p.threshold:g}; "
+            f"candidates: {'every stored frame' if index is None else f'{candidates} from {index}'}")
+
+
+def data_for(p: Plan, folder, index=None, candidates: int = 20) -> Data:
+    """The ``Data`` a registry entry's ``stream`` and ``describer`` read on a user's recording: no
+    ground truth, no split; params: the default velocities, ImageNet weights, the index options."""
+    params = {"velocities": seqmatch.DEFAULT_VELOCITIES, "weights": "auto", "index": index, "candidates": candidates}
+    return Data(str(folder), p.step, np.arange(len(p.paths)) * p.step, None, p.exclude, None, None, params, {}, {}, {})
+
+
+class FrameStream:
+    """A registered detector fed decoded frames: ``update_many(frames)`` -> closure events and
+    ``decide_many(frames)`` -> one decision per frame ({'frame', 'match', 'score', 'closure'});
+    a detector that takes frames itself is called directly, one fed descriptors through ``describe``
+    (the timed path, ``speed.timing.detector_method``)."""
+
+    def __init__(self, name: str, detector, describe):
+        self.detector = detector
+        self._step = None if describe is None else timing.detector_method(name, detector, describe).step
+
+    def update_many(self, frames) -> list[dict]:
+        if self._step is None:
+            return self.detector.update_many(frames)
+        return [e for e in (self._step(self.detector, f) for f in frames) if e]
+
+    def decide_many(self, frames) -> list[dict]:
+        if self._step is None:
+            return self.detector.decide_many(frames)
+        rows = []
+        for f in frames:
+            j, event = self.detector.frame_index, self._step(self.detector, f)
+            match, score = seqstream.best_candidate(self.detector)
+            rows.append(dict(event or {"frame": j, "match": match, "score": score}, closure=event is not None))
+        return rows
+
+
+def open_stream(p: Plan, folder, index=None, candidates: int = 20, state=None) -> FrameStream:
+    """The plan's detector: new from its registry entry, or the one saved in ``state`` (a file from
+    :func:`save_state` for the same recording and knobs; ValueError otherwise)."""
+    key = state_key(p, folder, index, candidates)
+    if state and Path(state).is_file():
+        with open(state, "rb") as f:
+            saved = pickle.load(f)
+        if saved.get("key") != key:
+            raise ValueError(f"--state {state} was saved for another run ({saved.get('key')}); pass the same folder "
+                             f"and options, or delete the file to start over")
+        det = saved["detector"]
+    else:
+        if index is not None:
+            retrieval.one_thread()
+        det = registry.get(p.name).stream(p.knobs, p.threshold, data_for(p, folder, index, candidates))
+    entry = registry.get(p.name)
+    # a detector that describes frames with the record's own descriptor takes them in windows (one
+    # batched pass); the others are fed the entry's describer's output, frame by frame
+    own = entry.describer is None or getattr(det, "descriptor", None) == p.knobs.get("descriptor")
+    return FrameStream(p.name, det, None if own else entry.describer(p.knobs, data_for(p, folder)))
+
+
+def state_key(p: Plan, folder, index, candidates) -> dict:
+    """What a saved state must match to be resumed: knobs, threshold, step, exclusion, folder, frames, index."""
+    return dict(p.knobs, method=p.name, threshold=p.threshold, step=p.step, exclude=p.exclude,
+                folder=str(Path(folder).resolve()), frames=len(p.paths), index=index, candidates=candidates)
+
+
+def save_state(stream: FrameStream, key: dict, path) -> None:
+    """Write the detector (stored frames, index, buffers, events) and its key to ``path``, atomically."""
+    def dump(tmp):
+        with open(tmp, "wb") as f:
+            pickle.dump({"key": key, "detector": stream.detector}, f, protocol=pickle.HIGHEST_PROTOCOL)
+    write_atomic(path, dump)
+
+
+def matches_writer(path, paths, append: bool):
+    """A function taking a window's decisions (``FrameStream.decide_many``) and appending one CSV line
+    per frame (MATCH_COLUMNS: frame and file, its best stored match and file, empty while none is a
+    candidate, the score, 1 where a closure was declared) to ``path``; a new file unless ``append``."""
+    path = Path(path)
+    if path.parent and not path.parent.is_dir():
+        raise FileNotFoundError(f"--matches {path}: folder {path.parent} does not exist")
+    if not append or not path.is_file():
+        path.write_text(",".join(MATCH_COLUMNS) + "\n")
+
+    def write(rows):
+        with open(path, "a") as f:
+            for r in rows:
+                m = r["match"]
+                f.write(f"{r['frame']},{paths[r['frame']].name},{m if m >= 0 else ''},"
+                        f"{paths[m].name if m >= 0 else ''},{'' if m < 0 else format(r['score'], '.6g')},"
+                        f"{int(r['closure'])}\n")
+    return write
+
+
+def event_columns(detector) -> tuple[str, ...]:
+    """The columns of the detector's events after ``frame``: its ``event_columns`` or (match, score)."""
+    return tuple(getattr(detector, "event_columns", ("match", "score")))
+
+
+def event_line(e: dict, columns, paths) -> str:
+    """One printed closure: frame, the event's columns, the frame's file (and the match's, if any)."""
+    vals = [f"{e[c]:.4f}" if isinstance(e[c], float) else str(e[c]) for c in columns]
+    files = [paths[e["frame"]].name] + ([paths[e["match"]].name] if "match" in e else [])
+    return "\t".join([str(e["frame"]), *vals, *files])
+
+
+def run_windows(stream: FrameStream, paths, window: int, first: int = 0, stop=None, after=None, matches=None,
+                out=print, desc: str = "detect") -> float:
+    """Decode paths[first:stop] in windows of ``window`` frames, feed each to ``stream``, ``out`` one
+    line per closure (:func:`event_line`), ``matches(rows)`` per window when given, ``after()`` per
+    window (state saving); a progress bar on stderr. Returns the wall seconds (decoding included)."""
+    stop = len(paths) if stop is None else stop
+    columns = event_columns(stream.detector)
+    progress = bar(total=len(paths), initial=first, desc=desc, unit="frame")
+
+    def go():
+        for start in range(first, stop, window):
+            chunk = paths[start:min(start + window, stop)]
+            frames = read_window(chunk)
+            rows = stream.decide_many(frames) if matches else stream.update_many(frames)
+            for e in rows:
+                if e.get("closure", True):
+                    out(event_line(e, columns, paths))
+            if matches is not None:
+                matches(rows)
+            progress.update(len(chunk))
+            if after is not None:
+                after()
+    try:
+        return timing.timed(go)[1]
+    finally:
+        progress.close()
+
+
+class Run(NamedTuple):
+    """A finished (or stopped) detect run: the stream, the first and next frame numbers, the wall
+    seconds (decoding included) and whether the recording was finished."""
+    stream: FrameStream
+    first: int
+    next: int
+    seconds: float
+    finished: bool
+
+
+def run(p: Plan, folder, window: int = 70, index=None, candidates: int = 20, state=None, save_every: int = 10000,
+        stop_after=None, matches=None, out=print) -> Run:
+    """Stream the plan's frames (from where ``state`` stopped, if it exists) through its detector:
+    closures to ``out`` as declared, every frame's decision to the ``matches`` CSV, the detector to
+    ``state`` every ``save_every`` frames, on Ctrl-C (re-raised) and at the end; at most
+    ``stop_after`` frames in this run."""
+    if matches is not None and registry.get(p.name).describer is None:
+        raise ValueError("--matches needs a method that matches frames (the dictionary counts spot labels): "
+                         f"pass --method {seqmatch.DEFAULT_NAME} (the default) or another registered one")
+    stream = open_stream(p, folder, index, candidates, state)
+    key, first = state_key(p, folder, index, candidates), stream.detector.frame_index
+    stop = len(p.paths) if stop_after is None else min(len(p.paths), first + stop_after)
+    saved = [first]
+
+    def save_now(force=False):
+        if state and (force or stream.detector.frame_index - saved[0] >= save_every):
+            save_state(stream, key, state)
+            saved[0] = stream.detector.frame_index
+    write = None if matches is None else matches_writer(matches, p.paths, append=first > 0)
+    columns = event_columns(stream.detector)
+    if first:
+        out(f"# resumed at frame {first} (--state {state})")
+    out("\t".join(["frame", *columns, "file"] + (["match_file"] if "match" in columns else [])))
+    try:
+        seconds = run_windows(stream, p.paths, window, first, stop, save_now, write, out, p.name)
+    except KeyboardInterrupt:
+        save_now(force=True)
+        raise
+    save_now(force=True)
+    n = stream.detector.frame_index
+    return Run(stream, first, n, seconds, n == len(p.paths))
