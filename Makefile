@@ -122,26 +122,26 @@ all: $(HTML) $(RESULTS)/tables.md $(CROSS) ## run every notebook into results/, 
 # One table across every dataset that has results: results/ (synthetic) and results/<name>/.
 DATASET_RESULTS := results $(filter-out results/quick,$(patsubst %/07_feature_baselines/,%,$(wildcard results/*/07_feature_baselines/)))
 results/datasets.md: $(wildcard $(DATASET_RESULTS:%=%/*/summary.json)) $(RESULTS)/tables.md
-	$(BIN)/python -m greenloop.study.report --datasets $@ $(DATASET_RESULTS)
+	$(BIN)/python -m greenloop tables --datasets $@ $(DATASET_RESULTS)
 
 # Which table and figure of the papers the results reproduce (greenloop.study.coverage), read from them.
 results/coverage.md: $(wildcard $(DATASET_RESULTS:%=%/*/manifest.json)) greenloop/study/coverage.py
-	$(BIN)/python -m greenloop.study.report --coverage $@ $(DATASET_RESULTS)
+	$(BIN)/python -m greenloop tables --coverage $@ $(DATASET_RESULTS)
 
 # Does each paper's claim hold, per dataset (greenloop.study.verdict), read from the tables; README.md's
 # verdict block is refilled by `make readme`, not by a run.
 results/verdict.md: $(wildcard $(DATASET_RESULTS:%=%/*/manifest.json)) $(RESULTS)/tables.md greenloop/study/verdict.py
-	$(BIN)/python -m greenloop.study.verdict --out $@ $(DATASET_RESULTS)
+	$(BIN)/python -m greenloop verdict --out $@ $(DATASET_RESULTS)
 
 # Each notebook's git commit, environment hash, CPU, date (its manifest) and duration (papermill's, in
 # the executed notebook), one table per results folder (greenloop.study.provenance). After tables.md, as
 # datasets.md: in `make all` (-j too) it reads the manifests this run wrote. `make provenance` writes it
 # from the folders as they are, running nothing.
 results/PROVENANCE.md: $(wildcard $(DATASET_RESULTS:%=%/*/manifest.json)) $(RESULTS)/tables.md greenloop/study/provenance.py
-	$(BIN)/python -m greenloop.study.provenance --out $@ $(DATASET_RESULTS)
+	$(BIN)/python -m greenloop provenance --out $@ $(DATASET_RESULTS)
 
 provenance: | $(STAMP) ## results/PROVENANCE.md: each notebook's commit, environment hash, CPU, date and duration
-	$(BIN)/python -m greenloop.study.provenance --out results/PROVENANCE.md $(DATASET_RESULTS)
+	$(BIN)/python -m greenloop provenance --out results/PROVENANCE.md $(DATASET_RESULTS)
 
 # Every leaderboard row, the main paper's detector as a loop-closure detector, the detector's targets and
 # the long-recording benchmark, read from the folders' tables (greenloop.study.summary). After tables.md,
@@ -149,10 +149,10 @@ provenance: | $(STAMP) ## results/PROVENANCE.md: each notebook's commit, environ
 results/summary.md: $(wildcard $(foreach t,leaderboard comparisons targets,$(DATASET_RESULTS:%=%/13_leaderboard/$(t).csv)) $(DATASET_RESULTS:%=%/01_spot_grouping/table1.csv) \
 		$(DATASET_RESULTS:%=%/06_speed/paper_vs_run.csv) results/bench/scale_decisions.csv results/bench/scale.md) \
 		$(RESULTS)/tables.md greenloop/study/summary.py
-	$(BIN)/python -m greenloop.study.summary --out $@ $(DATASET_RESULTS)
+	$(BIN)/python -m greenloop summary --out $@ $(DATASET_RESULTS)
 
 summary: | $(STAMP) ## results/summary.md: every leaderboard row, the paper's detector, the targets, from the tables
-	$(BIN)/python -m greenloop.study.summary --out results/summary.md $(DATASET_RESULTS)
+	$(BIN)/python -m greenloop summary --out results/summary.md $(DATASET_RESULTS)
 
 # `make verify RESULTS=DIR`: did a rerun reproduce the committed tables? Every NN_name/*.csv of the
 # committed folder of DIR's dataset (REFERENCE, or REFERENCE/<dataset>) against DIR's, cell by cell,
@@ -161,17 +161,17 @@ summary: | $(STAMP) ## results/summary.md: every leaderboard row, the paper's de
 REFERENCE ?= results
 verify: | $(STAMP) ## did a rerun reproduce? RESULTS=DIR's tables vs the committed REFERENCE=results, outside timing
 	@test "$(origin RESULTS)" = "command line" || { echo "make verify RESULTS=DIR: name the rerun's results folder (compared with REFERENCE=$(REFERENCE))"; exit 2; }
-	$(BIN)/python -m greenloop.study.verify $(REFERENCE) $(RESULTS)
+	$(BIN)/python -m greenloop verify $(REFERENCE) $(RESULTS)
 
 default-choice: | $(STAMP) ## the named default's centring windows, cell shift and threshold, chosen on tuning queries -> results/default_choice/
-	$(BIN)/python -m greenloop.experiments.default_choice --nordland $(NORDLAND) --gardenspoint $(GARDENSPOINT) \
+	$(BIN)/python -m greenloop default-choice --nordland $(NORDLAND) --gardenspoint $(GARDENSPOINT) \
 		--synthetic $(SYNTHETIC) --out results/default_choice
 
 readme: | $(STAMP) ## the README's verdict table, results/verdict.md, summary.md and coverage.md, from the results folders
-	$(BIN)/python -m greenloop.study.report --coverage results/coverage.md $(DATASET_RESULTS)
-	$(BIN)/python -m greenloop.study.report results
-	$(BIN)/python -m greenloop.study.summary --out results/summary.md --readme README.md $(DATASET_RESULTS)
-	$(BIN)/python -m greenloop.study.verdict --out results/verdict.md --readme README.md $(DATASET_RESULTS)
+	$(BIN)/python -m greenloop tables --coverage results/coverage.md $(DATASET_RESULTS)
+	$(BIN)/python -m greenloop tables results
+	$(BIN)/python -m greenloop summary --out results/summary.md --readme README.md $(DATASET_RESULTS)
+	$(BIN)/python -m greenloop verdict --out results/verdict.md --readme README.md $(DATASET_RESULTS)
 
 # Each notebook gets, in increasing precedence: what the dataset says of itself (its sequence.yaml,
 # or an exclude that fits its ground truth: $(RESULTS)/sequence_params.yaml, written by
@@ -201,7 +201,7 @@ $(RESULTS)/%.html: $(RESULTS)/%.ipynb
 
 # results/tables.md also holds results/coverage.md, which every dataset's run may rewrite
 $(RESULTS)/tables.md: $(EXECUTED) $(wildcard $(RESULTS)/coverage.md)
-	$(BIN)/python -m greenloop.study.report $(RESULTS)
+	$(BIN)/python -m greenloop tables $(RESULTS)
 
 # RESULTS given on the command line wins (make quick RESULTS=results/mine); else results/quick/
 QUICK_RESULTS := $(if $(filter command line,$(origin RESULTS)),$(RESULTS),results/quick)
@@ -216,14 +216,14 @@ sweep: $(DATA_DEP) | $(STAMP) ## Dask sweep of SWEEP_GRID over SWEEP_NOTEBOOK (d
 	    $(if $(SWEEP_METRIC),--metric '$(SWEEP_METRIC)') --timeout $(TIMEOUT) $(PARAMS)
 
 bench: | $(STAMP) ## speed benchmark: streaming detector and training vs plain Keras -> results/bench/
-	$(BIN)/python -m greenloop.speed.bench --out $(RESULTS)/bench --dataset $(DATASET)
-	$(BIN)/python -m greenloop.study.report $(RESULTS)
+	$(BIN)/python -m greenloop bench --out $(RESULTS)/bench --dataset $(DATASET)
+	$(BIN)/python -m greenloop tables $(RESULTS)
 
 # SCALE_NOTE: a sentence for scale.md's header, e.g. what else shared the cores during the run
 SCALE_NOTE ?=
 bench-scale: | $(STAMP) ## retrieval indexes and the named default's whole decision (candidate mode vs the exact scan) at 10^4..10^6 stored frames (augmented Nordland) -> results/bench/scale.md (about an hour on 2 cores)
 	test -d "$(NORDLAND_SRC)" || { echo "bench-scale needs Nordland's frames: set NORDLAND_SRC=path (summer/, winter/), e.g. from git clone --depth 1 $(NORDLAND_URL)"; exit 1; }
-	OMP_NUM_THREADS=1 $(BIN)/python -m greenloop.speed.scale --src $(NORDLAND_SRC) --out $(RESULTS)/bench --note "$(SCALE_NOTE)"
+	OMP_NUM_THREADS=1 $(BIN)/python -m greenloop bench-scale --src $(NORDLAND_SRC) --out $(RESULTS)/bench --note "$(SCALE_NOTE)"
 
 # Optional, for the cross-checks against the torch originals only (GhostNet vs timm, the Lite0 port
 # and checkpoint reader vs efficientnet_lite_pytorch and torch.load): a CPU torch wheel where the
@@ -241,7 +241,7 @@ browser:
 	  else echo "no chromium/chromedriver and no root apt-get: tests/test_book.py skips its browser check"; fi; }
 
 book: | $(STAMP) ## a static site of every executed notebook of every dataset, the verdict table as its landing page -> build/book/ (nothing re-executed)
-	$(BIN)/python -m greenloop.study.book --out build/book $(DATASET_RESULTS)
+	$(BIN)/python -m greenloop book --out build/book $(DATASET_RESULTS)
 	@echo "open build/book/index.html"
 
 $(VENV)/.timm: $(STAMP)

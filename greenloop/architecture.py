@@ -16,15 +16,13 @@ Imports are read from the source with ``ast`` (``import greenloop.x``, ``from gr
 ``from greenloop.x import y`` and relative forms, at module level and inside functions), so an
 import that a function makes only when it runs is seen too.
 
-``python -m greenloop.architecture`` checks the package (exit status 1 and one line per violation);
+``python -m greenloop layers`` checks the package (exit status 1 and one line per violation);
 ``--markdown`` prints the layer listing that docs/ARCHITECTURE.md holds (tests/test_architecture.py
 compares the two).
 """
 from __future__ import annotations
 
-import argparse
 import ast
-import sys
 from pathlib import Path
 from typing import NamedTuple
 
@@ -213,24 +211,3 @@ def markdown(layers=LAYERS) -> str:
         units = ", ".join(f"`{u}`" for u in layer.units)
         lines.append(f"| {i} | {layer.name} | {units} | {layer.what} |")
     return "\n".join(lines) + "\n"
-
-
-def main(argv=None) -> int:
-    """CLI: check the package against the contract (status 1 and the violations), or print the
-    Markdown listing."""
-    ap = argparse.ArgumentParser(prog="python -m greenloop.architecture", description=__doc__.splitlines()[0])
-    ap.add_argument("--markdown", action="store_true", help="print the layer listing of docs/ARCHITECTURE.md")
-    args = ap.parse_args(argv)
-    if args.markdown:
-        print(markdown(), end="")
-        return 0
-    problems = check(Path(__file__).resolve().parent)
-    for p in problems:
-        print(p)
-    if not problems:
-        print(f"greenloop holds its {len(LAYERS)} layers: no import up a layer, no cycle, none inside a function")
-    return 1 if problems else 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -10,6 +10,7 @@ import pytest
 import greenloop
 from greenloop import architecture
 from greenloop.architecture import Layer
+from greenloop.cli import main as cli_main
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = Path(greenloop.__file__).resolve().parent
@@ -79,16 +80,16 @@ def test_a_cycle_between_modules_of_one_unit_is_reported(tmp_path):
 
 
 def test_the_documented_layers_are_the_contract():
-    """docs/ARCHITECTURE.md's layer table is ``python -m greenloop.architecture --markdown``."""
+    """docs/ARCHITECTURE.md's layer table is ``python -m greenloop layers --markdown``."""
     text = (ROOT / "docs" / "ARCHITECTURE.md").read_text()
-    start, end = "<!-- layers:start (python -m greenloop.architecture --markdown) -->\n", "<!-- layers:end -->"
+    start, end = "<!-- layers:start (python -m greenloop layers --markdown) -->\n", "<!-- layers:end -->"
     assert start in text and end in text, "docs/ARCHITECTURE.md lost its layer table"
     assert text.split(start, 1)[1].split(end, 1)[0] == architecture.markdown(), (
-        "docs/ARCHITECTURE.md's layer table is stale: paste `python -m greenloop.architecture --markdown`")
+        "docs/ARCHITECTURE.md's layer table is stale: paste `python -m greenloop layers --markdown`")
 
 
 def test_command_line(capsys):
-    assert architecture.main([]) == 0 and "holds its" in capsys.readouterr().out
-    assert architecture.main(["--markdown"]) == 0 and capsys.readouterr().out == architecture.markdown()
+    assert cli_main(["layers"]) == 0 and "holds its" in capsys.readouterr().out
+    assert cli_main(["layers", "--markdown"]) == 0 and capsys.readouterr().out == architecture.markdown()
     with pytest.raises(SystemExit):
-        architecture.main(["--bogus"])
+        cli_main(["layers", "--bogus"])

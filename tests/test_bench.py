@@ -1,4 +1,4 @@
-"""`python -m greenloop.speed.bench --quick` end to end on the tiny sequence: it runs, writes its
+"""`python -m greenloop bench --quick` end to end on the tiny sequence: it runs, writes its
 files, and the backends it times give Keras's labels. Correctness only; the figures it prints are
 not asserted (they depend on the machine and its load)."""
 import json
@@ -20,7 +20,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def test_bench_quick_writes_figures_and_backends_agree(tiny_sequence, tmp_path):
     out = tmp_path / "bench"
     env = dict(os.environ, PYTHONPATH=str(ROOT), GREENLOOP_CACHE=str(tmp_path / "models"))
-    r = subprocess.run([sys.executable, "-m", "greenloop.speed.bench", "--quick", "--dataset", str(tiny_sequence),
+    r = subprocess.run([sys.executable, "-m", "greenloop", "bench", "--quick", "--dataset", str(tiny_sequence),
                         "--out", str(out)], capture_output=True, text=True, env=env, timeout=600)
     assert r.returncode == 0, r.stderr[-3000:]
     res = json.loads((out / "bench.json").read_text())

@@ -11,6 +11,7 @@ import pytest
 
 from greenloop import report
 from greenloop.study import provenance
+from greenloop.cli import main as cli_main
 
 ROOT = Path(__file__).resolve().parents[1]
 GIT = shutil.which("git")
@@ -74,7 +75,7 @@ def test_provenance_md_lists_each_notebook_and_dashes_what_an_old_manifest_lacks
     report.write_json(res / "02_bare" / "manifest.json", {"parameters": {}})
     (res / "models").mkdir()                                       # no manifest: not a row
     new = json.loads((res / "01_new" / "manifest.json").read_text())
-    assert provenance.main([str(res), "--out", str(tmp_path / "PROVENANCE.md")]) == 0
+    assert cli_main(["provenance", str(res), "--out", str(tmp_path / "PROVENANCE.md")]) == 0
     assert capsys.readouterr().out.strip() == str(tmp_path / "PROVENANCE.md")
     text = (tmp_path / "PROVENANCE.md").read_text()
     assert "synthetic-greenhouse" in text and "models" not in text

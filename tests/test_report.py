@@ -5,6 +5,7 @@ import pytest
 
 from greenloop import report
 from greenloop.study import report as study_report
+from greenloop.cli import main as cli_main
 
 
 def test_tables_and_assembly(tmp_path):
@@ -22,11 +23,11 @@ def test_tables_and_assembly(tmp_path):
 
 def test_command_line_assembles_and_refuses_a_missing_folder(tmp_path, capsys):
     report.write_table(report.paper_vs_run([("spots", 38, 38)]), tmp_path / "01_x" / "paper_vs_run", title="T")
-    assert study_report.main([str(tmp_path)]) == 0
+    assert cli_main(["tables", str(tmp_path)]) == 0
     assert capsys.readouterr().out.strip() == str(tmp_path / "tables.md")
     assert "## 01_x" in (tmp_path / "tables.md").read_text()
     with pytest.raises(SystemExit) as e:
-        study_report.main([str(tmp_path / "nope")])
+        cli_main(["tables", str(tmp_path / "nope")])
     assert e.value.code == 2 and "no such results folder" in capsys.readouterr().err
 
 

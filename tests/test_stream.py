@@ -1,5 +1,5 @@
 """greenloop.methods.dictionary.stream (Detector, preprocessing, TFLite export) and the `python -m greenloop detect` CLI.
-Correctness only; speed is measured by `python -m greenloop.speed.bench`."""
+Correctness only; speed is measured by `python -m greenloop bench`."""
 import os
 import subprocess
 import sys

@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 from greenloop.study import summary
+from greenloop.cli import main as cli_main
 
 ROOT = Path(__file__).resolve().parents[1]
 LB_COLUMNS = ["method", "mode", "queries", "revisit_queries", "R@1_%", "R@1_lo_%", "R@1_hi_%", "AUC-PR_%",
@@ -80,7 +81,7 @@ def test_the_committed_summary_is_the_generated_one(monkeypatch):
 def test_a_planted_folder_gives_its_closure_rates_and_every_row(tmp_path, capsys):
     res = _planted(tmp_path / "results")
     out = tmp_path / "summary.md"
-    assert summary.main([str(res), "--out", str(out)]) == 0
+    assert cli_main(["summary", str(res), "--out", str(out)]) == 0
     assert capsys.readouterr().out.strip() == str(out)
     text = out.read_text()
     assert "planted-set" in text and "Planted CPU" in text and "`abababababab`" in text

@@ -8,6 +8,7 @@ import pandas as pd
 import pytest
 
 from greenloop.study import verify
+from greenloop.cli import main as cli_main
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -45,7 +46,7 @@ def ref_rerun(tmp_path):
 
 def test_an_identical_copy_reproduces_and_names_the_skipped_timing(ref_rerun, capsys):
     ref, rerun = ref_rerun
-    assert verify.main([str(ref), str(rerun)]) == 0
+    assert cli_main(["verify", str(ref), str(rerun)]) == 0
     out = capsys.readouterr().out
     assert "01_x/table2.csv: reproduced" in out and "timing columns skipped: extract_s_per_image" in out
     assert "timing rows skipped: 'frames per second'" in out and "4 reproduced" in out
@@ -54,7 +55,7 @@ def test_an_identical_copy_reproduces_and_names_the_skipped_timing(ref_rerun, ca
 def test_a_difference_in_a_plain_cell_fails_and_names_the_cell(ref_rerun, capsys):
     ref, rerun = ref_rerun
     plant(rerun, "01_x/table2.csv", 1, "AP_%", 39.01)
-    assert verify.main([str(ref), str(rerun)]) == 1
+    assert cli_main(["verify", str(ref), str(rerun)]) == 1
     out = capsys.readouterr().out
     assert "01_x/table2.csv: differs" in out
     assert "row 2 (backbone='vgg19') AP_%: reference '39.0', rerun '39.01'" in out and "NOT REPRODUCED" in out
@@ -76,17 +77,17 @@ def test_a_difference_in_timing_is_ignored(ref_rerun, capsys):
     plant(rerun, "01_x/table2.csv", 1, "extract_s_per_image", 0.5)
     plant(rerun, "01_x/paper_vs_run.csv", 1, "this run", "1900")           # the frames-per-second row
     plant(rerun, "01_x/paper_vs_run.csv", 1, "note", "this run: Intel Xeon (2 cores)")
-    assert verify.main([str(ref), str(rerun)]) == 0
+    assert cli_main(["verify", str(ref), str(rerun)]) == 0
     assert "differs" not in capsys.readouterr().out
 
 
 def test_a_missing_table_fails_and_a_new_one_does_not(ref_rerun, capsys):
     ref, rerun = ref_rerun
     (rerun / "02_y" / "extra.csv").write_text("a\n1\n")
-    assert verify.main([str(ref), str(rerun)]) == 0
+    assert cli_main(["verify", str(ref), str(rerun)]) == 0
     assert "02_y/extra.csv: new" in capsys.readouterr().out
     (rerun / "02_y" / "summary.csv").unlink()
-    assert verify.main([str(ref), str(rerun)]) == 1
+    assert cli_main(["verify", str(ref), str(rerun)]) == 1
     assert "02_y/summary.csv: missing" in capsys.readouterr().out
 
 
@@ -95,12 +96,12 @@ def test_a_retrained_seed_may_move_inside_the_committed_spread_not_outside(ref_r
     plant(rerun, "02_y/per_seed.csv", 0, "test_acc_%", 95.0)      # random split's seeds span 90..96
     plant(rerun, "02_y/summary.csv", 0, "acc_mean_%", 94.0)       # inside [min, max] 90..96
     plant(rerun, "02_y/summary.csv", 0, "acc_std_%", 2.0)         # inside one std of 3.01
-    assert verify.main([str(ref), str(rerun)]) == 0
+    assert cli_main(["verify", str(ref), str(rerun)]) == 0
     assert "02_y/per_seed.csv: reproduced\n    1 cells within the committed seed spread" in capsys.readouterr().out
 
     plant(rerun, "02_y/per_seed.csv", 3, "test_acc_%", 60.0)      # blocked split's seeds span 40..55
     plant(rerun, "02_y/summary.csv", 1, "acc_max_%", 60.0)
-    assert verify.main([str(ref), str(rerun)]) == 1
+    assert cli_main(["verify", str(ref), str(rerun)]) == 1
     out = capsys.readouterr().out
     assert ("row 4 (split='blocked') test_acc_%: reference '40.0', rerun '60.0' (outside the committed range "
             "over 3 seeds 40..55)") in out
@@ -160,6 +161,4 @@ def test_the_reference_is_the_committed_folder_of_the_reruns_dataset(tmp_path, c
     assert verify.resolve_reference(ref, rerun) == nordland
     assert verify.resolve_reference(nordland, rerun) == nordland
     (rerun / "01_x" / "manifest.json").write_text(json.dumps({"dataset": "data/my-run"}))
-    with pytest.raises(SystemExit) as e:
-        verify.main([str(ref), str(rerun)])
-    assert e.value.code == 2 and "my-run" in capsys.readouterr().err
+    assert cli_main(["verify", str(ref), str(rerun)]) == 2 and "my-run" in capsys.readouterr().err

@@ -12,9 +12,9 @@ import sys
 
 os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
 
-from greenloop.cli import detect, import_gt, sweep  # noqa: E402
+from greenloop.cli import bench, detect, import_gt, layers, results, sweep  # noqa: E402
 
-COMMANDS = (detect, sweep, import_gt)
+COMMANDS = (detect, import_gt, sweep, results, bench, layers)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -43,13 +43,12 @@ two Gardens Point pairs, and the synthetic sequence's leaderboard stream (every 
    (notebook 13's targets table). The threshold of step 2 is then picked at the width in the code.
 
 Everything else of ``seqmatch.DEFAULT_KNOBS`` (descriptor, seq_len, velocities) is kept.
-CLI: ``python -m greenloop.experiments.default_choice [--nordland DIR] [--gardenspoint DIR]
+CLI: ``python -m greenloop default-choice [--nordland DIR] [--gardenspoint DIR]
 [--synthetic DIR] [--out results/default_choice]`` writes ``<out>/windows``, ``<out>/repeat_gate``
 and ``<out>/cnn_width`` (.md and .csv) and ``<out>/manifest.json``.
 """
 from __future__ import annotations
 
-import argparse
 import functools
 import time
 from pathlib import Path
@@ -242,23 +241,21 @@ def width_table(streams: dict, frames: dict, timing_frames: dict, widths=CNN_WID
     return pd.DataFrame(rows).sort_values("mean_AUC-PR_tune_%", ascending=False, kind="stable").reset_index(drop=True)
 
 
-def main(argv=None) -> None:
-    p = argparse.ArgumentParser(prog="python -m greenloop.experiments.default_choice", description=__doc__.splitlines()[0])
-    p.add_argument("--nordland", default="data/nordland")
-    p.add_argument("--gardenspoint", default="data/gardenspoint")
-    p.add_argument("--synthetic", default="data/synthetic-greenhouse")
-    p.add_argument("--out", default="results/default_choice")
-    a = p.parse_args(argv)
-    for f in (a.nordland, a.gardenspoint, a.synthetic):
+def run(nordland="data/nordland", gardenspoint="data/gardenspoint", synthetic="data/synthetic-greenhouse",
+        out="results/default_choice") -> list[str]:
+    """Choose the named default's windows, cell shift and threshold and the CNN configuration's width
+    and threshold on the target streams' tuning queries; write windows, cnn_width, repeat_gate and the
+    manifest to ``out``. Returns the lines to print (the tables and the choice)."""
+    for f in (nordland, gardenspoint, synthetic):
         if not Path(f).is_dir():
-            raise SystemExit(f"dataset folder {f} not found: build it first (make nordland gardenspoint synthetic)")
-    s = streams(a.nordland, a.gardenspoint, a.synthetic)
+            raise FileNotFoundError(f"dataset folder {f} not found: build it first (make nordland gardenspoint synthetic)")
+    s = streams(nordland, gardenspoint, synthetic)
     table = rank(s, reverse=[k for k in s if k != SYNTHETIC_STREAM])
     best, shift = table["center_window"][0], int(table["cell_shift"][0])
     cw = {str(c): c for c in GRID}[best]
     t = threshold(s[THRESHOLD_STREAM], cw, shift)
-    t_cnn = cnn_threshold(a.nordland)
-    out = Path(a.out)
+    t_cnn = cnn_threshold(nordland)
+    out = Path(out)
     report.write_table(table, out / "windows", decimals=2,
                        title="The named default's center_window and cell_shift: per-query AUC-PR on the tuning queries of the target streams",
                        note=(f"greenloop.experiments.default_choice: the first row wins (highest mean). The 'p95' rule on "
@@ -268,10 +265,10 @@ def main(argv=None) -> None:
                              f"seqmatch.DEFAULT_THRESHOLD {seqmatch.DEFAULT_THRESHOLD}. The same rule picks {t_cnn:.4f} "
                              f"for the named CNN configuration ({seqmatch.CNN_NAME}, not ranked here): "
                              f"seqmatch.CNN_THRESHOLD {seqmatch.CNN_THRESHOLD}."))
-    widths = width_table(s, stream_frames(a.nordland, a.gardenspoint, a.synthetic),
+    widths = width_table(s, stream_frames(nordland, gardenspoint, synthetic),
                          {f"{Path(f).name} ({TIMING_FRAMES} frames)": sequence.load_frames(f, size=None, gray=False, limit=TIMING_FRAMES,
                                                                                          progress=False, dtype=np.uint8)
-                          for f in (a.nordland, a.synthetic)})
+                          for f in (nordland, synthetic)})
     report.write_table(widths, out / "cnn_width", decimals=2,
                        title=f"The named CNN configuration ({seqmatch.CNN_NAME}) by its CNN's input width: per-query AUC-PR on the "
                              "tuning queries of the target streams, and the CNN part's cost per frame",
@@ -291,14 +288,9 @@ def main(argv=None) -> None:
                               cnn_widths=list(CNN_WIDTHS), cnn_width_winner=int(widths["cnn_width"][0]),
                               fused_width=features.FUSED_WIDTH, timing_frames=TIMING_FRAMES,
                               timing_repeats=TIMING_REPEATS),
-                    datasets=[a.nordland, a.gardenspoint, a.synthetic])
-    print(table.round(2).to_string(index=False))
-    print(gate.round(2).to_string(index=False))
-    print(widths.round(2).to_string(index=False))
-    print(f"winner {best}, cell_shift {shift}; p95 threshold on {THRESHOLD_STREAM}: {t:.4f}; "
-          f"{seqmatch.CNN_NAME}: {t_cnn:.4f} at features.FUSED_WIDTH {features.FUSED_WIDTH} "
-          f"(the width ranking's winner: {int(widths['cnn_width'][0])})")
-
-
-if __name__ == "__main__":
-    main()
+                    datasets=[nordland, gardenspoint, synthetic])
+    return [table.round(2).to_string(index=False), gate.round(2).to_string(index=False),
+            widths.round(2).to_string(index=False),
+            f"winner {best}, cell_shift {shift}; p95 threshold on {THRESHOLD_STREAM}: {t:.4f}; "
+            f"{seqmatch.CNN_NAME}: {t_cnn:.4f} at features.FUSED_WIDTH {features.FUSED_WIDTH} "
+            f"(the width ranking's winner: {int(widths['cnn_width'][0])})"]

@@ -1,6 +1,6 @@
 """Speed benchmark: the paper's pipeline as written vs greenloop.methods.dictionary.stream, in one process.
 
-    python -m greenloop.speed.bench [--out results/bench] [--dataset data/synthetic-greenhouse] [--quick]
+    python -m greenloop bench [--out results/bench] [--dataset data/synthetic-greenhouse] [--quick]
                               [--accuracy-seeds 10]
 
 Measures, interleaving reference and candidates so that load from other jobs hits both alike:
@@ -25,9 +25,7 @@ If the dataset folder is missing, frames are random (said so in bench.json).
 """
 from __future__ import annotations
 
-import argparse
 import os
-import sys
 import tempfile
 from pathlib import Path
 
@@ -299,21 +297,20 @@ def same_distribution(plain, fast) -> dict:
             "mann_whitney_p": float(mannwhitneyu(fast, plain, alternative="two-sided").pvalue)}
 
 
-def main(argv=None) -> int:
-    """CLI: time the reference and greenloop.methods.dictionary.stream, train both ways, write bench.json / .md / .csv."""
-    args = _parse_args(argv)
-    (result, rows, best), result_wall = timed(_measure, args)
+def run(out="results/bench", dataset="data/synthetic-greenhouse", quick: bool = False, accuracy_seeds: int = 10) -> str:
+    """Time the reference and greenloop.methods.dictionary.stream, train both ways, write
+    bench.json / .md / .csv to ``out``. dataset: a sequence folder (random frames if missing);
+    quick: fewer repetitions, 1 seed, 2 epochs; accuracy_seeds: seeds of the 200-epoch accuracy
+    comparison, plain vs fast (0 skips it). Returns one line saying what was written."""
+    (result, rows, best), result_wall = timed(_measure, quick, dataset, accuracy_seeds)
     result["wall_seconds"] = result_wall
-    _write(Path(args.out), result, rows)
-    print(f"[bench] wrote {Path(args.out) / 'bench.json'} in {result['wall_seconds']:.0f} s; "
-          f"fastest window backend: {best}")
-    return 0
+    _write(Path(out), result, rows)
+    return f"[bench] wrote {Path(out) / 'bench.json'} in {result['wall_seconds']:.0f} s; fastest window backend: {best}"
 
 
-def _measure(args):
-    """Every measurement of :func:`main`: (bench.json's dict, the table's rows, the fastest backend)."""
-    quick = args.quick
-    raw, u8, y, info = _load(Path(args.dataset))
+def _measure(quick: bool, dataset, accuracy_seeds: int):
+    """Every measurement of :func:`run`: (bench.json's dict, the table's rows, the fastest backend)."""
+    raw, u8, y, info = _load(Path(dataset))
     X = (u8.astype(np.float32) / np.float32(255.0))[..., None]
     n_classes = int(y.max() + 1)
     print(f"[bench] {len(u8)} frames, {n_classes} spots, random={info['random_frames']}", flush=True)
@@ -336,9 +333,9 @@ def _measure(args):
     training, fast_run = bench_training(X, y, seeds, epochs)
 
     accuracy = None
-    if not quick and args.accuracy_seeds > 0:
-        print(f"[bench] (c') 200-epoch accuracy over {args.accuracy_seeds} seeds, plain vs fast", flush=True)
-        accuracy = bench_accuracy(X, y, list(range(args.accuracy_seeds)), 200)
+    if not quick and accuracy_seeds > 0:
+        print(f"[bench] (c') 200-epoch accuracy over {accuracy_seeds} seeds, plain vs fast", flush=True)
+        accuracy = bench_accuracy(X, y, list(range(accuracy_seeds)), 200)
         accuracy["comparison"] = same_distribution(accuracy["plain"]["test_accuracy"],
                                                    accuracy["fast"]["test_accuracy"])
 
@@ -350,20 +347,6 @@ def _measure(args):
             + _training_rows(training, accuracy, seeds, epochs) + _agreement_rows(agreement, quant))
     tmpdir.cleanup()
     return result, rows, best
-
-
-def _parse_args(argv):
-    """The command line (see the module docstring) as an argparse Namespace."""
-    ap = argparse.ArgumentParser(prog="python -m greenloop.speed.bench", description=__doc__.split("\n")[0])
-    ap.add_argument("--out", default="results/bench", help="output folder (default results/bench)")
-    ap.add_argument("--dataset", default="data/synthetic-greenhouse",
-                    help="sequence folder (default data/synthetic-greenhouse; random frames if missing)")
-    ap.add_argument("--quick", action="store_true", help="fewer repetitions, 1 seed, 2 epochs (< 1 min)")
-    ap.add_argument("--accuracy-seeds", type=int, default=10,
-                    help="seeds of the 200-epoch accuracy comparison, plain vs fast (default 10: the "
-                         "notebooks' 0-4 and five more, since one seed in ten can end several points "
-                         "below the rest; 0 skips it; cached models are reused)")
-    return ap.parse_args(argv)
 
 
 def _quick_model(X, y, n_classes: int):
@@ -545,7 +528,3 @@ def _write(out: Path, result: dict, rows: list[dict]) -> None:
             f"export, judged by its test-accuracy change, not by label equality.")
     md = report.write_table(pd.DataFrame(rows), out / "bench", title="Speed: reference vs greenloop.methods.dictionary.stream", note=note)
     print(md.read_text())
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -27,7 +27,6 @@ stored frame; the descriptor's own cost per frame (:func:`describe_ms`) in a col
 """
 from __future__ import annotations
 
-import argparse
 import time
 from pathlib import Path
 
@@ -606,28 +605,3 @@ def _stream_section(path: Path) -> list[str]:
             f"state file {r['state_file_bytes'] / 1e9:.2f} GB saved {r['saves']} times; {r['closures']:,} closures, "
             f"{r['closures_correct']:,} correct.", "",
             *([f"Resume: {r['resume_check']}.", ""] if "resume_check" in r else []), f"Notes: {r['note']}", ""]
-
-
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description="Scaling benchmark of candidate retrieval (module doc).")
-    ap.add_argument("--src", default="../shared/real/nordland", help="Nordland source (summer/, winter/)")
-    ap.add_argument("--out", default="results/bench", help="output folder")
-    ap.add_argument("--sizes", type=int, nargs="+", default=list(SIZES))
-    ap.add_argument("--queries", type=int, nargs="+", default=[2000, 1000, 300],
-                    help="queries per size (same order as --sizes)")
-    ap.add_argument("--dim", type=int, default=64)
-    ap.add_argument("--decision-queries", type=int, default=2000,
-                    help="frames streamed through the whole decision at each size")
-    ap.add_argument("--decision-sizes", type=int, nargs="+", default=None,
-                    help="stored counts of the whole decision (default: --sizes)")
-    ap.add_argument("--note", default="", help="a sentence for the header (e.g. what shared the cores)")
-    a = ap.parse_args(argv)
-    if len(a.queries) != len(a.sizes):
-        raise SystemExit("--queries needs one count per --sizes entry")
-    run(a.src, a.out, a.sizes, a.dim, a.queries, note=a.note, decision_queries=a.decision_queries,
-        decision_sizes=a.decision_sizes)
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -1,6 +1,6 @@
 """The rendered study: a static site of the executed notebooks, built without re-executing them.
 
-``python -m greenloop.study.book [--out build/book] RESULTS...`` (``make book``) writes one folder of
+``python -m greenloop book [--out build/book] RESULTS...`` (``make book``) writes one folder of
 plain HTML that opens from disk or any static host:
 
 * ``index.html``: the landing page: the verdict table (``results/verdict.md``), the headline figure,
@@ -17,11 +17,9 @@ are inside the notebooks' HTML (base64 images) or copied files, so the site has 
 """
 from __future__ import annotations
 
-import argparse
 import html
 import re
 import shutil
-import sys
 from pathlib import Path
 
 import mistune
@@ -157,17 +155,3 @@ def build(results_dirs, out) -> Path:
     book.mkdir(parents=True)
     done = notebook_pages(folders, book)
     return landing(folders[0], book, done)
-
-
-def main(argv=None) -> int:
-    """CLI (``make book``): build the book, print its landing page."""
-    ap = argparse.ArgumentParser(prog="python -m greenloop.study.book", description=__doc__.split("\n")[0])
-    ap.add_argument("results", nargs="+", help="results folders, the top one first: results results/nordland ...")
-    ap.add_argument("--out", default="build/book", help="the site's folder (replaced)")
-    args = ap.parse_args(argv)
-    print(build(args.results, args.out))
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -15,14 +15,11 @@ descriptions: nothing to measure).
 """
 from __future__ import annotations
 
-import argparse
 import json
-import sys
 from pathlib import Path
 
 import pandas as pd
 
-from greenloop.report import fill_block
 from greenloop.study import provenance
 
 MAIN, QI, ZCA, ZHANG, XU = ("main paper (CNN + dictionary)", "Qi 2024", "ResNet/Inception/ZCA",
@@ -144,23 +141,3 @@ def coverage(results_dirs) -> pd.DataFrame:
 def markdown(results_dirs) -> str:
     """:func:`coverage` as a GitHub markdown table (the README's and results/coverage.md's)."""
     return coverage(results_dirs).to_markdown(index=False) + "\n"
-
-
-def update_readme(readme, results_dirs) -> Path:
-    """Refill the ``coverage`` block of ``readme`` with :func:`markdown` of ``results_dirs``."""
-    return fill_block(readme, "coverage", markdown(results_dirs))
-
-
-def main(argv=None) -> int:
-    """CLI (``make readme-coverage``): refill README's coverage block from the results folders."""
-    ap = argparse.ArgumentParser(prog="python -m greenloop.study.coverage",
-                                 description="Refill a Markdown file's <!-- coverage:start --> block from results folders.")
-    ap.add_argument("markdown", help="the file to update, e.g. README.md")
-    ap.add_argument("results", nargs="+", help="results folders to read, e.g. results results/nordland")
-    args = ap.parse_args(argv)
-    print(update_readme(args.markdown, args.results))
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

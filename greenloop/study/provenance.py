@@ -1,6 +1,6 @@
 """results/PROVENANCE.md: where each notebook's results come from, read from what the runs wrote.
 
-``python -m greenloop.study.provenance [--out results/PROVENANCE.md] RESULTS...`` (``make provenance``)
+``python -m greenloop provenance [--out results/PROVENANCE.md] RESULTS...`` (``make provenance``)
 writes one table per results folder (``results``, ``results/nordland``, ...), one row per folder of it
 that holds a ``manifest.json`` (the notebooks, ``default_choice``): the git commit and whether the tree
 was dirty, the environment hash, the CPU model and the date, from the manifest
@@ -10,10 +10,8 @@ and nothing is guessed: a field an older manifest lacks shows ``—``.
 """
 from __future__ import annotations
 
-import argparse
 import json
 import re
-import sys
 from pathlib import Path
 
 from greenloop.util.files import write_atomic
@@ -77,7 +75,7 @@ def dataset_name(folder) -> str | None:
 def markdown(results_dirs) -> str:
     """PROVENANCE.md's text: a header saying how each column is read, then a table per results folder."""
     parts = ["# Provenance of the results\n\n",
-             "Written by `make provenance` (`python -m greenloop.study.provenance`) from each folder's "
+             "Written by `make provenance` (`python -m greenloop provenance`) from each folder's "
              "`manifest.json` and executed notebook; nothing is typed by hand. `—`: the manifest was "
              "written before that field was recorded.\n\n",
              "- **commit**: the checkout's `git rev-parse HEAD` when the notebook ran (first 12 digits); "
@@ -137,21 +135,3 @@ def write_provenance(results_dirs, out) -> Path:
     """Write :func:`markdown` of these results folders to ``out``, atomically."""
     text = markdown(results_dirs)
     return write_atomic(Path(out), lambda p: p.write_text(text))
-
-
-def main(argv=None) -> int:
-    """CLI: write PROVENANCE.md for the results folders named (default: results/PROVENANCE.md)."""
-    ap = argparse.ArgumentParser(prog="python -m greenloop.study.provenance",
-                                 description="Each notebook's commit, environment, CPU, date and duration.")
-    ap.add_argument("results", nargs="+", help="results folders (results results/nordland ...)")
-    ap.add_argument("--out", default=None, help="file to write (default: PROVENANCE.md in the first folder)")
-    args = ap.parse_args(argv)
-    missing = [d for d in args.results if not Path(d).is_dir()]
-    if missing:
-        ap.error(f"no such results folder: {', '.join(missing)}")
-    print(write_provenance(args.results, args.out or Path(args.results[0]) / "PROVENANCE.md"))
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -2,14 +2,12 @@
 
 Every notebook writes under ``<results_dir>/<notebook stem>/`` (through ``greenloop.report``);
 ``make`` assembles the ``*.md`` tables there into ``results/tables.md`` without re-executing anything
-(``python -m greenloop.study.report results``), and the results of several datasets into one table
-(``python -m greenloop.study.report --datasets results/datasets.md results results/nordland``).
+(``python -m greenloop tables results``), and the results of several datasets into one table
+(``python -m greenloop tables --datasets results/datasets.md results results/nordland``).
 """
 from __future__ import annotations
 
-import argparse
 import json
-import sys
 from pathlib import Path
 
 import pandas as pd
@@ -144,32 +142,3 @@ def coverage_with_claims(results_dirs) -> pd.DataFrame:
     t.insert(t.columns.get_loc("status") + 1, "claim holds",
              [verdict.claim_holds(p, i, results_dirs) for p, i in zip(t.paper, t["item"])])
     return t
-
-
-def main(argv=None) -> int:
-    """CLI (``make`` calls it): assemble RESULTS/tables.md, or with --datasets / --coverage write
-    one table across results folders. Prints the file written."""
-    ap = argparse.ArgumentParser(prog="python -m greenloop.study.report",
-                                 description="Assemble the notebooks' tables from a results folder.")
-    ap.add_argument("results", nargs="*", default=["results"],
-                    help="results folder (default results); with --datasets/--coverage: every folder to read")
-    group = ap.add_mutually_exclusive_group()
-    group.add_argument("--datasets", metavar="OUT", help="write one table across the results folders (.md, .csv)")
-    group.add_argument("--coverage", metavar="OUT", help="write the papers' coverage read from the results folders")
-    args = ap.parse_args(argv)
-    missing = [d for d in args.results if not Path(d).is_dir()]
-    if missing:
-        ap.error(f"no such results folder: {', '.join(missing)} (run `make all` first, or name another)")
-    if args.datasets:
-        print(write_cross_dataset(args.results, args.datasets))
-    elif args.coverage:
-        print(write_coverage(args.results, args.coverage))
-    elif len(args.results) != 1:
-        ap.error("give one results folder (or --datasets / --coverage for several)")
-    else:
-        print(assemble_tables(args.results[0]))
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

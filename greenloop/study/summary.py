@@ -1,7 +1,7 @@
 """results/summary.md: every leaderboard row, the main paper's detector as a loop-closure detector, the
 detector's targets and the long-recording benchmark on one page, read from the committed tables.
 
-``python -m greenloop.study.summary [--out results/summary.md] [--bench results/bench] RESULTS...``
+``python -m greenloop summary [--out results/summary.md] [--bench results/bench] RESULTS...``
 (``make summary``) reads, for each results folder (``results``, ``results/nordland``, ...; its dataset
 named as PROVENANCE.md names it, from its notebooks' manifests):
 
@@ -24,11 +24,9 @@ exception.
 """
 from __future__ import annotations
 
-import argparse
 import csv
 import os
 import re
-import sys
 from pathlib import Path
 
 from greenloop.report import fill_block
@@ -142,7 +140,7 @@ def header(results_dirs) -> str:
             r = {k: DASH if v == provenance.MISSING else v for k, v in provenance.row(d / nb).items()}
             rows.append([name(d), nb, r["commit"], r["CPU"], r["date"]])
     return ("# Summary: leaderboards, the main paper's detector, the detector's targets\n\n"
-            "Written by `make summary` (`python -m greenloop.study.summary`) from the tables each section "
+            "Written by `make summary` (`python -m greenloop summary`) from the tables each section "
             "names (each folder's `13_leaderboard/leaderboard.csv`, `comparisons.csv`, `targets.csv`, "
             "`01_spot_grouping/table1.csv`, `06_speed/paper_vs_run.csv`; `bench/scale_decisions.csv`); "
             "nothing is typed by hand. Numbers as the tables' markdown writes them (closure precision and "
@@ -409,29 +407,11 @@ def markdown(results_dirs, out=None, bench=None) -> str:
             + targets(results_dirs) + long_recordings(bench, out))
 
 
-def write_summary(results_dirs, out, bench=None) -> Path:
-    """Write :func:`markdown` of these results folders to ``out``, atomically."""
+def write_summary(results_dirs, out, bench=None, readme=None) -> Path:
+    """Write :func:`markdown` of these results folders to ``out``, atomically, and refill the
+    ``standing`` block of the Markdown file ``readme`` (when given) with :func:`standing`."""
     text = markdown(results_dirs, out, bench)
-    return write_atomic(Path(out), lambda p: p.write_text(text))
-
-
-def main(argv=None) -> int:
-    """CLI: write summary.md for the results folders named (default: results/summary.md)."""
-    ap = argparse.ArgumentParser(prog="python -m greenloop.study.summary",
-                                 description="Every leaderboard row, the main paper's detector, the targets.")
-    ap.add_argument("results", nargs="+", help="results folders (results results/nordland ...)")
-    ap.add_argument("--out", default=None, help="file to write (default: summary.md in the first folder)")
-    ap.add_argument("--bench", default=None, help="benchmark folder (default: bench in the first folder)")
-    ap.add_argument("--readme", help="a Markdown file whose <!-- standing:start --> block to refill")
-    args = ap.parse_args(argv)
-    missing_dirs = [d for d in args.results if not Path(d).is_dir()]
-    if missing_dirs:
-        ap.error(f"no such results folder: {', '.join(missing_dirs)}")
-    print(write_summary(args.results, args.out or Path(args.results[0]) / "summary.md", args.bench))
-    if args.readme:
-        fill_block(args.readme, "standing", standing(args.results))
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())
+    written = write_atomic(Path(out), lambda p: p.write_text(text))
+    if readme:
+        fill_block(readme, "standing", standing(results_dirs))
+    return written

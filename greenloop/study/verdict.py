@@ -1,6 +1,6 @@
 """Does each paper's headline claim hold here? One row per claim, one cell per dataset, read from the tables.
 
-``python -m greenloop.study.verdict [--out results/verdict.md] [--readme README.md] RESULTS...``
+``python -m greenloop verdict [--out results/verdict.md] [--readme README.md] RESULTS...``
 (``make readme``) reads the committed tables of each results folder (``results`` for the synthetic
 sequence, ``results/nordland``, ``results/gardenspoint``) and writes, per claim of :data:`CLAIMS`,
 the paper's value, the measured value with its spread, and a verdict, into ``results/verdict.csv``,
@@ -23,8 +23,6 @@ The verdicts (:data:`RULES`, printed under the table):
 """
 from __future__ import annotations
 
-import argparse
-import sys
 from pathlib import Path
 from typing import Callable, NamedTuple
 
@@ -418,24 +416,13 @@ def markdown(results_dirs) -> str:
     return summary.table(list(t.columns), t.itertuples(index=False)) + "\n" + RULES + "\n"
 
 
-def main(argv=None) -> int:
-    """CLI (``make readme``): write results/verdict.md and .csv, and refill the README's verdict block."""
-    ap = argparse.ArgumentParser(prog="python -m greenloop.study.verdict", description=__doc__.split("\n")[0])
-    ap.add_argument("results", nargs="+", help="results folders, e.g. results results/nordland results/gardenspoint")
-    ap.add_argument("--out", default="results/verdict.md", help="the markdown page (a .csv beside it)")
-    ap.add_argument("--readme", help="a Markdown file whose <!-- verdict:start --> block to refill")
-    args = ap.parse_args(argv)
-    table = verdicts(args.results)
-    out = Path(args.out)
-    write_atomic(out.with_suffix(".csv"), table.replace(r"\*\*", "", regex=True).to_csv(index=False))
-    write_atomic(out, "# Does each paper's claim hold here?\n\nWritten by `make readme` "
-                 "(`python -m greenloop.study.verdict`) from the tables of " +
-                 ", ".join(f"`{d}`" for d in args.results) + ".\n\n" + markdown(args.results))
-    if args.readme:
-        fill_block(args.readme, "verdict", markdown(args.results))
-    print(out)
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())
+def write(results_dirs, out="results/verdict.md", readme=None) -> Path:
+    """Write :func:`verdicts` to ``out`` (.md) and beside it (.csv), and refill the ``verdict`` block
+    of the Markdown file ``readme`` (when given)."""
+    out, text = Path(out), markdown(results_dirs)
+    write_atomic(out.with_suffix(".csv"), verdicts(results_dirs).replace(r"\*\*", "", regex=True).to_csv(index=False))
+    write_atomic(out, "# Does each paper's claim hold here?\n\nWritten by `make readme` (`python -m greenloop verdict`) "
+                 "from the tables of " + ", ".join(f"`{d}`" for d in results_dirs) + ".\n\n" + text)
+    if readme:
+        fill_block(readme, "verdict", text)
+    return out

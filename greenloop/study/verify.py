@@ -1,6 +1,6 @@
 """Did a rerun reproduce the committed results? Compare two results folders table by table.
 
-``python -m greenloop.study.verify REFERENCE RERUN`` (``make verify RESULTS=RERUN [REFERENCE=results]``)
+``python -m greenloop verify REFERENCE RERUN`` (``make verify RESULTS=RERUN [REFERENCE=results]``)
 reads every ``*.csv`` under each notebook folder (``NN_name/``) of REFERENCE and the table of the
 same path under RERUN, and compares them cell by cell:
 
@@ -30,11 +30,9 @@ the committed datasets (``results``): the rerun's manifests name its dataset, an
 """
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import re
-import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -274,32 +272,15 @@ def compare_folders(reference, rerun, rtol: float = RTOL) -> list[TableResult]:
     return out
 
 
-def main(argv=None) -> int:
-    """CLI: print one line per table, a summary; exit 0 (all reproduced), 1 (not), 2 (usage)."""
-    ap = argparse.ArgumentParser(prog="python -m greenloop.study.verify",
-                                 description="Did RERUN reproduce REFERENCE's tables, outside timing?")
-    ap.add_argument("reference", help="committed results folder (results, or results/<dataset>)")
-    ap.add_argument("rerun", help="the rerun's results folder (make all RESULTS=...)")
-    ap.add_argument("--rtol", type=float, default=RTOL, help=f"relative tolerance for non-integer numbers ({RTOL:g})")
-    args = ap.parse_args(argv)
-    for d in (args.reference, args.rerun):
-        if not Path(d).is_dir():
-            ap.error(f"no such results folder: {d}")
-    try:
-        reference = resolve_reference(args.reference, args.rerun)
-        results = compare_folders(reference, args.rerun, args.rtol)
-    except FileNotFoundError as e:
-        ap.error(str(e))
-    print(f"reference {reference}, rerun {args.rerun}: timing columns and rows skipped, "
-          f"other numbers within rtol {args.rtol:g} or the committed seed spread")
-    for r in results:
-        print(r.line())
+def check(reference, rerun, rtol: float = RTOL) -> tuple[list[str], bool]:
+    """Compare a rerun with the committed tables (:func:`compare_folders`, the reference resolved by
+    :func:`resolve_reference`). Returns (the lines to print: a header, one per table, the counts,
+    the verdict; whether every table was reproduced)."""
+    reference = resolve_reference(reference, rerun)
+    results = compare_folders(reference, rerun, rtol)
+    lines = [f"reference {reference}, rerun {rerun}: timing columns and rows skipped, other numbers within rtol "
+             f"{rtol:g} or the committed seed spread"] + [r.line() for r in results]
     count = {s: sum(r.status == s for r in results) for s in ("reproduced", "differs", "missing", "new")}
-    print(", ".join(f"{n} {s}" for s, n in count.items() if n or s == "reproduced"))
-    failed = not all(r.ok for r in results)
-    print("NOT REPRODUCED" if failed else "reproduced")
-    return 1 if failed else 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())
+    ok = all(r.ok for r in results)
+    return lines + [", ".join(f"{n} {s}" for s, n in count.items() if n or s == "reproduced"),
+                    "reproduced" if ok else "NOT REPRODUCED"], ok

@@ -17,7 +17,7 @@ Preprocessing and training data
     the same frame from a live camera give bit-identical model inputs (tests/test_stream.py).
 
 Backends (all give the labels of ``argmax(model.predict(x))``; checked by tests/test_stream.py
-and by ``python -m greenloop.speed.bench`` on every frame of the dataset)
+and by ``python -m greenloop bench`` on every frame of the dataset)
     "numpy":  the paper's CNN written out in NumPy with the weights pulled from the Keras model
               (``greenloop.methods.dictionary.cnn.forward``, the fused trainer's own forward pass): conv 3x3 + ReLU
               (numba's ``kernels.conv_relu``, or im2col without numba), the 28800 x 68 dense layer
@@ -30,7 +30,7 @@ and by ``python -m greenloop.speed.bench`` on every frame of the dataset)
     "keras":  ``model.predict`` (the reference; slow, for comparison only).
     "auto":   "tflite" when TensorFlow has tf.lite, else "numpy" (paper's architecture only).
 
-Why "auto" picks TFLite: in ``python -m greenloop.speed.bench`` (reference and candidates interleaved in
+Why "auto" picks TFLite: in ``python -m greenloop bench`` (reference and candidates interleaved in
 one process; the figures are in results/bench/bench.md) TFLite has the lowest window and
 single-frame times of the backends that give Keras's labels on every frame; NumPy is the
 dependency-free fallback. A numba forward pass (the training kernels of ``greenloop.util.numba_kernels``, with
