@@ -106,14 +106,18 @@ def test_supervisions_table_is_each_network_scored_on_the_heldout_part(setup, tr
     assert summ.loc["scnn softmax, RGB", "AP_min"] == t["AP_%"][:2].min() and summ.loc["scnn softmax, RGB", "AP_max"] == t["AP_%"][:2].max()
 
 
-def test_best_of_needs_separated_seed_ranges():
-    t = pd.DataFrame({"descriptor": list("aabbcc"), "supervision": "x", "fusion": "none", "layer": "",
-                      "AP_%": [50, 60, 40, 45, 30, 61], "R@100P_%": 0.0, "train_s": 1.0})
-    summ = sr.seed_summary(t)
-    assert sr.best_of(summ, ["a", "b"])[0] == "a"                  # [50, 60] above [40, 45]
+def test_best_of_needs_five_seeds_and_separated_seed_ranges():
+    def table(ap):
+        return sr.seed_summary(pd.DataFrame({"descriptor": [d for d in ap for _ in ap[d]], "supervision": "x",
+                                             "fusion": "none", "layer": "", "AP_%": [v for d in ap for v in ap[d]],
+                                             "R@100P_%": 0.0, "train_s": 1.0}))
+    summ = table({"a": [50, 52, 55, 58, 60], "b": [40, 41, 42, 44, 45], "c": [30, 35, 40, 50, 61]})
+    assert sr.best_of(summ, ["a", "b"])[0] == "a"                  # [50, 60] above [40, 45], 5 seeds each
     best, text = sr.best_of(summ, ["a", "b", "c"])                 # c's 61 reaches into a's range
-    assert best is None and "a 55.00 [50.00, 60.00]" in text and "c 45.50 [30.00, 61.00]" in text
+    assert best is None and "a 55.00 [50.00, 60.00]" in text and "c 43.20 [30.00, 61.00]" in text
     assert sr.best_of(summ, ["a"])[0] is None                      # nothing to be best against
+    few, text = sr.best_of(table({"a": [50, 60], "b": [40, 45]}), ["a", "b"])   # separated, but 2 seeds each
+    assert few is None and "fewer than 5 seeds per arm" in text
 
 
 def test_levelling_gives_the_gain_per_third_of_the_epochs_over_distinct_networks():

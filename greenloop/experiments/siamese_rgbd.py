@@ -291,12 +291,15 @@ def seed_summary(table: pd.DataFrame) -> pd.DataFrame:
 
 def best_of(summary: pd.DataFrame, names) -> tuple[str | None, str]:
     """The descriptor among ``names`` (rows of :func:`seed_summary`) with the highest mean AP, if
-    its lowest seed is above every other's highest (the seed ranges separate); else None.
+    every arm has at least ``verdict.MIN_SEEDS`` seeds and its lowest seed is above every other's
+    highest (the seed ranges separate: the verdict table's rule); else None.
     Returns (name or None, text): text gives each mean and [min, max] over seeds."""
     t = summary.set_index("descriptor").loc[list(names)]
     top = t.AP_mean.idxmax()
     others = t.drop(index=top)
     text = "; ".join(f"{d} {r.AP_mean:.2f} [{r.AP_min:.2f}, {r.AP_max:.2f}]" for d, r in t.iterrows())
+    if t.seeds.min() < verdict.MIN_SEEDS:
+        return None, text + f" (fewer than {verdict.MIN_SEEDS} seeds per arm)"
     separated = len(others) > 0 and t.loc[top, "AP_min"] > others.AP_max.max()
     return (top if separated else None), text
 
@@ -508,7 +511,7 @@ def _timing_sentence(tim: pd.DataFrame) -> str:
     net, sift = t.index[0], t.index[-1]
     return (f"Seconds per image one at a time on this CPU: {net} {t[net]:.5f}, SIFT-BoVW {t[sift]:.5f} (a "
             f"{max(t[net], t[sift]) / min(t[net], t[sift]):.0f}x ratio; one timing each, {wording.NOT_A_RANKING}; "
-            "the network here has about a hundredth of the paper's multiply-adds).")
+            "the network here is a trunk scaled down to 2 CPU cores, not the paper's AlexNet).")
 
 
 def conclusion(out_dir) -> str:
