@@ -283,8 +283,8 @@ def manifest(folder, parameters: dict, dataset: str | Path | None = None, **extr
     """Write ``<folder>/manifest.json``: :func:`provenance` (date, git commit and whether the tree
     was dirty, environment hash, CPU model, platform), the wall time of this process so far (for a
     notebook executed by papermill: its kernel, i.e. the notebook's run time until this call),
-    library versions, parameters, dataset path, fingerprint and ground-truth kind ('poses', 'pairs'
-    or None), plus any extra fields."""
+    library versions, parameters (a notebook's: :func:`parameters`, never a dict typed again), dataset
+    path, fingerprint and ground-truth kind ('poses', 'pairs' or None), plus any extra fields."""
     info = {**provenance(), "wall_seconds": round(time.time() - psutil.Process().create_time(), 1),
             "versions": versions(), "parameters": parameters}
     if dataset is not None:
