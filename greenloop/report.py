@@ -10,6 +10,7 @@ that every layer above may write results.
 """
 from __future__ import annotations
 
+import ast
 import datetime as _dt
 import hashlib
 import json
@@ -215,12 +216,75 @@ def versions() -> dict:
     return out
 
 
+# The first line of the cell papermill injects after a notebook's cell tagged ``parameters`` (its
+# PythonTranslator.codify: the comment "Parameters", then one assignment per passed parameter).
+INJECTED = "# Parameters"
+
+
+def _assigned(source: str) -> tuple[list[str], bool]:
+    """(the names a cell's top-level assignments bind, in order: ``x = ...``, ``x: T = ...``,
+    ``x = y = ...``; whether the cell holds nothing else but comments and a docstring)."""
+    names, only = [], True
+    for node in ast.parse(source).body:
+        if isinstance(node, ast.Assign) and all(isinstance(t, ast.Name) for t in node.targets):
+            names += [t.id for t in node.targets]
+        elif isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name) and node.value is not None:
+            names.append(node.target.id)
+        elif not (isinstance(node, ast.Expr) and isinstance(node.value, ast.Constant)):
+            only = False
+    return list(dict.fromkeys(names)), only
+
+
+def parameters(namespace: dict, **derived) -> dict:
+    """The notebook's parameters as this run set them, then ``derived``: {name: value} for every
+    name its cell tagged ``parameters`` assigns, valued as ``namespace`` holds it (pass ``globals()``:
+    the value papermill injected wins over the cell's default), then each ``derived`` value (one the
+    notebook computed, e.g. the frame step it used or its exclusion in steps). A derived value named
+    as a parameter replaces it: the manifest then records what the run used under that name; state
+    the given one under another name where it differs (notebook 13: ``frame_step_requested``).
+
+    The names come from the kernel's own input history (``In`` in ``namespace``), not from a
+    notebook file: papermill executes its injected cell (first line :data:`INJECTED`) right after the
+    cell tagged ``parameters``, so the cell the kernel ran just before the last injected one is the
+    parameters cell, whatever the notebook's path, name or folder and the working directory
+    (``make``'s notebooks/ run from the checkout, the tests' and ``make sweep``'s runs into temporary
+    folders, a user's copy elsewhere). Where nothing was injected (papermill without parameters, or a
+    notebook run top to bottom by hand) the values are the cell's own and the cell is the first the
+    kernel ran: a notebook's parameters cell is its first code cell (tests/test_report.py checks the
+    study's notebooks). Only assignments count: a name papermill injected that the cell does not
+    declare is left out (papermill warns "Passed unknown parameter").
+
+    Values are returned as given (lists, strings, None: JSON as :func:`manifest` writes them; numpy
+    scalars and Paths are converted by :func:`write_json`). Raises ValueError without an input
+    history, without a parameters cell, or where a parameter is not in ``namespace``."""
+    history = namespace.get("In")
+    if not isinstance(history, list) or len(history) < 2:
+        raise ValueError("report.parameters reads the kernel's input history (In): call it from a notebook's "
+                         "cell as report.parameters(globals())")
+    injected = [k for k, src in enumerate(history) if src.split("\n", 1)[0].strip() == INJECTED]
+    if injected:
+        k = injected[-1] - 1
+        if k < 1:
+            raise ValueError("papermill injected the parameters before any cell ran: the notebook has no cell "
+                             "tagged 'parameters' (tag its parameters cell so)")
+        names = _assigned(history[k])[0]
+    else:
+        names, only = _assigned(history[1])
+        if not only:
+            raise ValueError("the first cell this kernel ran is not a parameters cell (assignments only): run the "
+                             "notebook from the top, or with papermill")
+    missing = [n for n in names if n not in namespace]
+    if missing:
+        raise ValueError(f"parameters {missing} of the parameters cell are not in the namespace given: pass globals()")
+    return {**{n: namespace[n] for n in names}, **derived}
+
+
 def manifest(folder, parameters: dict, dataset: str | Path | None = None, **extra) -> Path:
     """Write ``<folder>/manifest.json``: :func:`provenance` (date, git commit and whether the tree
     was dirty, environment hash, CPU model, platform), the wall time of this process so far (for a
     notebook executed by papermill: its kernel, i.e. the notebook's run time until this call),
-    library versions, parameters, dataset path, fingerprint and ground-truth kind ('poses', 'pairs'
-    or None), plus any extra fields."""
+    library versions, parameters (a notebook's: :func:`parameters`, never a dict typed again), dataset
+    path, fingerprint and ground-truth kind ('poses', 'pairs' or None), plus any extra fields."""
     info = {**provenance(), "wall_seconds": round(time.time() - psutil.Process().create_time(), 1),
             "versions": versions(), "parameters": parameters}
     if dataset is not None:

@@ -1,4 +1,5 @@
 import json
+import os
 
 import pandas as pd
 import pytest
@@ -36,6 +37,65 @@ def test_manifest_records_machine_and_versions(tmp_path):
     m = json.loads((tmp_path / "manifest.json").read_text())
     assert m["parameters"] == {"epochs": 3} and "numpy" in m["versions"] and m["cpu"]
     assert m["dataset_fingerprint"].startswith("unavailable")
+
+
+def test_parameters_reads_the_cell_before_papermills_injection():
+    """Names from the cell run just before papermill's injected one (an earlier cell and a name papermill
+    injected undeclared are left out), values from the namespace; a derived value is added, and one
+    named as a parameter replaces it."""
+    ns = {"In": ["", "import json", 'a = 1  # c\nb: int = 2\nc = d = [3]\n"""a docstring"""',
+                 f"{report.INJECTED}\na = 5\nzz = 0", "x = 9"], "a": 5, "b": 2, "c": [3], "d": [3], "zz": 0, "x": 9}
+    assert report.parameters(ns) == {"a": 5, "b": 2, "c": [3], "d": [3]}
+    assert report.parameters(ns, b=7, used=1) == {"a": 5, "b": 7, "c": [3], "d": [3], "used": 1}
+    ns["In"] += ["a = 6", f"{report.INJECTED}\nb = 1"]       # papermill ran again in the same kernel: the last injection
+    assert report.parameters(ns) == {"a": 5}
+    # nothing injected: the first cell the kernel ran, which must hold only assignments
+    assert report.parameters({"In": ["", "a = 1", "x = a + 1"], "a": 1, "x": 2}) == {"a": 1}
+    with pytest.raises(ValueError, match="not a parameters cell"):
+        report.parameters({"In": ["", "import json\na = 1"], "a": 1})
+    with pytest.raises(ValueError, match="no cell tagged 'parameters'"):
+        report.parameters({"In": ["", f"{report.INJECTED}\na = 1"], "a": 1})
+    with pytest.raises(ValueError, match="input history"):
+        report.parameters({"a": 1})
+    with pytest.raises(ValueError, match=r"\['b'\].*globals\(\)"):
+        report.parameters({"In": ["", "a = 1\nb = 2"], "a": 1})
+
+
+def test_injected_marker_is_papermills():
+    from papermill.translators import PythonTranslator
+    assert PythonTranslator.codify({"epochs": 2}).splitlines()[0] == report.INJECTED
+
+
+def _tiny_notebook(path, lead=None):
+    """A notebook as the study writes them (a parameters cell, then a call into greenloop), in tmp;
+    lead: a code cell before the parameters cell."""
+    import nbformat
+    params = nbformat.v4.new_code_cell('out = "res"                # where the manifest goes\nepochs = 200\n'
+                                       'seeds = [0, 1, 2]\nweights = None\ntau_list = list(range(40, 50, 5))')
+    params.metadata["tags"] = ["parameters"]
+    nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_markdown_cell("# a tiny notebook"),
+                                         *([nbformat.v4.new_code_cell(lead)] if lead else []), params,
+                                         nbformat.v4.new_code_cell("from greenloop import report\n"
+                                                                   "report.manifest(out, report.parameters(globals(), "
+                                                                   "seeds_used=seeds[:1]));")])
+    nb.metadata["kernelspec"] = {"name": "greenloop", "display_name": "Python (greenloop)", "language": "python"}
+    nbformat.write(nb, path)
+    return path
+
+
+@pytest.mark.parametrize("injected", [{"epochs": 2}, None], ids=["injected", "defaults"])
+def test_manifest_of_a_papermill_run_holds_every_parameter(tmp_path, monkeypatch, injected):
+    """papermill runs a notebook in tmp (its folder the kernel's working directory, not the checkout):
+    the manifest holds every parameter of its cell, the injected value winning, and the derived value
+    the notebook gave; where nothing is injected (the parameters cell first), the cell's defaults."""
+    import papermill
+    monkeypatch.setenv("PYTHONPATH", str(report.ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    nb = _tiny_notebook(tmp_path / "tiny.ipynb", lead="import json" if injected else None)
+    papermill.execute_notebook(str(nb), str(tmp_path / "out.ipynb"), parameters=injected, kernel_name="greenloop",
+                               cwd=str(tmp_path), progress_bar=False, execution_timeout=120)
+    m = json.loads((tmp_path / "res" / "manifest.json").read_text())
+    assert m["parameters"] == {"out": "res", "epochs": 2 if injected else 200, "seeds": [0, 1, 2], "weights": None,
+                               "tau_list": [40, 45], "seeds_used": [0]}
 
 
 def test_cross_dataset_table_puts_datasets_side_by_side(tmp_path):
