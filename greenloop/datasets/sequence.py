@@ -153,22 +153,24 @@ class Sequence:
     [0, 1]; :meth:`depth` (N, H, W) float32 metres; :meth:`loop_pairs` (P, 3) int64 (i, j,
     tolerance); :meth:`poses` ((N,) int64 frame numbers, (N, 4, 4) float64 camera-to-world, metres);
     :meth:`camera`; :meth:`traversal_index`; :meth:`reference_frames`; :meth:`info`.
-    ``os.fspath(seq)`` and ``str(seq)`` are its path.
+    ``os.fspath(seq)`` and ``str(seq)`` are the folder as it was given (``open("data/x/")``:
+    "data/x/"), so text that names the folder reads as it did with the path itself.
     """
 
     def __init__(self, folder):
+        self._given = os.fspath(folder)
         self.path = Path(folder)
         self.name = self.path.name
         self._memo: dict = {}
 
     def __fspath__(self) -> str:
-        return str(self.path)
+        return self._given
 
     def __str__(self) -> str:
-        return str(self.path)
+        return self._given
 
     def __repr__(self) -> str:
-        return f"Sequence({str(self.path)!r})"
+        return f"Sequence({self._given!r})"
 
     def _once(self, key, compute):
         """compute() the first time ``key`` is asked for, the kept value after."""
@@ -317,7 +319,7 @@ class Sequence:
                 "traversals": ", ".join(f"{t.name} {t.start}-{t.stop - 1}" for t in self.traversals)}
 
 
-_OPENED: OrderedDict = OrderedDict()     # {path as given: (its state, Sequence)}, MEMO_SIZE at most
+_OPENED: OrderedDict = OrderedDict()     # {folder as given: (its state, Sequence)}, MEMO_SIZE at most
 
 
 def open(folder) -> Sequence:  # noqa: A001 (sequence.open, as io.open: the module's one door)
@@ -340,14 +342,13 @@ def _lookup(folder) -> Sequence:
     while the folder is unchanged, else a new one (kept). A missing folder is never kept."""
     if isinstance(folder, Sequence):
         return folder
-    path = Path(folder)
-    state = _state(path)
+    key = os.fspath(folder)
+    state = _state(Path(key))
     if state is None:
-        return Sequence(path)
-    key = str(path)
+        return Sequence(key)
     kept_state, seq = _OPENED.get(key, (None, None))
     if seq is None or kept_state != state:
-        seq = Sequence(path)
+        seq = Sequence(key)
     _OPENED[key] = (state, seq)
     _OPENED.move_to_end(key)
     while len(_OPENED) > MEMO_SIZE:
