@@ -87,7 +87,7 @@ $(SYNTHETIC)/synthetic.json: | $(STAMP)
 data: | $(STAMP) ## download the real GreenHouse set into data/greenhouse (resumable)
 	$(BIN)/python -m greenloop.datasets.greenhouse data/greenhouse
 
-nordland: $(NORDLAND)/nordland.json ## build data/nordland: Nordland summer then winter, loop pairs as ground truth
+nordland: $(NORDLAND)/sequence.yaml ## build data/nordland: Nordland summer then winter, loop pairs as ground truth
 
 # Built in a temporary folder and renamed at the end, so nordland.json in place means a complete
 # folder. From NORDLAND_SRC when set, else from a shallow clone of NORDLAND_URL (fails at once
@@ -96,21 +96,30 @@ $(NORDLAND)/nordland.json: | $(STAMP)
 	$(BIN)/python -m greenloop.datasets.nordland $(NORDLAND) --overwrite \
 	    $(if $(NORDLAND_SRC),--src $(NORDLAND_SRC),--url $(NORDLAND_URL))
 
-gardenspoint: $(GARDENSPOINT)/gardenspoint.json ## build data/gardenspoint: Gardens Point Walking, 3 traversals of 200 frames (640x360)
+# The builder's sequence.yaml (the targets' protocol), rewritten from nordland.json without touching
+# the frames whenever the builder is newer: a folder built before gets what the builder writes now.
+$(NORDLAND)/sequence.yaml: $(NORDLAND)/nordland.json greenloop/datasets/nordland.py
+	$(BIN)/python -m greenloop.datasets.nordland $(NORDLAND) --describe
+
+gardenspoint: $(GARDENSPOINT)/sequence.yaml ## build data/gardenspoint: Gardens Point Walking, 3 traversals of 200 frames (640x360)
 
 # As Nordland: built in a temporary folder and renamed, from GARDENSPOINT_SRC or a shallow clone.
 $(GARDENSPOINT)/gardenspoint.json: | $(STAMP)
 	$(BIN)/python -m greenloop.datasets.gardenspoint $(GARDENSPOINT) --overwrite \
 	    $(if $(GARDENSPOINT_SRC),--src $(GARDENSPOINT_SRC),--url $(GARDENSPOINT_URL))
 
+# As Nordland's: its sequence.yaml rewritten from gardenspoint.json when the builder is newer.
+$(GARDENSPOINT)/sequence.yaml: $(GARDENSPOINT)/gardenspoint.json greenloop/datasets/gardenspoint.py
+	$(BIN)/python -m greenloop.datasets.gardenspoint $(GARDENSPOINT) --describe
+
 # The dataset a run needs: the synthetic default, data/nordland and data/gardenspoint are built
 # when missing; any other folder must exist already.
 ifeq ($(patsubst %/,%,$(DATASET)),$(SYNTHETIC))
 DATA_DEP := $(SYNTHETIC)/synthetic.json
 else ifeq ($(patsubst %/,%,$(DATASET)),$(NORDLAND))
-DATA_DEP := $(NORDLAND)/nordland.json
+DATA_DEP := $(NORDLAND)/sequence.yaml
 else ifeq ($(patsubst %/,%,$(DATASET)),$(GARDENSPOINT))
-DATA_DEP := $(GARDENSPOINT)/gardenspoint.json
+DATA_DEP := $(GARDENSPOINT)/sequence.yaml
 else
 DATA_DEP := $(DATASET)
 endif
@@ -163,7 +172,7 @@ verify: | $(STAMP) ## did a rerun reproduce? RESULTS=DIR's tables vs the committ
 	@test "$(origin RESULTS)" = "command line" || { echo "make verify RESULTS=DIR: name the rerun's results folder (compared with REFERENCE=$(REFERENCE))"; exit 2; }
 	$(BIN)/python -m greenloop verify $(REFERENCE) $(RESULTS)
 
-default-choice: | $(STAMP) ## the named default's centring windows, cell shift and threshold, chosen on tuning queries -> results/default_choice/
+default-choice: $(NORDLAND)/sequence.yaml $(GARDENSPOINT)/sequence.yaml | $(STAMP) ## the named default's centring windows, cell shift and threshold, chosen on tuning queries -> results/default_choice/
 	$(BIN)/python -m greenloop default-choice --nordland $(NORDLAND) --gardenspoint $(GARDENSPOINT) \
 		--synthetic $(SYNTHETIC) --out results/default_choice
 

@@ -20,7 +20,6 @@ own). :func:`candidate_share` says what share of the frames it leaves any candid
 """
 from __future__ import annotations
 
-from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
@@ -46,17 +45,18 @@ class Exclusion(NamedTuple):
 def exclusion(folder, loop_threshold: float = 0.5) -> Exclusion:
     """The exclusion of a sequence folder by the module's rule (first that applies).
 
-    folder: a sequence folder (greenloop.datasets.sequence) or a folder of frames.
+    folder: a sequence folder (greenloop.datasets.sequence), a Sequence or a folder of frames
+        (opened once: ``sequence.open``).
     loop_threshold: Qi 2024 Eq. 5's threshold for a folder with poses (as ``groundtruth.for_sequence``).
     """
-    folder = Path(folder)
-    d = sequence.read_description(folder)
-    if d["exclude"] is not None:
-        return Exclusion(int(d["exclude"]), sequence.DESCRIPTION_NAME,
-                         f"exclude {d['exclude']} frames, from {folder / sequence.DESCRIPTION_NAME}")
-    if sequence.ground_truth_kind(folder) is not None:
-        return from_ground_truth(folder, loop_threshold)
-    n = len(sequence.list_frames(folder))
+    seq = sequence.open(folder)
+    d = seq.description
+    if seq.exclude is not None:
+        return Exclusion(int(seq.exclude), sequence.DESCRIPTION_NAME,
+                         f"exclude {seq.exclude} frames, from {seq.path / sequence.DESCRIPTION_NAME}")
+    if seq.ground_truth is not None:
+        return from_ground_truth(seq, loop_threshold)
+    n = seq.n_frames
     if d["frame_rate"] is not None:
         frames = int(round(EXCLUDE_SECONDS * float(d["frame_rate"])))
         return Exclusion(frames, "frame rate", f"exclude {frames} frames: {EXCLUDE_SECONDS:g} s at the "
@@ -72,13 +72,15 @@ def partner_offsets(folder, loop_threshold: float = 0.5) -> tuple[np.ndarray, np
     d (P,) offsets >= 1 (frame a + d is a partner of a), n frames in the folder.
 
     Poses: Qi 2024 Eq. 5 (``groundtruth.pose_error`` < loop_threshold); loop pairs (any source of
-    ``sequence.ground_truth_source``): each row (i, j, tolerance) pairs i with j - tol .. j + tol."""
-    n = len(sequence.list_frames(folder))
-    if sequence.ground_truth_kind(folder) == "poses":
-        _, poses = sequence.read_trajectory(folder, n_frames=n)
+    ``sequence.ground_truth_source``): each row (i, j, tolerance) pairs i with j - tol .. j + tol.
+    folder: a sequence folder or Sequence."""
+    seq = sequence.open(folder)
+    n = seq.n_frames
+    if seq.ground_truth is not None and seq.ground_truth.kind == "poses":
+        _, poses = seq.poses()
         a, b = np.nonzero(np.triu(groundtruth.pose_error(poses) < loop_threshold, 1))
     else:
-        p = sequence.read_loop_pairs(Path(folder), n_frames=n)
+        p = seq.loop_pairs()
         lo, hi = np.maximum(p[:, 1] - p[:, 2], 0), np.minimum(p[:, 1] + p[:, 2], n - 1)
         i = np.repeat(p[:, 0], np.maximum(hi - lo + 1, 0))
         j = np.concatenate([np.arange(s, e + 1) for s, e in zip(lo, hi)] + [np.zeros(0, np.int64)])

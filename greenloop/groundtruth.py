@@ -3,6 +3,8 @@
 Get a sequence's ground truth with :func:`for_sequence` (every notebook does): it reads the
 poses (``CameraTrajectory.txt``) where the folder has them, and the loop pairs
 (``ground_truth.csv``) otherwise, and raises :class:`NoGroundTruthError` when it has neither.
+Every function here that takes a folder takes a ``datasets.sequence.Sequence`` too (or opens the
+folder once with ``sequence.open``), so the files are read once per folder.
 
 The one definition every evaluation in greenloop uses
 ----------------------------------------------------
@@ -31,7 +33,6 @@ The matrix is symmetric with a False diagonal; evaluations count each unordered 
 """
 from __future__ import annotations
 
-from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
@@ -180,8 +181,8 @@ def pair_matrix(pairs, n_frames: int, frames=None, exclude: int = DEFAULT_EXCLUD
 def for_sequence(folder, frames=None, threshold: float = 0.5, exclude: int = DEFAULT_EXCLUDE) -> np.ndarray:
     """The ground-truth loop matrix of a sequence folder: the one call notebooks and users make.
 
-    folder: a sequence folder (greenloop.datasets.sequence). Its poses (CameraTrajectory.txt, one per frame)
-        are used where they exist (``loop_matrix``, Qi 2024 Eq. 5 < ``threshold``), its loop
+    folder: a sequence folder or a ``sequence.Sequence`` (read once: ``sequence.open``). Its poses
+        (CameraTrajectory.txt, one per frame) are used where they exist (``loop_matrix``, Qi 2024 Eq. 5 < ``threshold``), its loop
         pairs (ground_truth.csv, ``pair_matrix``) otherwise.
     frames: (M,) strictly increasing original frame numbers of the described frames, e.g.
         ``np.arange(0, N, step)``; None = every frame.
@@ -191,21 +192,25 @@ def for_sequence(folder, frames=None, threshold: float = 0.5, exclude: int = DEF
     Raises NoGroundTruthError (a FileNotFoundError) when the folder has neither file, and
     ValueError for a malformed file or a trajectory that does not match the frames.
     """
-    folder = Path(folder)
-    kind = sequence.ground_truth_kind(folder)
-    n = len(sequence.list_frames(folder))
+    seq = sequence.open(folder)
+    kind, n = _kind(seq), seq.n_frames
     if kind is None:
         raise NoGroundTruthError(
-            f"{folder} has no ground truth: add {sequence.TRAJECTORY_NAMES[0]} (TUM poses, one per frame) "
+            f"{seq.path} has no ground truth: add {sequence.TRAJECTORY_NAMES[0]} (TUM poses, one per frame) "
             f"or {sequence.GROUND_TRUTH_NAME} (a header line, then `i,j[,tolerance]` loop pairs of 0-based "
             f"frame numbers) to the folder, `ground_truth: aligned` to its {sequence.DESCRIPTION_NAME} "
             f"(traversals aligned frame by frame), or import another format with "
             f"`python -m greenloop import-gt FILE`")
     f = _check_frames(frames, n)
     if kind == "poses":
-        _, poses = sequence.read_trajectory(folder, n_frames=n)
+        _, poses = seq.poses()
         return loop_matrix(poses[f], threshold, 0) & far_in_time(f, exclude)
-    return pair_matrix(sequence.read_loop_pairs(folder, n_frames=n), n, f, exclude)
+    return pair_matrix(seq.loop_pairs(), n, f, exclude)
+
+
+def _kind(seq: sequence.Sequence) -> str | None:
+    """'poses', 'pairs' or None: the ground truth a Sequence carries."""
+    return None if seq.ground_truth is None else seq.ground_truth.kind
 
 
 class Described(NamedTuple):
@@ -219,7 +224,7 @@ class Described(NamedTuple):
 def described_frames(folder, frame_step: int, threshold: float = 0.5, exclude: int = DEFAULT_EXCLUDE) -> Described:
     """Every frame_step-th frame of a sequence, its exclusion band in steps and its ground truth.
 
-    folder: a sequence folder. frame_step: describe frames 0, frame_step, 2 frame_step, ...
+    folder: a sequence folder or Sequence. frame_step: describe frames 0, frame_step, 2 frame_step, ...
     (an integer >= 1). threshold, exclude: as :func:`for_sequence` (exclude in ORIGINAL frames).
     Returns Described(frames, exclude_steps, gt, summary): ``exclude_steps = exclude // frame_step`` is the band the
     scoring functions take for the described frames, ``gt = for_sequence(folder, frames,
@@ -227,11 +232,12 @@ def described_frames(folder, frame_step: int, threshold: float = 0.5, exclude: i
     original frames, the ground-truth definition, its loop pairs and revisit frames).
     """
     step = positive_int("frame_step", frame_step, whole_floats=True)
-    frames = np.arange(0, len(sequence.list_frames(folder)), step)
+    seq = sequence.open(folder)
+    frames = np.arange(0, seq.n_frames, step)
     exclude_steps = int(exclude) // step
-    gt = for_sequence(folder, frames, threshold, exclude)
+    gt = for_sequence(seq, frames, threshold, exclude)
     summary = (f"{len(frames)} frames (frame_step {frame_step}), exclusion band {exclude_steps} steps = {exclude_steps * step} original "
-               f"frames; ground truth ({definition(folder, threshold, exclude)}): {len(loop_pairs(gt))} loop pairs, "
+               f"frames; ground truth ({definition(seq, threshold, exclude)}): {len(loop_pairs(gt))} loop pairs, "
                f"{int(revisit_frames(gt).sum())} revisit frames")
     return Described(frames, exclude_steps, gt, summary)
 
@@ -246,12 +252,11 @@ def variants(folder, frames=None, thresholds=(0.3, 0.4, 0.5, 0.6, 0.7, 0.8), exc
     Returns {label: (M, M) bool}: "Eq. 5 < t" for every t, then "metric: < d m, < a deg";
     an empty dict for a folder without poses (its loop pairs admit one ground truth only).
     """
-    folder = Path(folder)
-    if sequence.ground_truth_kind(folder) != "poses":
+    seq = sequence.open(folder)
+    if _kind(seq) != "poses":
         return {}
-    n = len(sequence.list_frames(folder))
-    f = _check_frames(frames, n)
-    _, poses = sequence.read_trajectory(folder, n_frames=n)
+    f = _check_frames(frames, seq.n_frames)
+    _, poses = seq.poses()
     far = far_in_time(f, exclude)
     out = {f"Eq. 5 < {t:g}": loop_matrix(poses[f], t, 0) & far for t in thresholds}
     out[f"metric: < {max_distance:g} m, < {max_angle:g} deg"] = (
@@ -262,16 +267,16 @@ def variants(folder, frames=None, thresholds=(0.3, 0.4, 0.5, 0.6, 0.7, 0.8), exc
 def definition(folder, threshold: float = 0.5, exclude: int = DEFAULT_EXCLUDE) -> str:
     """One line saying which ground truth ``for_sequence(folder, ..., threshold, exclude)`` uses,
     for table notes and printouts (names the file and, for pairs, their count and tolerances)."""
-    folder = Path(folder)
-    kind = sequence.ground_truth_kind(folder)
+    seq = sequence.open(folder)
+    kind = _kind(seq)
     if kind == "poses":
         return (f"Qi 2024 Eq. 5 on the poses ({sequence.TRAJECTORY_NAMES[0]}): ||T_i^-1 T_j - I||_F < "
                 f"{threshold}, |i - j| > {exclude} frames")
     if kind == "pairs":
-        p = sequence.read_loop_pairs(folder)
+        p = sequence.read_loop_pairs(seq)
         tol = f"{p[:, 2].min()}" if len(p) and p[:, 2].min() == p[:, 2].max() else (
             f"{p[:, 2].min()}-{p[:, 2].max()}" if len(p) else "-")
-        return (f"loop pairs from {sequence.ground_truth_source(folder).label} ({len(p)} rows, tolerance "
+        return (f"loop pairs from {seq.ground_truth.label} ({len(p)} rows, tolerance "
                 f"{tol} frames), |i - j| > {exclude} frames")
     return "none: the folder has no poses and no loop-pair file"
 

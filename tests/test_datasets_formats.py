@@ -328,6 +328,13 @@ def test_gardenspoint_builder_on_a_fake_source(tmp_path):
     assert meta["source_sizes"]["night_right"] == [[16, 9]] and meta["source_sizes"]["day_left"] == [[32, 18]]
     # 6-frame traversals: every loop lies within 150 frames, the closest 5 apart (frame 1 and 6)
     assert params.sequence_parameters(out)[0] == {"exclude": 2, "frame_step": 1, "first_traversal_end": 6}
+    protocol = sequence.open(out).protocol                # the targets' two streams, database first, +- 2
+    assert protocol.targets == "gardenspoint" and [s.name for s in protocol.streams] == [
+        f"{a} -> {b}" for a, b in gardenspoint.TARGET_PAIRS] == ["day_right -> night_right", "day_left -> night_right"]
+    assert [(s.traversals[0].start, s.traversals[1].start, s.tolerance) for s in protocol.streams] == [(6, 12, 2), (0, 12, 2)]
+    text = (out / "sequence.yaml").read_text()
+    (out / "sequence.yaml").write_text(text.split("# how the detector")[0])    # a folder built before the protocol
+    assert gardenspoint.main([str(out), "--describe"]) == 0 and (out / "sequence.yaml").read_text() == text
     assert not list(tmp_path.glob(".gp.tmp*"))
     with pytest.raises(FileNotFoundError, match="GARDENSPOINT_SRC=path"):
         gardenspoint.build(tmp_path / "x", tmp_path / "missing", progress=False)

@@ -233,11 +233,13 @@ def test_method_rows_one_per_mode_with_closures_in_loop_closure_only(revisit):
 
 
 
-def test_targets_table_says_when_a_dataset_is_not_one_of_its_own():
+def test_targets_table_judges_the_named_target_set_and_refuses_a_folder_name():
     board = pd.DataFrame([{"method": "greenloop-seq-grad", "mode": "loop closure", "R@1_%": 50.0}])
-    t = lb.targets_table(board, "data/my-indoor-walk", 1)
-    assert len(t) == 1 and t.met.isna().all() and "not judged" in t.note.iloc[0]
-    t = lb.targets_table(board, "data/nordland", 8)
+    t = lb.targets_table(board, "generic", 1)                    # a user's folder: the generic targets
+    assert t.target.str.startswith("highest R@1").any() and not t.target.str.startswith("frame step").any()
+    with pytest.raises(ValueError, match="none of the target sets"):
+        lb.targets_table(board, "data/my-indoor-walk", 1)
+    t = lb.targets_table(board, "nordland", 8)
     step = t[t.target.str.startswith("frame step")].iloc[0]
     assert step.measured == 8 and step.met is False or step.met == False   # noqa: E712 (numpy bool)
 
@@ -250,11 +252,11 @@ def test_targets_table_judges_each_named_configuration_on_its_own_sequence_lengt
     monkeypatch.setattr(seqmatch, "NAMED", {**seqmatch.NAMED, seqmatch.CNN_NAME: (long, seqmatch.CNN_THRESHOLD)})
     board = pd.DataFrame([{"method": m, "mode": "loop closure", "R@1_%": 50.0}
                           for m in (seqmatch.DEFAULT_NAME, seqmatch.CNN_NAME)])
-    t = lb.targets_table(board, "data/nordland", 1)
+    t = lb.targets_table(board, "nordland", 1)
     seq = t[t.target == "frames of sequence"].set_index("configuration")
     assert seq.loc[seqmatch.DEFAULT_NAME, "measured"] == 10 and bool(seq.loc[seqmatch.DEFAULT_NAME, "met"])
     assert seq.loc[seqmatch.CNN_NAME, "measured"] == 20 and not bool(seq.loc[seqmatch.CNN_NAME, "met"])
-    only = lb.targets_table(board[board.method == seqmatch.DEFAULT_NAME], "data/nordland", 1)
+    only = lb.targets_table(board[board.method == seqmatch.DEFAULT_NAME], "nordland", 1)
     assert set(only.configuration) == {seqmatch.DEFAULT_NAME}
 
 
@@ -292,11 +294,11 @@ def test_targets_table_says_how_many_queries_each_measured_target_rests_on():
                            "R@100P_%": 40.0, "fps_min": 1000.0, "closures_declared": 10, "closures_false": 0},
                           {"method": name, "mode": "place recognition", "queries": 400, "revisit_queries": 380,
                            "R@1_%": 95.0, "R@100P_%": 60.0}])
-    t = lb.targets_table(board, "data/gardenspoint", 1).set_index("target")
+    t = lb.targets_table(board, "gardenspoint", 1).set_index("target")
     assert t.loc["R@1 (%), place recognition", lb.COUNTS].tolist() == [400, 380]
     assert t.loc["closure precision at the threshold (%)", lb.COUNTS].tolist() == [180, 150]
     assert t.loc["frames/s (slowest repeat)", lb.COUNTS].isna().all()       # no query count bears on a frame rate
-    n = lb.targets_table(board, "data/nordland", 8).set_index("target")
+    n = lb.targets_table(board, "nordland", 8).set_index("target")
     assert n.loc["R@1 (%), loop closure", lb.COUNTS].tolist() == [180, 150]
     assert n.loc["frame step of the rows (1 = Nordland's full rate)", lb.COUNTS].isna().all()
     assert "180," in t.to_csv() and "180.0" not in t.to_csv()                # whole numbers, blank where not counted

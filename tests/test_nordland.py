@@ -56,6 +56,20 @@ def test_build_order_ground_truth_and_metadata(tmp_path):
     k = np.arange(n)[:, None]
     assert (gt[:n, n:] == (np.abs(np.arange(n)[None, :] - k) <= 2)).all()
     assert not list(tmp_path.glob(".nordland.tmp*")), "temporary folder left behind"
+    # sequence.yaml says only the targets' protocol: no traversals, exclude or frame_step of its own
+    seq = sequence.open(out)
+    assert {k for k, v in seq.description.items() if v is not None} == {"protocol"}
+    assert seq.traversals == [sequence.Traversal("all", 0, 2 * n)]
+    (stream,) = seq.protocol.streams
+    assert seq.protocol.targets == "nordland" and stream.name == "every frame, +- 2 frames"
+    assert stream.traversals == (sequence.Traversal("summer", 0, n), sequence.Traversal("winter", n, 2 * n))
+    assert stream.tolerance == nordland.TARGET_TOLERANCE == 2
+    # --describe writes the same file into a folder built before it existed, frames untouched
+    text = (out / "sequence.yaml").read_text()
+    (out / "sequence.yaml").unlink()
+    assert sequence.open(out).protocol.targets == "generic"
+    assert nordland.main([str(out), "--describe"]) == 0 and (out / "sequence.yaml").read_text() == text
+    assert sequence.open(out).protocol.streams == (stream,)
 
 
 def test_build_from_a_repository_clone_layout(tmp_path):

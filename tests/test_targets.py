@@ -1,10 +1,12 @@
-"""greenloop.study.targets: the detector's targets judged from hand-made leaderboard rows."""
+"""greenloop.study.targets: the detector's targets judged from hand-made leaderboard rows, by the target
+set a dataset's sequence.yaml names (its protocol; generic where it names none)."""
 import math
 
 import pandas as pd
 import pytest
 
-from greenloop.study.targets import dataset_kind, detector_targets
+from greenloop.datasets import sequence
+from greenloop.study.targets import TARGET_SETS, detector_targets
 
 
 def _met(out):
@@ -15,7 +17,7 @@ def test_nordland_targets_met_and_not_met():
     rows = [{"method": "greenloop-seq", "mode": "loop closure", "R@1_%": 96.0, "R@100P_%": 59.9, "fps_min": 919.0,
              "closures_declared": 100, "closures_false": 10, "R@1_lo_%": 93.0, "R@1_hi_%": 98.0},
             {"method": "SeqSLAM", "mode": "loop closure", "R@1_%": 96.5, "R@100P_%": 10.0, "R@1_lo_%": 94.0, "R@1_hi_%": 99.0}]
-    out = detector_targets(rows, "data/nordland", seq_len=10)
+    out = detector_targets(rows, "nordland", seq_len=10)
     m = {r["target"]: r for r in out}
     assert m["R@1 (%), loop closure"]["met"] is True and m["R@1 (%), loop closure"]["measured"] == 96.0
     assert m["frames of sequence"]["met"] is True
@@ -35,7 +37,7 @@ def test_gardenspoint_reads_place_recognition_and_absent_values_are_not_measured
     rows = pd.DataFrame([{"method": "greenloop-seq", "mode": "loop closure", "R@1_%": 10.0, "R@100P_%": 5.0},
                          {"method": "greenloop-seq", "mode": "place recognition", "R@1_%": 94.0,
                           "R@100P_%": 72.0, "fps_min": math.nan}])
-    m = _met(detector_targets(rows, "Gardens Point day_right->night_right"))
+    m = _met(detector_targets(rows, "gardenspoint"))
     assert m["R@1"] is True and m["R@100P"] is True                        # the loop-closure 10 % is not read
     assert m["frames/s"] is None and m["closure precision at the threshold"] is None
 
@@ -45,25 +47,26 @@ def _spread(v, half):
             "AUC-PR_%": v - 10, "AUC-PR_lo_%": v - 10 - half, "AUC-PR_hi_%": v - 10 + half}
 
 
-def test_synthetic_highest_of_every_method_ignores_chance_and_needs_separate_intervals():
+def test_generic_highest_of_every_method_ignores_chance_and_needs_separate_intervals():
     rows = [{"method": "greenloop-seq", "mode": "loop closure", **_spread(80.0, 2.0)},
             {"method": "SeqSLAM", "mode": "loop closure", **_spread(70.0, 3.0)},
             {"method": "pixels (single frame)", "mode": "loop closure", **_spread(60.0, 5.0)},
             {"method": "chance (random scores)", "mode": "loop closure", "R@1_%": 99.0, "AUC-PR_%": 99.0}]
-    out = detector_targets(rows, "data/synthetic-greenhouse")
+    out = detector_targets(rows)                                            # generic: the default set
     assert [r["met"] for r in out[:2]] == [True, True]
     assert out[0]["measured"] == 78.0 and out[0]["required"] == "> 73.0"  # its low end above SeqSLAM's high end
     rows[1].update(_spread(75.0, 3.0))                                      # 80 > 75, but [78, 82] meets [72, 78]
-    assert [r["met"] for r in detector_targets(rows, "synthetic")[:2]] == [False, False]
+    assert [r["met"] for r in detector_targets(rows, "generic")[:2]] == [False, False]
     rows[1].pop("R@1_hi_%")                                                 # no interval: not measured
-    assert detector_targets(rows, "synthetic")[0]["met"] is None
-    missing = detector_targets(rows[1:], "synthetic")                       # no greenloop-seq row
+    assert detector_targets(rows, "generic")[0]["met"] is None
+    missing = detector_targets(rows[1:], "generic")                       # no greenloop-seq row
     assert all(r["met"] is None for r in missing)
 
 
-def test_unknown_dataset_names_the_accepted_ones():
-    with pytest.raises(ValueError, match="nordland"):
-        dataset_kind("kitti")
+def test_an_unknown_target_set_names_the_accepted_ones_and_the_sets_are_the_protocols():
+    with pytest.raises(ValueError, match="none of the target sets generic, nordland, gardenspoint"):
+        detector_targets([], "data/nordland")                               # a folder name is no target set
+    assert tuple(TARGET_SETS) == sequence.PROTOCOL_TARGETS                  # what sequence.yaml may name
 
 
 def test_nordland_judges_every_seqslam_row_named():
@@ -100,7 +103,7 @@ def test_with_comparisons_above_and_highest_are_the_paired_differences_not_the_i
     assert [r["met"] for r in absent if r["target"].startswith("R@1 above")] == [None]     # no such row: not measured
     comp = _paired([("SeqSLAM (published)", "R@1", 20.0, 10.0, 30.0), ("SeqSLAM (tuned)", "R@1", 2.0, 0.5, 3.5),
                     ("SeqSLAM (published)", "AUC-PR", 20.0, 10.0, 30.0), ("SeqSLAM (tuned)", "AUC-PR", 2.0, -1.0, 4.0)])
-    high = {r["target"].split(",")[0]: r for r in detector_targets(rows, "synthetic", comparisons=comp)}
+    high = {r["target"].split(",")[0]: r for r in detector_targets(rows, "generic", comparisons=comp)}
     assert high["highest R@1 of every method"]["met"] is True and high["highest R@1 of every method"]["measured"] == 0.5
     assert high["highest AUC-PR of every method"]["met"] is False                 # not resolved against the tuned row
-    assert [r["met"] for r in detector_targets(rows, "synthetic")[:2]] == [False, False]   # rows alone: overlap
+    assert [r["met"] for r in detector_targets(rows, "generic")[:2]] == [False, False]   # rows alone: overlap

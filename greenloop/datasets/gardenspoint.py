@@ -13,13 +13,15 @@ night one 640x360. ``build`` writes (the traversals layout of ``greenloop.datase
     traversals/night_right/...                 that size is copied byte for byte)
     sequence.yaml       the stream order day_left, day_right, night_right (600 frames, each place
                         revisited twice), ``ground_truth: aligned`` with a tolerance of TOLERANCE
-                        frames (VPR-Bench's) and frame_step 1 (200 frames a traversal leave nothing
-                        to subsample)
+                        frames (VPR-Bench's), frame_step 1 (200 frames a traversal leave nothing
+                        to subsample) and the detector targets' protocol: Gardens Point's target
+                        set on the streams TARGET_PAIRS, +- TARGET_TOLERANCE frames
     gardenspoint.json   source, counts, size, traversal boundaries
 
 Run ``make gardenspoint`` or ``python -m greenloop.datasets.gardenspoint data/gardenspoint
 [--src FOLDER]``; without ``--src`` the source is cloned (``git clone --depth 1``) into a
-temporary folder.
+temporary folder. ``--describe`` rewrites only the sequence.yaml of a folder built before, from
+its gardenspoint.json.
 """
 from __future__ import annotations
 
@@ -31,12 +33,15 @@ from pathlib import Path
 import cv2
 
 from greenloop.datasets import sequence, sources
+from greenloop.util.files import write_atomic
 from greenloop.util.progress import bar as tqdm  # in the terminal, never in a notebook
 
 SOURCE_URL = "https://github.com/aghagol/loop-detection"
 SOURCE_SUBDIR = "PR_bench/GardensPointWalking"
 TRAVERSALS = ("day_left", "day_right", "night_right")
 TOLERANCE = 2                 # frames: VPR-Bench's ground truth for this set (frame k +- 2)
+TARGET_PAIRS = (("day_right", "night_right"), ("day_left", "night_right"))   # the targets' streams, database first
+TARGET_TOLERANCE = sequence.TARGET_TOLERANCE   # frames: the targets' streams, frame k of each walk +- 2
 SIZE = (640, 360)             # (width, height): night_right's size, the day sets shrunk to it
 JPEG_QUALITY = 95
 FIX = ("set GARDENSPOINT_SRC=path (make) or pass --src path to a local copy of the source folder "
@@ -81,7 +86,20 @@ def _description(tolerance: int) -> str:
             f"ground_truth: {sequence.ALIGNED}\n"
             f"tolerance: {tolerance}\n"
             f"# 200 frames a traversal: the descriptor notebooks describe every frame\n"
-            f"frame_step: 1\n")
+            f"frame_step: 1\n"
+            f"# how the detector's targets judge it (greenloop.study.targets): Gardens Point's set, on\n"
+            f"# two walks at a time, the first the database, frame k of each one place +- {TARGET_TOLERANCE}\n"
+            f"protocol:\n"
+            f"  targets: gardenspoint\n"
+            f"  target_streams:\n"
+            + "".join(f"    - traversals: [{a}, {b}]\n      tolerance: {TARGET_TOLERANCE}\n" for a, b in TARGET_PAIRS))
+
+
+def describe(out) -> Path:
+    """Rewrite the sequence.yaml of a built Gardens Point folder ``out`` (its ground-truth tolerance
+    from its gardenspoint.json); frames untouched. Returns the file's path."""
+    meta = json.loads((Path(out) / "gardenspoint.json").read_text())
+    return write_atomic(Path(out) / sequence.DESCRIPTION_NAME, _description(int(meta["ground_truth"]["tolerance_frames"])))
 
 
 def build(out, src, size=SIZE, tolerance: int = TOLERANCE, overwrite: bool = False,
@@ -108,7 +126,6 @@ def build(out, src, size=SIZE, tolerance: int = TOLERANCE, overwrite: bool = Fal
             paths = tqdm(found[t], desc=t, unit="frame", disable=not progress)
             native[t] = sorted({_convert(p, tmp / sequence.TRAVERSALS_DIR / t / f"{k}.jpg", size)
                                 for k, p in enumerate(paths)})
-        (tmp / sequence.DESCRIPTION_NAME).write_text(_description(tolerance))
         meta = {"generator": "greenloop.datasets.gardenspoint", "format": 1,
                 "source": source_name or str(source_folder(src)), "source_repository": SOURCE_URL,
                 "source_folder": SOURCE_SUBDIR, "frames_per_traversal": n, "n_frames": len(TRAVERSALS) * n,
@@ -118,6 +135,7 @@ def build(out, src, size=SIZE, tolerance: int = TOLERANCE, overwrite: bool = Fal
                 "ground_truth": {"file": sequence.DESCRIPTION_NAME, "pairs": "frame k of every traversal "
                                  "with frame k +- tolerance of every later one", "tolerance_frames": tolerance}}
         (tmp / "gardenspoint.json").write_text(json.dumps(meta, indent=1, sort_keys=True) + "\n")
+        (tmp / sequence.DESCRIPTION_NAME).write_text(_description(tolerance))
     return sources.write_folder(out, write)
 
 
@@ -130,6 +148,8 @@ def main(argv=None) -> int:
     ap.add_argument("--tolerance", type=int, default=TOLERANCE,
                     help="ground-truth tolerance in frames (default %(default)s, VPR-Bench's)")
     a = ap.parse_args(argv)
+    if a.describe:
+        return sources.run_describe(a.out, describe)
     w, _, h = a.size.lower().partition("x")
     if not (w.isdigit() and h.isdigit()):
         ap.error(f"--size must be WIDTHxHEIGHT in pixels (e.g. 640x360), got {a.size!r}")

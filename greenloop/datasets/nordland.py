@@ -11,6 +11,10 @@ summer and frame k of winter show the same place. ``build`` writes (see ``greenl
     ground_truth.csv               the alignment: summer frame k is a loop with winter frames
                                    n + k +- TOLERANCE, never with summer frames (alignment_pairs)
     nordland.json                  source, counts, traversal boundaries [0, n) and [n, 2n)
+    sequence.yaml                  only the detector targets' protocol (:func:`description`):
+                                   Nordland's target set, on every frame, summer then winter,
+                                   +- TARGET_TOLERANCE frames (not the traversals themselves, which
+                                   would make every notebook's first_traversal_end)
 
 Read in order, the second half revisits the first: a loop-closure sequence without poses or
 depth whose loops are the rows of ground_truth.csv (``greenloop.groundtruth.for_sequence``).
@@ -25,7 +29,8 @@ minutes of travel away is not counted as a loop; ``tolerance=150`` (``--toleranc
 the looser reading.
 
 Run ``make nordland`` or ``python -m greenloop.datasets.nordland data/nordland [--src FOLDER]``; without
-``--src`` the source is cloned (``git clone --depth 1``) into a temporary folder.
+``--src`` the source is cloned (``git clone --depth 1``) into a temporary folder. ``--describe``
+rewrites only the sequence.yaml of a folder built before, from its nordland.json.
 """
 from __future__ import annotations
 
@@ -39,6 +44,7 @@ import cv2
 import numpy as np
 
 from greenloop.datasets import sequence, sources
+from greenloop.util.files import write_atomic
 from greenloop.util.progress import bar as tqdm  # in the terminal, never in a notebook
 
 SOURCE_URL = "https://github.com/TimQuelch/seqslam"
@@ -47,6 +53,7 @@ SEASONS = ("summer", "winter")
 SAMPLE_STEP = 10        # the sample's rows cover every SAMPLE_STEP-th image (358 = ceil(3576 / 10))
 SAMPLE_TOLERANCE = 15   # the tolerance column of the source's sample ground truth
 TOLERANCE = SAMPLE_TOLERANCE   # default: read as frames of these images (module doc)
+TARGET_TOLERANCE = sequence.TARGET_TOLERANCE   # frames: the targets' stream, frame k of each season +- 2
 FIX = ("set NORDLAND_SRC=path (make) or pass --src path to a local copy of the source folder "
        f"`{SOURCE_SUBDIR}` (summer/ and winter/), e.g. from `git clone --depth 1 {SOURCE_URL}`")
 
@@ -105,8 +112,30 @@ def traversals(folder) -> list:
                   key=lambda t: t.start)
 
 
+def description(n: int) -> str:
+    """The sequence.yaml of a Nordland folder of two seasons of n frames: the detector targets'
+    protocol only (greenloop.datasets.description): Nordland's target set, on one stream of every
+    frame, summer [0, n) then winter [n, 2n), frame k of each the same place +- TARGET_TOLERANCE."""
+    return (f"# Nordland (greenloop.datasets.nordland): summer frames 0..{n - 1}, then winter {n}..{2 * n - 1}; the\n"
+            f"# ground truth is ground_truth.csv. How the detector's targets judge it (greenloop.study.targets):\n"
+            f"# Nordland's set, on every frame at the full rate, frame k of each season one place +- {TARGET_TOLERANCE}.\n"
+            f"protocol:\n"
+            f"  targets: nordland\n"
+            f"  target_streams:\n"
+            f"    - name: every frame, +- {TARGET_TOLERANCE} frames\n"
+            f"      traversals: {{summer: [0, {n}], winter: [{n}, {2 * n}]}}\n"
+            f"      tolerance: {TARGET_TOLERANCE}\n")
+
+
+def describe(out) -> Path:
+    """Rewrite the sequence.yaml of a built Nordland folder ``out`` (:func:`description`) from its
+    nordland.json; frames and ground truth untouched. Returns the file's path."""
+    meta = json.loads((Path(out) / "nordland.json").read_text())
+    return write_atomic(Path(out) / sequence.DESCRIPTION_NAME, description(int(meta["frames_per_season"])))
+
+
 def _write(tmp: Path, summer, winter, tolerance: int, meta: dict, progress: bool) -> None:
-    """Copy the frames (summer then winter) and write ground_truth.csv and nordland.json."""
+    """Copy the frames (summer then winter) and write ground_truth.csv, nordland.json and sequence.yaml."""
     (tmp / "rgb").mkdir(parents=True)
     frames = summer + winter
     for k, p in enumerate(tqdm(frames, desc="nordland", unit="frame", disable=not progress)):
@@ -114,6 +143,7 @@ def _write(tmp: Path, summer, winter, tolerance: int, meta: dict, progress: bool
     n = len(summer)
     sequence.write_loop_pairs(tmp / sequence.GROUND_TRUTH_NAME, alignment_pairs(n, tolerance))
     (tmp / "nordland.json").write_text(json.dumps(meta, indent=1, sort_keys=True) + "\n")
+    (tmp / sequence.DESCRIPTION_NAME).write_text(description(n))
 
 
 def build(out, src, tolerance: int = TOLERANCE, overwrite: bool = False, progress: bool = True,
@@ -159,11 +189,13 @@ def main(argv=None) -> int:
     ap.add_argument("--tolerance", type=int, default=TOLERANCE,
                     help="ground-truth tolerance in frames (default %(default)s, from the source's sample)")
     a = ap.parse_args(argv)
+    if a.describe:
+        return sources.run_describe(a.out, describe)
 
     def summary(out: Path) -> str:
         meta = json.loads((out / "nordland.json").read_text())
-        return (f"wrote {meta['n_frames']} frames ({meta['frames_per_season']} per season) and "
-                f"{sequence.GROUND_TRUTH_NAME} to {out}")
+        return (f"wrote {meta['n_frames']} frames ({meta['frames_per_season']} per season), "
+                f"{sequence.GROUND_TRUTH_NAME} and {sequence.DESCRIPTION_NAME} to {out}")
     return sources.run_builder(
         a, lambda src, **more: build(a.out, src, a.tolerance, a.overwrite, progress=not a.quiet, **more),
         lambda tmp: clone_source(tmp / "seqslam", a.url), SOURCE_SUBDIR, summary)

@@ -124,7 +124,22 @@ def builder_parser(prog: str, description: str, example: str, subfolders: str, u
     ap.add_argument("--url", default=url, help="repository to clone when --src is not given")
     ap.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
+    ap.add_argument("--describe", action="store_true",
+                    help="only rewrite OUT's sequence.yaml from its build record (no frame is read or written): "
+                         "an older build gets what the builder writes now, e.g. its targets' protocol")
     return ap
+
+
+def run_describe(out, describe) -> int:
+    """A builder's ``--describe``: ``describe(out)`` rewrites the sequence.yaml of the built folder
+    ``out``; prints what it wrote. Returns 0, or 1 with ``error: ...`` when ``out`` is no build of it."""
+    try:
+        path = describe(out)
+    except (ValueError, FileNotFoundError, KeyError, OSError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 1
+    print(f"wrote {path}")
+    return 0
 
 
 def run_builder(a: argparse.Namespace, build, clone, subdir: str, summary) -> int:

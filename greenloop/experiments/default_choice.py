@@ -81,7 +81,7 @@ __all__ = ["GRID", "SHIFTS", "REPEAT_LEVELS", "CNN_WIDTHS", "streams", "stream_f
 
 
 def streams(nordland=None, gardenspoint=None, synthetic=None, descriptor: str = "gradients") -> dict:
-    """{"<dataset kind>: <protocol>": (X (N, D) descriptors, GT (N, N) bool, exclude (frames of the stream),
+    """{"<target set>: <stream>": (X (N, D) descriptors, GT (N, N) bool, exclude (frames of the stream),
     tune (N,) bool tuning queries)}: the target streams of the given dataset folders (None: left
     out), split as notebook 13 splits them (tune_fraction 0.5, exclude 150 original frames).
     descriptor: the named default's "gradients" (256-d) or the CNN configuration's (``seqmatch.CNN_KNOBS``)."""
@@ -100,7 +100,7 @@ def _target_data(nordland, gardenspoint, synthetic):
     """(label, folder, Data) of each target stream of the given folders (None: left out), in order."""
     for folder in (f for f in (nordland, gardenspoint) if f is not None):
         for label, d in _protocols(str(folder)):
-            yield f"{targets.dataset_kind(folder)}: {label}", str(folder), d
+            yield f"{sequence.open(folder).protocol.targets}: {label}", str(folder), d
     if synthetic is not None:
         yield SYNTHETIC_STREAM, str(synthetic), _synthetic(str(synthetic))
 

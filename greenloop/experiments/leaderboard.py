@@ -25,7 +25,7 @@ import pandas as pd
 
 from greenloop import evaluate, groundtruth
 from greenloop.methods.greenloop_seq import seqmatch
-from greenloop.datasets import nordland, sequence
+from greenloop.datasets import sequence
 from greenloop.datasets.sequence import list_frames
 from greenloop.methods.single_frame import entry as single_frame
 from greenloop.methods.interface import Data
@@ -33,14 +33,12 @@ from greenloop.methods.registry import REGISTRY
 from greenloop.speed import timing
 from greenloop.study import leaderboard as lb, wording
 from greenloop import report
-from greenloop.study import targets as goals
 from greenloop.study import verdict
 
 NAMED = tuple(seqmatch.NAMED)      # the named configurations (untuned, fixed thresholds)
 SEQ_ROWS = ("greenloop-seq", "greenloop-seq-fast", *NAMED)   # the rows the targets judge
 TARGET_ENTRIES = NAMED + ("seqslam",)    # what a target protocol runs: the named configurations and SeqSLAM's rows
-TARGET_TOLERANCE = 2       # frames: the targets' ground truth, frame k of each traversal +- 2
-GP_PAIRS = (("day_right", "night_right"), ("day_left", "night_right"))   # Gardens Point's named pairs
+TARGET_TOLERANCE = sequence.TARGET_TOLERANCE   # frames: a target stream's ground truth (sequence.yaml's default)
 NO_SPLIT_DROPPED = "greenloop-seq, the tuned SeqSLAM, every tuned knob and threshold and so every closure count"
 NO_SPLIT_KEPT = ("the single-frame methods (untuned), SeqSLAM at its published parameters and the "
                  "dictionary at its fixed τ are scored on every query instead")
@@ -148,11 +146,11 @@ def choose_step(dataset, requested: int, loop_threshold: float, exclude: int, tu
     leave at least ``minimum`` revisit queries in the evaluation part (:func:`evaluation_revisits`,
     the split :func:`prepare` makes: a gap of the longest of ``params["seq_lens"]``), step 1 when none
     does. A coarse ``frame_step`` meant for notebooks 07-09 must not leave the leaderboard resting on a
-    handful of queries. exclude: ORIGINAL frames."""
-    gap = max(params["seq_lens"])
+    handful of queries. dataset: a sequence folder or Sequence (opened once). exclude: ORIGINAL frames."""
+    gap, seq = max(params["seq_lens"]), sequence.open(dataset)
 
     def at(s):
-        _, exclude_steps, GT, _ = groundtruth.described_frames(dataset, s, loop_threshold, exclude)
+        _, exclude_steps, GT, _ = groundtruth.described_frames(seq, s, loop_threshold, exclude)
         return evaluation_revisits(GT, exclude_steps, tune_fraction, gap)
 
     step, seen = largest_step(requested, at, minimum)
@@ -163,10 +161,12 @@ def prepare(dataset, frame_step: int, loop_threshold: float, exclude: int, tune_
             reference_frames, params: dict) -> tuple[Data, Split]:
     """The described frames, ground truth and honest split (``evaluate.honest_split``, a gap of the
     longest of ``params["seq_lens"]``), and the timed window (the first ``params["fps_frames"]``
-    evaluation frames). exclude: ORIGINAL frames. Returns (Data, Split); without an honest split
+    evaluation frames). dataset: a sequence folder or Sequence, opened once (``sequence.open``): Data.dataset
+    is its Sequence. exclude: ORIGINAL frames. Returns (Data, Split); without an honest split
     Data.tune is None and every query is an evaluation query."""
-    frames, exclude_steps, GT, summary = groundtruth.described_frames(dataset, frame_step, loop_threshold, exclude)
-    return _with_split(Data(dataset, frame_step, frames, GT, exclude_steps, None, None, dict(params, exclude=exclude),
+    seq = sequence.open(dataset)
+    frames, exclude_steps, GT, summary = groundtruth.described_frames(seq, frame_step, loop_threshold, exclude)
+    return _with_split(Data(seq, frame_step, frames, GT, exclude_steps, None, None, dict(params, exclude=exclude),
                             {}, {}, {}), tune_fraction, lb.reference_mask(frames, reference_frames), summary)
 
 
@@ -254,14 +254,15 @@ def board(data: Data, split: Split, tuned: Tuned, timed: Timed, decisions=()) ->
     table = lb.table(rows)
     written = lb.rounded(table)
     comp = lb.comparisons(tuned.S, lb.comparison_pairs(written, SEQ_ROWS), data.GT, data.exclude, data.evalq, split.gap)
-    return Board(table, lb.targets(written, list(SEQ_ROWS), comp), lb.targets_table(written, data.dataset,
+    targets = sequence.open(data.dataset).protocol.targets        # the dataset's target set (sequence.yaml)
+    return Board(table, lb.targets(written, list(SEQ_ROWS), comp), lb.targets_table(written, targets,
                  data.frame_step, comp), lb.statement(written, comp, SEQ_ROWS), comp)
 
 
 def _every_frame(data: Data, registry: dict) -> Data:
     """``data`` at frame_step 1 (every frame of the dataset) with the descriptors the registry's
     entries need: data itself when it already describes every frame, else described here."""
-    n = len(list_frames(data.dataset))
+    n = sequence.open(data.dataset).n_frames
     full = data if data.frame_step == 1 and len(data.frames) == n else data._replace(
         frame_step=1, frames=np.arange(n), descriptors={}, infos={}, cache={})
     for e in registry.values():
@@ -271,45 +272,39 @@ def _every_frame(data: Data, registry: dict) -> Data:
     return full
 
 
-def _protocol(full: Data, traversals, tune_fraction: float) -> tuple[Data, Split]:
-    """The stream of the given traversals of ``full`` (``sequence.Traversal``s, in stream order), their
-    frames aligned +- TARGET_TOLERANCE, the first traversal the place-recognition database."""
+def _protocol(full: Data, stream: sequence.TargetStream, tune_fraction: float) -> tuple[Data, Split]:
+    """The stream of the given traversals of ``full`` (``stream.traversals``, in stream order), their
+    frames aligned +- ``stream.tolerance``, the first traversal the place-recognition database."""
+    traversals, tol = stream.traversals, stream.tolerance
     idx = np.concatenate([np.arange(t.start, t.stop) for t in traversals])
     bounds = np.cumsum([0] + [t.stop - t.start for t in traversals])
     ex = int(full.params["exclude"])                       # frame_step 1: steps are original frames
-    GT = groundtruth.pair_matrix(sequence.aligned_pairs(list(zip(bounds[:-1], bounds[1:])), TARGET_TOLERANCE),
+    GT = groundtruth.pair_matrix(sequence.aligned_pairs(list(zip(bounds[:-1], bounds[1:])), tol),
                                  len(idx), None, ex)
     d = Data(full.dataset, 1, idx, GT, ex, None, None, dict(full.params), {k: v[idx] for k, v in full.descriptors.items()},
              dict(full.infos), {})
     names = " then ".join(f"{t.name} (frames {t.start}..{t.stop - 1})" for t in traversals)
     summary = (f"{len(idx)} frames (every frame) of {names}; ground truth: frame k of each traversal is frame k of the "
-               f"others +- {TARGET_TOLERANCE} frames, pairs within {ex} frames excluded: {int(GT.sum()) // 2} loop pairs")
+               f"others +- {tol} frames, pairs within {ex} frames excluded: {int(GT.sum()) // 2} loop pairs")
     return _with_split(d, tune_fraction, np.arange(len(idx)) < bounds[1], summary)
 
 
 def target_protocols(data: Data, tune_fraction: float) -> dict:
     """{label: (Data, Split)}: the streams on which the detector's targets are defined where this
-    leaderboard's own differ, for the named default and SeqSLAM (TARGET_ENTRIES).
-
-    Nordland: all its frames at the full rate (frame_step 1), summer then winter, correct within
-    +- TARGET_TOLERANCE frames (the leaderboard: every frame_step-th frame, the dataset's own
-    tolerance). Gardens Point: the pairs GP_PAIRS, each a stream of two traversals whose first is
-    the database (the leaderboard: day_left the database of both later walks). Any other
-    dataset: {} (its targets are judged on the leaderboard itself). Each is split as the
-    leaderboard is (``tune_fraction``, a gap of the longest sequence)."""
-    try:
-        kind = goals.dataset_kind(data.dataset)
-    except ValueError:
+    leaderboard's own differ, for the named default and SeqSLAM (TARGET_ENTRIES): the target streams of
+    the dataset's sequence.yaml (``Sequence.protocol.streams``, labelled by their names), each every frame
+    of its traversals (frame_step 1), in its order, the first traversal the database, frame k of each
+    the same place +- its tolerance (default TARGET_TOLERANCE frames). Nordland's builder names all its
+    frames, summer then winter, +- 2 (the leaderboard: every frame_step-th frame, the dataset's own
+    tolerance); Gardens Point's the pairs day_right -> night_right and day_left -> night_right (the
+    leaderboard: day_left the database of both later walks). A dataset without streams: {} (its
+    targets are judged on the leaderboard itself). Each is split as the leaderboard is
+    (``tune_fraction``, a gap of the longest sequence)."""
+    streams = sequence.open(data.dataset).protocol.streams
+    if not streams:
         return {}
-    reg = {k: REGISTRY[k] for k in TARGET_ENTRIES}
-    if kind == "nordland":
-        full = _every_frame(data, reg)
-        return {f"every frame, +- {TARGET_TOLERANCE} frames": _protocol(full, nordland.traversals(data.dataset),
-                                                                      tune_fraction)}
-    if kind == "gardenspoint":
-        full, ts = _every_frame(data, reg), {t.name: t for t in sequence.traversals(data.dataset)}
-        return {f"{a} -> {b}": _protocol(full, [ts[a], ts[b]], tune_fraction) for a, b in GP_PAIRS}
-    return {}
+    full = _every_frame(data, {k: REGISTRY[k] for k in TARGET_ENTRIES})
+    return {s.name: _protocol(full, s, tune_fraction) for s in streams}
 
 
 def threshold_check(data: Data, tuned: Tuned) -> list[dict]:

@@ -19,7 +19,9 @@ import numpy as np
 class Data(NamedTuple):
     """What every detector is described, tuned and scored on.
 
-    dataset: the sequence folder. frame_step: every frame_step-th frame is described.
+    dataset: the sequence folder: its ``datasets.sequence.Sequence`` (``experiments.leaderboard.prepare``
+        opens it once; os.PathLike, so code that takes a folder takes it) or a path.
+        frame_step: every frame_step-th frame is described.
     frames: (M,) int original frame numbers of the described frames. GT: (M, M) bool ground truth.
     exclude: candidates of query j are frames i with j - i > exclude (described frames).
     tune: (M,) bool tuning queries, or None where no honest split exists (untuned defaults then).
@@ -30,7 +32,7 @@ class Data(NamedTuple):
         the families' ``describe`` returned, merged in registry order (a later family may reuse an
         earlier one's). cache: scratch shared by a family's functions (e.g. fitted projections).
     """
-    dataset: str
+    dataset: object      # a datasets.sequence.Sequence or a path (str | os.PathLike)
     frame_step: int
     frames: np.ndarray
     GT: np.ndarray

@@ -470,23 +470,20 @@ def dictionary_row(name: str, tau: int, n_train: int, closures: dict, op: dict, 
             "scored_on": f"{scored_on}; decisions only (no score): pair precision {op['precision']:.3f}, recall {op['recall']:.3f}"}
 
 
-def targets_table(board: pd.DataFrame, dataset, frame_step: int,
+def targets_table(board: pd.DataFrame, targets: str, frame_step: int,
                   comparisons: pd.DataFrame | None = None) -> pd.DataFrame:
     """The detector's targets for each named configuration on this board (``seqmatch.NAMED``: the named
     default always, the others where the board has their row), one row each: configuration, target,
-    measured, required, met (``study.targets.detector_targets``, with the configuration's own seq_len;
-    SeqSLAM = the published and the tuned row, each judged; "above" and "highest" from ``comparisons``,
-    :func:`comparisons`, where given). A dataset that is none of the targets' gives one row saying so.
-    A target measured on per-query rows gets their COUNTS (:func:`_rests_on`)."""
+    measured, required, met (``study.targets.detector_targets`` of the target set ``targets``, the
+    dataset's ``Sequence.protocol.targets``, with the configuration's own seq_len; SeqSLAM = the
+    published and the tuned row, each judged; "above" and "highest" from ``comparisons``,
+    :func:`comparisons`, where given). A target measured on per-query rows gets their COUNTS
+    (:func:`_rests_on`). Raises ValueError for a name that is none of ``study.targets.TARGET_SETS``."""
     names = [n for n in seqmatch.NAMED if n == seqmatch.DEFAULT_NAME or n in set(board["method"])]
-    try:
-        rows = [dict(configuration=n, **r, **_rests_on(board, n, r["target"])) for n in names
-                for r in goals.detector_targets(board, str(dataset), n, ("SeqSLAM (published)", "SeqSLAM (tuned)"),
-                                                seq_len=seqmatch.NAMED[n][0]["seq_len"], frame_step=frame_step,
-                                                comparisons=comparisons)]
-    except ValueError as e:
-        return pd.DataFrame([{"configuration": None, "target": "the detector's targets", "measured": None,
-                              "required": None, "met": None, "note": f"not judged: {e}"}])
+    rows = [dict(configuration=n, **r, **_rests_on(board, n, r["target"])) for n in names
+            for r in goals.detector_targets(board, targets, n, ("SeqSLAM (published)", "SeqSLAM (tuned)"),
+                                            seq_len=seqmatch.NAMED[n][0]["seq_len"], frame_step=frame_step,
+                                            comparisons=comparisons)]
     t = pd.DataFrame(rows)
     for c in COUNTS:                     # whole numbers, blank where not counted (not 203.0 beside NaN)
         t[c] = pd.Series([r[c] for r in rows], index=t.index, dtype=object)

@@ -43,11 +43,13 @@ PARAMS_NAME = "sequence_params.yaml"
 
 def loop_distances(folder) -> tuple[int, int] | None:
     """(closest, farthest) frame distance |i - j| of the loops of a loop-pair ground truth, before
-    any exclusion window; None for poses (every neighbour is close), no ground truth or no loop."""
-    if sequence.ground_truth_kind(folder) != "pairs":
+    any exclusion window; None for poses (every neighbour is close), no ground truth or no loop.
+    folder: a sequence folder or ``sequence.Sequence`` (opened once)."""
+    seq = sequence.open(folder)
+    if seq.ground_truth is None or seq.ground_truth.kind != "pairs":
         return None
-    n = len(sequence.list_frames(folder))
-    p = sequence.read_loop_pairs(folder, n_frames=n)
+    n = seq.n_frames
+    p = seq.loop_pairs()
     if not len(p):
         return None
     i, lo, hi = p[:, 0], np.maximum(p[:, 1] - p[:, 2], 0), np.minimum(p[:, 1] + p[:, 2], n - 1)
@@ -65,16 +67,15 @@ def sequence_parameters(folder) -> tuple[dict, list[str]]:
 
     Returns ({name: value}: ``exclude`` by greenloop.exclusion's rule, ``frame_step`` from
     sequence.yaml, ``first_traversal_end`` (notebook 12) where the folder has several traversals),
-    [sentences saying why]).
+    [sentences saying why]). folder: a sequence folder or ``sequence.Sequence`` (opened once).
     """
-    folder = Path(folder)
-    d = sequence.read_description(folder)
-    rule = exclusion.exclusion(folder)
-    params, notes = {"exclude": rule.frames}, [f"{folder}: {rule.rule}"]
-    if d["frame_step"] is not None:
-        params["frame_step"] = d["frame_step"]
-        notes.append(f"frame_step {d['frame_step']} from {folder / sequence.DESCRIPTION_NAME}")
-    ts = sequence.traversals(folder)
+    seq = sequence.open(folder)
+    rule = exclusion.exclusion(seq)
+    params, notes = {"exclude": rule.frames}, [f"{seq.path}: {rule.rule}"]
+    if seq.frame_step is not None:
+        params["frame_step"] = seq.frame_step
+        notes.append(f"frame_step {seq.frame_step} from {seq.path / sequence.DESCRIPTION_NAME}")
+    ts = seq.traversals
     if len(ts) > 1:
         params["first_traversal_end"] = ts[1].start
         notes.append(f"first_traversal_end {ts[1].start}: the start of traversal {ts[1].name!r}")
@@ -162,9 +163,9 @@ def loop_step(folder, params: dict) -> int | None:
     one where only that does (a coarse budget step must not hide a short recording's loops), None
     where not even every frame does."""
     exclude, step = int(params.get("exclude", DEFAULT_EXCLUDE)), int(params.get("frame_step", 1) or 1)
-    n = len(sequence.list_frames(folder))
+    seq = sequence.open(folder)
     for s in range(step, 0, -1):
-        if groundtruth.for_sequence(folder, np.arange(0, n, s), params.get("loop_threshold", 0.5), exclude).any():
+        if groundtruth.for_sequence(seq, np.arange(0, seq.n_frames, s), params.get("loop_threshold", 0.5), exclude).any():
             return s
     return None
 
@@ -177,7 +178,7 @@ def finer_step(notebook, folder, params: dict) -> tuple[int | None, str | None]:
     if stem[:2] not in LOOP_NOTEBOOKS or stem[:2] == "13" or "frame_step" not in params:
         return None, None
     requested = int(params["frame_step"] or 1)
-    step = loop_step(folder, params) if sequence.ground_truth_kind(folder) is not None else None
+    step = loop_step(folder, params) if sequence.open(folder).ground_truth is not None else None
     if step is None or step == requested:
         return None, None
     return step, (f"{stem}: frame_step {step}, not the requested {requested}: at every {requested}th frame no "
@@ -193,14 +194,15 @@ def skip_reason(notebook, folder, params: dict) -> str | None:
     stem = Path(notebook).stem
     if stem[:2] not in GROUND_TRUTH_NOTEBOOKS:
         return None
-    if sequence.ground_truth_kind(folder) is None:
+    seq = sequence.open(folder)
+    if seq.ground_truth is None:
         return (f"{stem} scores loop closures, and {folder} has no ground truth (add ground_truth.csv, "
                 f"CameraTrajectory.txt or `ground_truth: aligned` in sequence.yaml, or run "
                 f"`python -m greenloop import-gt FILE`)")
-    if stem[:2] not in LOOP_NOTEBOOKS or loop_step(folder, params) is not None:
+    if stem[:2] not in LOOP_NOTEBOOKS or loop_step(seq, params) is not None:
         return None
     exclude = int(params.get("exclude", DEFAULT_EXCLUDE))
-    dist = loop_distances(folder)
+    dist = loop_distances(seq)
     closest = (f"its closest loop is {dist[0]} frames apart and its farthest {dist[1]}"
                if dist else "it has no loop at all")
     yaml_file = Path(folder) / sequence.DESCRIPTION_NAME

@@ -7,11 +7,14 @@ repeat, frames/s) and ``closures_declared`` / ``closures_false`` (at the operati
 Only what the rows hold is judged: a target whose value is absent is "not measured" (met None),
 never met.
 
-The targets (evaluation part only, one configuration of greenloop-seq):
+The target sets (evaluation part only, one configuration of greenloop-seq), TARGET_SETS; a dataset
+names its set in its sequence.yaml (``protocol: {targets: ...}``, ``datasets.sequence.Sequence.protocol``,
+the builders of Nordland and Gardens Point write it), and one that names none gets the generic set:
     nordland      R@1 >= 95 % with seq_len <= 10, R@100P >= 60 %, R@1 above the SeqSLAM row (loop closure)
     gardenspoint  R@1 >= 90 %, R@100P >= 50 % (place recognition: reference = the day traversal)
-    synthetic     the highest R@1 and the highest AUC-PR of every method (loop closure, chance excluded)
-    every dataset >= 920 frames/s (slowest repeat); closure precision >= 90 % at the threshold used
+    generic       the highest R@1 and the highest AUC-PR of every method (loop closure, chance excluded):
+                  the synthetic sequence, the real GreenHouse set and users' own folders
+    every set     >= 920 frames/s (slowest repeat); closure precision >= 90 % at the threshold used
 
 "Above" and "highest" are judged from the paired comparisons where they are given (``comparisons``: the
 table ``study.leaderboard.comparisons`` writes, notebook 13's comparisons.csv; :func:`paired_ahead`): met
@@ -25,22 +28,10 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["FPS_TARGET", "PRECISION_TARGET", "dataset_kind", "detector_targets", "paired_ahead", "separated"]
+__all__ = ["FPS_TARGET", "PRECISION_TARGET", "TARGET_SETS", "detector_targets", "paired_ahead", "separated"]
 
 FPS_TARGET = 920.0            # frames/s per stream on 2 cores, descriptor included (the main paper's)
 PRECISION_TARGET = 90.0       # % closure precision at the one threshold
-KINDS = {"nordland": "nordland", "gardens": "gardenspoint", "synthetic": "synthetic", "greenhouse": "synthetic"}
-
-
-def dataset_kind(dataset: str) -> str:
-    """"nordland", "gardenspoint" or "synthetic" from a dataset name or folder (substring match,
-    case-insensitive). ValueError naming the accepted names otherwise."""
-    low = str(dataset).lower()
-    for key, kind in KINDS.items():
-        if key in low:
-            return kind
-    raise ValueError(f"dataset {dataset!r} is none of the datasets the detector targets name: its name must contain one of "
-                     f"{sorted(KINDS)}")
 
 
 def _rows(rows) -> list[dict]:
@@ -119,36 +110,54 @@ def _common(row, seq_len) -> list[dict]:
     return out
 
 
-def detector_targets(rows, dataset: str, method: str = "greenloop-seq", seqslam: str = "SeqSLAM",
-                    seq_len=None, frame_step=None, comparisons=None) -> list[dict]:
-    """Each of the detector's targets (module doc) of ``dataset`` for ``method``: a list of dicts target (text), measured
-    (float, % or frames/s; None when the rows do not hold it), required (text) and met (bool; None
-    when not measured). rows: the dataset's leaderboard rows (list of dicts or a DataFrame).
-    seqslam: the SeqSLAM row's method name, or several (each judged: Nordland's R@1 above it).
-    seq_len: the method's frames of sequence (needed for Nordland's "<= 10 frames"); frame_step:
-    the rows' frame step (Nordland's targets are at its full rate, frame_step 1). comparisons: the
-    paired comparisons that judge "above" and "highest" (module doc; None: the rows' intervals)."""
-    rows, kind = _rows(rows), dataset_kind(dataset)
+def detector_targets(rows, targets: str = "generic", method: str = "greenloop-seq", seqslam: str = "SeqSLAM",
+                     seq_len=None, frame_step=None, comparisons=None) -> list[dict]:
+    """Each target of the set ``targets`` (module doc; a dataset's ``Sequence.protocol.targets``) for ``method``:
+    a list of dicts target (text), measured (float, % or frames/s; None when the rows do not hold it),
+    required (text) and met (bool; None when not measured). rows: the dataset's leaderboard rows (list of
+    dicts or a DataFrame). seqslam: the SeqSLAM row's method name, or several (each judged: Nordland's R@1
+    above it). seq_len: the method's frames of sequence (needed for Nordland's "<= 10 frames"); frame_step:
+    the rows' frame step (Nordland's targets are at its full rate, frame_step 1). comparisons: the paired
+    comparisons that judge "above" and "highest" (module doc; None: the rows' intervals). Raises
+    ValueError for a name that is none of TARGET_SETS."""
+    if targets not in TARGET_SETS:
+        raise ValueError(f"targets {targets!r} is none of the target sets {', '.join(TARGET_SETS)}: name one in the "
+                         f"dataset's sequence.yaml (`protocol: {{targets: generic}}`), or leave it out for generic")
+    rows = _rows(rows)
     lc, pr = _find(rows, method, "loop closure"), _find(rows, method, "place recognition")
-    if kind == "nordland":
-        r1 = _value(lc, "R@1_%")
-        out = [_judge("frame step of the rows (1 = Nordland's full rate)", None if frame_step is None else float(frame_step),
-                      "== 1", lambda v: v == 1),
-               _judge("R@1 (%), loop closure", r1, ">= 95", lambda v: v >= 95.0),
-               _judge("frames of sequence", None if seq_len is None else float(seq_len), "<= 10", lambda v: v <= 10),
-               _judge("R@100P (%), loop closure", _value(lc, "R@100P_%"), ">= 60", lambda v: v >= 60.0)]
-        for name in ([seqslam] if isinstance(seqslam, str) else list(seqslam)):
-            other = _find(rows, name, "loop closure")
-            sr = _value(other, "R@1_%")
-            out.append(_above(f"R@1 above {name} ({sr if sr is not None else 'not measured'} %)", lc,
-                              [] if other is None else [other], "R@1_%", comparisons))
-        return out + _common(lc, seq_len)
-    if kind == "gardenspoint":
-        return [_judge("R@1 (%), place recognition", _value(pr, "R@1_%"), ">= 90", lambda v: v >= 90.0),
-                _judge("R@100P (%), place recognition", _value(pr, "R@100P_%"), ">= 50", lambda v: v >= 50.0)] \
-            + _common(lc if lc is not None else pr, seq_len)
+    return TARGET_SETS[targets](rows, lc, pr, method, seqslam, seq_len, frame_step, comparisons)
+
+
+def _nordland(rows, lc, pr, method, seqslam, seq_len, frame_step, comparisons) -> list[dict]:
+    """Nordland's targets: at the full rate, R@1 and R@100P (loop closure), seq_len, above every SeqSLAM row."""
+    r1 = _value(lc, "R@1_%")
+    out = [_judge("frame step of the rows (1 = Nordland's full rate)", None if frame_step is None else float(frame_step),
+                  "== 1", lambda v: v == 1),
+           _judge("R@1 (%), loop closure", r1, ">= 95", lambda v: v >= 95.0),
+           _judge("frames of sequence", None if seq_len is None else float(seq_len), "<= 10", lambda v: v <= 10),
+           _judge("R@100P (%), loop closure", _value(lc, "R@100P_%"), ">= 60", lambda v: v >= 60.0)]
+    for name in ([seqslam] if isinstance(seqslam, str) else list(seqslam)):
+        other = _find(rows, name, "loop closure")
+        sr = _value(other, "R@1_%")
+        out.append(_above(f"R@1 above {name} ({sr if sr is not None else 'not measured'} %)", lc,
+                          [] if other is None else [other], "R@1_%", comparisons))
+    return out + _common(lc, seq_len)
+
+
+def _gardenspoint(rows, lc, pr, method, seqslam, seq_len, frame_step, comparisons) -> list[dict]:
+    """Gardens Point's targets: R@1 and R@100P in place recognition."""
+    return [_judge("R@1 (%), place recognition", _value(pr, "R@1_%"), ">= 90", lambda v: v >= 90.0),
+            _judge("R@100P (%), place recognition", _value(pr, "R@100P_%"), ">= 50", lambda v: v >= 50.0)] \
+        + _common(lc if lc is not None else pr, seq_len)
+
+
+def _generic(rows, lc, pr, method, seqslam, seq_len, frame_step, comparisons) -> list[dict]:
+    """The generic targets: the highest R@1 and AUC-PR of every method (loop closure, chance excluded)."""
     out = []
     for key in ("R@1_%", "AUC-PR_%"):
         out.append(_above(f"highest {key[:-2]} of every method, loop closure", lc,
                           _others(rows, method, "loop closure", key), key, comparisons))
     return out + _common(lc, seq_len)
+
+
+TARGET_SETS = {"generic": _generic, "nordland": _nordland, "gardenspoint": _gardenspoint}   # sequence.PROTOCOL_TARGETS
