@@ -33,6 +33,7 @@ The matrix is symmetric with a False diagonal; evaluations count each unordered 
 """
 from __future__ import annotations
 
+from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
