@@ -23,7 +23,8 @@ import cv2
 import numpy as np
 
 from greenloop import exclusion
-from greenloop.datasets.sequence import DESCRIPTION_NAME, list_frames, read_description
+from greenloop.datasets import sequence
+from greenloop.datasets.sequence import DESCRIPTION_NAME
 from greenloop.methods import registry
 from greenloop.methods.greenloop_seq import seqmatch, seqstream
 from greenloop.methods.interface import Data
@@ -117,9 +118,9 @@ def knobs_for(name: str, folder, tuned=None, variant=None, threshold=None, step=
         raise ValueError(f"--method {name} needs a threshold chosen on your own data: pass --threshold T or --tuned "
                          f"<results>/13_leaderboard/summary.json (notebook 13 picks knobs and threshold on a tuning "
                          f"part); --method {seqmatch.DEFAULT_NAME} (the default) has a fixed one")
-    desc = read_description(folder) if Path(folder).is_dir() else {}
-    step_from = "--step" if step is not None else (DESCRIPTION_NAME if desc.get("frame_step") else "default")
-    step = step or desc.get("frame_step") or 1
+    own_step = sequence.open(folder).frame_step
+    step_from = "--step" if step is not None else (DESCRIPTION_NAME if own_step else "default")
+    step = step or own_step or 1
     if step < 1:
         raise ValueError(f"--step must be >= 1, got {step}")
     lines = [f"# {k} {knobs[k]} ({origin[k]})" for k in knobs if k != "fixed_threshold"]
@@ -152,9 +153,11 @@ def exclusion_for(folder, n: int, step: int, exclude=None, tuned_exclude=None) -
 
 def plan(folder, name: str = seqmatch.DEFAULT_NAME, tuned=None, variant=None, threshold=None, step=None,
          exclude=None, **flags) -> Plan:
-    """Everything a detect run decides before its first frame (:func:`knobs_for`, :func:`exclusion_for`)."""
+    """Everything a detect run decides before its first frame (:func:`knobs_for`, :func:`exclusion_for`).
+    folder: a recording's folder (a sequence folder or a folder of images) or its ``sequence.Sequence``."""
+    folder = sequence.open(folder)
     knobs, threshold, step, lines, tuned_ex = knobs_for(name, folder, tuned, variant, threshold, step, **flags)
-    paths = list_frames(folder)[::step]
+    paths = folder.frame_paths[::step]
     ex, source, rule = exclusion_for(folder, len(paths), step, exclude, tuned_ex)
     return Plan(name, knobs, threshold, step, ex, paths, lines + [f"# exclude {ex} ({source})", f"# exclusion: {rule}"])
 
