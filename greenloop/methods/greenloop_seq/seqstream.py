@@ -494,7 +494,7 @@ class Detector(CandidateMode):
         """The window's raw descriptors (N, D), each frame checked; the weights looked up once."""
         for k, f in enumerate(frames):
             self._check_frame(f, self.frame_index + k)
-        if self._descriptor is None:   # the weights are looked up at the first frame, not at every one
+        if getattr(self, "_descriptor", None) is None:   # looked up at the first frame (and in a state saved before it had one)
             self._descriptor = features.get(self.descriptor, self.weights)
         return self._descriptor(features.stack_frames(frames), color=self.color)
 
