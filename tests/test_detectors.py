@@ -1,12 +1,15 @@
 """greenloop.methods: the interface, each registered entry, the registry's readers (the
 leaderboard experiment, `detect --method`) and the example of docs/ARCHITECTURE.md."""
 import re
+import sys
+import types
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
 
+from greenloop import features
 from greenloop.methods.greenloop_seq import seqmatch
 from greenloop.methods.seqslam import seqslam
 from greenloop.methods import registry
@@ -195,15 +198,20 @@ def test_every_registered_stream_declares_what_its_matrix_does(entry, revisit):
         assert not seqstream.stream_check(entry.stream(k, thr, d), d.descriptors[k["descriptor"]], shifted, GT)["equal"]
 
 
-def _example():
-    """The 'Adding a detector' code block of docs/ARCHITECTURE.md, run: its module namespace."""
+def _example(monkeypatch):
+    """The 'Adding a descriptor' blocks of docs/ARCHITECTURE.md, run: the module block becomes the
+    module it names (greenloop.features.hue) and the registry line a line of features.BACKBONES
+    (both undone after the test). Returns the module."""
     text = (ROOT / "docs" / "ARCHITECTURE.md").read_text()
-    section = text[text.index("## Adding a detector"):]
-    code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
-    assert len([line for line in code.splitlines() if line.strip()]) <= 10
-    namespace = {}
-    exec(compile(code, "ARCHITECTURE.md", "exec"), namespace)
-    return namespace
+    section = text[text.index("## Adding a descriptor"):text.index("## Adding a detector")]
+    code, line = re.findall(r"```python\n(.*?)```", section, re.S)[:2]
+    assert len([c for c in code.splitlines() if c.strip()]) <= 10 and len(line.strip().splitlines()) == 1
+    module = types.ModuleType("greenloop.features.hue")
+    exec(compile(code, "ARCHITECTURE.md", "exec"), module.__dict__)
+    monkeypatch.setitem(sys.modules, module.__name__, module)
+    record = eval(line, {"Backbone": features.Backbone})
+    monkeypatch.setitem(features.BACKBONES, record.name, record)
+    return module
 
 
 def _walk_folder(folder: Path) -> Path:
@@ -250,15 +258,23 @@ def test_the_siamese_row_trains_only_before_the_evaluation_part_and_streams_its_
     assert scnn.describe(data._replace(tune=None)) == ({}, {})           # no honest split: nothing to train on
 
 
-def test_the_documented_example_appears_on_the_leaderboard_and_in_detect(tmp_path, monkeypatch, capsys):
-    ns = _example()
-    entry = ns["ENTRY"]
-    for name in [n for n in registry.REGISTRY if n != "seqslam"]:              # keep the run to seconds
+def test_the_documented_descriptor_appears_to_the_notebooks_the_leaderboard_and_detect(tmp_path, monkeypatch):
+    """One module and one registry line: the notebooks' extract_all takes the name, the leaderboard's
+    single-frame matcher gives it a tuned row, and the stream detect runs (single_frame.cli_knobs,
+    the entry's stream and describer, speed.timing's step) closes the loops its matrix declares."""
+    from greenloop.speed import timing
+    from greenloop.util import cache
+    hue = _example(monkeypatch)
+    monkeypatch.setattr(cache, "CACHE_DIR", tmp_path / "models")
+    for name in [n for n in registry.REGISTRY if n != "single-frame"]:          # keep the run to seconds
         monkeypatch.delitem(registry.REGISTRY, name)
-    monkeypatch.setitem(registry.REGISTRY, entry.name, entry)
     folder = _walk_folder(tmp_path / "walk")
+    rgb = np.stack([cv2.imread(str(folder / "rgb" / f"{i}.png"))[..., ::-1] for i in range(60)])
+    X = hue.hue_histogram(rgb)
+    feats, infos = features.extract_all(folder, ["hue-histogram"])                 # notebooks 07 / 08
+    assert np.array_equal(feats["hue-histogram"], X) and infos["hue-histogram"].label == "hue-histogram (none)"
     params = dict(seq_lens=[3], contrast_windows=[0, 4], velocities=[1.0], threshold_rule="f1", fps_frames=5,
-                  timing_repeats=3)
+                  timing_repeats=3, cnn_backbones=[], random_control="pixels-patchnorm", vocab_size=16, whiten_dims=[4])
     data, split = experiment.prepare(folder, 1, 0.5, 10, 0.5, None, params)
     tuned = experiment.tune(data)
     timed = experiment.stream_and_time(data, tuned, experiment.decide(data))
@@ -268,17 +284,16 @@ def test_the_documented_example_appears_on_the_leaderboard_and_in_detect(tmp_pat
     assert row["bytes_per_stored_frame"] == 32 * 4 + 4 and row["fps_min"] > 0
     assert (tuned.rows.descriptor == "hue-histogram").sum() == 2                   # its contrast windows, tuned
     S = tuned.S["hue-histogram (single frame)"]
-    X = np.stack([ns["hue_histogram"](cv2.imread(str(folder / "rgb" / f"{i}.png"))) for i in range(60)])
     assert np.array_equal(S, seqstream.score_matrix(X, data.exclude, 1, (1.0,), tuned.knobs[row.name]["contrast_window"]))
 
-    from greenloop.__main__ import main
-    assert main(["detect", str(folder), "--method", "hue-histogram", "--threshold", "0.99", "--exclude", "10"]) == 0
-    out = capsys.readouterr().out
-    events = [line.split("\t") for line in out.splitlines() if line[:1].isdigit()]
-    det = entry.stream(entry.cli_knobs, 0.99, data)
-    expected = [e for e in (det.update_descriptor(x) for x in X) if e]
-    assert events and [(int(e[0]), int(e[1])) for e in events] == [(e["frame"], e["match"]) for e in expected]
-    assert "60 frames" in out and main(["detect", str(folder), "--method", "hue-histogram"]) == 2   # no threshold
+    entry, knobs = registry.REGISTRY["single-frame"], single_frame.cli_knobs("hue-histogram")   # detect's path
+    det, describe = entry.stream(knobs, 0.99, data), entry.describer(knobs, data)
+    step = timing.detector_method("single-frame", det, describe).step
+    events = [e for e in (step(det, cv2.imread(str(folder / "rgb" / f"{i}.png"))) for i in range(60)) if e]
+    ref = entry.stream(knobs, 0.99, data)
+    assert events and events == [e for e in (ref.update_descriptor(x) for x in X) if e]
+    with pytest.raises(ValueError, match="valid names: .*hue-histogram"):
+        single_frame.cli_knobs("hue-histogam")
 
 
 def test_the_dictionary_decides_and_has_no_score():

@@ -376,13 +376,11 @@ def test_backbone_entries_name_their_weights():
         F.split_spec("alexnet")
 
 
-def test_extract_spec_keeps_fixed_inputs_and_forces_random_init():
+def test_a_study_wide_cnn_input_keeps_fixed_inputs_and_the_suffix_forces_random_init():
     frames = np.random.default_rng(0).integers(0, 255, (2, 40, 48, 3), dtype=np.uint8)
-    X, info = F.extract_spec(frames, "mobilenetv2:random", "auto", input_size=64,
-                                    return_info=True, progress=False)
+    X, info = F.get("mobilenetv2:random", "auto", cnn_input_size=64).extract(frames)
     assert X.shape == (2, 1280) and info.weights == "random init" and info.input_size == (224, 224)
-    X, info = F.extract_spec(frames, "pixels", "auto", input_size=64, return_info=True,
-                                    progress=False)
+    X, info = F.get("pixels", "auto", cnn_input_size=64).extract(frames)
     assert X.shape == (2, 1024)
 
 
@@ -405,7 +403,7 @@ def test_random_init_fallback_is_reported_in_one_line_without_paths(frames, caps
     import warnings
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        with F.random_init_reported("ghostnet", "auto"):
+        with F.random_init_reported(F.get("ghostnet", "auto", warn=False)):
             X = F.extract(frames, "ghostnet", "auto", input_size=64)
     out = capsys.readouterr().out
     assert out.count("RANDOM-INITIALISED") == 1 and out.startswith("ghostnet:") and "/" not in out.split("(")[0]
@@ -427,7 +425,7 @@ def test_sequence_descriptors_are_registry_entries():
     assert seqmatch.DESCRIPTORS == ("pixels", "pixels-patchnorm", "mobilenetv2", "gradients", "gradients+efficientnetlite0")
     for name in seqmatch.DESCRIPTORS:
         assert F.BACKBONES[name].kind in F.EXTRACTORS
-    assert set(F.EXTRACTORS) == {b.kind for b in F.BACKBONES.values()}
+    assert set(F.EXTRACTORS) == {b.kind for b in F.BACKBONES.values()} | {"function"}   # no function registered yet
 
 
 def test_patchnorm_and_gradients_entries(frames):
@@ -465,18 +463,16 @@ def test_gray_float_frames_round_then_preprocess(frames):
 
 
 def test_extract_all_resolves_weights_once_per_entry(tiny_sequence, tmp_path, monkeypatch):
-    """extract_all resolves each (backbone, weights) pair once and passes the result on (the
-    cache key, the random-init report and extract all use it); before, it resolved three times."""
-    from greenloop.features import cache as FC
-    from greenloop.features import extraction as FE
+    """extract_all resolves each (backbone, weights) pair once, when it makes the Descriptor (the
+    cache key, the random-init report and the extraction read it there)."""
+    from greenloop.features import descriptor as FD
     calls = []
 
     def counting(name, weights, warn=True):
         calls.append(name)
         return real(name, weights, warn)
-    real = FC.resolve
-    monkeypatch.setattr(FC, "resolve", counting)
-    monkeypatch.setattr(FE, "resolve", counting)
+    real = FD.resolve
+    monkeypatch.setattr(FD, "resolve", counting)
     F.extract_all(tiny_sequence, ["pixels", "sift_bovw"], step=5, vocab_size=8, cache=tmp_path)
     assert calls == ["pixels", "sift_bovw"]
 

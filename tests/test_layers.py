@@ -1,5 +1,5 @@
-"""greenloop.features.layers: CNN maps at three depths, pooled three ways, and their entries
-("backbone@depth-pooling") in extract_spec / extract_all."""
+"""greenloop.features.layers: CNN maps at three depths, pooled three ways, and their names
+("backbone@depth-pooling") in features.get / extract_all."""
 import numpy as np
 import pytest
 
@@ -23,10 +23,11 @@ def test_pooling_of_a_known_map():
 
 
 def test_names_and_sizes():
-    assert layers.spec("mobilenetv2", "mid", "grid2") == "mobilenetv2@mid-grid2"
-    assert layers.split("mobilenetv2@mid-grid2") == ("mobilenetv2", "mid", "grid2") and layers.split("pixels") is None
+    assert features.layer_name("mobilenetv2", "mid", "grid2") == "mobilenetv2@mid-grid2"
+    assert features.parse("mobilenetv2@mid-grid2") == ("mobilenetv2", "mid", "grid2", "")
+    assert features.parse("pixels") == ("pixels", None, None, "")
     with pytest.raises(ValueError, match="backbone>@<depth>-<pooling"):
-        layers.split("mobilenetv2@middle-avg")
+        features.parse("mobilenetv2@middle-avg")
     s = layers.specs(["efficientnetlite0:random"])
     assert len(s) == 9 and s[0] == "efficientnetlite0@early-avg:random" and s[-1] == "efficientnetlite0@last-gem:random"
     assert features.split_spec(s[0]) == ("efficientnetlite0@early-avg", None)
@@ -48,8 +49,9 @@ def test_one_pass_gives_every_depth_and_the_last_map_is_the_plain_descriptor(fra
     square, _ = layers.extract_layers(frames, "efficientnetlite0", None, ("last",), ("avg",), aspect=False, progress=False)
     plain = features.extract(frames, "efficientnetlite0", None, progress=False)
     assert np.allclose(square[("last", "avg")], plain, atol=1e-5)
-    X, i = features.extract_spec(frames, "efficientnetlite0@mid-grid2:random", return_info=True, progress=False)
-    assert np.allclose(X, feats[("mid", "grid2")], atol=1e-5) and i.label == "efficientnetlite0@mid-grid2 (random init)"
+    d = features.get("efficientnetlite0@mid-grid2:random")
+    X, i = d.extract(frames)
+    assert np.allclose(X, feats[("mid", "grid2")], atol=1e-5) and d.dim == X.shape[1] == 448 and i.label == "efficientnetlite0@mid-grid2 (random init)"
     assert i.layer == "_blocks__10___add, grid2 pooling" and i.input_size == (224, 112)
     with pytest.raises(ValueError, match="layer descriptors exist for"):
         layers.extract_layers(frames, "ghostnet", None)
@@ -66,7 +68,7 @@ def test_extract_all_runs_one_cached_pass_per_network(tmp_path, frames):
     assert len(list((tmp_path / "cache").glob("layers-*/layers.npz"))) == 1       # one pass for both entries
     again, _ = features.extract_all(tmp_path / "seq", specs[::-1], cache=tmp_path / "cache")
     assert all(np.array_equal(feats[s], again[s]) for s in specs)
-    direct = features.extract_spec(tmp_path / "seq", specs[1], progress=False)
+    direct = features.get(specs[1])(tmp_path / "seq")
     assert np.allclose(direct, feats[specs[1]], atol=1e-5) and infos[specs[0]].dim == 40
 
 
@@ -75,5 +77,5 @@ def test_a_streams_frame_describer_reads_the_layer_entry(frames):
     from greenloop.methods.greenloop_seq import entry as greenloop_seq
     f = np.ascontiguousarray(frames[0][..., ::-1])                  # as cv2 decodes it
     one = greenloop_seq.frame_describer("efficientnetlite0@early-grid2", None)(f)
-    batch = features.extract_spec(frames, "efficientnetlite0@early-grid2", None, progress=False)
+    batch = features.get("efficientnetlite0@early-grid2", None)(frames)
     assert one.shape == (160,) and np.allclose(one, batch[0], atol=1e-5)

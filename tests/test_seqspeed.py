@@ -266,15 +266,14 @@ def test_a_stream_looks_its_weights_up_once_not_at_every_frame(monkeypatch):
     random-init warning): a Detector and a leaderboard describer resolve once and give the same
     descriptors as describing each frame on its own."""
     from greenloop.methods.greenloop_seq import entry as greenloop_seq
-    from greenloop.features import extraction
+    from greenloop.features import descriptor
     calls = []
-    real = extraction.resolve
+    real = descriptor.resolve
 
     def counted(*a, **k):
         calls.append(a[0])
         return real(*a, **k)
-    monkeypatch.setattr(extraction, "resolve", counted)
-    monkeypatch.setattr(features, "resolve", counted)
+    monkeypatch.setattr(descriptor, "resolve", counted)
     frames = np.random.default_rng(2).integers(0, 256, (6, 48, 64, 3), dtype=np.uint8)
     det = seqstream.Detector(None, descriptor="gradients", seq_len=2, exclude=0)
     for f in frames:

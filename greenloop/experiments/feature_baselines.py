@@ -16,8 +16,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from greenloop import evaluate, groundtruth, similarity
-from greenloop.features import layers
+from greenloop import evaluate, features, groundtruth, similarity
 from greenloop.speed import timing
 from greenloop.study import verdict, wording
 from greenloop import report
@@ -74,11 +73,10 @@ def layer_table(feats: dict, infos: dict, GT, exclude: int, tune=None, evalq=Non
     parts = {"all": None} if tune is None else {"tune": tune, "eval": evalq}
     rows = []
     for spec, X in feats.items():
-        name, colon, tag = spec.partition(":")
-        backbone, depth, pooling = layers.split(name)
+        n = features.parse(spec)
         S, i = similarity.cosine_matrix(X), infos[spec]
-        row = {"spec": spec, "backbone": backbone + colon + tag,
-               "weights": i.weights, "depth": depth, "layer": i.layer.rsplit(", ", 1)[0], "pooling": pooling,
+        row = {"spec": spec, "backbone": n.backbone + (":" + n.tag if n.tag else ""),
+               "weights": i.weights, "depth": n.depth, "layer": i.layer.rsplit(", ", 1)[0], "pooling": n.pooling,
                "dim": i.dim, "input": "x".join(map(str, i.input_size)), "extract_s_per_image": i.seconds_per_image}
         for part, q in parts.items():
             m = evaluate.per_query(S, GT, exclude, queries=q, ks=(1,))

@@ -30,7 +30,7 @@ REFERENCE = "ghostnet"          # Tables 3/4 take their rates R_a, R_t relative 
 def split_backbones(backbones) -> tuple[list, list]:
     """(cnn, skipped): the backbone specs ("name" or "name:random") that name a CNN of
     ``features.CNN_BACKBONES``, and the others (Tables 3/4 compare CNNs only)."""
-    cnn = [b for b in backbones if features.split_spec(b)[0] in features.CNN_BACKBONES]
+    cnn = [b for b in backbones if features.parse(b).backbone in features.CNN_BACKBONES]
     return cnn, [b for b in backbones if b not in cnn]
 
 
@@ -49,11 +49,10 @@ def rgbd_table(dataset, backbones, GT, exclude: int, weights="auto", input_size=
     """
     rows, S, infos = [], {}, {}
     for b in backbones:
-        name, w = features.split_spec(b, weights)
-        with features.random_init_reported(name, w):
-            X, inf = features.extract_rgbd(dataset, name, w, progress=False, step=frame_step,
-                                           input_size=None if features.BACKBONES[name].fixed_input else input_size,
-                                           max_depth=max_depth, return_info=True)
+        d = features.get(b, weights, cnn_input_size=input_size, warn=False)
+        with features.random_init_reported(d):
+            X, inf = features.extract_rgbd(dataset, d, progress=False, step=frame_step, max_depth=max_depth,
+                                           return_info=True)
         infos[b], S[b] = inf, similarity.rgbd_matrices(X)
         row = {"backbone": b, "weights": inf.weights, "label": inf.label, "dim_rgbd": X.shape[1],
                "input": "x".join(map(str, inf.input_size))}
@@ -73,7 +72,7 @@ def rgbd_table(dataset, backbones, GT, exclude: int, weights="auto", input_size=
 def skipped_table(backbones, weights="auto") -> pd.DataFrame:
     """The table of a sequence without depth/: per CNN backbone its weights, label and the status
     "skipped: the dataset has no depth/ folder"."""
-    used = {b: features.weights_used(*features.split_spec(b, weights)) for b in backbones}
+    used = {b: features.get(b, weights, warn=False).resolved.label for b in backbones}
     return pd.DataFrame([{"backbone": b, "weights": used[b], "label": f"{b} ({used[b]})",
                           "status": "skipped: the dataset has no depth/ folder"} for b in backbones])
 

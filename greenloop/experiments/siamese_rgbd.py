@@ -184,7 +184,7 @@ def reference_scores(X_rgb, GT, exclude: int, heldout, seeds=(0,), width: float 
         F, inf = siamese.describe(untrained, X_rgb, return_info=True, weights="random init")
         sims["untrained", seed], ap, r100 = score_descriptors(F, GT, exclude, heldout)
         rows.append(_row("scnn untrained, RGB", f"scnn untrained, RGB ({inf.weights})", inf, ap, r100, seed=seed))
-    F, inf = features.extract(np.rint(X_rgb * 255).astype(np.uint8), "pixels", progress=False, return_info=True)
+    F, inf = features.get("pixels").extract(np.rint(X_rgb * 255).astype(np.uint8))
     sims["pixels", None], ap, r100 = score_descriptors(F, GT, exclude, heldout)
     rows.append(_row("pixels (32x32 gray)", inf.label, inf, ap, r100))
     return rows, sims
@@ -330,7 +330,7 @@ def timing(s: Setup, sup: Runs, fus: Runs, dataset, fusion_supervision: str, mid
                                   dtype=np.uint8, progress=False)
     with warnings.catch_warnings():    # tiny frames may hold fewer SIFT descriptors than words: timing only
         warnings.simplefilter("ignore", UserWarning)
-        t_sift = features.extract(native, "sift_bovw", progress=False, return_info=True)[1].seconds_per_image
+        t_sift = features.get("sift_bovw").extract(native)[1].seconds_per_image
     rows.append({"descriptor": "sift_bovw (SIFT + 500-word quantisation)", "weights": "none",
                  "label": "sift_bovw (none)", "input": f"{s.info['width']}x{s.info['height']}",
                  "s_per_image_batched": t_sift,

@@ -1,7 +1,14 @@
 """Whole-image descriptors for loop-closure detection: CNN features, SIFT bag of words, raw pixels.
 
-One entry point, ``extract(frames_or_folder, backbone)``, returns an (N, D) float32 array: row i
-describes frame i; compare rows with cosine similarity (after the normalisation/whitening stage).
+One way to get one: ``d = get(name, weights=..., input_size=...)``, a :class:`Descriptor` with
+``d.name``, ``d.label``, ``d.dim`` and ``d.resolved`` (its weights); ``d(frames)`` maps (N, H, W, 3)
+uint8 RGB frames (``color="bgr"`` for frames as ``cv2.imread`` decodes them) to an (N, D) float32
+array, row i describing frame i (compare rows with cosine similarity, after the normalisation /
+whitening stage); ``d.describe(folder, step)`` describes a sequence folder once and keeps the result
+in the one on-disk cache (``greenloop.util.cache``). Names: ``registry.names()``, read by
+``registry.parse`` (``"mobilenetv2:random"``, ``"efficientnetlite0@mid-grid2"``); a new descriptor is
+one module and one line in ``registry.BACKBONES`` (docs/ARCHITECTURE.md, "Adding a descriptor").
+``extract``, ``extract_all``, ``extract_rgbd`` and ``time_per_image`` are shortcuts over ``get``.
 
 Backbones (``BACKBONES[name].dim`` is D)::
 
@@ -74,54 +81,53 @@ Weights (CNN backbones), the ``weights`` argument:
 Every result can and should be labelled: ``weights_used(backbone, weights)`` returns ``"imagenet"``,
 ``"imagenet, tflite uint8"`` (the quantised MobileNet graphs), ``"random init"``, ``"file:<name>"``
 (``"model:<name>"`` for an in-memory spot_cnn, ``"none"`` for the weight-free backbones), and
-``extract(..., return_info=True)`` returns it in ``info.weights`` and ``info.label`` (e.g.
+``Descriptor.label`` (and the ``ExtractInfo`` of ``d.extract`` / ``d.describe``) carries it (e.g.
 ``"ghostnet (random init)"``, ``"mobilenetv1 (imagenet, tflite uint8)"``) for table rows and legends.
 
-Timing: ``extract(..., return_info=True)`` also measures ``info.seconds_per_image``: wall-clock seconds
+Timing: ``d.extract(...)`` also measures ``info.seconds_per_image``: wall-clock seconds
 per frame of the whole timed pass (resize + preprocess + network, not reading files from disk),
 measured after one untimed warm-up batch (graph tracing, memory allocation). ``time_per_image`` is a
 shortcut on synthetic frames. For sift_bovw the time covers SIFT plus quantisation, not the one-off
 vocabulary fit.
 
 Package layout (one module per job; imports run downward: registry <- weights, frames <- the
-extractor families cnn / pixels / sift / spot <- layers <- extraction <- cache)::
+extractor families cnn / pixels / sift / spot / function <- layers <- descriptor <- extraction)::
 
-    registry.py  Backbone records, BACKBONES, SEQUENCE_DESCRIPTORS, Options, ExtractInfo, split_spec
-    weights.py   weight resolution: resolve(backbone, weights) -> Resolved(label, source), once per pair
-    frames.py    input checks, stack_frames, gray/RGB batches (via sequence.preprocess_image, RGB or
-                 BGR channel order), depth_to_uint8
-    cnn.py       Keras / port / TFLite extractor;  pixels.py  pixels, pixels-patchnorm, gradients
-    sift.py      SIFT bag of words;  spot.py  the main paper's CNN
-    layers.py    CNN maps at an early, mid and last depth, pooled avg / 2x2 grid / GeM: the entries
-                 "backbone@depth-pooling" that extract_spec and extract_all read (one pass per network)
-    extraction.py  extract, extract_spec, resolve_spec, extract_rgbd, time_per_image; EXTRACTORS {kind: fn}
-    cache.py     extract_all and its descriptor cache
+    registry.py    the one registry: Backbone records, BACKBONES, parse (the name grammar), names,
+                   SEQUENCE_DESCRIPTORS, Options, ExtractInfo
+    weights.py     weight resolution: resolve(backbone, weights) -> Resolved(label, source), once per pair
+    frames.py      input checks, stack_frames, gray/RGB batches (via sequence.preprocess_image, RGB or
+                   BGR channel order), depth_to_uint8
+    cnn.py         Keras / port / TFLite extractor;  pixels.py  pixels, pixels-patchnorm, gradients
+    sift.py        SIFT bag of words;  spot.py  the main paper's CNN;  function.py  registered functions
+    layers.py      CNN maps at an early, mid and last depth, pooled avg / 2x2 grid / GeM (one pass per network)
+    descriptor.py  Descriptor, get, EXTRACTORS {kind: fn}; its cache entries in greenloop.util.cache
+    extraction.py  extract, extract_all, extract_rgbd, time_per_image, random_init_reported (over get)
 """
 from __future__ import annotations
 
-from greenloop.features.cache import extract_all, random_init_reported
 from greenloop.features.cnn import clear_models
-from greenloop.features.extraction import (EXTRACTORS, clear_cache, extract, extract_rgbd,
-                                           extract_spec, resolve_spec, time_per_image)
+from greenloop.features.descriptor import EXTRACTORS, Descriptor, get
+from greenloop.features.extraction import (clear_cache, extract, extract_all, extract_rgbd, random_init_reported,
+                                           time_per_image)
 from greenloop.features.frames import depth_to_uint8, stack_frames
 from greenloop.features.pixels import gradient_histograms, patch_normalise
-from greenloop.features.registry import (BACKBONES, CNN_BACKBONES, CNN_KINDS, DEFAULT_VOCAB_SIZE,
-                                         DEPTH_MAX_M, FUSED_CNN, FUSED_DIM, FUSED_WIDTH, GRADIENT_BINS,
-                                         GRADIENT_CELL, GRADIENT_DIM, GRADIENT_SIZE, PATCH, PIXELS_SIZE,
-                                         RANDOM_INIT_SEED, SEQUENCE_DESCRIPTORS,
-                                         Backbone, ExtractInfo, Options, get_backbone, split_spec)
+from greenloop.features.registry import (BACKBONES, CNN_BACKBONES, CNN_KINDS, DEFAULT_VOCAB_SIZE, DEPTH_MAX_M, DEPTHS,
+                                         FUSED_CNN, FUSED_DIM, FUSED_WIDTH, GRADIENT_BINS, GRADIENT_CELL, GRADIENT_DIM,
+                                         GRADIENT_SIZE, PATCH, PIXELS_SIZE, POOLINGS, RANDOM_INIT_SEED,
+                                         SEQUENCE_DESCRIPTORS, Backbone, ExtractInfo, Name, Options, get_backbone,
+                                         layer_name, names, parse, split_spec)
 from greenloop.features.sift import fit_vocabulary
 from greenloop.features.spot import spot_feature_model
 from greenloop.features.weights import (TFLITE_LABEL, WEIGHTS_ENV, Resolved, WeightsNotFoundError,
                                         imagenet_weights_path, resolve, weights_search_path,
                                         weights_used)
 
-__all__ = ["BACKBONES", "CNN_BACKBONES", "CNN_KINDS", "DEFAULT_VOCAB_SIZE", "DEPTH_MAX_M", "FUSED_CNN", "FUSED_DIM", "FUSED_WIDTH", "EXTRACTORS",
-           "GRADIENT_BINS", "GRADIENT_CELL", "GRADIENT_DIM", "GRADIENT_SIZE", "PATCH", "PIXELS_SIZE",
-           "RANDOM_INIT_SEED", "SEQUENCE_DESCRIPTORS", "TFLITE_LABEL", "WEIGHTS_ENV", "Backbone",
-           "ExtractInfo", "Options", "Resolved", "WeightsNotFoundError", "clear_cache", "clear_models",
-           "depth_to_uint8", "extract", "extract_all", "extract_rgbd", "extract_spec", "fit_vocabulary",
-           "get_backbone", "gradient_histograms", "imagenet_weights_path", "patch_normalise",
-           "random_init_reported", "resolve", "resolve_spec", "spot_feature_model", "split_spec", "stack_frames",
-           "time_per_image",
-           "weights_search_path", "weights_used"]
+__all__ = ["BACKBONES", "CNN_BACKBONES", "CNN_KINDS", "DEFAULT_VOCAB_SIZE", "DEPTHS", "DEPTH_MAX_M", "EXTRACTORS",
+           "FUSED_CNN", "FUSED_DIM", "FUSED_WIDTH", "GRADIENT_BINS", "GRADIENT_CELL", "GRADIENT_DIM", "GRADIENT_SIZE",
+           "PATCH", "PIXELS_SIZE", "POOLINGS", "RANDOM_INIT_SEED", "SEQUENCE_DESCRIPTORS", "TFLITE_LABEL",
+           "WEIGHTS_ENV", "Backbone", "Descriptor", "ExtractInfo", "Name", "Options", "Resolved",
+           "WeightsNotFoundError", "clear_cache", "clear_models", "depth_to_uint8", "extract", "extract_all",
+           "extract_rgbd", "fit_vocabulary", "get", "get_backbone", "gradient_histograms", "imagenet_weights_path",
+           "layer_name", "names", "parse", "patch_normalise", "random_init_reported", "resolve", "spot_feature_model",
+           "split_spec", "stack_frames", "time_per_image", "weights_search_path", "weights_used"]

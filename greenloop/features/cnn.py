@@ -1,6 +1,6 @@
 """The CNN extractor family: Keras applications, the Keras ports and the TFLite MobileNets.
 
-``extract_cnn`` follows the extractor protocol of ``greenloop.features.extract`` (see
+``extract_cnn`` follows the extractor protocol of ``features.descriptor.EXTRACTORS`` (see
 ``registry.Options``). Models are built once per process (``clear_models`` forgets them).
 """
 from __future__ import annotations

@@ -82,6 +82,18 @@ def rgb_batch(a: np.ndarray, size, color: str = "rgb") -> np.ndarray:
     return np.ascontiguousarray(x, dtype=np.float32)
 
 
+def rgb_uint8(a: np.ndarray, size, color: str = "rgb") -> np.ndarray:
+    """A slice of checked frames -> uint8 RGB (b, h, w, 3) at size (w, h) (None: as they are): float
+    frames rounded to uint8 first, single-channel ones replicated, BGR (color="bgr") swapped."""
+    out = []
+    for im in a:
+        if im.dtype != np.uint8:
+            im = np.clip(np.rint(im * 255.0), 0, 255).astype(np.uint8)
+        im = _resize(im if im.ndim == 3 else im[..., None], size)
+        out.append(np.repeat(im, 3, axis=-1) if im.shape[-1] == 1 else im[..., ::-1] if color == "bgr" else im)
+    return np.ascontiguousarray(np.stack(out))
+
+
 def gray_batch(a: np.ndarray, size, as_float: bool, color: str = "rgb") -> np.ndarray:
     """Checked frames (b, h, w[, 1 | 3]) RGB (or BGR with color="bgr") -> grayscale (b, H, W) at
     size (W, H): float32 in [0, 1] (as_float) or uint8. Float frames are rounded to uint8 first,

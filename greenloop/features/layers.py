@@ -2,7 +2,7 @@
 each pooled globally or over a spatial grid.
 
 Sünderhauf et al. (2015) found mid-level convolutional layers, which keep the image's layout, the
-most robust to appearance change for place recognition; ``features.extract`` reads only the last
+most robust to appearance change for place recognition; ``features.get(network)`` reads only the last
 map, averaged over the whole image. ``extract_layers`` reads three depths of one forward pass
 (``LAYERS``) and pools each map (N, h, w, C) in three ways (``POOLINGS``):
 
@@ -44,13 +44,11 @@ from greenloop.datasets import sequence
 from greenloop.features.cnn import _cnn_model, _preprocess_fn, _tflite_interpreter, predictor, run_model
 from greenloop.features.frames import load, rgb_batch
 from greenloop.features.pixels import extract_gradients
-from greenloop.features.registry import (BACKBONES, FUSED_CNN, FUSED_WIDTH, GRADIENT_SIZE, ExtractInfo, Options,
-                                         get_backbone)
+from greenloop.features.registry import (BACKBONES, DEPTHS, FUSED_CNN, FUSED_WIDTH, GRADIENT_SIZE, POOLINGS, Options,
+                                         get_backbone, layer_name, parse)
 from greenloop.features.weights import Resolved, resolve, source_key
 from greenloop.similarity import l2_normalise
 
-DEPTHS = ("early", "mid", "last")
-POOLINGS = ("avg", "grid2", "gem")
 GEM_P = 3.0
 _V1, _V2 = "MobilenetV1/MobilenetV1/", "MobilenetV2/"
 # backbone -> depth -> (TFLite tensor of the ImageNet graph, Keras layer of the same depth)
@@ -66,32 +64,14 @@ LAYERS = {
 }
 
 
-def spec(backbone: str, depth: str, pooling: str) -> str:
-    """The backbone-list entry of one layer descriptor, e.g. ``"mobilenetv2@mid-grid2"`` (a
-    ``:random`` suffix may follow, as for every entry)."""
-    return f"{backbone}@{depth}-{pooling}"
-
-
-def split(name: str) -> tuple[str, str, str] | None:
-    """(backbone, depth, pooling) of a layer descriptor name (:func:`spec`, without the weights
-    suffix), None for any other name; ValueError for a layer name it cannot read."""
-    if "@" not in name:
-        return None
-    backbone, _, rest = name.partition("@")
-    depth, _, pooling = rest.partition("-")
-    if backbone not in LAYERS or depth not in LAYERS[backbone] or pooling not in POOLINGS:
-        raise ValueError(f"layer descriptor {name!r}: write <backbone>@<depth>-<pooling> with backbone in "
-                         f"{sorted(LAYERS)}, depth in {DEPTHS}, pooling in {POOLINGS}")
-    return backbone, depth, pooling
-
-
 def specs(backbones, depths=DEPTHS, poolings=POOLINGS) -> list[str]:
-    """Every layer descriptor of the backbone-list entries ``backbones`` (a ``:random`` suffix
-    carries over), depth by depth."""
+    """Every layer descriptor name of the descriptor-list entries ``backbones`` (a ``:random`` /
+    ``:imagenet`` suffix carries over), depth by depth: ``specs(["mobilenetv2"], ["mid"])`` is
+    ["mobilenetv2@mid-avg", "mobilenetv2@mid-grid2", "mobilenetv2@mid-gem"]."""
     out = []
     for b in backbones:
-        name, colon, tag = str(b).partition(":")
-        out += [spec(name, d, p) + colon + tag for d in depths for p in poolings]
+        n = parse(b)
+        out += [layer_name(n.backbone, d, p) + (":" + n.tag if n.tag else "") for d in depths for p in poolings]
     return out
 
 
@@ -140,12 +120,12 @@ def extract_layers(frames_or_folder, backbone: str, weights="auto", depths=DEPTH
                    limit: int | None = None, resolved=None, width: int = 224, color: str = "rgb") -> tuple[dict, dict]:
     """Descriptors of every frame at several depths of one network, one forward pass.
 
-    frames_or_folder: a sequence folder or (N, H, W, 3) RGB frames (as ``features.extract``).
-    backbone: a key of ``LAYERS``; weights: as ``features.extract`` (the TFLite graphs for the
+    frames_or_folder: a sequence folder or (N, H, W, 3) RGB frames (as ``Descriptor.extract``).
+    backbone: a key of ``LAYERS``; weights: as ``features.get`` (the TFLite graphs for the
     ImageNet MobileNets, their Keras architecture with weights=None). depths: keys of
     LAYERS[backbone]; poolings: of ``POOLINGS``. aspect: keep the frames' aspect ratio where the
     network allows it (:func:`aspect_size`, ``width`` pixels wide). step, limit, resolved, color (of a
-    frame array: "rgb", or "bgr" as ``cv2.imread`` decodes): as ``features.extract``.
+    frame array: "rgb", or "bgr" as ``cv2.imread`` decodes): as ``Descriptor.extract``.
     Returns (feats, info): feats {(depth, pooling): (N, D) float32}; info {'weights': label,
     'input': 'WxH', 'layers': {depth: layer name}, 'seconds_per_image': wall s per frame of the
     whole forward pass and pooling}.
@@ -209,31 +189,8 @@ def _channels(name, key, size, tflite: bool, names) -> list[int]:
     return [int(o.shape[-1]) for o in _keras_layers(name, key, size, tuple(names)).outputs]
 
 
-def extract_spec(frames_or_folder, name: str, weights="auto", *, return_info: bool = False,
-                 progress: bool = True, step: int = 1, limit: int | None = None, resolved=None, **_):
-    """``features.extract`` of one layer descriptor ``name`` (:func:`split`): (N, D) float32, or
-    with return_info (X, ExtractInfo) whose layer names the map and pooling and whose
-    seconds_per_image is the pass that computed it (a Keras network up to that depth, a TFLite
-    graph whole; ``features.extract_all`` times one pass for every depth and pooling). Other keywords of
-    ``features.extract_spec`` (vocab_size, ...) do not apply and are ignored."""
-    backbone, depth, pooling = split(name)
-    feats, li = extract_layers(frames_or_folder, backbone, weights, (depth,), (pooling,), progress=progress,
-                               step=step, limit=limit, resolved=resolved)
-    X = feats[(depth, pooling)]
-    return (X, info(name, li, X)) if return_info else X
-
-
-def info(name: str, layer_info: dict, X: np.ndarray):
-    """The ExtractInfo of layer descriptor ``name`` from :func:`extract_layers`' info and its (N, D)."""
-    _, depth, pooling = split(name)
-    w, h = map(int, layer_info["input"].split("x"))
-    return ExtractInfo(backbone=name, weights=layer_info["weights"], dim=int(X.shape[1]), n_images=len(X),
-                       input_size=(w, h), layer=f"{layer_info['layers'][depth]}, {pooling} pooling",
-                       seconds_per_image=float(layer_info["seconds_per_image"]))
-
-
 def extract_fused(b, frames_or_folder, source, size, opt: Options):
-    """'gradients+efficientnetlite0' (``features.extract``'s extractor protocol): each frame's
+    """'gradients+efficientnetlite0' (the extractor protocol, ``registry.Options``): each frame's
     gradients (``pixels.gradient_histograms``, 256-d) beside EfficientNet-Lite0's block-10 map pooled
     over 2 x 2 cells (:func:`extract_layers` at ``FUSED_WIDTH`` pixels wide, aspect kept, 448-d),
     each part L2-normalised: (N, 704) float32, so that the cosine of two frames weighs both parts

@@ -1,8 +1,12 @@
-"""The backbone registry: one record per descriptor name, and the names' parsing.
+"""The one descriptor registry: one record per descriptor name, and the names' grammar, read here
+and nowhere else (:func:`parse`).
 
-Every descriptor greenloop computes is a key of ``BACKBONES`` (the leaderboard, the CLI, the
-sweeps and greenloop-seq read it; ``SEQUENCE_DESCRIPTORS`` names the ones greenloop-seq streams).
-Imports nothing of the other features modules (they all import this one).
+Every descriptor greenloop computes is a key of ``BACKBONES`` or a layer descriptor of one
+(``"backbone@depth-pooling"``), optionally with a weights suffix (``":random"``, ``":imagenet"``);
+``features.get(name)`` turns a name into a ``Descriptor``. The notebooks, the leaderboard, the CLI
+and greenloop-seq read this registry (``SEQUENCE_DESCRIPTORS`` names the ones greenloop-seq
+streams). A new descriptor is one module and one line here (docs/ARCHITECTURE.md, "Adding a
+descriptor"). Imports nothing of the other features modules (they all import this one).
 """
 from __future__ import annotations
 
@@ -31,20 +35,31 @@ GRADIENT_DIM = (GRADIENT_SIZE[0] // GRADIENT_CELL) * (GRADIENT_SIZE[1] // GRADIE
 FUSED_CNN = ("efficientnetlite0", "mid", "grid2")
 FUSED_WIDTH = 128
 FUSED_DIM = GRADIENT_DIM + 4 * 112
+# layer descriptors "backbone@depth-pooling" (greenloop.features.layers): the channels C of each depth's map
+# (a descriptor is C long, 4 C for grid2), the same for the ImageNet graph and the random-init control
+DEPTHS = ("early", "mid", "last")
+POOLINGS = ("avg", "grid2", "gem")
+LAYER_CHANNELS = {"mobilenetv1": {"early": 256, "mid": 512, "last": 1024},
+                  "mobilenetv2": {"early": 32, "mid": 96, "last": 1280},
+                  "efficientnetlite0": {"early": 40, "mid": 112, "last": 1280}}
+WEIGHT_TAGS = {"": None, "random": None, "imagenet": "imagenet"}   # name suffix -> weights ("": the caller's)
 
 
 @dataclass(frozen=True)
 class Backbone:
-    """What ``extract`` knows about a backbone.
+    """One registry line: what ``features.get`` knows about a descriptor.
 
     name: the key in BACKBONES. kind: 'keras' | 'ghostnet' | 'efficientnet_lite' | 'tflite' |
     'sift_bovw' | 'pixels' | 'spot_cnn' | 'pixels-patchnorm' | 'gradients' | 'fused' (gradients beside a
-    CNN layer, ``layers.extract_fused``). dim: descriptor length D (None: depends on the vocabulary or
+    CNN layer, ``layers.extract_fused``) | 'function' (a registered function of frames, ``fn``). dim: descriptor length D (None: depends on the vocabulary or
     the model). input_size: default (width, height) fed to the extractor (None: native frame size).
     layer: which layer/feature the descriptor is. weights_file: name of the ImageNet weights file
     looked for by ``weights_search_path`` (None for weight-free backbones). app / module: the
     keras.applications constructor (for 'tflite': the same architecture's random-init control) and
     the submodule holding its preprocess_input. fixed_input: the input size cannot be changed.
+    fn: kind 'function' only: "module:function" of a function frames (N, H, W, 3) uint8 RGB ->
+    (N, D) float32 (imported when first used). leaderboard: the leaderboard's single-frame matcher
+    gives it a row (``methods.single_frame``), beside the notebook's CNNs, SIFT-BoVW and pixels.
     """
     name: str
     kind: str
@@ -56,6 +71,8 @@ class Backbone:
     module: str | None = None   # keras.applications submodule holding preprocess_input
     fixed_input: bool = False
     top_layer: str | None = None   # 'keras' only: build with the classifier, describe by this layer
+    fn: str | None = None          # 'function' only: "module:function", frames -> descriptors
+    leaderboard: bool = False      # a row of the leaderboard's single-frame matcher
 
 
 BACKBONES: dict[str, Backbone] = {b.name: b for b in (
@@ -129,7 +146,7 @@ SEQUENCE_DESCRIPTORS = ("pixels", "pixels-patchnorm", "mobilenetv2", "gradients"
 
 @dataclass
 class ExtractInfo:
-    """What an ``extract`` call did; use ``label`` in every table row and legend.
+    """What a ``Descriptor.extract`` / ``describe`` call did; use ``label`` in every table row and legend.
 
     backbone: its name. weights: ``weights_used`` string ("imagenet", "random init", "file:<name>",
     "model:<name>", "none"). dim: D. n_images: N. input_size: (width, height) fed to the extractor
@@ -152,12 +169,12 @@ class ExtractInfo:
 
 
 class Options(NamedTuple):
-    """The per-call settings every extractor takes (``extract``'s arguments, checked there).
+    """The per-call settings every extractor takes (a Descriptor's and its call's, checked there).
 
     The extractor protocol: ``fn(b: Backbone, frames_or_folder, source, size, opt: Options)`` ->
     (features (N, D) float32, seconds per image, extra dict); frames_or_folder is a sequence folder
     or an (N, H, W[, 1 | 3]) uint8 / [0, 1] float array, source the ``weights.Resolved`` source,
-    size the (width, height) input (None: native). ``extraction.EXTRACTORS`` maps each kind to its fn.
+    size the (width, height) input (None: native). ``descriptor.EXTRACTORS`` maps each kind to its fn.
     color: the channel order of a 3-channel array, "rgb" or "bgr" (as ``cv2.imread`` decodes);
     always "rgb" for a folder, which ``sequence.load_frames`` decodes to RGB.
     """
@@ -193,17 +210,65 @@ def input_size_of(input_size, default):
     return w, h
 
 
-def split_spec(spec: str, weights="auto"):
-    """A notebook's backbone-list entry -> (backbone name, weights).
+class Name(NamedTuple):
+    """A descriptor name read by :func:`parse`. backbone: its BACKBONES key. depth, pooling: a layer
+    descriptor's map and pooling (None otherwise). tag: the weights suffix, "", "random" or "imagenet"."""
+    backbone: str
+    depth: str | None
+    pooling: str | None
+    tag: str
 
-    ``"name"`` takes ``weights`` (the notebook's choice); ``"name:random"`` forces random
-    initialisation (``weights=None``), the untrained control of the same architecture, so a table
-    can show a pretrained row beside it; ``"name:imagenet"`` forces ``"imagenet"``. ``name`` may
-    be a layer descriptor ``"backbone@depth-pooling"`` (greenloop.features.layers), returned whole.
-    Raises ValueError for another suffix or an unknown name.
+    @property
+    def base(self) -> str:
+        """The name without its weights suffix: "mobilenetv2", "efficientnetlite0@mid-grid2"."""
+        return self.backbone if self.depth is None else layer_name(self.backbone, self.depth, self.pooling)
+
+
+def _unknown(name) -> ValueError:
+    return ValueError(f"unknown descriptor {name!r}; valid names: {', '.join(BACKBONES)}; or a layer "
+                      f"descriptor <backbone>@<depth>-<pooling> with backbone in {sorted(LAYER_CHANNELS)}, depth "
+                      f"in {DEPTHS}, pooling in {POOLINGS}; each with an optional ':random' or ':imagenet' suffix")
+
+
+def parse(name: str) -> Name:
+    """Read a descriptor name, the one place the grammar is read:
+    ``<backbone>[@<depth>-<pooling>][:random | :imagenet]``.
+
+    ``":random"`` forces random initialisation (the untrained control of the same architecture),
+    ``":imagenet"`` the ImageNet weights; without a suffix the caller's weights apply.
+    ``"backbone@depth-pooling"`` is a layer descriptor (greenloop.features.layers). Raises
+    ValueError listing the valid names for an unknown backbone, layer or suffix.
     """
-    name, _, tag = str(spec).partition(":")
-    get_backbone(name.partition("@")[0])   # "backbone@depth-pooling": greenloop.features.layers
-    if tag and tag not in ("random", "imagenet"):
-        raise ValueError(f"backbone entry {spec!r}: the suffix must be ':random' or ':imagenet'")
-    return name, {"": weights, "random": None, "imagenet": "imagenet"}[tag]
+    if not isinstance(name, str):
+        raise _unknown(name)
+    base, _, tag = name.partition(":")
+    if tag not in WEIGHT_TAGS or (not tag and name.endswith(":")):
+        raise ValueError(f"descriptor {name!r}: the suffix must be ':random' or ':imagenet'")
+    backbone, at, layer = base.partition("@")
+    if backbone.lower() not in BACKBONES:
+        raise _unknown(name)
+    if not at:
+        return Name(backbone.lower(), None, None, tag)
+    depth, _, pooling = layer.partition("-")
+    if backbone not in LAYER_CHANNELS or depth not in DEPTHS or pooling not in POOLINGS:
+        raise ValueError(f"layer descriptor {base!r}: write <backbone>@<depth>-<pooling> with backbone in "
+                         f"{sorted(LAYER_CHANNELS)}, depth in {DEPTHS}, pooling in {POOLINGS}")
+    return Name(backbone, depth, pooling, tag)
+
+
+def layer_name(backbone: str, depth: str, pooling: str) -> str:
+    """The name of one layer descriptor, e.g. ``"mobilenetv2@mid-grid2"``."""
+    return f"{backbone}@{depth}-{pooling}"
+
+
+def names() -> list[str]:
+    """Every descriptor name of the registry: the BACKBONES keys, then every layer descriptor
+    (each may take a ``:random`` / ``:imagenet`` suffix, :func:`parse`)."""
+    return list(BACKBONES) + [layer_name(b, d, p) for b in LAYER_CHANNELS for d in DEPTHS for p in POOLINGS]
+
+
+def split_spec(spec: str, weights="auto"):
+    """A notebook's descriptor-list entry -> (name without the weights suffix, weights): ``"name"``
+    takes ``weights``, ``"name:random"`` None, ``"name:imagenet"`` "imagenet" (:func:`parse`)."""
+    n = parse(spec)
+    return n.base, weights if not n.tag else WEIGHT_TAGS[n.tag]

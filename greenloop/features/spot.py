@@ -75,3 +75,10 @@ def extract_spot(b: Backbone, frames_or_folder, source, size, opt: Options):
 
     return (*run_model(feat_model.predict_on_batch, a, batch, opt.batch_size, opt.progress,
                         "spot_cnn features"), {})
+
+
+def spot_dim(source) -> int:
+    """D of spot_cnn for its resolved source (a keras Model or the Path of a .keras file): the
+    units of the model's penultimate layer (68 for greenloop.methods.dictionary.cnn.build)."""
+    model = source if not isinstance(source, Path) else _spot_model(str(source.resolve()), source.stat().st_mtime_ns)
+    return int(spot_feature_model(model).outputs[0].shape[-1])

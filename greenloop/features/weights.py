@@ -1,8 +1,7 @@
 """Weight resolution: which weights a (backbone, weights) pair means, decided once per pair.
 
-``resolve(backbone, weights)`` returns a ``Resolved`` (label, source); ``extract`` takes it
-(``resolved=``) so a caller that already resolved a pair (``cache.extract_all``) passes the result on
-instead of resolving it again. See the package doc for the ``weights`` values.
+``resolve(backbone, weights)`` returns a ``Resolved`` (label, source); ``features.get`` resolves
+once, when it makes a Descriptor, which keeps the result (so a stream never resolves per frame). See the package doc for the ``weights`` values.
 """
 from __future__ import annotations
 
@@ -18,7 +17,7 @@ from greenloop.features.registry import FUSED_CNN, Backbone, get_backbone
 
 WEIGHTS_ENV = "GREENLOOP_WEIGHTS"   # folder(s) of ImageNet weight files, searched first
 TFLITE_LABEL = "imagenet, tflite uint8"
-WEIGHT_FREE_KINDS = ("pixels", "sift_bovw", "pixels-patchnorm", "gradients")
+WEIGHT_FREE_KINDS = ("pixels", "sift_bovw", "pixels-patchnorm", "gradients", "function")
 
 
 class WeightsNotFoundError(FileNotFoundError):

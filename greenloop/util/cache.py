@@ -1,15 +1,23 @@
-"""The on-disk cache of everything expensive: trained models and extracted descriptors.
+"""The one on-disk cache of everything expensive: trained models and extracted descriptors.
 
-One folder per key under ``CACHE_DIR`` (``results/models/``, or ``$GREENLOOP_CACHE``), written
-under a temporary name and renamed, under a file lock, so reruns and parallel ``make -j`` jobs
-compute each key once and never read a half-written folder.
+One folder per key under ``CACHE_DIR`` (``results/models/``, or ``$GREENLOOP_CACHE``; descriptors
+in its ``descriptors/`` folder), written under a temporary name and renamed, under a file lock, so
+reruns and parallel ``make -j`` jobs compute each key once and never read a half-written folder.
+
+Keys: a model's (:func:`cache_key`) hashes its training data and parameters; a descriptor's
+(:func:`descriptor_key`) the frames' names, sizes and modification times, the descriptor code's
+version (:data:`DESCRIPTOR_CODE_VERSION`) and the settings. Formats: a model folder holds
+``model.keras`` (:func:`cached_model`); a descriptor folder ``features.npy`` (:func:`cached_descriptor`)
+or, for one pass of a network at every depth, ``layers.npz`` (:func:`cached_layers`).
 """
 from __future__ import annotations
 
 import contextlib
 import fcntl
+import functools
 import hashlib
 import json
+import lzma
 import os
 import tempfile
 from pathlib import Path
@@ -20,6 +28,16 @@ from greenloop.util.files import publish_folder
 
 ROOT = Path(__file__).resolve().parents[2]
 CACHE_DIR = Path(os.environ.get("GREENLOOP_CACHE", ROOT / "results" / "models"))
+DESCRIPTORS = "descriptors"    # the descriptor entries' folder under CACHE_DIR
+
+# Descriptor keys once hashed the live source of greenloop/features/*.py, datasets/sequence.py and
+# the backbone ports, so that any edit (a docstring, a move) re-extracted every cached descriptor.
+# They now hash a frozen stamp of the code version instead: version 1 is exactly those files' bytes
+# at commit e5611eb (their sha1 below), so every key, and the warm cache, stays what it was.
+# A change to what a descriptor computes must bump the version (then the stamp is the version
+# string); tests/test_descriptor_objects.py holds checksums of every family that fail until then.
+DESCRIPTOR_CODE_VERSION = 1
+_STAMP_V1 = (Path(__file__).with_name("descriptor_code_v1.xz"), "0ec05641e7b0e72e7dead994bfae7e8812308a83")
 
 
 def cache_key(X: np.ndarray, y: np.ndarray, **params) -> str:
@@ -107,3 +125,77 @@ def cached_model(key: str, cache, fit, params: dict, arrays: str, compile: bool 
         return model, history, dict(np.load(folder / arrays))
 
     return cached(key, cache, fit, save, load)
+
+
+@functools.lru_cache(maxsize=1)
+def code_stamp() -> bytes:
+    """The bytes every descriptor key hashes for the code version (:data:`DESCRIPTOR_CODE_VERSION`)."""
+    if DESCRIPTOR_CODE_VERSION != 1:
+        return f"greenloop descriptor code v{DESCRIPTOR_CODE_VERSION}".encode()
+    path, digest = _STAMP_V1
+    data = lzma.decompress(path.read_bytes())
+    if hashlib.sha1(data).hexdigest() != digest:
+        raise RuntimeError(f"{path} is damaged: its content is not the code stamp of descriptor keys v1")
+    return data
+
+
+def descriptor_key(name: str, frames, meta: dict) -> str:
+    """Key "<name>-<16 hex>" of a descriptor of the frame files ``frames`` (Paths, in order): a sha1
+    of each file's name, size and modification time, :func:`code_stamp` and the JSON of ``meta``
+    (the settings: sorted keys, ``str`` for what JSON lacks)."""
+    h = hashlib.sha1()
+    for p in frames:
+        st = p.stat()
+        h.update(f"{p.name}:{st.st_size}:{st.st_mtime_ns};".encode())
+    h.update(code_stamp())
+    h.update(json.dumps(meta, sort_keys=True, default=str).encode())
+    return f"{name}-{h.hexdigest()[:16]}"
+
+
+def descriptor_root(cache) -> Path | bool:
+    """The folder of descriptor entries: cache True -> ``CACHE_DIR/descriptors``, a folder -> it,
+    False -> False (not cached)."""
+    if cache is True:
+        return CACHE_DIR / DESCRIPTORS
+    return Path(cache) if cache else False
+
+
+def cached_descriptor(key: str, cache, fit):
+    """:func:`cached` for one descriptor: fit() -> (X (N, D) float32, info dict, extra dict). Kept
+    as ``features.npy``, ``info.json`` (info with the JSON-able extras under "extra") and
+    ``extra.npz`` (the array extras, when any). cache: as :func:`descriptor_root`.
+    Returns (X, info dict, extra dict)."""
+    def save(folder: Path, result) -> None:
+        X, info, extra = result
+        np.save(folder / "features.npy", X)
+        arrays = {k: v for k, v in extra.items() if isinstance(v, np.ndarray)}
+        if arrays:
+            np.savez(folder / "extra.npz", **arrays)
+        meta = dict(info, extra={k: v for k, v in extra.items() if not isinstance(v, np.ndarray)})
+        (folder / "info.json").write_text(json.dumps(meta, default=str))
+
+    def load(folder: Path):
+        info = json.loads((folder / "info.json").read_text())
+        extra = dict(info.pop("extra"))
+        if (folder / "extra.npz").is_file():
+            extra.update(np.load(folder / "extra.npz"))
+        return np.load(folder / "features.npy"), info, extra
+
+    return cached(key, descriptor_root(cache), fit, save, load, marker="features.npy")
+
+
+def cached_layers(key: str, cache, fit):
+    """:func:`cached` for one pass of a network kept at several depths and poolings: fit() ->
+    ({(depth, pooling): (N, D) float32}, info dict), kept as ``layers.npz`` (arrays named
+    "depth-pooling") and ``info.json``. Returns what fit() returns."""
+    def save(folder: Path, result) -> None:
+        feats, info = result
+        np.savez(folder / "layers.npz", **{f"{d}-{p}": X for (d, p), X in feats.items()})
+        (folder / "info.json").write_text(json.dumps(info))
+
+    def load(folder: Path):
+        with np.load(folder / "layers.npz") as z:
+            feats = {tuple(k.split("-")): z[k] for k in z.files}
+        return feats, json.loads((folder / "info.json").read_text())
+
+    return cached(key, descriptor_root(cache), fit, save, load, marker="layers.npz")

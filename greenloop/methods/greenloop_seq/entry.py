@@ -12,7 +12,6 @@ velocities, weights, input_size.
 """
 from __future__ import annotations
 
-import cv2
 import numpy as np
 
 from greenloop import features
@@ -81,15 +80,12 @@ def stream(k: dict, threshold, data: Data) -> seqstream.Detector:
 
 
 def frame_describer(descriptor: str, weights="auto", input_size=None, vocabulary=None):
-    """One decoded BGR frame (H, W, 3) uint8 -> the raw descriptor (D,) a method stores: the
-    timed describe step. descriptor: a seqmatch descriptor or a backbone entry. SIFT-BoVW
-    quantises against ``vocabulary`` (one frame's tf-idf)."""
-    resolved = features.resolve_spec(descriptor, weights)   # once, not at every frame
-    if descriptor in seqmatch.DESCRIPTORS and descriptor != "mobilenetv2":
-        return lambda f: seqmatch.describe_frames([f], descriptor, resolved=resolved)[0]
-    kw = {"vocabulary": vocabulary} if descriptor == "sift_bovw" else {}
-    return lambda f: features.extract_spec(cv2.cvtColor(f, cv2.COLOR_BGR2RGB)[None], descriptor, weights,
-                                           input_size, progress=False, resolved=resolved, **kw)[0]
+    """One decoded BGR frame (H, W, 3) uint8 -> the raw descriptor (D,) a method stores: the timed
+    describe step. descriptor: a features registry name (``features.get``, made once here, so the
+    weights are looked up once); input_size: the study's CNN input. SIFT-BoVW quantises against
+    ``vocabulary`` (one frame's tf-idf)."""
+    d = features.get(descriptor, weights, cnn_input_size=input_size, vocabulary=vocabulary)
+    return lambda f: d(f[None], color="bgr")[0]
 
 
 def describer(k: dict, data: Data):

@@ -132,28 +132,25 @@ def describe(frames_or_folder, descriptor: str = "pixels", step: int = 1, weight
     frames_or_folder: a sequence folder (its rgb/ frames) or an (N, H, W[, 3]) uint8 array (RGB).
     descriptor: "pixels" (32x32 gray in [0, 1], 1024-d), "pixels-patchnorm" (the same, SeqSLAM
         patch-normalised, 1024-d), "mobilenetv2" (ImageNet TFLite graph, 224x224, 1280-d) or
-        "gradients" (128x64 gray, 16x16-cell orientation histograms, 256-d): ``features.extract``
-        of that ``features.BACKBONES`` entry.
-    step: every step-th frame. weights: for mobilenetv2 (see ``greenloop.features.extract``).
+        "gradients" (128x64 gray, 16x16-cell orientation histograms, 256-d): ``features.get`` of
+        that registry name.
+    step: every step-th frame. weights: for mobilenetv2 (see ``greenloop.features.get``).
     Returns (N, D) float32, or (X, info) with return_info (``greenloop.features.ExtractInfo``; its
     seconds_per_image includes loading, preprocessing and the descriptor).
     """
-    X, info = features.extract(frames_or_folder, _check_descriptor(descriptor), weights=weights,
-                               progress=False, return_info=True, step=step)
+    X, info = features.get(_check_descriptor(descriptor), weights).extract(frames_or_folder, step=step)
     return (X, info) if return_info else X
 
 
-def describe_frames(frames, descriptor: str = "pixels", color: str = "bgr", weights="auto",
-                    resolved=None) -> np.ndarray:
-    """Raw camera frames -> descriptors (M, D) float32, the streaming path of ``speed.seqstream.Detector``.
+def describe_frames(frames, descriptor: str = "pixels", color: str = "bgr", weights="auto") -> np.ndarray:
+    """Raw camera frames -> descriptors (M, D) float32, the streaming path of ``seqstream.Detector``.
 
     frames: a list of M same-sized (H, W, 3) uint8 frames (BGR as cv2 decodes them, or RGB with
-    color="rgb") or (H, W) gray uint8. ``features.extract`` of the descriptor's registry entry, with
-    the frames' channel order, so a frame from disk gives the same descriptor as :func:`describe`.
-    resolved: ``features.resolve`` of the descriptor and ``weights``, already done (a stream does it once).
+    color="rgb") or (H, W) gray uint8. ``features.get`` of the descriptor's registry name, called
+    with the frames' channel order, so a frame from disk gives the same descriptor as :func:`describe`.
+    A stream keeps its Descriptor instead (its weights looked up once).
     """
-    return features.extract(features.stack_frames(frames), _check_descriptor(descriptor), weights=weights,
-                            progress=False, color=color, resolved=resolved)
+    return features.get(_check_descriptor(descriptor), weights)(features.stack_frames(frames), color=color)
 
 
 def normalise(X, projection=None) -> np.ndarray:

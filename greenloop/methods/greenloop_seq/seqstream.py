@@ -21,7 +21,7 @@ from greenloop import evaluate, features
 from greenloop.methods.lsh import retrieval
 from greenloop.methods.greenloop_seq.seqmatch import (COLORS, DEFAULT_VELOCITIES, STORE_DTYPES, _check_descriptor, _join,
                                 SHIFTABLE_DIMS, calibrate_scores, cell_shifts, check_calibration, center, center_stored, center_windows,
-                                columns_to_scores, contrast_normalise, describe_frames, matrix_events, normalise,
+                                columns_to_scores, contrast_normalise, matrix_events, normalise,
                                 shift_cells, threshold_range)
 from greenloop.similarity import l2_normalise
 from greenloop.methods.greenloop_seq import candidates
@@ -175,7 +175,7 @@ class Detector(CandidateMode):
                                             positive_int("index_fit", index_fit, 2))
         self.null_sample = positive_int("null_sample", null_sample, 2)
         self.velocities, self.projection, self.color, self.weights = tuple(v), projection, color, weights
-        self._resolved = None   # features.resolve(descriptor, weights), at the first frame
+        self._descriptor = None   # features.get(descriptor, weights), at the first frame
         self.store_dtype = np.dtype(store_dtype)
         off = _offsets(self.seq_len, self.velocities)
         self._margin = int(off.max())
@@ -494,9 +494,9 @@ class Detector(CandidateMode):
         """The window's raw descriptors (N, D), each frame checked; the weights looked up once."""
         for k, f in enumerate(frames):
             self._check_frame(f, self.frame_index + k)
-        if self._resolved is None:   # the weights are looked up at the first frame, not at every one
-            self._resolved = features.resolve(self.descriptor, self.weights)
-        return describe_frames(frames, self.descriptor, self.color, resolved=self._resolved)
+        if getattr(self, "_descriptor", None) is None:   # looked up at the first frame (and in a state saved before it had one)
+            self._descriptor = features.get(self.descriptor, self.weights)
+        return self._descriptor(features.stack_frames(frames), color=self.color)
 
     def _update_frames(self, frames) -> list:
         if not frames:

@@ -54,6 +54,7 @@ from greenloop.util.checks import positive_int
 
 SIZE = (64, 32)                 # (width, height) of the downsampled frames
 PATCH = features.PATCH          # patch-normalisation side length (pixels), the registry's
+DESCRIPTOR = features.get("pixels-patchnorm", input_size=SIZE)   # SeqSLAM's descriptor, 2048-d
 R_WINDOW = 10                   # contrast enhancement: database templates
 DS = 10                         # sequence length (a trajectory spans DS + 1 columns)
 V_MIN, V_MAX, V_STEP = 0.8, 1.2, 0.1
@@ -88,14 +89,13 @@ def describe_frames(frames, color: str = "bgr") -> np.ndarray:
     "pixels-patchnorm" (gray in [0, 1], ``features.patch_normalise`` with P = 8, flattened
     row-major) at SeqSLAM's 64x32 instead of 32x32.
     frames: list of (H, W, 3) uint8 BGR (RGB with color="rgb") or (H, W) gray uint8."""
-    return features.extract(features.stack_frames(frames), "pixels-patchnorm", input_size=SIZE, progress=False,
-                            color=color)
+    return DESCRIPTOR(features.stack_frames(frames), color=color)
 
 
 def describe(folder, step: int = 1) -> np.ndarray:
     """The SeqSLAM descriptors (N, 2048) float32 of every step-th frame of a sequence folder, the
-    same values :func:`describe_frames` gives frame by frame (both are ``features.extract``)."""
-    return features.extract(folder, "pixels-patchnorm", input_size=SIZE, step=step, progress=False)
+    same values :func:`describe_frames` gives frame by frame (both are :data:`DESCRIPTOR`)."""
+    return DESCRIPTOR.extract(folder, step=step)[0]
 
 
 def difference_similarity(db, y) -> np.ndarray:

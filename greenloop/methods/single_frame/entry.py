@@ -12,17 +12,17 @@ frames; its causal (look-back) form along the diagonal is a trajectory mean, i.e
 with seq_len = the window, which is the sequence row, not a single-frame one.
 
 :data:`ENTRY` ("single-frame") describes the study's descriptors (params: cnn_backbones,
-random_control, weights, input_size, vocab_size, whiten_dims, contrast_windows, velocities);
-:func:`entry` makes one on a new descriptor from a frame -> vector function (docs/ARCHITECTURE.md).
+random_control, weights, input_size, vocab_size, whiten_dims, contrast_windows, velocities) and every
+features registry line marked ``leaderboard=True``: a new descriptor reaches the leaderboard, and
+``detect --method single-frame --descriptor NAME`` (:func:`cli_knobs`), through the features registry
+alone (docs/ARCHITECTURE.md, "Adding a descriptor").
 """
 from __future__ import annotations
 
-import cv2
 import numpy as np
 
 from greenloop import features
 from greenloop.methods.greenloop_seq import seqmatch
-from greenloop.datasets.sequence import list_frames
 from greenloop.methods.greenloop_seq import entry as greenloop_seq
 from greenloop.methods.interface import Data, Entry
 from greenloop.methods.greenloop_seq import seqstream
@@ -34,8 +34,10 @@ def row_name(descriptor: str) -> str:
 
 
 def specs(params: dict) -> list:
-    """The study's single-frame descriptors: the CNNs, the random-init control, SIFT-BoVW, pixels."""
-    return list(params["cnn_backbones"]) + [params["random_control"], "sift_bovw", "pixels"]
+    """The study's single-frame descriptors: the CNNs, the random-init control, SIFT-BoVW, pixels,
+    then every features registry line marked ``leaderboard=True`` (in registry order)."""
+    study = list(params["cnn_backbones"]) + [params["random_control"], "sift_bovw", "pixels"]
+    return study + [n for n, b in features.BACKBONES.items() if b.leaderboard and n not in study]
 
 
 def projections(feats: dict, names, fit, dims) -> dict:
@@ -93,24 +95,14 @@ def tune(data: Data) -> tuple[list, dict, dict]:
     return tune_names(data, specs(p), list(p["cnn_backbones"]) + [p["random_control"]])
 
 
+def cli_knobs(descriptor: str = "pixels") -> dict:
+    """The untuned knob record of one descriptor's single-frame matcher: what ``detect --method
+    single-frame --descriptor NAME`` streams (``ENTRY.stream`` / ``ENTRY.describer`` of it).
+    ValueError, listing the registry's names, for a name ``features.parse`` cannot read."""
+    features.parse(descriptor)
+    return untuned([descriptor])[row_name(descriptor)]
+
+
 ENTRY = Entry("single-frame", describe, tune, greenloop_seq.score, greenloop_seq.stream, greenloop_seq.describer,
-              greenloop_seq.knob_text, cli_knobs=untuned(["pixels"])[row_name("pixels")])
+              greenloop_seq.knob_text, cli_knobs=cli_knobs("pixels"))
 
-
-def entry(name: str, describe_frame) -> Entry:
-    """A single-frame matcher on a new descriptor, as a registry entry.
-
-    name: the descriptor's (and the registry's) name; its row is "<name> (single frame)".
-    describe_frame: one decoded BGR frame (H, W, 3) uint8 -> (D,) float descriptor; the same
-    function describes the dataset's frames (``cv2.imread``) and the stream's, so the score matrix
-    and the stream see the same values. Knobs: the contrast window, as every single-frame matcher.
-    """
-    def describe_new(data: Data) -> tuple[dict, dict]:
-        paths = list_frames(data.dataset)
-        X = np.stack([np.asarray(describe_frame(cv2.imread(str(paths[int(i)]), cv2.IMREAD_COLOR)), np.float32)
-                      for i in data.frames])
-        return {name: X}, {}
-
-    return Entry(name, describe_new, lambda data: tune_names(data, [name]), greenloop_seq.score,
-                 greenloop_seq.stream, lambda k, data: describe_frame, greenloop_seq.knob_text,
-                 cli_knobs=untuned([name])[row_name(name)])
