@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from greenloop import detect, exclusion
+from greenloop import detect, exclusion, features
 from greenloop.methods import registry
 from greenloop.methods.dictionary import entry as dictionary
 from greenloop.methods.greenloop_seq import seqmatch, seqstream
@@ -57,8 +57,9 @@ def _knob_options(d) -> None:
     g.add_argument("--variant", default=None, metavar="ROW",
                    help="which of --tuned's rows (greenloop-seq: greenloop-seq-fast by default; another --method: "
                         "the row to stream, e.g. 'SeqSLAM (tuned)')")
-    g.add_argument("--descriptor", default=None, choices=seqmatch.DESCRIPTORS,
-                   help="per-frame descriptor (default: " + _defaults("descriptor") + ")")
+    g.add_argument("--descriptor", default=None, choices=features.names(), metavar="NAME",
+                   help="per-frame descriptor, a name of greenloop.features' registry (default: " + _defaults("descriptor")
+                        + "); --method single-frame matches single frames on any of them")
     g.add_argument("--seq-len", type=int, default=None, help="frames per matched sequence (default: " + _defaults("seq_len") + ")")
     g.add_argument("--contrast-window", type=int, default=None,
                    help="local contrast window in frames, 0 = off (default: " + _defaults("contrast_window") + ")")
