@@ -1,4 +1,4 @@
-"""greenloop.study.leaderboard: notebook 13's rows and tables on small hand-made data (the detectors' own
+"""greenloop.experiments.leaderboard.rows: notebook 13's rows and tables on small hand-made data (the detectors' own
 knobs, scores and streams: tests/test_detectors.py)."""
 import math
 
@@ -9,7 +9,7 @@ import pytest
 from greenloop import evaluate
 from greenloop.methods.greenloop_seq import seqmatch
 from greenloop.methods.greenloop_seq import seqstream
-from greenloop.study import leaderboard as lb
+from greenloop.experiments.leaderboard import rows as lb
 
 N0, REPEAT, EX, DIM = 80, 40, 20, 16
 

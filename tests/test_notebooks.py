@@ -491,7 +491,7 @@ def _check_12(folder):
 def _leaderboard_bounds(t):
     """What any correct leaderboard satisfies: its columns, R@5 >= R@1 and R@95P >= R@100P (a looser
     condition finds at least as much), every interval around its value, one for each scored row but chance."""
-    from greenloop.study import leaderboard
+    from greenloop.experiments.leaderboard import rows as leaderboard
     assert list(t.columns) == leaderboard.COLUMNS
     scored = t.dropna(subset=["R@1_%"])
     for c in leaderboard.METRICS + ["pair_AP_%"]:
@@ -507,7 +507,7 @@ def _check_13_counts(folder, t):
     """Every row says the queries it rests on (one count per mode, the dictionary's and chance's the
     methods'), the step the notebook chose from the requested 4 is 1, and the revisit count it chose
     by is the table's; threshold_carry and targets carry the same loop-closure counts."""
-    from greenloop.study import leaderboard
+    from greenloop.experiments.leaderboard import rows as leaderboard
     assert t[leaderboard.COUNTS].notna().all().all() and (t.revisit_queries <= t.queries).all()
     per_mode = t.groupby("mode")[leaderboard.COUNTS].nunique()
     assert (per_mode == 1).all().all(), per_mode
@@ -530,7 +530,7 @@ def _check_13_comparisons(folder, lc):
     """comparisons.csv: greenloop-seq against every other scored loop-closure row, each metric once, the
     difference the rows' (to rounding), resolved exactly where the written interval excludes 0, on the
     rows' queries; the Markdown beside it."""
-    from greenloop.study import leaderboard
+    from greenloop.experiments.leaderboard import rows as leaderboard
     c = pd.read_csv(folder / "comparisons.csv")
     assert list(c.columns) == ["protocol"] + leaderboard.COMPARISON_COLUMNS and (folder / "comparisons.md").is_file()
     c = c[(c.protocol == "leaderboard") & (c.a == "greenloop-seq")]
@@ -544,7 +544,7 @@ def _check_13_comparisons(folder, lc):
 
 
 def _check_13(folder):
-    from greenloop.study import leaderboard
+    from greenloop.experiments.leaderboard import rows as leaderboard
     csv = folder / "leaderboard.csv"
     assert (folder.parent / "leaderboard.csv").read_bytes() == csv.read_bytes()      # the copy is the same bytes
     t = pd.read_csv(csv)

@@ -1,4 +1,4 @@
-"""greenloop.study.leaderboard's paired comparisons: a metric's difference between two methods on the
+"""greenloop.experiments.leaderboard.rows's paired comparisons: a metric's difference between two methods on the
 same queries, bootstrapped in the same blocks as the rows' intervals (``spread``), and the table the
 statement and the targets read."""
 from collections import Counter
@@ -9,7 +9,7 @@ import pytest
 
 from greenloop import evaluate
 from greenloop.methods.greenloop_seq import seqstream
-from greenloop.study import leaderboard as lb
+from greenloop.experiments.leaderboard import rows as lb
 
 Q, BLOCK = 300, 10
 

@@ -1,5 +1,6 @@
 """Notebook 13's experiment: every registered detector on the same frames, ground truth, split,
-tuning budget and timing (``greenloop.methods.registry``; the rows are ``study.leaderboard``'s).
+tuning budget and timing (``greenloop.methods.registry``); its rows, spreads and paired comparisons are
+``leaderboard.rows``: one leaderboard, one folder.
 
 The calls, in the notebook's order (each returns what one table or figure shows):
 
@@ -31,7 +32,8 @@ from greenloop.methods.single_frame import entry as single_frame
 from greenloop.methods.interface import Data
 from greenloop.methods.registry import REGISTRY
 from greenloop.speed import timing
-from greenloop.study import leaderboard as lb, wording
+from greenloop.experiments.leaderboard import rows as lb
+from greenloop.study import wording
 from greenloop import report
 from greenloop.study import verdict
 
@@ -79,7 +81,7 @@ class Timed(NamedTuple):
 
 
 class Board(NamedTuple):
-    """board: the leaderboard (``study.leaderboard.COLUMNS``, unrounded; ``leaderboard.rounded`` is
+    """board: the leaderboard (``rows.COLUMNS``, unrounded; ``leaderboard.rounded`` is
     its written form); target: ``leaderboard.targets``; targets: the targets table; statement:
     the printed sentences (these three judge the written, rounded numbers, and read "above",
     "higher" and "highest" from comparisons only); comparisons: the paired comparisons as written
