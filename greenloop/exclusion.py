@@ -25,8 +25,8 @@ from typing import NamedTuple
 import numpy as np
 
 from greenloop import groundtruth
-from greenloop.groundtruth import DEFAULT_EXCLUDE
 from greenloop.datasets import sequence
+from greenloop.groundtruth import DEFAULT_EXCLUDE
 
 EXCLUDE_SECONDS = 10.0       # seconds of recording: a walking or driving camera has left a place by then
 EXCLUDE_FRACTION = 0.1       # of the recording, when neither ground truth nor frame times are known

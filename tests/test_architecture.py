@@ -3,6 +3,7 @@ import inside a function), the checker reports a planted violation of each kind,
 docs/ARCHITECTURE.md lists the contract's layers as they are.
 
 (tests/test_layers.py is features.layers' test: CNN layers, not these.)"""
+import re
 from pathlib import Path
 
 import pytest
@@ -93,3 +94,29 @@ def test_command_line(capsys):
     assert cli_main(["layers", "--markdown"]) == 0 and capsys.readouterr().out == architecture.markdown()
     with pytest.raises(SystemExit):
         cli_main(["layers", "--bogus"])
+
+
+def _layout_block() -> str:
+    text = (ROOT / "docs" / "ARCHITECTURE.md").read_text()
+    return re.search(r"## The layout.*?```\n(.*?)```", text, re.S).group(1)
+
+
+def _layout_problems(block: str) -> list[str]:
+    """Modules and folders of the package the layout block does not name, and names it gives that
+    are no module of the package."""
+    named = set(re.findall(r"([\w]+\.py)\b", block))
+    folders = set(re.findall(r"([\w]+)/", block))
+    files = [p.relative_to(PACKAGE) for p in PACKAGE.rglob("*.py") if "__pycache__" not in p.parts]
+    missing = {str(p) for p in files if p.name not in named and p.name != "__init__.py"}
+    missing |= {f"{d}/" for p in files for d in p.parts[:-1] if d not in folders}
+    extra = {f"no module {n}" for n in named if not any(p.name == n for p in files)}
+    return sorted(missing | extra)
+
+
+def test_the_documented_layout_is_the_package():
+    """docs/ARCHITECTURE.md's layout names every module and folder of the package, and nothing else."""
+    block = _layout_block()
+    assert _layout_problems(block) == [], "docs/ARCHITECTURE.md's layout differs from the package"
+    assert _layout_problems(block.replace("similarity.py", "similarities.py")) == ["no module similarities.py",
+                                                                                     "similarity.py"]
+    assert _layout_problems(block.replace("speed/", "speed")) == ["speed/"]

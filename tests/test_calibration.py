@@ -7,8 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from greenloop.methods.greenloop_seq import seqmatch
-from greenloop.methods.greenloop_seq import seqstream
+from greenloop.methods.greenloop_seq import seqmatch, seqstream
 
 
 def test_neighbourhood_by_hand():

@@ -7,8 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from greenloop.methods.greenloop_seq import seqmatch
-from greenloop.methods.greenloop_seq import candidates, seqstream
+from greenloop.methods.greenloop_seq import candidates, seqmatch, seqstream
 from tests.test_seqspeed import D, DEFAULT, EXCLUDE, N0, REVISIT, _detect, _drive, make_route, replay
 
 

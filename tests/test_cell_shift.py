@@ -5,8 +5,7 @@ import numpy as np
 import pytest
 
 from greenloop import evaluate, similarity
-from greenloop.methods.greenloop_seq import seqmatch
-from greenloop.methods.greenloop_seq import seqstream
+from greenloop.methods.greenloop_seq import seqmatch, seqstream
 from greenloop.util import numba_kernels
 
 ROWS, COLS, BINS = seqmatch.CELL_GRID

@@ -8,8 +8,7 @@ import pytest
 
 from greenloop.experiments import (descriptor_postprocessing as dp, feature_baselines as fb, leaderboard as lbx,
                                    lsh_matching, revisit_protocol, rgbd_features, siamese_rgbd)
-from greenloop.study import wording
-from greenloop.study import verdict
+from greenloop.study import verdict, wording
 
 ORDER_WORDS = ("best", "ahead", "higher", "better")
 

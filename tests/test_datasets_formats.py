@@ -14,8 +14,7 @@ import scipy.io
 from sklearn.metrics.pairwise import haversine_distances
 
 from greenloop import groundtruth
-from greenloop.datasets import gardenspoint, sequence
-from greenloop.datasets import groundtruth_formats as fmts
+from greenloop.datasets import gardenspoint, groundtruth_formats as fmts, sequence
 from greenloop.study import params
 
 ROOT = Path(__file__).resolve().parents[1]

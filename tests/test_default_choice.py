@@ -7,8 +7,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from greenloop.methods.greenloop_seq import seqmatch
 from greenloop.experiments import default_choice as dc
+from greenloop.methods.greenloop_seq import seqmatch
 
 D, N0, REV, EX = int(np.prod(seqmatch.CELL_GRID)), 300, 120, 40     # the gradients layout (cell shifts)
 

@@ -10,18 +10,14 @@ import numpy as np
 import pytest
 
 from greenloop import features
-from greenloop.methods.greenloop_seq import seqmatch
-from greenloop.methods.seqslam import seqslam
+from greenloop.experiments import leaderboard as experiment
 from greenloop.methods import registry
 from greenloop.methods.dictionary import entry as dictionary
-from greenloop.methods.greenloop_seq import entry as greenloop_seq
+from greenloop.methods.greenloop_seq import entry as greenloop_seq, seqmatch, seqstream
+from greenloop.methods.interface import Data
+from greenloop.methods.seqslam import entry as slam_entry, seqslam, seqslam_stream
 from greenloop.methods.siamese import entry as scnn
 from greenloop.methods.single_frame import cnn_layers, entry as single_frame
-from greenloop.methods.seqslam import entry as slam_entry
-from greenloop.methods.interface import Data
-from greenloop.experiments import leaderboard as experiment
-from greenloop.methods.greenloop_seq import seqstream
-from greenloop.methods.seqslam import seqslam_stream
 
 ROOT = Path(__file__).resolve().parents[1]
 N0, REPEAT, EX, DIM = 80, 40, 20, int(np.prod(seqmatch.CELL_GRID))   # the gradients layout (the default shifts cells)

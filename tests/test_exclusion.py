@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from greenloop import exclusion
-from greenloop.methods.greenloop_seq import seqmatch
 from greenloop.datasets import sequence
+from greenloop.methods.greenloop_seq import seqmatch
 from greenloop.study import params
 
 ROOT = Path(__file__).resolve().parents[1]

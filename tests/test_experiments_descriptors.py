@@ -8,12 +8,10 @@ import pandas as pd
 import pytest
 
 from greenloop import evaluate, similarity
+from greenloop.datasets import sequence
+from greenloop.experiments import descriptor_postprocessing as dp, feature_baselines as fb, lsh_matching, rgbd_features
 from greenloop.methods.dictionary import dictionary
 from greenloop.methods.lsh import lsh
-from greenloop.datasets import sequence
-from greenloop.experiments import descriptor_postprocessing as dp
-from greenloop.experiments import feature_baselines as fb
-from greenloop.experiments import lsh_matching, rgbd_features
 from greenloop.speed import timing
 from test_evaluate import EXCL, N, hand_example
 

@@ -5,9 +5,9 @@ import pandas as pd
 import pytest
 
 from greenloop import evaluate, groundtruth
-from greenloop.methods.dictionary import cnn, dictionary, spots
 from greenloop.datasets import sequence
 from greenloop.experiments import revisit_protocol as rp
+from greenloop.methods.dictionary import cnn, dictionary, spots
 
 
 def test_first_traversal_is_the_spots_before_the_first_revisit(tiny_sequence):

@@ -7,8 +7,8 @@ import pandas as pd
 import pytest
 
 from greenloop import evaluate, features, groundtruth
-from greenloop.methods.siamese import siamese as sm
 from greenloop.experiments import siamese_rgbd as sr
+from greenloop.methods.siamese import siamese as sm
 
 matplotlib.use("Agg")
 W = 0.25            # small networks: the tests check structure and numbers, not accuracy

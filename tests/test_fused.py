@@ -11,10 +11,9 @@ import numpy as np
 import pytest
 
 from greenloop import features
-from greenloop.methods.greenloop_seq import seqmatch
 from greenloop.features import layers
+from greenloop.methods.greenloop_seq import seqmatch, seqstream
 from greenloop.similarity import l2_normalise
-from greenloop.methods.greenloop_seq import seqstream
 from test_seqspeed import _drive, make_route, recall_at_1  # noqa: E402  (the drives of the target-5 and CLI tests)
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -2,7 +2,7 @@ import shutil
 
 import pytest
 
-from greenloop.datasets import sequence, greenhouse
+from greenloop.datasets import greenhouse, sequence
 from conftest import write_frames
 
 

@@ -7,9 +7,8 @@ import pandas as pd
 import pytest
 
 from greenloop import evaluate
-from greenloop.methods.greenloop_seq import seqmatch
-from greenloop.methods.greenloop_seq import seqstream
 from greenloop.experiments.leaderboard import rows as lb
+from greenloop.methods.greenloop_seq import seqmatch, seqstream
 
 N0, REPEAT, EX, DIM = 80, 40, 20, 16
 

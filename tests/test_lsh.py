@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from greenloop import evaluate
-from greenloop.methods.lsh import lsh
 from greenloop.experiments import lsh_matching
+from greenloop.methods.lsh import lsh
 from greenloop.similarity import cosine_matrix, l2_normalise
 
 D, BITS = 48, 16

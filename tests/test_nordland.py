@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from greenloop import groundtruth
-from greenloop.datasets import sequence, nordland
+from greenloop.datasets import nordland, sequence
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared" / "real" / "nordland"

@@ -9,8 +9,8 @@ import pandas as pd
 import pytest
 import yaml
 
-from greenloop.methods.greenloop_seq import seqmatch
 from greenloop.experiments import siamese_rgbd
+from greenloop.methods.greenloop_seq import seqmatch
 
 ROOT = Path(__file__).resolve().parents[1]
 NOTEBOOKS = sorted((ROOT / "notebooks").glob("[0-9][0-9]_*.ipynb"))

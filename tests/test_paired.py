@@ -8,8 +8,8 @@ import pandas as pd
 import pytest
 
 from greenloop import evaluate
-from greenloop.methods.greenloop_seq import seqstream
 from greenloop.experiments.leaderboard import rows as lb
+from greenloop.methods.greenloop_seq import seqstream
 
 Q, BLOCK = 300, 10
 

@@ -10,8 +10,8 @@ from pathlib import Path
 import pytest
 
 from greenloop import report
-from greenloop.study import provenance
 from greenloop.cli import main as cli_main
+from greenloop.study import provenance
 
 ROOT = Path(__file__).resolve().parents[1]
 GIT = shutil.which("git")

@@ -5,8 +5,8 @@ import pandas as pd
 import pytest
 
 from greenloop import report
-from greenloop.study import report as study_report
 from greenloop.cli import main as cli_main
+from greenloop.study import report as study_report
 
 
 def test_tables_and_assembly(tmp_path):

@@ -5,8 +5,8 @@ import pytest
 import scipy.sparse
 
 from greenloop import evaluate
-from greenloop.methods.lsh import lsh, retrieval
 from greenloop.methods.greenloop_seq import seqstream
+from greenloop.methods.lsh import lsh, retrieval
 
 
 def _route(n_place=300, dim=32, passes=3, noise=0.25, seed=0):

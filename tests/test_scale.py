@@ -4,10 +4,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from greenloop.methods.greenloop_seq import seqmatch
+from greenloop.methods.greenloop_seq import seqmatch, seqstream
 from greenloop.similarity import l2_normalise
 from greenloop.speed import scale
-from greenloop.methods.greenloop_seq import seqstream
 
 N_PLACE, PASSES, TAIL = 120, 3, 120     # the tail: the third pass, from the route's first place
 

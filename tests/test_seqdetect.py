@@ -11,9 +11,8 @@ import numpy as np
 import pytest
 
 from greenloop import evaluate, features
-from greenloop.methods.greenloop_seq import seqmatch
 from greenloop.datasets import sequence
-from greenloop.methods.greenloop_seq import seqstream
+from greenloop.methods.greenloop_seq import seqmatch, seqstream
 from greenloop.methods.greenloop_seq.seqstream import Detector
 
 from conftest import write_frames

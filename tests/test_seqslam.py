@@ -6,11 +6,9 @@ import numpy as np
 import pytest
 
 from greenloop import evaluate
-from greenloop.methods.greenloop_seq import seqmatch
-from greenloop.methods.seqslam import seqslam
 from greenloop.datasets import sequence
-from greenloop.methods.greenloop_seq import seqstream
-from greenloop.methods.seqslam import seqslam_stream
+from greenloop.methods.greenloop_seq import seqmatch, seqstream
+from greenloop.methods.seqslam import seqslam, seqslam_stream
 
 from conftest import write_frames
 

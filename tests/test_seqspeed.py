@@ -12,8 +12,7 @@ import numpy as np
 import pytest
 
 from greenloop import evaluate, features
-from greenloop.methods.greenloop_seq import seqmatch
-from greenloop.methods.greenloop_seq import seqstream
+from greenloop.methods.greenloop_seq import seqmatch, seqstream
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -12,8 +12,7 @@ from greenloop import exclusion, groundtruth
 from greenloop.datasets import description, sequence
 from greenloop.experiments import leaderboard as ex
 from greenloop.methods.interface import Data
-from greenloop.study import params as study_params
-from greenloop.study import targets
+from greenloop.study import params as study_params, targets
 
 
 def _poses(n: int) -> np.ndarray:

@@ -2,8 +2,8 @@ import cv2
 import numpy as np
 import pytest
 
-from greenloop.methods.dictionary import shift
 from greenloop.datasets import sequence
+from greenloop.methods.dictionary import shift
 
 
 def test_shift_right_zero_fills_left_column():

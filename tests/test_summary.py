@@ -6,8 +6,8 @@ import csv
 import json
 from pathlib import Path
 
-from greenloop.study import summary
 from greenloop.cli import main as cli_main
+from greenloop.study import summary
 
 ROOT = Path(__file__).resolve().parents[1]
 LB_COLUMNS = ["method", "mode", "queries", "revisit_queries", "R@1_%", "R@1_lo_%", "R@1_hi_%", "AUC-PR_%",

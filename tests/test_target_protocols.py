@@ -6,10 +6,9 @@ import cv2
 import numpy as np
 import pytest
 
-from greenloop.methods.greenloop_seq import seqmatch
 from greenloop.datasets import gardenspoint, nordland
 from greenloop.experiments import leaderboard as ex
-from greenloop.methods.greenloop_seq import seqstream
+from greenloop.methods.greenloop_seq import seqmatch, seqstream
 
 N = 40                                     # places per traversal
 PARAMS = dict(seq_lens=[3, 5], contrast_windows=[0, 5], velocities=[0.8, 1.0, 1.25], threshold_rule="f1",

@@ -6,7 +6,7 @@ import pandas as pd
 import pytest
 
 from greenloop.datasets import sequence
-from greenloop.study.targets import TARGET_SETS, detector_targets
+from greenloop.study.targets import detector_targets, TARGET_SETS
 
 
 def _met(out):

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from greenloop.methods.dictionary.dictionary import LoopDetector
-from greenloop.speed import timing
 from greenloop.methods.greenloop_seq import seqstream
+from greenloop.speed import timing
 
 
 def _sleeper(name, log, ms=2.0, start_ms=150.0):

@@ -7,8 +7,8 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from greenloop.study import verify
 from greenloop.cli import main as cli_main
+from greenloop.study import verify
 
 ROOT = Path(__file__).resolve().parents[1]
 

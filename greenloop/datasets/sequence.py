@@ -76,8 +76,7 @@ import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from greenloop.datasets import description as _description
-from greenloop.datasets import groundtruth_formats as gt_formats
+from greenloop.datasets import description as _description, groundtruth_formats as gt_formats
 from greenloop.util import numba_kernels
 from greenloop.util.checks import positive_int
 from greenloop.util.progress import bar as tqdm  # in the terminal, never in a notebook

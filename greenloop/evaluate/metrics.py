@@ -9,9 +9,8 @@ from typing import NamedTuple
 import numpy as np
 from sklearn.metrics import average_precision_score, precision_recall_curve, roc_curve
 
-from greenloop.groundtruth import far_in_time
+from greenloop.groundtruth import DEFAULT_EXCLUDE, far_in_time
 from greenloop.util.checks import positive_int
-from greenloop.groundtruth import DEFAULT_EXCLUDE
 
 _NO_LOOPS = ("the ground truth has no loops among the counted pairs (|i - j| > exclude={exclude}"
              "{q}): use a larger pose threshold (greenloop.groundtruth.for_sequence), a larger "

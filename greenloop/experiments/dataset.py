@@ -11,10 +11,10 @@ import numpy as np
 import pandas as pd
 
 from greenloop import groundtruth
-from greenloop.methods.dictionary import spots
 from greenloop.datasets import sequence
-from greenloop.study import wording
 from greenloop.groundtruth import DEFAULT_EXCLUDE
+from greenloop.methods.dictionary import spots
+from greenloop.study import wording
 
 # where notebook 00 looks for the real GreenHouse trajectory when none is named
 REFERENCE_CANDIDATES = ("data/greenhouse/CameraTrajectory.txt", "../shared/greenhouse/CameraTrajectory.txt")

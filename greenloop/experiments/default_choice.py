@@ -56,14 +56,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from greenloop import evaluate, features
-from greenloop.methods.greenloop_seq import seqmatch
+from greenloop import evaluate, features, report
 from greenloop.datasets import sequence
 from greenloop.experiments import leaderboard as ex
 from greenloop.features.layers import extract_layers
+from greenloop.methods.greenloop_seq import seqmatch, seqstream
 from greenloop.similarity import l2_normalise
-from greenloop.methods.greenloop_seq import seqstream
-from greenloop import report
 from greenloop.study import targets
 
 GRID = [5, 10, 20, 30, 50] + [[a, b] for a in (3, 5, 10) for b in (15, 20, 30)]

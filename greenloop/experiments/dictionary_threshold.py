@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from greenloop.groundtruth import DEFAULT_EXCLUDE
 from greenloop.methods.dictionary import cnn, dictionary, spots
 from greenloop.study import wording
-from greenloop.groundtruth import DEFAULT_EXCLUDE
 
 PAPER_TAU = 70          # the paper's τ = L + Δ = 60 + 10 detections
 

@@ -16,10 +16,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from greenloop import evaluate, features, groundtruth, similarity
+from greenloop import evaluate, features, groundtruth, report, similarity
 from greenloop.speed import timing
 from greenloop.study import verdict, wording
-from greenloop import report
 
 __all__ = ["DECIMALS", "REFERENCE", "similarity_matrices", "table2", "layer_table", "chosen_layers",
            "layer_summary", "figure_layers",

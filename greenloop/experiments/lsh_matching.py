@@ -16,11 +16,10 @@ from typing import NamedTuple
 import numpy as np
 import pandas as pd
 
-from greenloop import evaluate, similarity
+from greenloop import evaluate, report, similarity
 from greenloop.methods.lsh import lsh
 from greenloop.speed import scale
 from greenloop.study import verdict, wording
-from greenloop import report
 
 __all__ = [
     "scanned_matrix", "best_match_matrix", "table6_variants", "query_matches", "run_scores",

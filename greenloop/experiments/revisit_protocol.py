@@ -17,12 +17,11 @@ from typing import NamedTuple
 import numpy as np
 import pandas as pd
 
-from greenloop import evaluate, groundtruth
-from greenloop.methods.dictionary import cnn, dictionary, spots
+from greenloop import evaluate, groundtruth, report
 from greenloop.datasets import sequence
-from greenloop import report
-from greenloop.study import verdict, wording
 from greenloop.groundtruth import DEFAULT_EXCLUDE
+from greenloop.methods.dictionary import cnn, dictionary, spots
+from greenloop.study import verdict, wording
 
 # decimals of the written tables' columns (rounded only where the notebook writes them)
 DECIMALS = {"final_train_acc_%": 2, "in_traversal_test_acc_%": 2, "revisit_acc_%": 2, "mean": 2, "std": 2,

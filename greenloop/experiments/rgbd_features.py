@@ -14,8 +14,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from greenloop import evaluate, features, similarity
-from greenloop import report
+from greenloop import evaluate, features, report, similarity
 from greenloop.study import verdict, wording
 
 __all__ = ["DECIMALS", "REFERENCE", "split_backbones", "rgbd_table", "skipped_table", "paper_rows", "conclusion",

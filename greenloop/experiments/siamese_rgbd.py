@@ -18,10 +18,9 @@ from typing import NamedTuple
 import numpy as np
 import pandas as pd
 
-from greenloop import evaluate, features, groundtruth, similarity
-from greenloop.methods.siamese import siamese
+from greenloop import evaluate, features, groundtruth, report, similarity
 from greenloop.datasets import sequence
-from greenloop import report
+from greenloop.methods.siamese import siamese
 from greenloop.study import verdict, wording
 from greenloop.util.cache import cache_key
 

@@ -12,8 +12,8 @@ import numpy as np
 import pandas as pd
 
 from greenloop.datasets import sequence
-from greenloop.speed import bench
 from greenloop.methods.dictionary.stream import Detector
+from greenloop.speed import bench
 from greenloop.study import wording
 
 BACKENDS = ("numpy", "tflite")

@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from greenloop.methods.dictionary import cnn, spots
 from greenloop.experiments import training_over_seeds
+from greenloop.methods.dictionary import cnn, spots
 from greenloop.study import wording
 
 PAPER_ACC = {50: 97, 60: 98, 70: 97}       # Table 1, %  (the reference column only)

@@ -107,7 +107,7 @@ extractor families cnn / pixels / sift / spot / function <- layers <- descriptor
 from __future__ import annotations
 
 from greenloop.features.cnn import clear_models
-from greenloop.features.descriptor import EXTRACTORS, Descriptor, get
+from greenloop.features.descriptor import Descriptor, EXTRACTORS, get
 from greenloop.features.extraction import (clear_cache, extract, extract_all, extract_rgbd, random_init_reported,
                                            time_per_image)
 from greenloop.features.frames import depth_to_uint8, stack_frames

@@ -18,13 +18,10 @@ from pathlib import Path
 
 import numpy as np
 
-from greenloop.backbones import efficientnet_lite as _lite
-from greenloop.backbones import ghostnet as _ghostnet
-from greenloop.backbones import mobilenet_tflite as _tflite
-from greenloop.backbones import shufflenet as _shufflenet
+from greenloop.backbones import efficientnet_lite as _lite, ghostnet as _ghostnet, mobilenet_tflite as _tflite, shufflenet as _shufflenet
 from greenloop.features.frames import load, rgb_batch
-from greenloop.features.registry import BACKBONES, RANDOM_INIT_SEED, Backbone, Options
-from greenloop.features.weights import WeightsNotFoundError, _missing_weights_message, source_key
+from greenloop.features.registry import Backbone, BACKBONES, Options, RANDOM_INIT_SEED
+from greenloop.features.weights import _missing_weights_message, source_key, WeightsNotFoundError
 from greenloop.util import devices
 from greenloop.util.progress import bar as tqdm  # in the terminal, never in a notebook
 

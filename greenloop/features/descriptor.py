@@ -31,7 +31,7 @@ from greenloop.features.registry import (BACKBONES, CNN_KINDS, DEFAULT_VOCAB_SIZ
                                          input_size_of, layer_name, parse)
 from greenloop.features.sift import extract_sift
 from greenloop.features.spot import extract_spot, spot_dim
-from greenloop.features.weights import Resolved, resolve, source_key
+from greenloop.features.weights import resolve, Resolved, source_key
 from greenloop.util import cache as _cache
 
 EXTRACTORS = {**{kind: extract_cnn for kind in CNN_KINDS}, "pixels": extract_pixels,

@@ -46,7 +46,7 @@ from greenloop.features.frames import load, rgb_batch
 from greenloop.features.pixels import extract_gradients
 from greenloop.features.registry import (BACKBONES, DEPTHS, FUSED_CNN, FUSED_WIDTH, GRADIENT_SIZE, POOLINGS, Options,
                                          get_backbone, layer_name, parse)
-from greenloop.features.weights import Resolved, resolve, source_key
+from greenloop.features.weights import resolve, Resolved, source_key
 from greenloop.similarity import l2_normalise
 
 GEM_P = 3.0

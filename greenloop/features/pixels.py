@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 
 from greenloop.features.frames import gray_frames
-from greenloop.features.registry import GRADIENT_BINS, GRADIENT_CELL, PATCH, Backbone, Options
+from greenloop.features.registry import Backbone, GRADIENT_BINS, GRADIENT_CELL, Options, PATCH
 
 _EPS = 1e-6
 

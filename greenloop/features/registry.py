@@ -15,10 +15,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from greenloop.backbones import efficientnet_lite as _lite
-from greenloop.backbones import ghostnet as _ghostnet
-from greenloop.backbones import mobilenet_tflite as _tflite
-from greenloop.backbones import shufflenet as _shufflenet
+from greenloop.backbones import efficientnet_lite as _lite, ghostnet as _ghostnet, mobilenet_tflite as _tflite, shufflenet as _shufflenet
 
 DEFAULT_VOCAB_SIZE = 500       # SIFT bag-of-words vocabulary (visual words)
 DEPTH_MAX_M = 10.0             # depth -> uint8 mapping: 0 m -> 0, >= DEPTH_MAX_M -> 255 (linear)

@@ -12,7 +12,7 @@ import cv2
 import numpy as np
 
 from greenloop.features.frames import gray_frames
-from greenloop.features.registry import DEFAULT_VOCAB_SIZE, Backbone, Options, input_size_of
+from greenloop.features.registry import Backbone, DEFAULT_VOCAB_SIZE, input_size_of, Options
 from greenloop.util.progress import bar as tqdm  # in the terminal, never in a notebook
 
 

@@ -10,10 +10,8 @@ import warnings
 from pathlib import Path
 from typing import Any, NamedTuple
 
-from greenloop.backbones import efficientnet_lite as _lite
-from greenloop.backbones import ghostnet as _ghostnet
-from greenloop.backbones import mobilenet_tflite as _tflite
-from greenloop.features.registry import FUSED_CNN, Backbone, get_backbone
+from greenloop.backbones import efficientnet_lite as _lite, ghostnet as _ghostnet, mobilenet_tflite as _tflite
+from greenloop.features.registry import Backbone, FUSED_CNN, get_backbone
 
 WEIGHTS_ENV = "GREENLOOP_WEIGHTS"   # folder(s) of ImageNet weight files, searched first
 TFLITE_LABEL = "imagenet, tflite uint8"

@@ -34,17 +34,15 @@ import numpy as np
 import pandas as pd
 import scipy.sparse
 
-from greenloop import evaluate
-from greenloop.methods.greenloop_seq import seqmatch
-from greenloop.methods.lsh import retrieval
+from greenloop import evaluate, report
 from greenloop.datasets import augment
-from greenloop.methods.greenloop_seq import seqstream
-from greenloop.speed.timing import timed
-from greenloop.similarity import l2_normalise
-from greenloop import report
-from greenloop.util.threads import one_blas_thread
-from greenloop.util.progress import bar
 from greenloop.groundtruth import DEFAULT_EXCLUDE
+from greenloop.methods.greenloop_seq import seqmatch, seqstream
+from greenloop.methods.lsh import retrieval
+from greenloop.similarity import l2_normalise
+from greenloop.speed.timing import timed
+from greenloop.util.progress import bar
+from greenloop.util.threads import one_blas_thread
 
 SIZES = (10_000, 100_000, 1_000_000)
 K = 10

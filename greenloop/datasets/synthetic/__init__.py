@@ -26,7 +26,7 @@ from greenloop.datasets.synthetic.make import main, make_greenhouse
 from greenloop.datasets.synthetic.render import render_frame
 from greenloop.datasets.synthetic.route import (DEFAULT_FRAMES, MIN_FRAMES, route, route_length,
                                                 route_waypoints, route_world)
-from greenloop.datasets.synthetic.scene import Scene, build_scene
+from greenloop.datasets.synthetic.scene import build_scene, Scene
 from greenloop.datasets.synthetic.sensor import DEFAULT_NOISE, MAX_DEPTH, MIN_DEPTH
 
 __all__ = ["make_greenhouse", "main", "route", "route_world", "route_waypoints", "route_length",

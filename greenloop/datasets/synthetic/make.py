@@ -28,13 +28,13 @@ import cv2
 import numpy as np
 
 from greenloop.datasets.sequence import DEPTH_SCALE, write_trajectory
-from greenloop.datasets.synthetic.camera import DEFAULT_SIZE, _check_size, write_camera_yaml
+from greenloop.datasets.synthetic.camera import _check_size, DEFAULT_SIZE, write_camera_yaml
 from greenloop.datasets.synthetic.hall import _check_seed
 from greenloop.datasets.synthetic.render import _grid, render_frame
 from greenloop.datasets.synthetic.route import (DEFAULT_FRAMES, _check_frames, route, route_length,
                                                 route_world)
 from greenloop.datasets.synthetic.scene import build_scene
-from greenloop.datasets.synthetic.sensor import DEFAULT_NOISE, _sensor
+from greenloop.datasets.synthetic.sensor import _sensor, DEFAULT_NOISE
 from greenloop.util.progress import bar as tqdm  # in the terminal, never in a notebook
 
 PNG_LEVEL = 5             # zlib level: 5 is ~10% smaller than 3 at about the same speed

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from greenloop.datasets.synthetic.camera import DEFAULT_SIZE, camera_intrinsics
+from greenloop.datasets.synthetic.camera import camera_intrinsics, DEFAULT_SIZE
 from greenloop.datasets.synthetic.hall import HALL_DEPTH, HALL_HEIGHT, HALL_WIDTH
 from greenloop.datasets.synthetic.scene import Scene
 from greenloop.datasets.synthetic.textures import TEX_RES

@@ -24,18 +24,16 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
-from greenloop import evaluate, groundtruth
-from greenloop.methods.greenloop_seq import seqmatch
+from greenloop import evaluate, groundtruth, report
 from greenloop.datasets import sequence
 from greenloop.datasets.sequence import list_frames
-from greenloop.methods.single_frame import entry as single_frame
+from greenloop.experiments.leaderboard import rows as lb
+from greenloop.methods.greenloop_seq import seqmatch
 from greenloop.methods.interface import Data
 from greenloop.methods.registry import REGISTRY
+from greenloop.methods.single_frame import entry as single_frame
 from greenloop.speed import timing
-from greenloop.experiments.leaderboard import rows as lb
-from greenloop.study import wording
-from greenloop import report
-from greenloop.study import verdict
+from greenloop.study import verdict, wording
 
 NAMED = tuple(seqmatch.NAMED)      # the named configurations (untuned, fixed thresholds)
 SEQ_ROWS = ("greenloop-seq", "greenloop-seq-fast", *NAMED)   # the rows the targets judge
@@ -71,7 +69,7 @@ class Tuned(NamedTuple):
 
 class Timed(NamedTuple):
     """thresholds: {method: float (NaN: none)}; dets: {method: streaming detector};
-    stream_check: {method: ``speed.seqstream.stream_check``}; speed: timing rows indexed by method (with
+    stream_check: {method: ``methods.greenloop_seq.seqstream.stream_check``}; speed: timing rows indexed by method (with
     decode_ms); decode: ``timing.decode_ms``."""
     thresholds: dict
     dets: dict

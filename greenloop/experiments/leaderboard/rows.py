@@ -15,9 +15,8 @@ import numpy as np
 import pandas as pd
 
 from greenloop import evaluate
-from greenloop.methods.greenloop_seq import seqmatch
+from greenloop.methods.greenloop_seq import seqmatch, seqstream
 from greenloop.speed import timing
-from greenloop.methods.greenloop_seq import seqstream
 from greenloop.study import targets as goals
 from greenloop.util.files import write_atomic
 

@@ -16,11 +16,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from greenloop.methods.dictionary import cnn, spots
 from greenloop.evaluate import closure_counts, operating_point
-from greenloop.groundtruth import far_in_time, revisit_frames
+from greenloop.groundtruth import DEFAULT_EXCLUDE, far_in_time, revisit_frames
+from greenloop.methods.dictionary import cnn, spots
 from greenloop.util.checks import positive_int
-from greenloop.groundtruth import DEFAULT_EXCLUDE
 
 
 def threshold(frames_per_spot: int, error_rate: float, margin: int) -> dict:

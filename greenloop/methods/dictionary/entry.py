@@ -16,11 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
-from greenloop.methods.dictionary import dictionary as counts
 from greenloop.datasets import sequence
+from greenloop.methods.dictionary import dictionary as counts, stream
 from greenloop.methods.greenloop_seq import seqmatch
 from greenloop.methods.interface import Data, Entry, no_descriptors
-from greenloop.methods.dictionary import stream
 
 NAME = "dictionary"
 

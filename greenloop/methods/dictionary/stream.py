@@ -53,8 +53,8 @@ from pathlib import Path
 
 import numpy as np
 
-from greenloop.methods.dictionary import cnn
 from greenloop.datasets.sequence import preprocess_image
+from greenloop.methods.dictionary import cnn
 from greenloop.methods.dictionary.dictionary import LoopDetector
 from greenloop.util import devices
 from greenloop.util.checks import positive_int

@@ -20,8 +20,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from greenloop.methods.lsh import retrieval
 from greenloop.methods.greenloop_seq.seqmatch import _EPS, calibrate_sampled
+from greenloop.methods.lsh import retrieval
 from greenloop.util import numba_kernels
 
 __all__ = ["reservoir", "IndexSpace", "CandidateMode", "INDEX_FIT", "NULL_SAMPLE", "INDEX_DIM", "FOLLOW", "AROUND",

@@ -15,9 +15,8 @@ from __future__ import annotations
 import numpy as np
 
 from greenloop import features
-from greenloop.methods.greenloop_seq import seqmatch
+from greenloop.methods.greenloop_seq import seqmatch, seqstream
 from greenloop.methods.interface import Data, Entry
-from greenloop.methods.greenloop_seq import seqstream
 
 NAME, FAST = "greenloop-seq", "greenloop-seq-fast"
 NAMED = seqmatch.NAMED   # the named configurations: {name: (knobs, fixed threshold)}

@@ -58,8 +58,8 @@ import warnings
 import numpy as np
 
 from greenloop import evaluate, features
-from greenloop.similarity import apply_projection, l2_normalise, pca_whiten
 from greenloop.groundtruth import DEFAULT_EXCLUDE
+from greenloop.similarity import apply_projection, l2_normalise, pca_whiten
 
 DESCRIPTORS = features.SEQUENCE_DESCRIPTORS   # each a features.BACKBONES entry (one registry)
 COLORS = ("bgr", "rgb")

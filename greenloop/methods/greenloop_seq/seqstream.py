@@ -23,14 +23,14 @@ from greenloop.methods.greenloop_seq.seqmatch import (COLORS, DEFAULT_VELOCITIES
                                 SHIFTABLE_DIMS, calibrate_scores, cell_shifts, check_calibration, center, center_stored, center_windows,
                                 columns_to_scores, contrast_normalise, matrix_events, normalise,
                                 shift_cells, threshold_range)
-from greenloop.similarity import l2_normalise
 from greenloop.methods.greenloop_seq import candidates
+from greenloop.similarity import l2_normalise
 from greenloop.methods.greenloop_seq.candidates import (AROUND, FOLLOW, FOLLOW_DEPTH, INDEX_DIM, INDEX_FIT, NULL_GROUPS,  # noqa: F401
                                         NULL_SAMPLE, WARMUP, CandidateMode)
+from greenloop.groundtruth import DEFAULT_EXCLUDE
 from greenloop.util import numba_kernels
 from greenloop.util.checks import positive_int
 from greenloop.util.threads import one_blas_thread
-from greenloop.groundtruth import DEFAULT_EXCLUDE
 
 __all__ = ["Detector", "INDEX_FIT", "NULL_SAMPLE", "INDEX_DIM", "best_candidate", "score_matrix", "tune_knobs", "stream_disagreements", "stream_matches_matrix", "stream_check"]
 

@@ -9,9 +9,8 @@ from __future__ import annotations
 import numpy as np
 
 from greenloop.methods.greenloop_seq import seqmatch
-from greenloop.methods.seqslam import seqslam as slam
 from greenloop.methods.interface import Data, Entry
-from greenloop.methods.seqslam import seqslam_stream
+from greenloop.methods.seqslam import seqslam as slam, seqslam_stream
 
 PUBLISHED, TUNED = "SeqSLAM (published)", "SeqSLAM (tuned)"
 SEQSLAM_PUBLISHED = {"descriptor": "seqslam", "whitening": "none", "seq_len": slam.DS + 1,

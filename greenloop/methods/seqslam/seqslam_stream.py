@@ -17,9 +17,9 @@ from greenloop import evaluate
 from greenloop.methods.greenloop_seq import seqmatch
 from greenloop.methods.seqslam.seqslam import (DS, R_WINDOW, describe_frames, difference_similarity, offsets, similarity_matrix,
                                velocities)
+from greenloop.groundtruth import DEFAULT_EXCLUDE
 from greenloop.methods.greenloop_seq import seqstream
 from greenloop.util.checks import positive_int
-from greenloop.groundtruth import DEFAULT_EXCLUDE
 
 __all__ = ["Detector", "score_matrix", "tune_knobs"]
 

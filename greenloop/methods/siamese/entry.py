@@ -16,11 +16,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from greenloop.methods.siamese import siamese
 from greenloop.datasets import sequence
 from greenloop.methods.greenloop_seq import entry as greenloop_seq
-from greenloop.methods.single_frame import entry as single_frame
 from greenloop.methods.interface import Data, Entry
+from greenloop.methods.siamese import siamese
+from greenloop.methods.single_frame import entry as single_frame
 
 NAME = "siamese"
 

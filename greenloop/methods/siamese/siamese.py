@@ -90,8 +90,8 @@ import time
 import numpy as np
 
 from greenloop import evaluate, features, groundtruth
-from greenloop.methods.dictionary import spots
 from greenloop.datasets import sequence
+from greenloop.methods.dictionary import spots
 from greenloop.util.cache import cache_key, cached_model, is_cached
 from greenloop.util.checks import positive_int
 from greenloop.util.progress import bar as tqdm  # in the terminal, never in a notebook

@@ -11,10 +11,10 @@ Matching, streaming and timing are greenloop-seq's at seq_len 1, as for every si
 from __future__ import annotations
 
 from greenloop import features
-from greenloop.methods.greenloop_seq import entry as greenloop_seq
-from greenloop.methods.single_frame import entry as single_frame
-from greenloop.methods.interface import Data, Entry
 from greenloop.features import layers
+from greenloop.methods.greenloop_seq import entry as greenloop_seq
+from greenloop.methods.interface import Data, Entry
+from greenloop.methods.single_frame import entry as single_frame
 
 
 def row_name(network: str) -> str:

@@ -22,10 +22,8 @@ from __future__ import annotations
 import numpy as np
 
 from greenloop import features
-from greenloop.methods.greenloop_seq import seqmatch
-from greenloop.methods.greenloop_seq import entry as greenloop_seq
+from greenloop.methods.greenloop_seq import entry as greenloop_seq, seqmatch, seqstream
 from greenloop.methods.interface import Data, Entry
-from greenloop.methods.greenloop_seq import seqstream
 
 
 def row_name(descriptor: str) -> str:
