@@ -2,6 +2,6 @@
 ``default_choice`` (``make default-choice``) is the study that chose the named default's knobs on
 notebook 13's target streams (``leaderboard.prepare``, ``target_protocols``).
 
-They sit above the stages, ``speed/``, ``detectors/`` and ``study/`` (they may import them) and below
-``__main__``; nothing below imports them (``greenloop.architecture``).
+They sit above ``methods/``, ``speed/`` and ``study/`` (they may import them) and below
+``detect`` and ``cli``; nothing below imports them (``greenloop.architecture``).
 """

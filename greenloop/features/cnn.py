@@ -169,7 +169,7 @@ def _lite_graph(model):
     """(interpreter, input index, output indices in the model's order) of a Keras model converted to a
     float32 TFLite graph with a free batch dimension, after a probe batch gave the model's outputs."""
     import tensorflow as tf
-    # the model's own tf.function: from_keras_model (speed.stream's converter) fails on the Lite port's
+    # the model's own tf.function: from_keras_model (dictionary.stream's converter) fails on the Lite port's
     # several-output models under Keras 3
     spec = tf.TensorSpec((None, *model.inputs[0].shape[1:]), tf.float32)
     fn = tf.function(lambda x: model(x, training=False), input_signature=[spec])

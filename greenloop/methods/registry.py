@@ -3,7 +3,7 @@
 Notebook 13's leaderboard (``greenloop.experiments.leaderboard``) describes, tunes, scores, streams
 and times every entry in this order; ``python -m greenloop detect --method NAME`` offers every
 name; tests/test_detectors.py checks each entry's stream against its score matrix. A new
-detector: its module in ``greenloop/detectors/`` and one line in ``ENTRIES``.
+detector: its module in ``greenloop/methods/`` and one line in ``ENTRIES``.
 """
 from __future__ import annotations
 
@@ -31,5 +31,5 @@ def get(name: str, registry=None):
     the registered ones otherwise."""
     reg = REGISTRY if registry is None else registry
     if name not in reg:
-        raise ValueError(f"no detector {name!r}: registered are {list(reg)} (greenloop/detectors/registry.py)")
+        raise ValueError(f"no detector {name!r}: registered are {list(reg)} (greenloop/methods/registry.py)")
     return reg[name]

@@ -30,7 +30,7 @@ A method is a :class:`Method`: ``start(preload)`` builds its database from the p
 (untimed) and returns a state, ``step(state, frame)`` is the timed path. :func:`detector_method`
 wraps a streaming detector that takes descriptors (``seqstream.Detector``, ``seqslam_stream.Detector``,
 and the single-frame methods as a ``seqstream.Detector`` with seq_len 1), :func:`dictionary_method`
-the main paper's ``speed.stream.Detector`` (its database is its spot counters).
+the main paper's ``methods.dictionary.stream.Detector`` (its database is its spot counters).
 """
 from __future__ import annotations
 
@@ -65,7 +65,7 @@ class Method(NamedTuple):
 def detector_method(name: str, detector, describe) -> Method:
     """A descriptor-fed streaming detector as a :class:`Method`.
 
-    detector: has ``reset()`` and ``update_descriptor(x)`` (``speed.seqstream`` / ``speed.seqslam_stream`` Detector).
+    detector: has ``reset()`` and ``update_descriptor(x)`` (``seqstream`` / ``seqslam_stream`` Detector).
     describe: one decoded frame (H, W, 3) uint8 BGR -> its descriptor (D,), the detector's input.
     preload of ``start``: (n0, D) descriptors of the frames before the window, fed in order.
     """

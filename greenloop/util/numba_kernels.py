@@ -11,7 +11,7 @@
   it (OpenCV runs a scalar loop for factors other than 2); ``greenloop.datasets.sequence.preprocess_image``
   uses it after checking it against OpenCV once per image shape.
 * ``candidate_rows`` / ``candidate_scores``: greenloop-seq's sequence verification in candidate
-  mode (``speed.seqstream.Detector``): the stored rows its candidates' trajectories and contrast
+  mode (``seqstream.Detector``): the stored rows its candidates' trajectories and contrast
   windows need, and the best-trajectory score of each candidate from those rows' similarities to
   the last seq_len queries, in one compiled pass instead of some thirty small NumPy calls.
 * ``pair_scores``: the same verification for cosine columns (no contrast window) under a cell
@@ -349,7 +349,7 @@ def _compile_candidates(njit) -> dict:
 
 
 def ring_best(R: np.ndarray, base: np.ndarray, c: int) -> np.ndarray | None:
-    """greenloop-seq's trajectory search (``speed.seqstream._ring_scores`` without the division):
+    """greenloop-seq's trajectory search (``seqstream._ring_scores`` without the division):
     out[i] = max over v of sum over k = 0..L-1 (in that order) of R[k, base[v, k] + i], i < c.
 
     R: (L, W) float32 or float64 ring rows, oldest last; base: (V, L) int64 column offsets. Returns

@@ -166,7 +166,7 @@ def fit_projection(X_fit, dim: int = 128, eps: float = 1e-5):
     """PCA whitening (Zhang 2017) fitted on L2-normalised ``X_fit`` (M, D) (tuning frames only).
 
     dim is clipped to the rank of the data (silently). Returns a ``similarity.Projection`` for
-    :func:`normalise` / ``speed.seqstream.Detector``.
+    :func:`normalise` / ``seqstream.Detector``.
     """
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
@@ -242,7 +242,7 @@ def center(X, window) -> np.ndarray:
     window: an int, or several windows (:func:`center_windows`): then row j is the K windows'
     centred rows, each L2-normalised, side by side (N, K * D): a short window removes the lighting of
     the last seconds, a longer one keeps what a stretch of the route shares.
-    Returns (N, D) or (N, K * D) float32; row j is bit-identical to what ``speed.seqstream.Detector``
+    Returns (N, D) or (N, K * D) float32; row j is bit-identical to what ``seqstream.Detector``
     computes at frame j.
     """
     X = np.asarray(X, dtype=np.float32)
@@ -256,7 +256,7 @@ def center_stored(X, window) -> np.ndarray:
 
     A frame stored before a full window existed was centred on fewer frames (frame 0 on itself
     alone, the zero vector), so the start of a recording, the place a robot most often comes back
-    to, could not be recognised. ``speed.seqstream.Detector`` centres its stored frames again on
+    to, could not be recognised. ``seqstream.Detector`` centres its stored frames again on
     every frame so far while the longest window fills (frames 0..m-1; causal: frames 0..j at frame
     j), and then keeps them: once frame m - 1 has arrived it holds these rows. window 0 returns X.
     Returns (N, D) or (N, K * D) float32 as :func:`center`.
@@ -412,7 +412,7 @@ def threshold_range(contrast_window: int) -> tuple[float, float]:
 def columns_to_scores(det, Y, G, gate=None) -> np.ndarray:
     """The (N, N) score matrix of a detector fed, column by column, a precomputed similarity.
 
-    det: a fresh ``greenloop.methods.greenloop_seq.seqstream.Detector`` (or a subclass, e.g. ``speed.seqslam_stream``'s) whose stages after
+    det: a fresh ``greenloop.methods.greenloop_seq.seqstream.Detector`` (or a subclass, e.g. ``seqslam_stream``'s) whose stages after
     the similarity (contrast normalisation, trajectory search) make the scores. Y: (N, D) stored
     descriptors in stream order; G: (N, N) similarity, G[i, j] = what the stream computes between
     stored frame i and query j. Query j sees only G[:j - exclude, j], so every column is causal.
@@ -509,7 +509,7 @@ def pick_knobs(rows, variants: dict) -> tuple[dict, dict]:
 def matrix_events(S, threshold: float, exclude: int, n: int) -> list[int]:
     """The query frames a score matrix declares a closure at, as a stream of its first n frames would.
 
-    S: (N, N) scores (``speed.seqstream.score_matrix``), row = database frame, column = query. Query j
+    S: (N, N) scores (``seqstream.score_matrix``), row = database frame, column = query. Query j
     (exclude < j < n) is declared when max_i S[i, j] over its candidates i < j - exclude reaches
     threshold. Returns the declared j (frames of the stream), in order.
     """

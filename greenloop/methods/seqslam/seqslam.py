@@ -34,7 +34,7 @@ module holds its parameters, descriptors and similarity.
 
 How it relates to greenloop-seq (``greenloop.methods.greenloop_seq.seqmatch``): the same stages after the similarity
 (contrast normalisation ``seqmatch.contrast_normalise``, the ring of normalised columns and the
-trajectory search of ``speed.seqstream.Detector``), reused by subclassing; it differs in more than
+trajectory search of ``seqstream.Detector``), reused by subclassing; it differs in more than
 knobs: the similarity (mean absolute difference of unnormalised 64x32 patch-normalised frames,
 not the cosine of L2-normalised descriptors), the frame size and the floor-rounded offsets over
 ds + 1 columns. Frame indices, ``exclude`` and ``ds`` are in frames of the stream fed to it.

@@ -2,7 +2,7 @@
 computed by streaming it: the score matrix and the tuning grid (the speed path).
 
 ``Detector`` (moved here from ``greenloop.methods.seqslam.seqslam``: streaming code lives in ``speed/``) is
-``speed.seqstream.Detector`` with SeqSLAM's similarity (negated mean absolute difference of the
+``seqstream.Detector`` with SeqSLAM's similarity (negated mean absolute difference of the
 patch-normalised 64x32 frames) and floor-rounded trajectory offsets; ``greenloop.methods.seqslam.seqslam`` holds
 the parameters, descriptors and similarity and says what differs from OpenSeqSLAM and why;
 ``greenloop.methods.seqslam.entry`` registers it.
@@ -31,7 +31,7 @@ class Detector(seqstream.Detector):
         is >= threshold (any finite float); None only scores. exclude: stored frames i with
         j - i > exclude are candidates. ds, contrast_window (R_window), vs (velocities): SeqSLAM's
         parameters, the published ones by default. color: "bgr" or "rgb".
-    Attributes as ``speed.seqstream.Detector`` (``events``, ``last_scores``, ``bytes_per_frame``, ...).
+    Attributes as ``seqstream.Detector`` (``events``, ``last_scores``, ``bytes_per_frame``, ...).
     """
 
     def __init__(self, threshold=None, exclude: int = DEFAULT_EXCLUDE, ds: int = DS,
@@ -88,9 +88,9 @@ def score_matrix(X, exclude: int = DEFAULT_EXCLUDE, ds: int = DS, contrast_windo
 
 
 def tune_knobs(X, GT, exclude: int, tune, seq_lens, contrast_windows, S0=None) -> list[dict]:
-    """SeqSLAM on the tuning grid of ``speed.seqstream.tune_knobs`` (the same criterion, the same rows).
+    """SeqSLAM on the tuning grid of ``seqstream.tune_knobs`` (the same criterion, the same rows).
 
-    X: (N, 2048) SeqSLAM descriptors; GT, exclude, tune as ``speed.seqstream.tune_knobs``. seq_lens:
+    X: (N, 2048) SeqSLAM descriptors; GT, exclude, tune as ``seqstream.tune_knobs``. seq_lens:
     frames per trajectory L (ds = L - 1); contrast_windows: R_window candidates (0 = off); S0: as
     :func:`score_matrix`. Returns one dict per (seq_len, contrast_window): descriptor "seqslam", whitening "none",
     seq_len, contrast_window, AUC-PR_tune_% and R@1_tune_% (``evaluate.per_query`` on the tuning
