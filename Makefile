@@ -82,10 +82,10 @@ synthetic: $(SYNTHETIC)/synthetic.json ## generate the embedded synthetic greenh
 # The generator renders into a temporary folder and renames it at the end, so synthetic.json
 # in place means a complete sequence.
 $(SYNTHETIC)/synthetic.json: | $(STAMP)
-	$(BIN)/python -m greenloop.datasets.synthetic $(SYNTHETIC) --overwrite
+	$(BIN)/python -m greenloop data synthetic $(SYNTHETIC) --overwrite
 
 data: | $(STAMP) ## download the real GreenHouse set into data/greenhouse (resumable)
-	$(BIN)/python -m greenloop.datasets.greenhouse data/greenhouse
+	$(BIN)/python -m greenloop data greenhouse data/greenhouse
 
 nordland: $(NORDLAND)/sequence.yaml ## build data/nordland: Nordland summer then winter, loop pairs as ground truth
 
@@ -93,24 +93,24 @@ nordland: $(NORDLAND)/sequence.yaml ## build data/nordland: Nordland summer then
 # folder. From NORDLAND_SRC when set, else from a shallow clone of NORDLAND_URL (fails at once
 # offline, naming the fix).
 $(NORDLAND)/nordland.json: | $(STAMP)
-	$(BIN)/python -m greenloop.datasets.nordland $(NORDLAND) --overwrite \
+	$(BIN)/python -m greenloop data nordland $(NORDLAND) --overwrite \
 	    $(if $(NORDLAND_SRC),--src $(NORDLAND_SRC),--url $(NORDLAND_URL))
 
 # The builder's sequence.yaml (the targets' protocol), rewritten from nordland.json without touching
 # the frames whenever the builder is newer: a folder built before gets what the builder writes now.
 $(NORDLAND)/sequence.yaml: $(NORDLAND)/nordland.json greenloop/datasets/nordland.py
-	$(BIN)/python -m greenloop.datasets.nordland $(NORDLAND) --describe
+	$(BIN)/python -m greenloop data nordland $(NORDLAND) --describe
 
 gardenspoint: $(GARDENSPOINT)/sequence.yaml ## build data/gardenspoint: Gardens Point Walking, 3 traversals of 200 frames (640x360)
 
 # As Nordland: built in a temporary folder and renamed, from GARDENSPOINT_SRC or a shallow clone.
 $(GARDENSPOINT)/gardenspoint.json: | $(STAMP)
-	$(BIN)/python -m greenloop.datasets.gardenspoint $(GARDENSPOINT) --overwrite \
+	$(BIN)/python -m greenloop data gardenspoint $(GARDENSPOINT) --overwrite \
 	    $(if $(GARDENSPOINT_SRC),--src $(GARDENSPOINT_SRC),--url $(GARDENSPOINT_URL))
 
 # As Nordland's: its sequence.yaml rewritten from gardenspoint.json when the builder is newer.
 $(GARDENSPOINT)/sequence.yaml: $(GARDENSPOINT)/gardenspoint.json greenloop/datasets/gardenspoint.py
-	$(BIN)/python -m greenloop.datasets.gardenspoint $(GARDENSPOINT) --describe
+	$(BIN)/python -m greenloop data gardenspoint $(GARDENSPOINT) --describe
 
 # The dataset a run needs: the synthetic default, data/nordland and data/gardenspoint are built
 # when missing; any other folder must exist already.
@@ -197,7 +197,7 @@ $(RESULTS)/%.ipynb: notebooks/%.ipynb $(SOURCES) $(DATA_DEP) $(wildcard $(DATASE
 	@# the notebook's folder holds only what this run writes: no table or figure of an older version survives;
 	@# the old executed notebook goes too, so that a run that fails is run again by the next make
 	@rm -rf $@ $(@D)/.tmp-$*.ipynb $(@D)/.tmp-$*.yaml $(@D)/.tmp-$*.args $(RESULTS)/$*
-	$(BIN)/python -m greenloop.study.params $< $(DATASET) $(RESULTS) --out $(@D)/.tmp-$*.ipynb \
+	$(BIN)/python -m greenloop notebook-params $< $(DATASET) $(RESULTS) --out $(@D)/.tmp-$*.ipynb \
 	    --params-out $(@D)/.tmp-$*.yaml --args-out $(@D)/.tmp-$*.args -- $(DATASET_PARAMS:%=-f %) $(PARAMS)
 	@test -f $(@D)/.tmp-$*.ipynb || xargs -0 -a $(@D)/.tmp-$*.args $(BIN)/papermill -k $(KERNEL) \
 	    --execution-timeout $(TIMEOUT) --log-output --progress-bar -f $(@D)/.tmp-$*.yaml $< $(@D)/.tmp-$*.ipynb

@@ -16,6 +16,7 @@ from sklearn.metrics.pairwise import haversine_distances
 from greenloop import groundtruth
 from greenloop.datasets import gardenspoint, groundtruth_formats as fmts, sequence
 from greenloop.study import params
+from greenloop.cli import main as cli_main
 
 ROOT = Path(__file__).resolve().parents[1]
 REAL_GP = ROOT.parent / "shared" / "real" / "gardenspoint"
@@ -232,7 +233,7 @@ def test_a_notebook_without_any_counted_loop_is_skipped_with_the_reason(tiny_nea
     nb = ROOT / "notebooks" / "07_feature_baselines.ipynb"
     out = tmp_path / "res" / ".tmp-07.ipynb"
     args = [str(nb), str(tiny_near_loop_sequence), str(tmp_path / "res"), "--out", str(out)]
-    assert params.main(args + ["--", "-p", "exclude", "120"]) == 0
+    assert cli_main(["notebook-params"] + args + ["--", "-p", "exclude", "120"]) == 0
     printed = capsys.readouterr().out
     assert "no loop pair more than exclude=120" in printed and "-p exclude 49" in printed
     assert "exclude 49 frames (the longer of" in printed         # the rule, printed once per run
@@ -240,9 +241,9 @@ def test_a_notebook_without_any_counted_loop_is_skipped_with_the_reason(tiny_nea
     assert "exclude=120" in (tmp_path / "res" / "07_feature_baselines" / "skipped.md").read_text()
     assert "07_feature_baselines: skipped" in report.assemble_tables(tmp_path / "res").read_text()
     out.unlink()
-    assert params.main(args) == 0 and not out.exists()                 # exclude 49: it runs
+    assert cli_main(["notebook-params"] + args) == 0 and not out.exists()                 # exclude 49: it runs
     assert "exclude 49" not in capsys.readouterr().out                 # the same rule: not printed again
-    assert params.main([str(ROOT / "notebooks" / "04_shift_robustness.ipynb")] + args[1:] + ["--", "-p", "exclude", "120"]) == 0
+    assert cli_main(["notebook-params", str(ROOT / "notebooks" / "04_shift_robustness.ipynb")] + args[1:] + ["--", "-p", "exclude", "120"]) == 0
     assert not out.exists()                                            # 04 scores no loops: never skipped
 
 
@@ -254,8 +255,8 @@ def test_make_passes_the_folder_parameters_first_and_builds_gardenspoint(tmp_pat
     assert r.returncode == 0, r.stderr
     text = r.stdout.replace("\\\n", " ")
     lines = text.splitlines()
-    build = [k for k, ln in enumerate(lines) if f"greenloop.datasets.gardenspoint {target}" in ln]
-    check = [k for k, ln in enumerate(lines) if "greenloop.study.params" in ln]
+    build = [k for k, ln in enumerate(lines) if f"greenloop data gardenspoint {target}" in ln]
+    check = [k for k, ln in enumerate(lines) if "greenloop notebook-params" in ln]
     runs = [k for k, ln in enumerate(lines) if "papermill" in ln]
     assert build and check and runs and build[0] < check[0] < runs[0]
     assert "--src /some/copy" in lines[build[0]]
@@ -333,7 +334,7 @@ def test_gardenspoint_builder_on_a_fake_source(tmp_path):
     assert [(s.traversals[0].start, s.traversals[1].start, s.tolerance) for s in protocol.streams] == [(6, 12, 2), (0, 12, 2)]
     text = (out / "sequence.yaml").read_text()
     (out / "sequence.yaml").write_text(text.split("# how the detector")[0])    # a folder built before the protocol
-    assert gardenspoint.main([str(out), "--describe"]) == 0 and (out / "sequence.yaml").read_text() == text
+    assert cli_main(["data", "gardenspoint", str(out), "--describe"]) == 0 and (out / "sequence.yaml").read_text() == text
     assert not list(tmp_path.glob(".gp.tmp*"))
     with pytest.raises(FileNotFoundError, match="GARDENSPOINT_SRC=path"):
         gardenspoint.build(tmp_path / "x", tmp_path / "missing", progress=False)
@@ -345,7 +346,7 @@ def test_gardenspoint_builder_on_a_fake_source(tmp_path):
 
 @pytest.mark.skipif(gardenspoint.shutil.which("git") is None, reason="git is not installed")
 def test_gardenspoint_offline_clone_fails_at_once_with_the_fix(tmp_path, capsys):
-    rc = gardenspoint.main([str(tmp_path / "out"), "--url", "http://127.0.0.1:9/loop-detection", "--quiet"])
+    rc = cli_main(["data", "gardenspoint", str(tmp_path / "out"), "--url", "http://127.0.0.1:9/loop-detection", "--quiet"])
     err = capsys.readouterr().err
     assert rc == 1 and "could not" in err and "GARDENSPOINT_SRC=path" in err and not (tmp_path / "out").exists()
 
@@ -393,7 +394,7 @@ def test_a_coarse_step_that_hides_every_loop_is_refined_and_said(tiny_near_loop_
         nb = ROOT / "notebooks" / f"{stem}.ipynb"
         run = tmp_path / f"{stem}.yaml"
         args = [str(nb), str(tiny_near_loop_sequence), str(res), "--out", str(out), "--params-out", str(run)]
-        assert params.main(args + ["--", "-p", "frame_step", "8"]) == 0 and not out.exists()
+        assert cli_main(["notebook-params"] + args + ["--", "-p", "frame_step", "8"]) == 0 and not out.exists()
         assert yaml.safe_load(run.read_text())["frame_step"] == want
         printed = capsys.readouterr().out
         assert ("frame_step 5, not the requested 8" in printed) == (want == 5), printed

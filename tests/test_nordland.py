@@ -11,6 +11,7 @@ import pytest
 
 from greenloop import groundtruth
 from greenloop.datasets import nordland, sequence
+from greenloop.cli import main as cli_main
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared" / "real" / "nordland"
@@ -68,7 +69,7 @@ def test_build_order_ground_truth_and_metadata(tmp_path):
     text = (out / "sequence.yaml").read_text()
     (out / "sequence.yaml").unlink()
     assert sequence.open(out).protocol.targets == "generic"
-    assert nordland.main([str(out), "--describe"]) == 0 and (out / "sequence.yaml").read_text() == text
+    assert cli_main(["data", "nordland", str(out), "--describe"]) == 0 and (out / "sequence.yaml").read_text() == text
     assert sequence.open(out).protocol.streams == (stream,)
 
 
@@ -101,7 +102,7 @@ def test_bad_sources_fail_clearly_and_leave_nothing(tmp_path):
 @pytest.mark.skipif(nordland.shutil.which("git") is None, reason="git is not installed")
 def test_offline_clone_fails_at_once_with_the_fix(tmp_path, capsys):
     t0 = time.perf_counter()
-    rc = nordland.main([str(tmp_path / "out"), "--url", "http://127.0.0.1:9/seqslam", "--quiet"])
+    rc = cli_main(["data", "nordland", str(tmp_path / "out"), "--url", "http://127.0.0.1:9/seqslam", "--quiet"])
     elapsed = time.perf_counter() - t0
     err = capsys.readouterr().err
     assert rc == 1 and elapsed < 30
@@ -118,7 +119,7 @@ def test_make_all_builds_nordland_first(tmp_path):
                        cwd=ROOT, capture_output=True, text=True, timeout=60)
     assert r.returncode == 0, r.stderr
     lines = r.stdout.splitlines()
-    build = [k for k, ln in enumerate(lines) if f"greenloop.datasets.nordland {target}" in ln]
+    build = [k for k, ln in enumerate(lines) if f"greenloop data nordland {target}" in ln]
     runs = [k for k, ln in enumerate(lines) if "papermill" in ln]
     assert build and runs and build[0] < runs[0]
     assert "--src /some/copy" in " ".join(lines[build[0]:build[0] + 2])

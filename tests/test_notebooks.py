@@ -11,6 +11,7 @@ import yaml
 
 from greenloop.experiments import siamese_rgbd
 from greenloop.methods.greenloop_seq import seqmatch
+from greenloop.cli import main as cli_main
 
 ROOT = Path(__file__).resolve().parents[1]
 NOTEBOOKS = sorted((ROOT / "notebooks").glob("[0-9][0-9]_*.ipynb"))
@@ -722,7 +723,7 @@ def test_notebook_runs_on_a_sequence_whose_loops_lie_inside_the_default_window(
     from greenloop.study import params
     tmp = near_loop_results / f".tmp-{notebook.stem}.ipynb"
     first = not (near_loop_results / params.PARAMS_NAME).exists()
-    assert params.main([str(notebook), str(tiny_near_loop_sequence), str(near_loop_results), "--out", str(tmp)]) == 0
+    assert cli_main(["notebook-params", str(notebook), str(tiny_near_loop_sequence), str(near_loop_results), "--out", str(tmp)]) == 0
     printed = capsys.readouterr().out
     if first:
         assert "exclude 49 frames (the longer of the camera's stay and half the closest revisit)" in printed

@@ -14,6 +14,7 @@ import yaml
 
 from greenloop.study import params, sweep
 from greenloop.util import devices
+from greenloop.cli import main as cli_main
 from conftest import write_frames
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -43,7 +44,7 @@ def test_the_params_cli_writes_one_file_of_declared_names_in_makes_precedence(tm
     (tmp_path / "budget.yaml").write_text("exclude: 4\nframes_per_spot: 30\nepochs: 9\n")
     res, nb = tmp_path / "res", ROOT / "notebooks" / "00_dataset.ipynb"
     out, yml, args = res / ".tmp-00.ipynb", res / ".tmp-00.yaml", res / ".tmp-00.args"
-    assert params.main([str(nb), str(seq), str(res), "--out", str(out), "--params-out", str(yml),
+    assert cli_main(["notebook-params", str(nb), str(seq), str(res), "--out", str(out), "--params-out", str(yml),
                         "--args-out", str(args), "--", "-f", str(tmp_path / "budget.yaml"),
                         "-p", "exclude", "5", "-p", "max_angle", "12.5", "-y", "loop_threshold: 0.25",
                         "-r", "reference_trajectory", "12", "-p", "epoch", "3", "--start-timeout", "90"]) == 0
@@ -58,10 +59,10 @@ def test_the_params_cli_writes_one_file_of_declared_names_in_makes_precedence(tm
     lines = [ln for ln in err.splitlines() if ln.strip()]
     assert len(lines) == 1 and "'epoch' (-p)" in lines[0] and "did you mean 'epochs'" in lines[0], err
     # sequence.yaml < dataset budget < PARAMS: without -p exclude the budget wins, without both sequence.yaml
-    params.main([str(nb), str(seq), str(res), "--out", str(out), "--params-out", str(yml), "--",
+    cli_main(["notebook-params", str(nb), str(seq), str(res), "--out", str(out), "--params-out", str(yml), "--",
                  "-f", str(tmp_path / "budget.yaml")])
     assert read_yaml_file(str(yml))["exclude"] == 4
-    params.main([str(nb), str(seq), str(res), "--out", str(out), "--params-out", str(yml)])
+    cli_main(["notebook-params", str(nb), str(seq), str(res), "--out", str(out), "--params-out", str(yml)])
     assert read_yaml_file(str(yml)) == {"dataset": str(seq), "results_dir": str(res), "exclude": 3}
     assert not capsys.readouterr().err
 
@@ -75,7 +76,7 @@ def test_papermill_gets_no_unknown_parameter_from_make_for_any_notebook(tiny_nea
             "-f", str(ROOT / "params" / "tiny.yaml")]
     for nb in NOTEBOOKS:
         tmp, yml = tmp_path / f".tmp-{nb.stem}.ipynb", tmp_path / f".tmp-{nb.stem}.yaml"
-        assert params.main([str(nb), str(tiny_near_loop_sequence), str(tmp_path), "--out", str(tmp),
+        assert cli_main(["notebook-params", str(nb), str(tiny_near_loop_sequence), str(tmp_path), "--out", str(tmp),
                             "--params-out", str(yml), "--"] + rest) == 0
         assert yml.is_file() and not tmp.exists(), nb.stem
         given = yaml.safe_load(yml.read_text())

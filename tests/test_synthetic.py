@@ -7,9 +7,10 @@ import pytest
 
 from greenloop import groundtruth
 from greenloop.datasets import sequence, synthetic
-from greenloop.datasets.synthetic.make import _parse_size
+
 from greenloop.datasets.synthetic.render import _grid
 from greenloop.datasets.synthetic.sensor import _sensor
+from greenloop.cli import main as cli_main
 
 N, SIZE = 200, (160, 120)
 
@@ -197,11 +198,10 @@ def test_existing_folder_needs_overwrite(tmp_path):
 
 
 def test_cli_reports_bad_arguments(tmp_path, capsys):
-    assert synthetic.main([str(tmp_path / "x"), "--frames", "50", "--quiet"]) == 2
+    assert cli_main(["data", "synthetic", str(tmp_path / "x"), "--frames", "50", "--quiet"]) == 2
     assert "n_frames >= 200" in capsys.readouterr().err
     with pytest.raises(SystemExit):
-        synthetic.main([str(tmp_path / "x"), "--size", "640by480"])
-    assert _parse_size("320x240") == (320, 240)
+        cli_main(["data", "synthetic", str(tmp_path / "x"), "--size", "640by480"])
 
 
 def test_camera_intrinsics_scale_linearly():

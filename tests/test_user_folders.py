@@ -14,6 +14,7 @@ import yaml
 
 from greenloop import evaluate, exclusion, groundtruth
 from greenloop.study import params
+from greenloop.cli import main as cli_main
 from tests import user_folders
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -25,7 +26,7 @@ def _make_params(folder, stem, results):
     None, the skip reason or None, what it printed)."""
     nb = ROOT / "notebooks" / f"{stem}.ipynb"
     out, run = results / f".tmp-{stem}.ipynb", results / f".tmp-{stem}.yaml"
-    rc = params.main([str(nb), str(folder), str(results), "--out", str(out), "--params-out", str(run),
+    rc = cli_main(["notebook-params", str(nb), str(folder), str(results), "--out", str(out), "--params-out", str(run),
                       "--", "-f", str(QUICK)])
     assert rc == 0
     skipped = (results / stem / "skipped.md").read_text() if out.exists() else None

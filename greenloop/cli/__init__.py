@@ -2,6 +2,8 @@
 
 One module per command, each with ``add_parser(subparsers)`` (its arguments) and ``run(args)``
 (calls the library, prints, returns the exit status); the work lives in the library (evo's style).
+A command that passes arguments on (``notebook-params``: papermill's) sets ``takes_rest`` and
+reads what follows ``--`` as ``args.rest``.
 ``COMMANDS`` lists them in ``--help`` order; a new command is a module and one line there.
 """
 from __future__ import annotations
@@ -12,9 +14,9 @@ import sys
 
 os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
 
-from greenloop.cli import bench, detect, import_gt, layers, results, sweep  # noqa: E402
+from greenloop.cli import bench, data, detect, import_gt, layers, notebook_params, results, sweep  # noqa: E402
 
-COMMANDS = (detect, import_gt, sweep, results, bench, layers)
+COMMANDS = (detect, import_gt, data, sweep, notebook_params, results, bench, layers)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -30,12 +32,17 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     """Parse ``argv`` and run the command; errors print one line ``error: ...`` and return 2."""
     ap = build_parser()
-    args = ap.parse_args(argv)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    cut = argv.index("--") if "--" in argv else len(argv)      # after --: arguments the command passes on
+    args = ap.parse_args(argv[:cut])
+    args.rest = argv[cut + 1:]
+    if args.rest and not getattr(args, "takes_rest", False):
+        ap.error(f"unrecognized arguments after --: {' '.join(args.rest)}")
     if not getattr(args, "func", None):
         ap.print_help()
         return 0
     try:
         return args.func(args)
-    except (FileNotFoundError, ValueError) as e:
+    except (FileNotFoundError, FileExistsError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

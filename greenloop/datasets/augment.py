@@ -19,7 +19,6 @@ chunk it is made in.
 """
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 import cv2
@@ -112,19 +111,3 @@ def write_recording(src, out, n_frames: int, seed: int = 0, progress: bool = Tru
                        desc="recording", unit="frame", disable=not progress):
         cv2.imwrite(str(out / f"{t}.png"), f)
     return out
-
-
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description="Write an augmented long recording over Nordland's frames "
-                                             "(module doc) as numbered PNGs.")
-    ap.add_argument("out", help="folder to write (outside the repository: 10^5 frames are ~0.5 GB)")
-    ap.add_argument("--src", default="../shared/real/nordland", help="Nordland source (summer/, winter/)")
-    ap.add_argument("--frames", type=int, default=100_000)
-    ap.add_argument("--seed", type=int, default=0)
-    a = ap.parse_args(argv)
-    write_recording(a.src, a.out, a.frames, a.seed)
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -18,7 +18,7 @@ night one 640x360. ``build`` writes (the traversals layout of ``greenloop.datase
                         set on the streams TARGET_PAIRS, +- TARGET_TOLERANCE frames
     gardenspoint.json   source, counts, size, traversal boundaries
 
-Run ``make gardenspoint`` or ``python -m greenloop.datasets.gardenspoint data/gardenspoint
+Run ``make gardenspoint`` or ``python -m greenloop data gardenspoint data/gardenspoint
 [--src FOLDER]``; without ``--src`` the source is cloned (``git clone --depth 1``) into a
 temporary folder. ``--describe`` rewrites only the sequence.yaml of a folder built before, from
 its gardenspoint.json.
@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import json
 import shutil
-import sys
 from pathlib import Path
 
 import cv2
@@ -137,33 +136,3 @@ def build(out, src, size=SIZE, tolerance: int = TOLERANCE, overwrite: bool = Fal
         (tmp / "gardenspoint.json").write_text(json.dumps(meta, indent=1, sort_keys=True) + "\n")
         (tmp / sequence.DESCRIPTION_NAME).write_text(_description(tolerance))
     return sources.write_folder(out, write)
-
-
-def main(argv=None) -> int:
-    """CLI: ``python -m greenloop.datasets.gardenspoint OUT [--src SRC] [--url URL] [--size WxH]``."""
-    ap = sources.builder_parser("python -m greenloop.datasets.gardenspoint",
-                                "Build the Gardens Point Walking sequence folder (3 traversals).",
-                                "data/gardenspoint", "day_left/, day_right/, night_right/", SOURCE_URL)
-    ap.add_argument("--size", default=f"{SIZE[0]}x{SIZE[1]}", help="WIDTHxHEIGHT of every frame (default %(default)s)")
-    ap.add_argument("--tolerance", type=int, default=TOLERANCE,
-                    help="ground-truth tolerance in frames (default %(default)s, VPR-Bench's)")
-    a = ap.parse_args(argv)
-    if a.describe:
-        return sources.run_describe(a.out, describe)
-    w, _, h = a.size.lower().partition("x")
-    if not (w.isdigit() and h.isdigit()):
-        ap.error(f"--size must be WIDTHxHEIGHT in pixels (e.g. 640x360), got {a.size!r}")
-    kw = dict(size=(int(w), int(h)), tolerance=a.tolerance, overwrite=a.overwrite, progress=not a.quiet)
-
-    def summary(out: Path) -> str:
-        meta = json.loads((out / "gardenspoint.json").read_text())
-        return (f"wrote {meta['n_frames']} frames ({meta['frames_per_traversal']} per traversal, "
-                f"{meta['width']}x{meta['height']}) and {sequence.DESCRIPTION_NAME} to {out}")
-    return sources.run_builder(
-        a, lambda src, **more: build(a.out, src, **kw, **more),
-        lambda tmp: source_folder(sources.shallow_clone(tmp / "loop-detection", a.url, FIX, "Gardens Point")),
-        SOURCE_SUBDIR, summary)
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -2,13 +2,11 @@
 
 Source: github.com/SCAU-AIUS/SLAM-for-agricultural-equipment, folder ``dataset/``: ``rgb/``,
 ``depth/`` (2261 frames each, about 1.2 GB), ``CameraTrajectory.txt`` and ``D435i.yaml``.
-Run ``make data`` or ``python -m greenloop.datasets.greenhouse data/greenhouse``.
+Run ``make data`` or ``python -m greenloop data greenhouse data/greenhouse``.
 """
 from __future__ import annotations
 
-import argparse
 import os
-import sys
 import urllib.error
 import urllib.request
 from concurrent.futures import ThreadPoolExecutor
@@ -94,20 +92,3 @@ def download(folder="data/greenhouse", base_url: str = BASE_URL, n_frames: int =
     if any(c != n_frames for c in counts.values()):
         raise ValueError(f"{folder} has {counts} frames, expected {n_frames} each: rerun to resume")
     return folder
-
-
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("folder", nargs="?", default="data/greenhouse")
-    ap.add_argument("--url", default=BASE_URL, help="raw URL of the dataset/ folder")
-    args = ap.parse_args(argv)
-    try:
-        print(download(args.folder, args.url))
-    except (RuntimeError, ValueError) as e:
-        print(e, file=sys.stderr)
-        return 1
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -28,7 +28,7 @@ its 15 mean 150 of these frames. We keep the stricter window, so that naming a p
 minutes of travel away is not counted as a loop; ``tolerance=150`` (``--tolerance 150``) gives
 the looser reading.
 
-Run ``make nordland`` or ``python -m greenloop.datasets.nordland data/nordland [--src FOLDER]``; without
+Run ``make nordland`` or ``python -m greenloop data nordland data/nordland [--src FOLDER]``; without
 ``--src`` the source is cloned (``git clone --depth 1``) into a temporary folder. ``--describe``
 rewrites only the sequence.yaml of a folder built before, from its nordland.json.
 """
@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import json
 import shutil
-import sys
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -179,27 +178,3 @@ def clone_source(dest, url: str = SOURCE_URL, timeout: float = 20.0,
     """``git clone --depth 1 url dest`` (:func:`greenloop.datasets.sources.shallow_clone`); returns the source folder inside
     it. Raises RuntimeError with the fix (NORDLAND_SRC=path) when the clone fails."""
     return source_folder(sources.shallow_clone(dest, url, FIX, "Nordland", timeout, clone_timeout))
-
-
-def main(argv=None) -> int:
-    """CLI: ``python -m greenloop.datasets.nordland OUT [--src SRC] [--url URL] [--tolerance T]``."""
-    ap = sources.builder_parser("python -m greenloop.datasets.nordland",
-                                "Build the Nordland summer+winter sequence folder.",
-                                "data/nordland", "summer/, winter/", SOURCE_URL)
-    ap.add_argument("--tolerance", type=int, default=TOLERANCE,
-                    help="ground-truth tolerance in frames (default %(default)s, from the source's sample)")
-    a = ap.parse_args(argv)
-    if a.describe:
-        return sources.run_describe(a.out, describe)
-
-    def summary(out: Path) -> str:
-        meta = json.loads((out / "nordland.json").read_text())
-        return (f"wrote {meta['n_frames']} frames ({meta['frames_per_season']} per season), "
-                f"{sequence.GROUND_TRUTH_NAME} and {sequence.DESCRIPTION_NAME} to {out}")
-    return sources.run_builder(
-        a, lambda src, **more: build(a.out, src, a.tolerance, a.overwrite, progress=not a.quiet, **more),
-        lambda tmp: clone_source(tmp / "seqslam", a.url), SOURCE_SUBDIR, summary)
-
-
-if __name__ == "__main__":
-    sys.exit(main())

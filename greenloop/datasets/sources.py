@@ -7,7 +7,6 @@ one error that ends with the builder's fix.
 """
 from __future__ import annotations
 
-import argparse
 import os
 import shutil
 import subprocess
@@ -114,22 +113,6 @@ def shallow_clone(dest, url: str, fix: str, what: str, timeout: float = 20.0,
     return Path(dest)
 
 
-def builder_parser(prog: str, description: str, example: str, subfolders: str, url: str) -> argparse.ArgumentParser:
-    """The arguments every builder's CLI shares: OUT, --src, --url, --overwrite, --quiet (a builder
-    adds its own, such as --tolerance). example: an output folder; subfolders: what --src holds."""
-    ap = argparse.ArgumentParser(prog=prog, description=description)
-    ap.add_argument("out", help=f"output sequence folder, e.g. {example}")
-    ap.add_argument("--src", help=f"local source folder ({subfolders}) or a clone of the source "
-                                  f"repository; without it the source is cloned into a temporary folder")
-    ap.add_argument("--url", default=url, help="repository to clone when --src is not given")
-    ap.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
-    ap.add_argument("--quiet", action="store_true", help="no progress bar")
-    ap.add_argument("--describe", action="store_true",
-                    help="only rewrite OUT's sequence.yaml from its build record (no frame is read or written): "
-                         "an older build gets what the builder writes now, e.g. its targets' protocol")
-    return ap
-
-
 def run_describe(out, describe) -> int:
     """A builder's ``--describe``: ``describe(out)`` rewrites the sequence.yaml of the built folder
     ``out``; prints what it wrote. Returns 0, or 1 with ``error: ...`` when ``out`` is no build of it."""
@@ -142,7 +125,7 @@ def run_describe(out, describe) -> int:
     return 0
 
 
-def run_builder(a: argparse.Namespace, build, clone, subdir: str, summary) -> int:
+def run_builder(a, build, clone, subdir: str, summary) -> int:
     """A builder's CLI after parsing: ``build(src)`` from ``a.src``, or from ``clone(tmp)`` (the
     source folder of a shallow clone of ``a.url`` into a temporary folder) as
     ``build(src, source_name="URL (subdir)")``; then prints ``summary(out)`` and the seconds taken.

@@ -17,16 +17,15 @@ printed, :func:`finer_step`). Where not even every frame keeps one, the notebook
 executed notebook that says why is written in its place and ``<results>/<stem>/skipped.md``
 records the reason, so ``make`` carries on with the next one.
 
-CLI (the Makefile's): ``python -m greenloop.study.params NOTEBOOK DATASET RESULTS --out TMP.ipynb
+CLI (the Makefile's): ``python -m greenloop notebook-params NOTEBOOK DATASET RESULTS --out TMP.ipynb
 [--params-out TMP.yaml --args-out TMP.args] -- [papermill -f/-p arguments]``.
 """
 from __future__ import annotations
 
-import argparse
 import ast
 import json
-import sys
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import yaml
@@ -293,60 +292,53 @@ def undeclared(names, notebook) -> list[str]:
     return lines
 
 
-def main(argv=None) -> int:
-    """CLI (make's): write RESULTS/sequence_params.yaml, print its notes; when NOTEBOOK cannot run,
-    write --out as a notebook that says why and print the reason. Else, with --params-out, write the
-    one papermill YAML file of the run: RESULTS/sequence_params.yaml, then the arguments after --
-    (params/datasets/*.yaml, PARAMS; ``-p dataset DATASET -p results_dir RESULTS`` before them),
-    with papermill's precedence, only the names NOTEBOOK declares (:func:`passed_parameters`); with
-    --args-out the other papermill options after -- (NUL-separated, for ``xargs -0``). One line on
-    stderr names each parameter after -- that no notebook declares. Exit 0 either way."""
-    ap = argparse.ArgumentParser(prog="python -m greenloop.study.params",
-                                 description="Parameters a sequence folder implies; skip a notebook that "
-                                             "cannot run on it; the parameters papermill passes it.")
-    ap.add_argument("notebook")
-    ap.add_argument("dataset")
-    ap.add_argument("results")
-    ap.add_argument("--out", required=True, help="where the executed notebook goes (written only when skipped)")
-    ap.add_argument("--params-out", help="papermill YAML file of the run's parameters (written unless skipped)")
-    ap.add_argument("--args-out", help="the run's other papermill options, NUL-separated (written unless skipped)")
-    ap.epilog = "after --: the papermill -f/-p arguments of the run (params/datasets/*.yaml, PARAMS)"
-    argv = list(sys.argv[1:] if argv is None else argv)
-    cut = argv.index("--") if "--" in argv else len(argv)
-    a, rest = ap.parse_args(argv[:cut]), argv[cut + 1:]
-    try:
-        seq_file = Path(a.results) / PARAMS_NAME
-        before = seq_file.read_text() if seq_file.is_file() else None
-        _, notes = write_parameters(a.dataset, seq_file)
-        if seq_file.read_text() != before:          # once per run of make, not once per notebook
-            print("\n".join(notes), flush=True)
-        params = effective_parameters(a.notebook, [seq_file], rest)
-        reason = skip_reason(a.notebook, a.dataset, params)
-        names, other = split_arguments(rest)
-        for line in undeclared(names, a.notebook):
-            print(line, file=sys.stderr, flush=True)
-    except (FileNotFoundError, ValueError) as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    if reason:
-        write_skipped(a.notebook, a.out, a.dataset, a.results, reason, params)
-        print(reason, flush=True)
-        return 0
-    if a.params_out:
-        run = passed_parameters(a.notebook, [seq_file], ["-p", "dataset", a.dataset, "-p", "results_dir",
-                                                         a.results] + rest)
-        step, why = finer_step(a.notebook, a.dataset, params)
+class NotebookRun(NamedTuple):
+    """What make runs one notebook with (:func:`prepare_run`). notes: sequence_params.yaml's notes
+    (empty when the file was already written by this run of make); undeclared: one line per name
+    after -- that no notebook declares; reason: why the notebook cannot run on the folder (None: it
+    can); params: the effective parameters; papermill: the run's papermill parameters (only the names
+    the notebook declares; None when skipped); step_why: why a finer frame_step was chosen ("" when
+    not); other: the other papermill options."""
+    notes: list
+    undeclared: list
+    reason: str | None
+    params: dict
+    papermill: dict | None
+    step_why: str
+    other: list
+
+
+def prepare_run(notebook, dataset, results, rest=()) -> NotebookRun:
+    """Write RESULTS/sequence_params.yaml and decide a notebook's run: its parameters in papermill's
+    precedence (sequence_params.yaml, then ``-p dataset DATASET -p results_dir RESULTS``, then
+    ``rest``: the papermill -f/-p arguments of the run, params/datasets/*.yaml and PARAMS), or the
+    reason it cannot run (:func:`skip_reason`)."""
+    seq_file = Path(results) / PARAMS_NAME
+    before = seq_file.read_text() if seq_file.is_file() else None
+    _, notes = write_parameters(dataset, seq_file)
+    params = effective_parameters(notebook, [seq_file], list(rest))
+    reason = skip_reason(notebook, dataset, params)
+    names, other = split_arguments(list(rest))
+    run, why = None, ""
+    if not reason:
+        run = passed_parameters(notebook, [seq_file], ["-p", "dataset", str(dataset), "-p", "results_dir", str(results)]
+                                + list(rest))
+        step, why = finer_step(notebook, dataset, params)
         if why:
             run["frame_step"] = step
-            print(why, flush=True)
-        write_atomic(a.params_out, f"# papermill parameters of {Path(a.notebook).name} "
-                                   f"(greenloop.study.params): {PARAMS_NAME}, then the dataset's and "
-                                   f"PARAMS, only the names it declares\n"
-                                   + yaml.safe_dump(run, sort_keys=False, allow_unicode=True))
-    if a.args_out:
-        write_atomic(a.args_out, "".join(f"{x}\0" for x in other))
-    return 0
+    return NotebookRun(notes if seq_file.read_text() != before else [], undeclared(names, notebook), reason, params,
+                       run, why or "", other)
 
 
-if __name__ == "__main__":
-    sys.exit(main())
+def write_run(r: NotebookRun, notebook, out, dataset, results, params_out=None, args_out=None) -> None:
+    """A skipped notebook's executed stand-in at ``out`` (:func:`write_skipped`), else the run's one
+    papermill YAML file (``params_out``) and its other options, NUL-separated (``args_out``)."""
+    if r.reason:
+        write_skipped(notebook, out, dataset, results, r.reason, r.params)
+        return
+    if params_out:
+        write_atomic(params_out, f"# papermill parameters of {Path(notebook).name} (greenloop.study.params): "
+                                 f"{PARAMS_NAME}, then the dataset's and PARAMS, only the names it declares\n"
+                                 + yaml.safe_dump(r.papermill, sort_keys=False, allow_unicode=True))
+    if args_out:
+        write_atomic(args_out, "".join(f"{x}\0" for x in r.other))

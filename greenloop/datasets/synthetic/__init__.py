@@ -2,7 +2,7 @@
 
 ``make_greenhouse(folder)`` renders a camera run through a 3D greenhouse hall (a plant factory
 like the one of the real set) and writes it as a sequence folder (the files: see ``make``; the
-contract: ``greenloop.datasets.sequence``); ``python -m greenloop.datasets.synthetic OUT`` is its
+contract: ``greenloop.datasets.sequence``); ``python -m greenloop data synthetic OUT`` is its
 command line (``make synthetic``). Its parts, each importing only parts listed above it:
 
     hall      the hall frame (x across, y up, z along, metres), its fixed layout, the seed check
@@ -13,23 +13,23 @@ command line (``make synthetic``). Its parts, each importing only parts listed a
     scene     ``build_scene``: the hall's objects as polygons, with the plants and the textures
     render    ``render_frame``: one clean frame (colour, depth) by a painter's algorithm
     sensor    lighting drift, flicker, blur, noise and D435i-like depth on a clean frame
-    make      ``make_greenhouse``: frames over a worker pool, the metadata files, the CLI ``main``
+    make      ``make_greenhouse``: frames over a worker pool, the metadata files
 
-Public: ``make_greenhouse`` (and ``main``, the CLI), ``route``, ``route_world``,
+Public: ``make_greenhouse``, ``route``, ``route_world``,
 ``route_waypoints``, ``route_length``, ``camera_intrinsics``, ``write_camera_yaml``,
 ``build_scene`` (a ``Scene``), ``render_frame``, and the limits ``DEFAULT_FRAMES``,
 ``MIN_FRAMES``, ``DEFAULT_SIZE``, ``MIN_SIZE``, ``DEFAULT_NOISE``, ``MIN_DEPTH``, ``MAX_DEPTH``.
 """
 from greenloop.datasets.synthetic.camera import (DEFAULT_SIZE, MIN_SIZE, camera_intrinsics,
                                                  write_camera_yaml)
-from greenloop.datasets.synthetic.make import main, make_greenhouse
+from greenloop.datasets.synthetic.make import make_greenhouse
 from greenloop.datasets.synthetic.render import render_frame
 from greenloop.datasets.synthetic.route import (DEFAULT_FRAMES, MIN_FRAMES, route, route_length,
                                                 route_waypoints, route_world)
 from greenloop.datasets.synthetic.scene import build_scene, Scene
 from greenloop.datasets.synthetic.sensor import DEFAULT_NOISE, MAX_DEPTH, MIN_DEPTH
 
-__all__ = ["make_greenhouse", "main", "route", "route_world", "route_waypoints", "route_length",
+__all__ = ["make_greenhouse", "route", "route_world", "route_waypoints", "route_length",
            "camera_intrinsics", "write_camera_yaml", "build_scene", "Scene", "render_frame",
            "DEFAULT_FRAMES", "MIN_FRAMES", "DEFAULT_SIZE", "MIN_SIZE", "DEFAULT_NOISE",
            "MIN_DEPTH", "MAX_DEPTH"]

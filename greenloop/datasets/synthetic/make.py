@@ -1,4 +1,4 @@
-"""The sequence folder: ``make_greenhouse(folder)`` and its command line ``main``.
+"""The sequence folder: ``make_greenhouse(folder)`` (its command line: ``python -m greenloop data synthetic``).
 
 Renders the route (``route``) through the scene (``scene``, ``render``, ``sensor``), chunks of
 frames over a pool of worker processes, and writes a sequence folder (see
@@ -11,17 +11,14 @@ frames over a pool of worker processes, and writes a sequence folder (see
     camera.yaml              ORB-SLAM / D435i layout (Camera.fx ... DepthMapFactor)
     synthetic.json           the generator's arguments (marks the folder as synthetic)
 
-CLI: ``python -m greenloop.datasets.synthetic OUT_FOLDER [--frames N] [--size WxH] [--seed S]
+CLI: ``python -m greenloop data synthetic OUT_FOLDER [--frames N] [--size WxH] [--seed S]
 [--noise STD] [--workers K] [--overwrite] [--quiet]`` (``make synthetic``).
 """
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import shutil
-import sys
-import time
 from pathlib import Path
 
 import cv2
@@ -167,38 +164,3 @@ def _move_into_place(tmp: Path, folder: Path) -> None:
         shutil.rmtree(old, ignore_errors=True)
     else:
         tmp.rename(folder)
-
-
-def _parse_size(text: str) -> tuple[int, int]:
-    """'640x480' -> (640, 480) for argparse."""
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"size must look like 640x480, got {text!r}") from None
-    return w, h
-
-
-def main(argv=None) -> int:
-    """CLI: ``python -m greenloop.datasets.synthetic OUT_FOLDER [--frames N] [--size WxH] [--seed S]``."""
-    ap = argparse.ArgumentParser(prog="python -m greenloop.datasets.synthetic",
-                                 description="Render the synthetic GreenHouse sequence folder.")
-    ap.add_argument("out", help="output sequence folder (created; must not exist unless --overwrite)")
-    ap.add_argument("--frames", type=int, default=DEFAULT_FRAMES, help="number of frames (>= 200)")
-    ap.add_argument("--size", type=_parse_size, default=DEFAULT_SIZE, help="WxH, e.g. 640x480")
-    ap.add_argument("--seed", type=int, default=0, help="random seed (>= 0)")
-    ap.add_argument("--noise", type=float, default=DEFAULT_NOISE,
-                    help="per-pixel Gaussian noise std in grey levels (default %(default)s; "
-                         "1.0 looks like a real sensor but doubles the disk size)")
-    ap.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
-    ap.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
-    ap.add_argument("--quiet", action="store_true", help="no progress bar")
-    a = ap.parse_args(argv)
-    t0 = time.perf_counter()
-    try:
-        out = make_greenhouse(a.out, a.frames, a.size, a.seed, progress=not a.quiet,
-                              workers=a.workers, overwrite=a.overwrite, noise=a.noise)
-    except (ValueError, FileExistsError) as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    print(f"wrote {a.frames} frames to {out} in {time.perf_counter() - t0:.1f} s")
-    return 0
