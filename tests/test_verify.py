@@ -141,7 +141,7 @@ def test_the_spread_rule_on_committed_tables(tmp_path):
 @pytest.mark.parametrize("name, timing", [
     ("train_s", True), ("decode_ms", True), ("window_frames_per_s", True), ("fps_median", True),
     ("insert_us", True), ("window_speed-up", True), ("R_t_%", True), ("loss_per_1%_time", True), ("cpu", True),
-    ("extraction time per image, vgg19 (s)", True), ("frames/s (slowest repeat)", True),
+    ("extraction time per image, vgg19 (s)", True), ("frames/s (slowest repeat)", True), ("loaded_from_cache", True),
     ("frames per second", True), ("seconds per 70-frame window", True), ("train_seconds", True),
     ("AP_%", False), ("R_a_%", False), ("frames_timed", False), ("frames of sequence", False),
     ("frame step of the rows (1 = Nordland's full rate)", False), ("errors_on_same_place_other_time", False),

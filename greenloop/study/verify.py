@@ -47,9 +47,10 @@ SHOW = 5             # differing cells printed per table
 # The one rule for what the machine or its load sets rather than the code and data: a column or a row
 # name holding one of these words (words split at anything but a letter or digit; "'s" and "(an)other
 # time", a revisit, dropped first). s, ms, us: a unit (train_s, decode_ms, "(s)", "frames/s");
-# R_t: Qi 2024's time reduction against SIFT-BoVW, a ratio of times; cpu: the CPU's name or CPU time.
+# R_t: Qi 2024's time reduction against SIFT-BoVW, a ratio of times; cpu: the CPU's name or CPU time;
+# cache: whether a model came from the on-disk cache (loaded_from_cache), which the cache's state sets.
 TIMING_WORDS = (r"(ms|us|µs|s|sec|secs|seconds|per[ _]second|fps|hz|times?|timing|duration|decode"
-                r"|speed[-_ ]?ups?|cpu|r_t)")
+                r"|speed[-_ ]?ups?|cpu|r_t|cache)")
 _TIMING = re.compile(rf"(?<![a-z0-9]){TIMING_WORDS}(?![a-z0-9])")
 _NOT_TIMING = re.compile(r"'s\b|other[ _]times?\b")
 LABEL_COLUMNS = ("quantity", "measurement", "metric", "target")  # a long table's row names
