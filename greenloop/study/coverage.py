@@ -15,7 +15,6 @@ descriptions: nothing to measure).
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import pandas as pd

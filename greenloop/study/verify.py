@@ -30,7 +30,6 @@ the committed datasets (``results``): the rerun's manifests name its dataset, an
 """
 from __future__ import annotations
 
-import json
 import math
 import re
 from dataclasses import dataclass, field
