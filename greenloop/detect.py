@@ -74,16 +74,10 @@ def read_tuned(path, variant: str) -> tuple[dict, float, int, int]:
     return summary["knobs"][variant], summary["thresholds"][variant], step, int(summary["exclude_steps"]) * step
 
 
-def default_variant(name: str) -> str | None:
-    """The summary.json row ``--tuned`` streams without ``--variant``: greenloop-seq-fast (no CNN) for
-    greenloop-seq, none for the others (they must name it)."""
-    return "greenloop-seq-fast" if name == "greenloop-seq" else None
-
-
 def _base(name: str, entry, tuned, variant) -> tuple[dict, float | None, str, int | None, int | None]:
     """(knobs, threshold, origin, tuned frame_step, tuned exclude) before the flags."""
     if tuned:
-        variant = variant or default_variant(name)
+        variant = variant or entry.cli_variant
         if variant is None:
             raise ValueError(f"--tuned needs --variant: the leaderboard row whose knobs --method {name} streams")
         knobs, threshold, step, ex = read_tuned(tuned, variant)

@@ -68,6 +68,8 @@ class Entry(NamedTuple):
         knobs ``detect``'s flags may set; ``fixed_threshold``: the threshold it streams at).
     cli_threshold: (knob record) -> the default threshold where it follows the knobs (the
         dictionary's tau = L + margin); None: ``fixed_threshold`` or a threshold given.
+    cli_variant: the summary.json row ``detect --tuned`` streams without ``--variant`` (None: it must
+        be named).
     decide: for score=None: (Data) -> dict(row=leaderboard row fields, detector=its streaming detector,
         preload=what its start takes); None otherwise.
     """
@@ -81,6 +83,7 @@ class Entry(NamedTuple):
     checked: bool = False
     cli_knobs: dict | None = None
     cli_threshold: Callable | None = None
+    cli_variant: str | None = None
     decide: Callable | None = None
 
 

@@ -149,6 +149,7 @@ def _tune_named(name: str):
 
 
 ENTRY = Entry(NAME, describe, tune, score, stream, describer, knob_text, checked=True,
-              cli_knobs=dict(descriptor="pixels-patchnorm", whitening="none", seq_len=10, contrast_window=10))
+              cli_knobs=dict(descriptor="pixels-patchnorm", whitening="none", seq_len=10, contrast_window=10),
+              cli_variant=FAST)   # --tuned streams the CNN-free row unless told otherwise
 DEFAULT_ENTRY, CNN_ENTRY = (Entry(n, _describe_named(n), _tune_named(n), score, stream, describer, knob_text,
                                     checked=True, cli_knobs=named_default(n)) for n in NAMED)
