@@ -185,3 +185,58 @@ def test_forward_is_the_keras_model_and_one_conv_with_or_without_numba():
     np.testing.assert_allclose(im2col, A, atol=1e-5)
     other = keras.Sequential([keras.Input((10, 12, 1)), keras.layers.Flatten(), keras.layers.Dense(3)])
     assert cnn.paper_weights(other) is None
+
+
+def _keras_stop_epoch(accuracy, patience):
+    """The epoch (1-based) at which Keras's own EarlyStopping on 'accuracy' stops, or None."""
+    import keras
+
+    class _Model:
+        stop_training = False
+    cb = keras.callbacks.EarlyStopping(monitor="accuracy", mode="max", patience=patience,
+                                       min_delta=cnn.STOP_MIN_DELTA)
+    cb.set_model(_Model())
+    cb.on_train_begin()
+    for e, a in enumerate(accuracy):
+        cb.on_epoch_end(e, {"accuracy": a})
+        if cb.model.stop_training:
+            return e + 1
+    return None
+
+
+def test_early_stopping_rule_is_keras_early_stopping():
+    rng = np.random.default_rng(0)
+    curves = [np.minimum(1, np.cumsum(rng.random(60) * 0.02)),             # rising, then flat at 1
+              np.r_[np.linspace(0.1, 0.6, 20), np.full(40, 0.6)],        # a plateau below fitting
+              np.r_[np.linspace(0.1, 0.6, 20), 0.6 + 0.004 * np.arange(40)],  # rises by less than min_delta
+              0.5 + 0.02 * np.arange(60) % 0.3]                          # saw-tooth
+    curves += [np.round(rng.random(60), 2) for _ in range(20)]
+    for acc in curves:
+        for patience in (1, 3, 10):
+            ours = next((e for e in range(1, len(acc) + 1) if cnn.stops_here(acc[:e], patience)), None)
+            assert ours == _keras_stop_epoch(acc, patience), (acc[:5], patience)
+    # a curve still rising by more than min_delta every epoch never stops; a flat one does, after patience
+    assert not any(cnn.stops_here(np.linspace(0.1, 0.9, e), 5) for e in range(1, 60))
+    assert cnn.stops_here(np.r_[0.2, 0.5, np.full(5, 0.5)], 5) and not cnn.stops_here(np.r_[0.2, 0.5, np.full(4, 0.5)], 5)
+
+
+@pytest.mark.parametrize("trainer", ["fused", "plain"])
+def test_training_stops_where_the_training_accuracy_stops_rising(tmp_path, trainer):
+    if trainer == "fused":
+        pytest.importorskip("numba")
+    X, y = _toy()
+    _, full, _ = cnn.train(X, y, seed=0, epochs=60, cache=False, progress=False, trainer=trainer)
+    _, h, _ = cnn.train(X, y, seed=0, epochs=60, cache=False, progress=False, trainer=trainer, stop_patience=3)
+    n = len(h["accuracy"])
+    # the toy fits its training frames early, so the run stops well before the cap, at the first
+    # epoch the rule fires, with the same epochs as the uncapped run up to there
+    assert h["stopped_early"] and n < 60
+    assert cnn.stops_here(h["accuracy"], 3) and not any(cnn.stops_here(h["accuracy"][:e], 3) for e in range(1, n))
+    assert np.allclose(h["accuracy"], full["accuracy"][:n])
+    # a cap below the stopping epoch is a budget: the run ends there, not stopped early
+    _, capped, _ = cnn.train(X, y, seed=0, epochs=2, cache=False, progress=False, trainer=trainer, stop_patience=3)
+    assert len(capped["accuracy"]) == 2 and not capped["stopped_early"]
+    # the rule joins the cache key, so a stopped run never stands in for a full one
+    cnn.train(X, y, seed=0, epochs=4, cache=tmp_path, progress=False, trainer=trainer)
+    cnn.train(X, y, seed=0, epochs=4, cache=tmp_path, progress=False, trainer=trainer, stop_patience=3)
+    assert len([p for p in tmp_path.iterdir() if p.is_dir()]) == 2

@@ -66,6 +66,8 @@ def _run(seed, test_acc, train_acc, val_acc=(0.5,), n_train=8, n_test=2, seconds
 
 def test_converged_and_first_epoch():
     assert tos.converged({"accuracy": [0.2, 0.95]}, 0.95) and not tos.converged({"accuracy": [0.99, 0.94]}, 0.95)
+    assert tos.converged({"accuracy": [0.2, 0.6], "stopped_early": True}, 0.95)
+    assert not tos.converged({"accuracy": [0.2, 0.6], "stopped_early": False}, 0.95)
     h = {"val_accuracy": [0.5, 0.97, 0.98, 0.99]}
     assert tos.first_epoch(h, 0.98) == 3 and tos.first_epoch(h, 0.5) == 1 and tos.first_epoch(h, 0.995) is None
 
@@ -143,12 +145,24 @@ def test_accuracy_over_seeds_by_hand():
     runs = [_run(0, 0.90, 0.99), _run(1, 0.80, 0.50), _run(2, 0.70, 0.96)]
     s = spot_grouping.accuracy_over_seeds(runs, converged_at=0.95)
     assert list(s) == ["seeds", "acc_mean_%", "acc_std_%", "acc_median_%", "acc_min_%", "acc_max_%",
-                       "final_train_acc_min_%", "converged_seeds", "acc_median_converged_%"]
+                       "final_train_acc_min_%", "converged_seeds", "acc_median_converged_%", "epochs_min", "epochs_max",
+                       "budget_limited"]
     assert s["seeds"] == 3 and s["acc_mean_%"] == pytest.approx(80.0) and s["acc_std_%"] == pytest.approx(10.0)
     assert (s["acc_median_%"], s["acc_min_%"], s["acc_max_%"]) == pytest.approx((80.0, 70.0, 90.0))
     assert s["final_train_acc_min_%"] == 50.0 and s["converged_seeds"] == 2 and s["acc_median_converged_%"] == pytest.approx(80.0)
     one = spot_grouping.accuracy_over_seeds([_run(0, 0.5, 0.2)], converged_at=0.95)
     assert one["acc_std_%"] == 0.0 and one["converged_seeds"] == 0 and np.isnan(one["acc_median_converged_%"])
+    assert (s["epochs_min"], s["epochs_max"], s["budget_limited"], one["budget_limited"]) == (2, 2, False, True)
+    # a seed whose training accuracy stopped rising before the cap converged, fit or not; one that ran
+    # into the cap while below converged_at did not: two of three such runs are budget-limited
+    stopped = _run(3, 0.4, 0.6)
+    stopped["history"] = dict(stopped["history"], accuracy=[0.1, 0.6, 0.6], stopped_early=True)
+    capped = [_run(4, 0.4, 0.6), _run(5, 0.4, 0.6)]
+    for r in capped:
+        r["history"]["stopped_early"] = False
+    t = spot_grouping.accuracy_over_seeds([stopped] + capped, converged_at=0.95)
+    assert (t["converged_seeds"], t["epochs_min"], t["epochs_max"], t["budget_limited"]) == (1, 2, 3, True)
+    assert not spot_grouping.accuracy_over_seeds([stopped, stopped, capped[0]], converged_at=0.95)["budget_limited"]
 
 
 def test_table1_groups_every_L_with_its_seeds(monkeypatch):
@@ -162,6 +176,17 @@ def test_table1_groups_every_L_with_its_seeds(monkeypatch):
     rows = spot_grouping.paper_rows(t)
     assert rows[2] == ("accuracy, L = 60 (%)", 98, "55.00 ± 7.07, median 55.00 (min 50.00, 2 seeds, 2 converged)")
     assert rows[3] == ("spots, L = 60", 38, 3) and len(rows) == 6 and list(runs) == [50, 60, 70]
+
+
+def test_table1_figure_names_its_budget_limited_rows():
+    import matplotlib
+    matplotlib.use("Agg")
+    runs = {50: [_run(0, 0.5, 0.4), _run(1, 0.6, 0.3)], 60: [_run(0, 0.9, 0.99), _run(1, 0.8, 0.99)]}
+    t = pd.DataFrame([dict(frames_per_spot=L, **spot_grouping.accuracy_over_seeds(rs)) for L, rs in runs.items()])
+    fig = spot_grouping.figure_table1(runs, t, 0.95)
+    ax = fig.axes[0]
+    assert "budget-limited at L = 50 " in ax.get_title() and "2 epochs" in ax.get_title()
+    assert [a.get_text() for a in ax.texts] == ["budget-limited"] and ax.texts[0].xy == (50, 60.0)
 
 
 def test_controls_by_grouping_runs_one_gap_per_grouping(monkeypatch):

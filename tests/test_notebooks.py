@@ -25,6 +25,8 @@ OVERRIDES = {
     # frame_step 4 as make quick's 8 on a short recording: 13 must come down to every frame (the tiny sequence's
     # evaluation part holds 26 revisit queries at step 1, 4 at step 4), so its rows are those of step 1
     "13_leaderboard": {"layer_backbones": [], "frame_step": 4},
+    # Table 1 under the early-stopping rule, capped at a few epochs
+    "01_spot_grouping": {"stop_patience": 2, "stop_cap": 6},
 }
 
 
@@ -159,6 +161,8 @@ def _check_01(folder):
     for c in ("acc_mean_%", "acc_median_%"):            # a mean or median of the seeds lies between their extremes
         assert (t["acc_min_%"] <= t[c] + 0.005).all() and (t[c] <= t["acc_max_%"] + 0.005).all(), c
     assert (t.converged_seeds <= t.seeds).all()
+    assert (t.epochs_min <= t.epochs_max).all() and (t.epochs_max <= 6).all() and (t.epochs_min >= 3).all()
+    assert (t.budget_limited == (2 * t.converged_seeds < t.seeds)).all()
     c = pd.read_csv(folder / "table1_control_runs.csv")
     assert sorted(c.frames_per_spot.unique()) == sorted(TINY["frames_per_spot_list"])
     for L, d in c.groupby("frames_per_spot"):          # the matched control has the blocked split's size

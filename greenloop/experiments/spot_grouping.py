@@ -13,7 +13,7 @@ import pandas as pd
 
 from greenloop.experiments import training_over_seeds
 from greenloop.methods.dictionary import cnn, spots
-from greenloop.study import wording
+from greenloop.study import verdict, wording
 
 PAPER_ACC = {50: 97, 60: 98, 70: 97}       # Table 1, %  (the reference column only)
 PAPER_SPOTS = {50: 46, 60: 38, 70: 33}
@@ -25,7 +25,9 @@ def accuracy_over_seeds(runs: list[dict], converged_at: float = 0.95) -> dict:
     runs: ``cnn.run_seeds``' dicts of one grouping (at least one). Returns {'seeds', 'acc_mean_%',
     'acc_std_%' (0 with one seed), 'acc_median_%', 'acc_min_%', 'acc_max_%',
     'final_train_acc_min_%' (the worst seed's final training accuracy), 'converged_seeds'
-    (``training_over_seeds.converged``), 'acc_median_converged_%' (NaN when none converged)}:
+    (``training_over_seeds.converged``), 'acc_median_converged_%' (NaN when none converged),
+    'epochs_min', 'epochs_max' (epochs the seeds ran: below the cap where early stopping ended a run),
+    'budget_limited' (``verdict.budget_limited``: fewer than half of the seeds converged)}:
     accuracies in %.
     """
     acc = np.array([r["test_accuracy"] for r in runs]) * 100
@@ -34,7 +36,10 @@ def accuracy_over_seeds(runs: list[dict], converged_at: float = 0.95) -> dict:
             "acc_median_%": np.median(acc), "acc_min_%": acc.min(), "acc_max_%": acc.max(),
             "final_train_acc_min_%": 100 * min(r["history"]["accuracy"][-1] for r in runs),
             "converged_seeds": int(conv.sum()),
-            "acc_median_converged_%": np.median(acc[conv]) if conv.any() else np.nan}
+            "acc_median_converged_%": np.median(acc[conv]) if conv.any() else np.nan,
+            "epochs_min": min(len(r["history"]["accuracy"]) for r in runs),
+            "epochs_max": max(len(r["history"]["accuracy"]) for r in runs),
+            "budget_limited": verdict.budget_limited(int(conv.sum()), len(acc))}
 
 
 def table1(X: np.ndarray, frames_per_spot_list, frames_per_spot: int, seeds, seeds_per_grouping,
@@ -89,8 +94,9 @@ def controls_by_grouping(X: np.ndarray, frames_per_spot_list, seeds, gap: int, c
 
 def figure_table1(runs: dict, table1: pd.DataFrame, converged_at: float):
     """Table 1 as a figure: every seed's test accuracy (%) per L (hollow: not converged), the median,
-    the mean ± std with a whisker over the seeds' min-max, and the paper's value per L as a dashed
-    segment. Returns the figure."""
+    the mean ± std with a whisker over the seeds' min-max, the paper's value per L as a dashed
+    segment, and "budget-limited" written over every L whose row says so (and in the title).
+    Returns the figure."""
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(7.5, 4))
@@ -107,10 +113,18 @@ def figure_table1(runs: dict, table1: pd.DataFrame, converged_at: float):
     for k, L in enumerate(paper):
         ax.hlines(PAPER_ACC[L], L - 3, L + 3, color="r", ls="--", lw=1.5,
                   label="paper (real set): " + " / ".join(f"{PAPER_ACC[x]} %" for x in paper) if k == 0 else None)
+    limited = table1[table1.budget_limited.astype(bool)]
+    for _, r in limited.iterrows():
+        ax.annotate("budget-limited", (r.frames_per_spot, r["acc_max_%"]), xytext=(0, 8), textcoords="offset points",
+                    ha="center", fontsize=8, color="tab:red")
     ax.set_xticks(list(runs), [str(L) for L in runs])
     ax.set_xlabel("frames per spot L"); ax.set_ylabel("test accuracy (%), random split")
     ax.legend(fontsize=8, loc="center left", bbox_to_anchor=(1.01, 0.5))
-    ax.set_title("Table 1: accuracy vs spot length")
+    epochs = (f"{table1.epochs_max.max()} epochs" if table1.epochs_min.min() == table1.epochs_max.max()
+              else f"{table1.epochs_min.min()}-{table1.epochs_max.max()} epochs (early stopping)")
+    ax.set_title(f"Table 1: accuracy vs spot length, {epochs}"
+                 + (f"; budget-limited at L = {', '.join(map(str, limited.frames_per_spot))} (fewer than half "
+                    f"of the seeds converged)" if len(limited) else ""), fontsize=9)
     fig.tight_layout()
     return fig
 
@@ -148,8 +162,10 @@ def _random_split(t: pd.DataFrame, name: str) -> str:
     each = "; ".join(f"L = {int(r.frames_per_spot)}: {wording.num(r['acc_mean_%'])} "
                      f"{wording.span(r['acc_min_%'], r['acc_max_%'])} ({wording.count(r.seeds, 'seed')}, {int(r.converged_seeds)} "
                      f"converged)" for _, r in t.iterrows())
-    budget = (" Fewer than half of the seeds fit their training frames, so these accuracies measure the training "
-              "budget more than the grouping." if 2 * t.converged_seeds.sum() < t.seeds.sum() else "")
+    budget = (" Fewer than half of the seeds converged (fit their training frames, or stopped rising before the epoch "
+              "cap), so these accuracies measure the training "
+              "budget more than the grouping (budget-limited)." if verdict.budget_limited(t.converged_seeds.sum(), t.seeds.sum())
+              else "")
     return (f"On {name}, the random split's test accuracy (%, mean [seed min, max]) is {each}; the order of L "
             f"is {wording.order(arms)}.{budget}")
 

@@ -12,8 +12,9 @@ The verdicts (:data:`RULES`, printed under the table):
 * **holds** / **does not hold**: a claimed value is reached by at least one seed (the measured range
   reaches it), or by none while at least half of the seeds converged; a claimed order is resolved
   in the claimed / the opposite direction (below).
-* **budget-limited**: the claimed value is not reached and fewer than half of the seeds fit their
-  training frames (``converged``), so the run cannot say.
+* **budget-limited**: the claimed value is not reached and fewer than half of the seeds converged
+  (fit their training frames, or stopped rising before the epoch cap: ``converged``), so the run
+  cannot say.
 * **not resolved**: a claimed order whose arms have fewer than :data:`MIN_SEEDS` seeds, or whose seed
   ranges overlap, or a comparison of single values with no spread. With 5 seeds per arm, ranges that
   do not overlap are a one-sided Mann-Whitney U of 0, p = 1/252; the rule is conservative: overlapping
@@ -39,7 +40,8 @@ DATASETS = {"synthetic-greenhouse": "synthetic", "nordland": "Nordland", "garden
 RULES = (
     "holds / does not hold: a claimed value reached by at least one seed (or the single measurement), or by "
     "none with at least half of the seeds converged; a claimed order resolved for / against the paper. "
-    "budget-limited: not reached, and fewer than half of the seeds fit their training frames. "
+    "budget-limited: not reached, and fewer than half of the seeds converged (fit their training frames, or "
+    "stopped rising before the epoch cap under early stopping). "
     f"not resolved: an order with fewer than {MIN_SEEDS} seeds per arm, overlapping seed ranges, or single "
     "values without spread (with 5 seeds per arm, separate ranges are a one-sided Mann-Whitney U of 0, "
     "p = 1/252). not testable here: networks without ImageNet weights here, or data the folder lacks.")
@@ -60,13 +62,19 @@ def _g(x) -> str:
     return f"{round(float(x), 2):g}"
 
 
+def budget_limited(converged: int, seeds: int) -> bool:
+    """The one rule for "budget-limited" (tables, figures, verdicts): fewer than half of the ``seeds``
+    runs converged (``converged`` of them did: ``training_over_seeds.converged``)."""
+    return bool(2 * converged < seeds)
+
+
 def value_verdict(paper: float, best: float, converged: int, seeds: int, higher_is_better=True) -> str:
     """Verdict on a claimed value: reached by the best seed (``best``, same unit) or not, and whether
     at least half of the ``seeds`` runs converged when it is not."""
     reached = best >= paper if higher_is_better else best <= paper
     if reached:
         return HOLDS
-    return FAILS if 2 * converged >= seeds else BUDGET
+    return BUDGET if budget_limited(converged, seeds) else FAILS
 
 
 def rank_verdict(claimed: str, arms: dict[str, tuple[int, float, float]]) -> str:
@@ -115,7 +123,7 @@ def table1_ranking(folder: Path):
     if 60 not in arms or len(arms) < 2:
         return "L = 60 not run (too few frames per walk)", UNTESTABLE
     text = "; ".join(f"L = {k}: {_seeds_range(*v)}" for k, v in sorted(arms.items()))
-    if 2 * t.converged_seeds.sum() < t.seeds.sum():
+    if budget_limited(t.converged_seeds.sum(), t.seeds.sum()):
         return text, BUDGET
     return text, rank_verdict(60, arms)
 

@@ -17,6 +17,7 @@ from greenloop.util.checks import positive_int
 from greenloop.util.progress import bar as tqdm   # in the terminal, never in a notebook
 
 SPLITS = ("random", "blocked")
+STOP_MIN_DELTA = 0.005   # early stopping: a rise of the training accuracy (fraction) smaller than this is none
 BLOCKS = ("random", "centre")   # where split="blocked" puts each spot's test block
 
 
@@ -134,7 +135,7 @@ def _epoch_bar(epochs: int, desc: str):
 def train(X: np.ndarray, y: np.ndarray, seed: int, epochs: int = 200, batch_size: int = 32,
           test_size: float = 0.2, split: str = "random", n_classes: int | None = None,
           trainer: str = "auto", cache: bool | str | Path = True, progress: bool = True, gap: int = 5,
-          block: str = "random", train_size: int | None = None):
+          block: str = "random", train_size: int | None = None, stop_patience: int = 0):
     """Train the paper's CNN on frames X with spot labels y; the test split is the validation data.
 
     X: (N, H, W, C) float32 in [0, 1]. y: (N,) int spot labels. seed: seeds the split, the weight
@@ -151,6 +152,10 @@ def train(X: np.ndarray, y: np.ndarray, seed: int, epochs: int = 200, batch_size
         "auto": "fused" when numba is installed and Keras sees no GPU, else "xla".
         Every trainer visits the frames in ``model.fit``'s order (``fit_orders``). The trainer is
         part of the cache key.
+    stop_patience: 0 trains every one of ``epochs`` epochs (the paper); P > 0 stops once the training
+        accuracy has not risen by ``STOP_MIN_DELTA`` over its best for P epochs (:func:`stops_here`,
+        Keras's ``EarlyStopping`` rule on 'accuracy'), so ``epochs`` is a cap; the history then
+        says 'stopped_early'.
     cache: True (results/models/ or $GREENLOOP_CACHE), a folder, or False. Runs are keyed by
         ``cache_key`` and written atomically under a file lock, so reruns and parallel ``make -j``
         jobs reuse a model instead of training it again.
@@ -176,6 +181,9 @@ def train(X: np.ndarray, y: np.ndarray, seed: int, epochs: int = 200, batch_size
         params["block"] = block                  # so models trained before they existed stay cached
     if train_size is not None:
         params["train_size"] = int(train_size)
+    if stop_patience:
+        params["stop_patience"] = positive_int("stop_patience", stop_patience, whole_floats=True)
+        params["stop_min_delta"] = STOP_MIN_DELTA
     if trainer == "fused":  # keys fused runs apart from those of the first fused trainer (NumPy's order)
         params["batch_order"] = "model.fit"
     # the key calls the trainer "fast" (train's argument before it was named trainer), so models
@@ -214,12 +222,25 @@ def _accelerator() -> bool:
     return False
 
 
+def stops_here(accuracy, patience: int, min_delta: float = STOP_MIN_DELTA) -> bool:
+    """Keras's ``EarlyStopping(monitor="accuracy", mode="max", patience, min_delta)`` rule after the
+    last epoch of ``accuracy`` (per-epoch training accuracies, fractions): True when none of the last
+    ``patience`` epochs beat the best before it by more than min_delta (the best counts only
+    improvements larger than min_delta, as Keras's does). tests/test_cnn.py checks it against Keras."""
+    best, wait = -np.inf, 0
+    for a in accuracy:
+        wait += 1
+        if a - min_delta > best:
+            best, wait = a, 0
+    return len(accuracy) > 1 and wait >= patience
+
+
 def _fit(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size, split, trainer, gap,
-         block="random", train_size=None, **_):
+         block="random", train_size=None, stop_patience=0, **_):
     if trainer == "fused":
         return _fit_fused(X, y, progress, n_classes=n_classes, seed=seed, epochs=epochs,
                           batch_size=batch_size, test_size=test_size, split=split, gap=gap,
-                          block=block, train_size=train_size)
+                          block=block, train_size=train_size, stop_patience=stop_patience)
     import keras
 
     train_idx, test_idx = split_indices(y, seed, test_size, split, gap or 0, block, train_size)
@@ -233,12 +254,17 @@ def _fit(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size, spli
         on_epoch_begin=lambda e, logs: epoch_seconds.append(-time.perf_counter()),
         on_epoch_end=lambda e, logs: epoch_seconds.__setitem__(-1, epoch_seconds[-1] + time.perf_counter()))
     callbacks = [clock] + ([_epoch_bar(epochs, f"train seed {seed} ({split})")] if progress else [])
+    if stop_patience:
+        callbacks.append(keras.callbacks.EarlyStopping(monitor="accuracy", mode="max", patience=stop_patience,
+                                                       min_delta=STOP_MIN_DELTA))
     t0 = time.perf_counter()
     h = model.fit(X[train_idx], Y[train_idx], epochs=epochs, batch_size=batch_size, shuffle=True,
                   validation_data=(X[test_idx], Y[test_idx]), verbose=0, callbacks=callbacks)
     history = {k: [float(v) for v in vals] for k, vals in h.history.items()}
     history["seconds"] = time.perf_counter() - t0
     history["epoch_seconds"] = epoch_seconds  # wall time per epoch (the first includes compilation)
+    if stop_patience:
+        history["stopped_early"] = len(history["accuracy"]) < epochs
     return model, history, {"train": train_idx, "test": test_idx}
 
 
@@ -352,9 +378,10 @@ def _softmax_loss(Z3, y):
 
 
 def _fit_fused(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size, split, gap,
-               block="random", train_size=None):
+               block="random", train_size=None, stop_patience=0):
     """The paper's protocol (batch 32, Adam 1e-3, softmax cross-entropy, shuffled batches, the
-    test split as validation data after each epoch) with the gradients written out in float32,
+    test split as validation data after each epoch, early stopping by :func:`stops_here` when
+    stop_patience > 0) with the gradients written out in float32,
     like Keras computes them:
     conv + ReLU (``kernels.conv_relu``) -> dense (BLAS, split over the cores) -> output layer and
     softmax (NumPy); backward: the dense layer's two products and Adam's update of its 2 M
@@ -402,6 +429,8 @@ def _fit_fused(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size
             epoch_seconds.append(time.perf_counter() - t_epoch)
             bar.update(1)
             bar.set_postfix(val_acc=f"{history['val_accuracy'][-1]:.3f}", refresh=False)
+            if stop_patience and stops_here(history["accuracy"], stop_patience):
+                break
     bar.close()
     Kc, bc, Wd, bd, Wo, bo = params
     conv.set_weights([Kc[:, :, None, :], bc])
@@ -409,6 +438,8 @@ def _fit_fused(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size
     out.set_weights([Wo, bo])
     history["seconds"] = time.perf_counter() - t0
     history["epoch_seconds"] = epoch_seconds
+    if stop_patience:
+        history["stopped_early"] = len(history["accuracy"]) < epochs
     return model, history, {"train": train_idx, "test": test_idx}
 
 
