@@ -90,3 +90,22 @@ def test_coverage_says_whether_the_claim_holds_beside_whether_the_protocol_ran(t
 def test_an_order_whose_claimed_arm_did_not_run_reads_not_run():
     """Notebook 10 run with supervisions = ["softmax"]: the multi-task claim has no arm to judge."""
     assert verdict.rank_verdict("multitask", {"softmax": (5, 1.0, 2.0)}) == f"{verdict.NOT_RUN} (multitask not in this run)"
+
+
+def test_qi_claims_name_the_row_that_is_missing(tmp_path):
+    """07 without GhostNet and 09 without EfficientNet-Lite0 are not testable and say which row is
+    absent, not "GhostNet AP nan %" or "no depth"."""
+    for nb in ("07_feature_baselines", "09_rgbd_features"):
+        (tmp_path / nb).mkdir()
+    pd.DataFrame({"backbone": ["mobilenetv2"], "weights": ["imagenet"], "AP_pct": [80.0]}).to_csv(
+        tmp_path / "07_feature_baselines" / "table2.csv", index=False)
+    pd.DataFrame({"backbone": ["ghostnet"], "weights": ["random init"], "AP_RGB_pct": [50.0],
+                  "AP_RGB-D_pct": [55.0]}).to_csv(tmp_path / "09_rgbd_features" / "rgbd.csv", index=False)
+    text, word = verdict.qi_ranking(tmp_path)
+    assert word == verdict.UNTESTABLE and "GhostNet not run" in text and "nan" not in text
+    text, word = verdict.qi_depth(tmp_path)
+    assert word == verdict.UNTESTABLE and "no EfficientNet-Lite0" in text
+    pd.DataFrame({"backbone": ["efficientnetlite0"], "weights": ["imagenet"], "AP_RGB_pct": [50.0],
+                  "AP_RGB-D_pct": [55.0]}).to_csv(tmp_path / "09_rgbd_features" / "rgbd.csv", index=False)
+    assert verdict.qi_depth(tmp_path) == ("EfficientNet-Lite0 (ImageNet) AP 50 -> 55 %",
+                                          verdict.UNRESOLVED + " (one AP each, no spread)")

@@ -203,7 +203,9 @@ def qi_ranking(folder: Path):
     if t is None:
         return None
     g = t[t.backbone == "ghostnet"]
-    if len(g) and (g.weights == "random init").all():
+    if not len(g):
+        return "GhostNet not run here (07's backbones)", UNTESTABLE
+    if (g.weights == "random init").all():
         return "GhostNet, VGG19, EfficientNet-B0, ShuffleNet v2 random-init here", UNTESTABLE
     return f"GhostNet AP {_g(g.AP_pct.max())} %", UNRESOLVED + " (one AP per network, no spread)"
 
@@ -215,7 +217,9 @@ def qi_depth(folder: Path):
     if t is None:
         return None
     r = t[(t.backbone == "efficientnetlite0") & (t.weights == "imagenet")]
-    if not len(r) or "AP_RGB-D_pct" not in r or pd.isna(r.iloc[0]["AP_RGB-D_pct"]):
+    if not len(r):
+        return "no EfficientNet-Lite0 (ImageNet) row in 09 (its backbones)", UNTESTABLE
+    if "AP_RGB-D_pct" not in r or pd.isna(r.iloc[0]["AP_RGB-D_pct"]):
         return "no depth", UNTESTABLE
     r = r.iloc[0]
     return (f"EfficientNet-Lite0 (ImageNet) AP {_g(r.AP_RGB_pct)} -> {_g(r['AP_RGB-D_pct'])} %",
