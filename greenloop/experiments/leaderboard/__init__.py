@@ -387,18 +387,24 @@ def method_colours(methods) -> dict:
 
 def figure_pr(data: Data, tuned: Tuned, board: pd.DataFrame):
     """Per-query PR curves of every scored method (loop closure, evaluation queries), coloured as
-    in :func:`figure_r1` for ``board`` (the leaderboard table), the legend beside the axes: a Figure."""
+    in :func:`figure_r1` for ``board`` (the leaderboard table), the legend beside the axes: a Figure.
+    Sequence methods are thick, each with its own dash pattern, so that a curve lying on another
+    (two configurations both at precision 1) still shows; single-frame curves are thin, drawn on top."""
     curves = lb.pr_curves(tuned.S, data.GT, data.exclude, data.evalq)
     colours = method_colours(board.method)     # figure_r1's mapping; a curve the board lacks is grey
+    dashes = iter([(None, None), (6, 3), (2, 2), (8, 3, 2, 3), (1, 3), (10, 4)] * 4)
     fig, ax = plt.subplots(figsize=(10, 6))
     for name, (p, r) in curves.items():
         seq = name.startswith(("greenloop-seq", "SeqSLAM"))
-        ax.step(r, p, where="post", lw=2.2 if seq else 1.1, color=colours.get(name, "0.5"), label=name)
+        line, = ax.step(r, p, where="post", lw=2.4 if seq else 1.1, color=colours.get(name, "0.5"), label=name,
+                        zorder=2 if seq else 3)
+        if seq and (d := next(dashes)) != (None, None):
+            line.set_dashes(d)
     ax.set_xlabel("recall (queries with a partner)"); ax.set_ylabel("precision (declared queries)")
     ax.set_xlim(0, 1); ax.set_ylim(0, 1.02)
     ax.set_title(f"{Path(data.dataset).name}: per-query PR over each query's best match, loop closure, "
                  "evaluation queries", fontsize=9)
-    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1), title="thick: sequence methods",
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1), title="thick: sequence methods (dashed apart)",
               title_fontsize=7)
     fig.tight_layout()
     return fig
