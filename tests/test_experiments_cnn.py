@@ -185,8 +185,8 @@ def test_table1_figure_names_its_budget_limited_rows():
     t = pd.DataFrame([dict(frames_per_spot=L, **spot_grouping.accuracy_over_seeds(rs)) for L, rs in runs.items()])
     fig = spot_grouping.figure_table1(runs, t, 0.95)
     ax = fig.axes[0]
-    assert "budget-limited at L = 50 " in ax.get_title() and "2 epochs" in ax.get_title()
-    assert [a.get_text() for a in ax.texts] == ["budget-limited"] and ax.texts[0].xy == (50, 60.0)
+    assert "budget-limited at L = 50:" in ax.get_title() and "2 epochs" in ax.get_title()
+    assert [a.get_text() for a in ax.texts] == ["budget-limited"] and ax.texts[0].xy == (50, 50.0)
 
 
 def test_controls_by_grouping_runs_one_gap_per_grouping(monkeypatch):

@@ -115,16 +115,16 @@ def figure_table1(runs: dict, table1: pd.DataFrame, converged_at: float):
                   label="paper (real set): " + " / ".join(f"{PAPER_ACC[x]} %" for x in paper) if k == 0 else None)
     limited = table1[table1.budget_limited.astype(bool)]
     for _, r in limited.iterrows():
-        ax.annotate("budget-limited", (r.frames_per_spot, r["acc_max_%"]), xytext=(0, 8), textcoords="offset points",
-                    ha="center", fontsize=8, color="tab:red")
+        ax.annotate("budget-limited", (r.frames_per_spot, r["acc_min_%"]), xytext=(8, 0), textcoords="offset points",
+                    ha="left", va="center", fontsize=8, color="tab:red")
     ax.set_xticks(list(runs), [str(L) for L in runs])
     ax.set_xlabel("frames per spot L"); ax.set_ylabel("test accuracy (%), random split")
     ax.legend(fontsize=8, loc="center left", bbox_to_anchor=(1.01, 0.5))
     epochs = (f"{table1.epochs_max.max()} epochs" if table1.epochs_min.min() == table1.epochs_max.max()
               else f"{table1.epochs_min.min()}-{table1.epochs_max.max()} epochs (early stopping)")
     ax.set_title(f"Table 1: accuracy vs spot length, {epochs}"
-                 + (f"; budget-limited at L = {', '.join(map(str, limited.frames_per_spot))} (fewer than half "
-                    f"of the seeds converged)" if len(limited) else ""), fontsize=9)
+                 + (f"\nbudget-limited at L = {', '.join(map(str, limited.frames_per_spot))}: fewer than half "
+                    f"of the seeds converged" if len(limited) else ""), fontsize=9)
     fig.tight_layout()
     return fig
 
