@@ -444,3 +444,19 @@ def test_write_table_rounds_only_what_it_is_asked_to(tmp_path):
     report.write_table(df, tmp_path / "t", decimals=1)
     assert (tmp_path / "t.csv").read_text().splitlines()[1] == "a,33.3,3,1.3"
     assert "33.3" in (tmp_path / "t.md").read_text() and "33.33" not in (tmp_path / "t.md").read_text()
+
+
+def test_budget_label_stands_on_tables_and_figures_of_unconverged_runs():
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fitted, stuck = _run(0, 0.9, 0.99), _run(1, 0.3, 0.4)
+    assert tos.budget_label([fitted, stuck]) == ""                                 # half converged
+    assert tos.budget_label([fitted, stuck, stuck]) == "budget-limited: 1 of 3 seeds converged"
+    assert tos.budget_label({"random": [fitted], "blocked": [stuck, stuck]}) == "budget-limited: 1 of 3 seeds converged"
+    fig = plt.figure(); fig.suptitle("Figure 5")
+    assert tos.label_budget(fig, [stuck]).get_suptitle() == "Figure 5\nbudget-limited: 0 of 1 seeds converged"
+    fig, ax = plt.subplots(); ax.set_title("Table 3")
+    assert tos.label_budget(fig, [stuck]).axes[0].get_title() == "Table 3\nbudget-limited: 0 of 1 seeds converged"
+    assert tos.label_budget(fig, [fitted]).axes[0].get_title() == "Table 3\nbudget-limited: 0 of 1 seeds converged"  # unchanged
+    plt.close("all")

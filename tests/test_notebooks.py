@@ -190,6 +190,15 @@ def _check_02(folder):
     assert blocked.equals(matched)                     # the control has the blocked split's training-set size
     by_gap = blocked.groupby("gap").min()
     assert by_gap.index.tolist() == TINY["sweep_gaps"] and by_gap.is_monotonic_decreasing
+    # the budget label stands on the table exactly where fewer than half of the seeds converged
+    label = f"budget-limited: {int(t.converged.sum())} of {len(t)} seeds converged"
+    assert (label in (folder / "per_seed.md").read_text()) == (2 * t.converged.sum() < len(t))
+
+
+def _budget_labelled(md, runs: int) -> None:
+    """A table's budget label, where it has one, counts every run it rests on."""
+    m = re.search(r"budget-limited: (\d+) of (\d+) seeds converged", md)
+    assert m is None or (int(m[2]) == runs and 2 * int(m[1]) < runs), m
 
 
 def _check_03(folder):
@@ -199,10 +208,12 @@ def _check_03(folder):
     assert (e.test_frames == 40).all()
     assert sorted(e.split.unique()) == ["blocked", "random"] and len(e) == 2 * len(TINY["seeds"])
     assert len(pd.read_csv(folder / "table2_blocked.csv")) == len(t)
+    _budget_labelled((folder / "errors_per_seed.md").read_text(), 2 * len(TINY["seeds"]))
 
 
 def _check_04(folder):
     from greenloop.methods.dictionary import shift
+    _budget_labelled((folder / "table3.md").read_text(), len(TINY["seeds"]))
     t = pd.read_csv(folder / "shift_controls.csv")
     assert t.input.unique().tolist() == list(shift.CONTROLS)
     assert len(t) == 4 * 4 * len(shift.CONTROLS)                   # 4 directions x shifts 1, 2, 4, 8

@@ -13,7 +13,7 @@ import numpy as np
 import pandas as pd
 
 from greenloop.methods.dictionary import cnn
-from greenloop.study import wording
+from greenloop.study import verdict, wording
 
 # the runs of ``leakage_controls``: a blocked split, a random split with its number of training
 # frames, and a blocked split with the test block centred in its spot
@@ -35,6 +35,30 @@ def converged(history: dict, converged_at: float = 0.95) -> bool:
     accuracy stopped rising before the epoch cap (``history['stopped_early']``, the early-stopping
     rule ``cnn.stops_here``). A run that is neither ended on its budget while still able to rise."""
     return bool(history["accuracy"][-1] >= converged_at or history.get("stopped_early", False))
+
+
+def budget_label(runs, converged_at: float = 0.95) -> str:
+    """"budget-limited: k of n seeds converged" where fewer than half of the runs converged
+    (``verdict.budget_limited`` on :func:`converged`), else "". runs: ``cnn.run_seeds``' dicts, as a
+    list or as {split: list} (``runs_by_split``), all counted. What a table's note and a figure's
+    title append, so that the label stands where the numbers are read."""
+    runs = [r for rs in runs.values() for r in rs] if isinstance(runs, dict) else list(runs)
+    k = sum(converged(r["history"], converged_at) for r in runs)
+    return f"budget-limited: {k} of {len(runs)} seeds converged" if verdict.budget_limited(k, len(runs)) else ""
+
+
+def label_budget(fig, runs, converged_at: float = 0.95):
+    """Append :func:`budget_label` to the figure's title (its suptitle, else its first axes' title),
+    in red on a line of its own; nothing where the runs converged. Returns the figure."""
+    label = budget_label(runs, converged_at)
+    if label:
+        title = fig.get_suptitle()
+        if title or not fig.axes:
+            fig.suptitle(f"{title}\n{label}" if title else label)
+        else:
+            ax = fig.axes[0]
+            ax.set_title(f"{ax.get_title()}\n{label}" if ax.get_title() else label)
+    return fig
 
 
 def first_epoch(history: dict, target: float):
