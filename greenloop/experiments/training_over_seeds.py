@@ -48,16 +48,12 @@ def budget_label(runs, converged_at: float = 0.95) -> str:
 
 
 def label_budget(fig, runs, converged_at: float = 0.95):
-    """Append :func:`budget_label` to the figure's title (its suptitle, else its first axes' title),
-    in red on a line of its own; nothing where the runs converged. Returns the figure."""
+    """Write :func:`budget_label` in red above the figure (over its title, outside the axes; the
+    saved figure's tight bounding box takes it in), nothing where the runs converged. Returns the
+    figure."""
     label = budget_label(runs, converged_at)
     if label:
-        title = fig.get_suptitle()
-        if title or not fig.axes:
-            fig.suptitle(f"{title}\n{label}" if title else label)
-        else:
-            ax = fig.axes[0]
-            ax.set_title(f"{ax.get_title()}\n{label}" if ax.get_title() else label)
+        fig.text(0.5, 1.0, label, ha="center", va="bottom", color="tab:red", fontsize=11)
     return fig
 
 
