@@ -95,7 +95,8 @@ def controls_by_grouping(X: np.ndarray, frames_per_spot_list, seeds, gap: int, c
 def figure_table1(runs: dict, table1: pd.DataFrame, converged_at: float):
     """Table 1 as a figure: every seed's test accuracy (%) per L (hollow: not converged), the median,
     the mean ± std with a whisker over the seeds' min-max, the paper's value per L as a dashed
-    segment, and "budget-limited" written over every L whose row says so (and in the title).
+    segment, and "budget-limited" written beside the lowest seed of every L whose row says so
+    (and on a second title line).
     Returns the figure."""
     import matplotlib.pyplot as plt
 

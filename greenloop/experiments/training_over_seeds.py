@@ -40,8 +40,8 @@ def converged(history: dict, converged_at: float = 0.95) -> bool:
 def budget_label(runs, converged_at: float = 0.95) -> str:
     """"budget-limited: k of n seeds converged" where fewer than half of the runs converged
     (``verdict.budget_limited`` on :func:`converged`), else "". runs: ``cnn.run_seeds``' dicts, as a
-    list or as {split: list} (``runs_by_split``), all counted. What a table's note and a figure's
-    title append, so that the label stands where the numbers are read."""
+    list or as {split: list} (``runs_by_split``), all counted. What a table's note carries and
+    :func:`label_budget` writes above a figure, so that the label stands where the numbers are read."""
     runs = [r for rs in runs.values() for r in rs] if isinstance(runs, dict) else list(runs)
     k = sum(converged(r["history"], converged_at) for r in runs)
     return f"budget-limited: {k} of {len(runs)} seeds converged" if verdict.budget_limited(k, len(runs)) else ""
