@@ -133,6 +133,15 @@ def mark_paper(ax, x, y, label: str, horizontal: bool = True, width: float = 0.8
         first = False
 
 
+def label_figure(fig, label: str):
+    """Write ``label`` (e.g. "budget-limited: ...") in red above the figure, over its title and
+    outside the axes (the saved figure's tight bounding box takes it in); nothing for "". Returns
+    the figure."""
+    if label:
+        fig.text(0.5, 1.0, label, ha="center", va="bottom", color="tab:red", fontsize=11)
+    return fig
+
+
 def save_figure(fig, path, dpi: int = 110) -> Path:
     """Save a matplotlib figure as PNG atomically (and leave it open for inline display)."""
     path = Path(path).with_suffix(".png")

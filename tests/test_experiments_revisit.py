@@ -44,8 +44,9 @@ def test_revisit_predictions_scores_the_same_models_on_the_revisit(monkeypatch):
     assert per_seed[["split", "seed", "revisit_acc_%"]].values.tolist() == \
         [["random", 3, 50.0], ["random", 4, 50.0], ["blocked", 3, 50.0], ["blocked", 4, 50.0]]
     row = per_seed.iloc[0].to_dict()
-    assert list(row) == ["split", "seed", "n_train", "final_train_acc_%", "in_traversal_test_acc_%", "revisit_acc_%",
-                         "revisit_frames"]
+    assert list(row) == ["split", "seed", "n_train", "epochs", "final_train_acc_%", "converged", "in_traversal_test_acc_%",
+                         "revisit_acc_%", "revisit_frames"]
+    assert (row["epochs"], row["converged"]) == (2, True)              # 98.765 % >= 95 %: fits its training frames
     # unrounded: 98.765 %, not 98.77 %
     assert row["final_train_acc_%"] == pytest.approx(98.765) and row["in_traversal_test_acc_%"] == pytest.approx(75.5)
     assert (row["n_train"], row["revisit_frames"]) == (8, 4)

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from greenloop import report
 from greenloop.methods.dictionary import cnn
 from greenloop.study import verdict, wording
 
@@ -51,10 +52,7 @@ def label_budget(fig, runs, converged_at: float = 0.95):
     """Write :func:`budget_label` in red above the figure (over its title, outside the axes; the
     saved figure's tight bounding box takes it in), nothing where the runs converged. Returns the
     figure."""
-    label = budget_label(runs, converged_at)
-    if label:
-        fig.text(0.5, 1.0, label, ha="center", va="bottom", color="tab:red", fontsize=11)
-    return fig
+    return report.label_figure(fig, budget_label(runs, converged_at))
 
 
 def first_epoch(history: dict, target: float):
