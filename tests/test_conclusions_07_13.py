@@ -169,6 +169,12 @@ def test_12_compares_the_same_models_in_the_traversal_and_on_the_revisit(tmp_pat
     assert "80 [75, 85] % and the revisit accuracy 82 [78, 86] %: not resolved (the spreads overlap)" in text
     assert "precision at the chosen τ 0.85 lies above at τ = 70 0.55 (the spreads separate)" in text
     assert "recall at the chosen τ 0.5 and at τ = 70 0.5: not resolved" in text
+    assert "budget" not in text.lower()                                          # summary.json carries no label
+    out = _revisit(tmp_path / "c", 5, 0.85)
+    info = json.loads((out / "summary.json").read_text())
+    (out / "summary.json").write_text(json.dumps({**info, "budget": "budget-limited: 3 of 10 seeds converged"}))
+    assert revisit_protocol.conclusion(out).startswith(
+        "### Conclusion on Nordland\n\n**Budget-limited: 3 of 10 seeds converged**: most runs ended on their epoch budget")
     few = revisit_protocol.conclusion(_revisit(tmp_path / "b", 3, 0.55))
     assert "in every one of the 3 seeds, but fewer than 5 per arm: not resolved" in few
     assert "precision at the chosen τ 0.55 and at τ = 70 0.55: not resolved" in few

@@ -48,6 +48,7 @@ def test_fit_and_score_row_and_the_references(tmp_path):
     # unrounded: the row holds the scores themselves
     assert S.shape == (120, 120) and row["AP_%"] == ap and row["R@100P_%"] == r100 and row["train_s"] == hist["seconds"]
     assert not row["loaded_from_cache"] and row["seed"] == 0
+    assert row["converged"] is sm.plateaued(hist["loss"]) is False          # one epoch: nothing levelled off
     assert hist["monitor"][-1] == pytest.approx(ap)        # the held-out AP watched after the last epoch
     again, *_ = sr.fit_and_score("scnn softmax, RGB", X, labels, held, gap, gt, 0, kw, supervision="softmax")
     assert again["loaded_from_cache"] and again["AP_%"] == row["AP_%"]
@@ -118,6 +119,22 @@ def test_best_of_needs_five_seeds_and_separated_seed_ranges():
     assert sr.best_of(summ, ["a"])[0] is None                      # nothing to be best against
     few, text = sr.best_of(table({"a": [50, 60], "b": [40, 45]}), ["a", "b"])   # separated, but 2 seeds each
     assert few is None and "fewer than 5 seeds per arm" in text
+
+
+def test_the_budget_label_counts_each_trained_network_once():
+    """Networks of other rows (RGB only, the late networks' single streams) and untrained rows are not
+    counted; the label stands where fewer than half converged."""
+    t = pd.DataFrame({"descriptor": ["e", "e", "l", "l", "l r", "l r", "RGB only", "u"],
+                      "fusion": ["early", "early", "late", "late", "late (rgb stream)", "late (rgb stream)", "RGB only", "none"],
+                      "epochs": [30, 30, 30, 30, 30, 30, 30, 0], "converged": [True, False, False, False, True, True, True, None]})
+    assert sr.converged_networks(t) == (1, 4)
+    assert sr.budget_label(t) == "budget-limited: 1 of 4 networks converged"
+    assert sr.budget_label(t.assign(converged=t.converged.replace({False: True}))) == ""      # 4 of 4
+    assert sr.converged_networks(t, t) == (2, 8) and sr.budget_label(t.drop(columns="converged")) == ""
+    import matplotlib.pyplot as plt
+    fig = plt.figure()
+    assert [x.get_text() for x in sr.label_budget(fig, t).texts] == [sr.budget_label(t)]   # above the figure, once
+    plt.close(fig)
 
 
 def test_levelling_gives_the_gain_per_third_of_the_epochs_over_distinct_networks():

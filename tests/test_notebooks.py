@@ -454,6 +454,10 @@ def _check_10(folder):
     g = per_seed.groupby("descriptor", sort=False)["AP_%"]
     assert list(sup.index) == list(g.mean().index) and (sup.seeds == g.size()).all()
     assert np.allclose(sup.AP_mean, g.mean(), atol=0.006) and (sup.AP_min == g.min()).all() and (sup.AP_max == g.max()).all()
+    # one epoch: no training loss has levelled off, so every table and the conclusion say budget-limited
+    assert (trained.converged == False).all() and (sup.loc[trained.descriptor.unique(), "converged_seeds"] == 0).all()  # noqa: E712
+    label = f"budget-limited: 0 of {len(trained)} networks converged"
+    assert label in (folder / "supervisions.md").read_text() and label in (folder / "supervisions_per_seed.md").read_text()
     fus = pd.read_csv(folder / "fusions_per_seed.csv")
     assert fus[fus.fusion == "mid"].layer.tolist() == [x for x in TINY["mid_layers"] for _ in seeds]
     assert {"early", "late", "RGB only", "late (rgb stream)", "late (depth stream)"} <= set(fus.fusion)
@@ -482,8 +486,16 @@ def _check_10(folder):
 
 def _check_12(folder):
     per_seed = pd.read_csv(folder / "per_seed.csv")
-    assert list(per_seed.columns) == ["split", "seed", "n_train", "final_train_acc_%", "in_traversal_test_acc_%",
-                                      "revisit_acc_%", "revisit_frames"]
+    assert list(per_seed.columns) == ["split", "seed", "n_train", "epochs", "final_train_acc_%", "converged",
+                                      "in_traversal_test_acc_%", "revisit_acc_%", "revisit_frames"]
+    # converged: fit the training frames (or stopped rising; no early stopping here, so every epoch ran)
+    assert (per_seed.epochs == TINY["epochs"]).all()
+    assert per_seed.converged.equals(per_seed["final_train_acc_%"] >= 95)
+    # the budget label on the tables and in the conclusion exactly where fewer than half of the runs converged
+    label = f"budget-limited: {int(per_seed.converged.sum())} of {len(per_seed)} seeds converged"
+    limited = 2 * per_seed.converged.sum() < len(per_seed)
+    assert (label in (folder / "summary_table.md").read_text()) == limited
+    assert json.loads((folder / "summary.json").read_text())["budget"] == (label if limited else "")
     assert sorted(map(tuple, per_seed[["split", "seed"]].values)) == sorted((s, k) for s in ("random", "blocked") for k in TINY["seeds"])
     acc = per_seed.filter(like="acc_%")
     assert acc.stack().between(0, 100).all() and (acc == acc.round(2)).all().all()

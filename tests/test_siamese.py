@@ -311,3 +311,17 @@ def test_a_tiny_siamese_training_learns_what_the_untrained_network_does_not(tmp_
     assert hist["loss"][-1] < 0.7 * hist["loss"][0], hist["loss"]
     assert len(hist["monitor"]) == 8 and hist["monitor"][-1] == pytest.approx(monitor(model))
     assert hist["monitor"][-1] > untrained_ap + 10, (hist["monitor"], untrained_ap)
+
+
+def test_a_loss_that_keeps_falling_has_not_plateaued_and_a_flat_one_has_at_any_scale():
+    """siamese.plateaued: the early-stopping rule on -log(loss), checked after every epoch."""
+    falling = 6.0 * 0.95 ** np.arange(30)                        # 5 % lower every epoch
+    assert not sm.plateaued(falling)
+    flat = np.r_[falling[:10], np.full(20, falling[9])]          # flat from epoch 10: 10 epochs without a fall by 1 %
+    assert sm.plateaued(flat) and sm.plateaued(flat / 100)       # scale-free: the contrastive loss is ~0.1
+    assert not sm.plateaued(flat[:19])                          # 9 flat epochs: patience 10 not yet spent
+    slow = 6.0 * 0.995 ** np.arange(30)                          # 0.5 % per epoch: 10 epochs make about 4.9 %
+    assert not sm.plateaued(slow) and sm.plateaued(slow, patience=1)
+    assert sm.plateaued(np.r_[falling[:12], falling[11] * 1.3, falling[11] * np.ones(12)])   # a rise is no fall
+    assert not sm.plateaued([1.0])                               # one epoch: nothing to compare
+

@@ -42,6 +42,24 @@ def test_an_order_on_fewer_than_five_seeds_is_never_resolved():
     assert verdict.rank_verdict("early", {k: (5, *v[1:]) for k, v in arms.items()}) == verdict.FAILS
 
 
+def test_an_order_of_siamese_networks_that_mostly_did_not_converge_is_budget_limited(tmp_path):
+    """Xu 2022's orders read the converged_seeds of 10's tables: fewer than half of the arms' networks
+    converged is budget-limited, whatever the seed ranges say."""
+    (tmp_path / "10_siamese_rgbd").mkdir()
+    def write(converged):
+        pd.DataFrame([{"descriptor": f"scnn {x}, RGB", "supervision": x, "seeds": 5, "converged_seeds": c,
+                       "AP_min": lo, "AP_max": hi} for x, lo, hi, c in zip(("softmax", "contrastive", "multitask"),
+                                                                        (40, 30, 60), (50, 45, 70), converged)]
+                     ).to_csv(tmp_path / "10_siamese_rgbd" / "supervisions.csv", index=False)
+    write((5, 5, 5))
+    assert verdict.xu_supervision(tmp_path)[1] == verdict.HOLDS                # [60, 70] above the others
+    write((2, 2, 3))                                                           # 7 of 15 converged
+    text, word = verdict.xu_supervision(tmp_path)
+    assert word == verdict.BUDGET and text.endswith("7 of 15 networks converged")
+    write((3, 2, 3))                                                           # 8 of 15: the ranges decide again
+    assert verdict.xu_supervision(tmp_path)[1] == verdict.HOLDS
+
+
 def test_the_dictionary_is_judged_by_closure_precision_and_reports_recall(tmp_path):
     (tmp_path / "13_leaderboard").mkdir()
     board = pd.DataFrame([{"method": "main paper: CNN + dictionary, tau = L + 10 = 70", "threshold": 70,

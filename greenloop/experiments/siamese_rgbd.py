@@ -30,6 +30,7 @@ DECIMALS = {"AP_%": 2, "R@100P_%": 2, "AP_mean": 2, "AP_std": 2, "AP_min": 2, "A
             "s_per_image_batched": 5, "s_per_image_one_at_a_time": 5}
 UNRESOLVED = "not resolved: the seed ranges overlap"
 LEVELLING = "held-out AP gain, first -> second -> last third of the epochs"
+CONVERGED = "networks whose training loss stopped falling within their epochs"
 # the paper's numbers, a reference column only: Table 2 (NYU, AP of mid-level fusion per layer)
 # and Table 3 (seconds per image: SCNN CPU and GPU, CNN CPU and GPU, GIST, BoVW)
 PAPER_T2 = dict(zip(siamese.LAYERS, [0.7444, 0.7644, 0.8111, 0.7778, 0.7222, 0.7444, 0.6667, 0.6333]))
@@ -122,11 +123,13 @@ def score_descriptors(F, GT, exclude: int, queries=None):
 
 
 def _row(descriptor, label, inf, ap, r100, supervision="none", fusion="none", layer="", train_pairs=0,
-         epochs=0, train_s=0.0, train_cpu_s=0.0, loaded_from_cache=False, seed=None) -> dict:
-    """One row of notebook 10's tables (AP, R@100P in %; ms per image), unrounded."""
+         epochs=0, train_s=0.0, train_cpu_s=0.0, loaded_from_cache=False, seed=None, converged=None) -> dict:
+    """One row of notebook 10's tables (AP, R@100P in %; ms per image), unrounded; converged: the
+    network's training loss stopped falling within its epochs (``siamese.plateaued``), None when
+    nothing was trained."""
     return {"descriptor": descriptor, "seed": seed, "weights": inf.weights, "label": label, "dim": inf.dim,
             "supervision": supervision, "fusion": fusion, "layer": layer, "train_pairs": train_pairs,
-            "epochs": epochs, "train_s": train_s, "train_cpu_s": train_cpu_s,
+            "epochs": epochs, "converged": converged, "train_s": train_s, "train_cpu_s": train_cpu_s,
             "loaded_from_cache": loaded_from_cache, "AP_%": ap, "R@100P_%": r100,
             "extract_ms_per_image": 1e3 * inf.seconds_per_image}
 
@@ -150,8 +153,9 @@ def fit_and_score(name: str, X, labels, heldout, gap: int, GT, exclude: int, tra
     arguments (seed, epochs, hard_fraction, ...); kw: this network's (supervision, fusion,
     fusion_layer, merge). The held-out AP after every epoch is recorded (:func:`heldout_monitor`).
     Returns (row, S, model, history): row = one dict of notebook 10's tables (AP and R@100P on
-    the held-out queries, in %; training seconds; loaded_from_cache = the model came from the
-    cache, ``util.cache.cached_model``), S (N, N) its similarity matrix, the descriptor model, history.
+    the held-out queries, in %; training seconds; converged = ``siamese.plateaued`` on its training
+    loss; loaded_from_cache = the model came from the cache, ``util.cache.cached_model``), S (N, N)
+    its similarity matrix, the descriptor model, history.
     """
     loaded = []
     model, hist, pairs = siamese.train(X, labels, **train_kw, **kw, gt=GT, monitor=heldout_monitor(X, GT, exclude, heldout),
@@ -161,7 +165,8 @@ def fit_and_score(name: str, X, labels, heldout, gap: int, GT, exclude: int, tra
     S, ap, r100 = score_descriptors(F, GT, exclude, heldout)
     row = _row(name, f"{name} ({inf.weights})", inf, ap, r100, kw.get("supervision", "multitask"),
                kw.get("fusion", "none"), kw.get("fusion_layer") or "", len(pairs["pairs"]), train_kw["epochs"],
-               hist["seconds"], hist.get("cpu_seconds", float("nan")), loaded[0], train_kw.get("seed"))
+               hist["seconds"], hist.get("cpu_seconds", float("nan")), loaded[0], train_kw.get("seed"),
+               siamese.plateaued(hist["loss"]))
     return row, S, model, hist
 
 
@@ -275,17 +280,45 @@ def fusions(s: Setup, sup: Runs, fusion_supervision: str, mid_layers, merge: str
 
 def seed_summary(table: pd.DataFrame) -> pd.DataFrame:
     """One row per descriptor of a per-seed table (:func:`supervisions` or :func:`fusions`), in
-    order: descriptor, supervision, fusion, layer, seeds, and the mean, standard deviation (ddof 1;
+    order: descriptor, supervision, fusion, layer, seeds, converged_seeds (networks whose training
+    loss stopped falling within the budget; 0 for untrained rows), and the mean, standard deviation (ddof 1;
     NaN for one run), min and max over seeds of AP_% and R@100P_% (AP_mean, AP_std, AP_min,
     AP_max, R100P_mean, R100P_min, R100P_max), and the mean train_s. A skipped table (no depth:
     nothing trained) is returned as it is."""
     if "AP_%" not in table:
         return table
-    g = table.groupby("descriptor", sort=False)
+    g = table.assign(converged=table["converged"].eq(True) if "converged" in table else False).groupby("descriptor", sort=False)
     return g.agg(supervision=("supervision", "first"), fusion=("fusion", "first"), layer=("layer", "first"),
-                 seeds=("AP_%", "size"), AP_mean=("AP_%", "mean"), AP_std=("AP_%", "std"), AP_min=("AP_%", "min"),
+                 seeds=("AP_%", "size"), converged_seeds=("converged", "sum"), AP_mean=("AP_%", "mean"), AP_std=("AP_%", "std"), AP_min=("AP_%", "min"),
                  AP_max=("AP_%", "max"), R100P_mean=("R@100P_%", "mean"), R100P_min=("R@100P_%", "min"),
                  R100P_max=("R@100P_%", "max"), train_s_mean=("train_s", "mean")).reset_index()
+
+
+def converged_networks(*tables: pd.DataFrame) -> tuple[int, int]:
+    """(k, n): n networks trained for the per-seed tables given (:func:`supervisions`, :func:`fusions`;
+    rows with epochs > 0, each network once: the fusion table's "RGB only" rows and the late
+    networks' single-stream rows are networks of other rows), k of them converged (their training
+    loss stopped falling within their epochs, ``siamese.plateaued``)."""
+    kept = [x for x in tables if "converged" in x]           # a skipped fusion table trained nothing
+    if not kept:
+        return 0, 0
+    t = pd.concat(kept, ignore_index=True)
+    t = t[(t.epochs > 0) & ~t.fusion.isin(["RGB only", "late (rgb stream)", "late (depth stream)"])]
+    return int(t.converged.eq(True).sum()), len(t)
+
+
+def budget_label(*tables: pd.DataFrame) -> str:
+    """"budget-limited: k of n networks converged" (:func:`converged_networks`) where fewer than half
+    converged (``verdict.budget_limited``), else "": the label the tables' notes, the figures
+    (:func:`label_budget`) and the conclusion carry."""
+    k, n = converged_networks(*tables)
+    return f"budget-limited: {k} of {n} networks converged" if n and verdict.budget_limited(k, n) else ""
+
+
+def label_budget(fig, *tables: pd.DataFrame):
+    """Write :func:`budget_label` in red above the figure (nothing where the networks converged);
+    returns the figure."""
+    return report.label_figure(fig, budget_label(*tables))
 
 
 def best_of(summary: pd.DataFrame, names) -> tuple[str | None, str]:
@@ -451,8 +484,13 @@ def paper_vs_run(s: Setup, sup: Runs, fus: Runs, tim: pd.DataFrame, supervisions
     seed range lies above every other's (:func:`best_of`), else :data:`UNRESOLVED`; the means and
     ranges stand beside it."""
     cmp, t2 = _fusion_rows(s, fus, mid_layers, merge, dataset)
+    k, n = converged_networks(sup.table, fus.table)
     level = [(LEVELLING, None, _levelling(list(sup.hists.values()) + list(fus.hists.values())),
-              "every network trained here, its held-out AP averaged per third of its epochs (convergence figure)")]
+              "every network trained here, its held-out AP averaged per third of its epochs (convergence figure)"),
+             (CONVERGED, "trained until the validation accuracy stalls for 10 epochs",
+              f"{k} of {n}" + (f" ({budget_label(sup.table, fus.table)})" if budget_label(sup.table, fus.table) else ""),
+              f"siamese.plateaued: the training loss fell by less than {100 * siamese.STOP_MIN_DELTA:g} % of its best "
+              f"for {siamese.STOP_PATIENCE} epochs before the budget's last epoch")]
     return (report.paper_vs_run(_supervision_rows(s, sup, supervisions) + level + cmp), report.paper_vs_run(t2),
             report.paper_vs_run(_timing_rows(tim)))
 
@@ -483,8 +521,12 @@ def _reached(cell: str, paper: float) -> str:
 
 
 def _budget_sentence(run: pd.Series) -> str:
-    """How far the budget levels off and the precision at the paper's recall (paper_vs_run.csv's cells)."""
-    text = f"Held-out AP gained from the first to the second third of the epochs, then to the last: {run[LEVELLING]}."
+    """The budget label where fewer than half of the networks converged, how far the budget levels off
+    and the precision at the paper's recall (paper_vs_run.csv's cells)."""
+    m = re.search(r"budget-limited: \d+ of \d+ networks converged", str(run.get(CONVERGED, "")))
+    text = (f"**{m[0][0].upper() + m[0][1:]}** (their training loss still fell within their last "
+            f"{siamese.STOP_PATIENCE} epochs), so every AP and order here is the budget's. " if m else "")
+    text += f"Held-out AP gained from the first to the second third of the epochs, then to the last: {run[LEVELLING]}."
     p83 = "precision at 83 % recall, multi-task"
     if p83 in run.index:
         text += f" Multi-task's precision at 83 % recall, mean [min, max]: {_reached(run[p83], 0.90)} (paper: > 0.90, New College)"

@@ -12,9 +12,10 @@ The verdicts (:data:`RULES`, printed under the table):
 * **holds** / **does not hold**: a claimed value is reached by at least one seed (the measured range
   reaches it), or by none while at least half of the seeds converged; a claimed order is resolved
   in the claimed / the opposite direction (below).
-* **budget-limited**: the claimed value is not reached and fewer than half of the seeds converged
-  (fit their training frames, or stopped rising before the epoch cap: ``converged``), so the run
-  cannot say.
+* **budget-limited**: the claimed value is not reached, or an order of trained arms is claimed, and
+  fewer than half of the seeds converged (fit their training frames, or stopped rising before the
+  epoch cap: ``training_over_seeds.converged``; a Siamese network's training loss stopped falling
+  within its epochs: ``siamese.plateaued``), so the run cannot say.
 * **not resolved**: a claimed order whose arms have fewer than :data:`MIN_SEEDS` seeds, or whose seed
   ranges overlap, or a comparison of single values with no spread. With 5 seeds per arm, ranges that
   do not overlap are a one-sided Mann-Whitney U of 0, p = 1/252; the rule is conservative: overlapping
@@ -40,8 +41,9 @@ DATASETS = {"synthetic-greenhouse": "synthetic", "nordland": "Nordland", "garden
 RULES = (
     "holds / does not hold: a claimed value reached by at least one seed (or the single measurement), or by "
     "none with at least half of the seeds converged; a claimed order resolved for / against the paper. "
-    "budget-limited: not reached, and fewer than half of the seeds converged (fit their training frames, or "
-    "stopped rising before the epoch cap under early stopping). "
+    "budget-limited: not reached, or an order of trained arms, with fewer than half of the seeds converged (fit "
+    "their training frames, stopped rising before the epoch cap under early stopping, or, for a Siamese network, "
+    "its training loss stopped falling within its epochs). "
     f"not resolved: an order with fewer than {MIN_SEEDS} seeds per arm, overlapping seed ranges, or single "
     "values without spread (with 5 seeds per arm, separate ranges are a one-sided Mann-Whitney U of 0, "
     "p = 1/252). not testable here: networks without ImageNet weights here, or data the folder lacks.")
@@ -286,14 +288,23 @@ def _arms(t: pd.DataFrame, key: str) -> dict[str, tuple[int, float, float]]:
     return {getattr(r, key): (r.seeds, r.AP_min, r.AP_max) for r in t.itertuples()}
 
 
+def _xu_order(t: pd.DataFrame, key: str, claimed: str):
+    """(text, verdict) of "``claimed`` ranks first" among the arms of notebook 10's summary rows ``t``
+    (AP % over seeds): budget-limited where fewer than half of the arms' networks converged (the
+    converged_seeds column; tables written before it was kept read as converged), else ``rank_verdict``."""
+    arms = _arms(t, key)
+    text = "; ".join(f"{k} {_seeds_range(*v)}" for k, v in arms.items())
+    if "converged_seeds" in t and budget_limited(t.converged_seeds.sum(), t.seeds.sum()):
+        return text + f", {int(t.converged_seeds.sum())} of {int(t.seeds.sum())} networks converged", BUDGET
+    return text, rank_verdict(claimed, arms)
+
+
 def xu_supervision(folder: Path):
     """Xu 2022: multi-task supervision ranks above softmax and contrastive (10, held-out AP % over seeds)."""
     t = _csv(folder, "10_siamese_rgbd/supervisions.csv")
     if t is None:
         return None
-    t = t[t.supervision.isin(["softmax", "contrastive", "multitask"])]
-    arms = _arms(t, "supervision")
-    return "; ".join(f"{k} {_seeds_range(*v)}" for k, v in arms.items()), rank_verdict("multitask", arms)
+    return _xu_order(t[t.supervision.isin(["softmax", "contrastive", "multitask"])], "supervision", "multitask")
 
 
 def xu_fusion(folder: Path):
@@ -306,8 +317,7 @@ def xu_fusion(folder: Path):
     t = t[(t.fusion.isin(["early", "late"])) | ((t.fusion == "mid") & (t.layer == "conv2"))]
     if not len(t):
         return "no depth", UNTESTABLE
-    arms = _arms(t, "fusion")
-    return "; ".join(f"{k} {_seeds_range(*v)}" for k, v in arms.items()), rank_verdict("late", arms)
+    return _xu_order(t, "fusion", "late")
 
 
 def xu_depth(folder: Path):
@@ -320,8 +330,7 @@ def xu_depth(folder: Path):
     t = t[t.fusion.isin(["RGB only", "late"])]
     if (t.fusion == "late").sum() == 0:
         return "no depth", UNTESTABLE
-    arms = _arms(t, "fusion")
-    return "; ".join(f"{k} {_seeds_range(*v)}" for k, v in arms.items()), rank_verdict("late", arms)
+    return _xu_order(t, "fusion", "late")
 
 
 MAIN, QI, ZCA, ZHANG, XU = ("main paper", "Qi 2024", "ResNet/Inception/ZCA", "Zhang 2017", "Xu 2022")

@@ -107,6 +107,8 @@ MARGIN = 1.0                   # contrastive margin m (Caffe's default; the pape
 LAMBDA = 1.0                   # multi-task weight of the contrastive term (the paper gives none)
 WEIGHT_DECAY = 5e-4            # Eq. 4's squared-norm terms (AlexNet's value)
 CACHE_VERSION = 2              # bump when training changes in a way the parameters do not show
+STOP_PATIENCE = 10             # epochs: Xu 2022 stops once its validation accuracy stalls for 10 epochs
+STOP_MIN_DELTA = 0.01          # a fall of the training loss by less than about 1 % of its best is none
 
 # (name, kind, filters, kernel, stride) of the trunk at width=1; then fc6 and fc7
 _TRUNK = (("conv1", "conv", 16, 5, 2), ("pool1", "pool", None, 3, 2),
@@ -636,6 +638,19 @@ def _fit(X, labels, progress, gt=None, monitor=None, *, seed, supervision, fusio
     history["n_classes"] = n_classes
     history["n_train_frames"] = int((labels >= 0).sum())
     return descriptor, history, {"pairs": np.concatenate(all_pairs), "same": np.concatenate(all_same)}
+
+
+def plateaued(loss, patience: int = STOP_PATIENCE, min_delta: float = STOP_MIN_DELTA) -> bool:
+    """Did the training loss stop falling within its epochs: the early-stopping rule of
+    ``cnn.stops_here`` (Keras's ``EarlyStopping``, on the training part) fires after some epoch of
+    -log(loss), so a fall by less than about ``min_delta`` of the best loss (a fraction, whatever
+    the loss's scale) counts as none for ``patience`` epochs. loss: per-epoch training losses
+    (``history["loss"]``). False: the loss still fell within every ``patience`` epochs, and the
+    network ended on its budget (``epochs``) before its training stopped improving."""
+    from greenloop.methods.dictionary.cnn import stops_here
+
+    r = -np.log(np.maximum(np.asarray(loss, dtype=float), 1e-12))
+    return any(stops_here(r[:e], patience, min_delta) for e in range(2, len(r) + 1))
 
 
 def train(X, labels, seed: int = 0, supervision: str = "multitask", fusion: str = "none",
