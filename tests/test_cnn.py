@@ -213,11 +213,11 @@ def test_early_stopping_rule_is_keras_early_stopping():
     curves += [np.round(rng.random(40), 2) for _ in range(8)]
     for acc in curves:
         for patience in (1, 3, 10):
-            ours = next((e for e in range(1, len(acc) + 1) if cnn.stops_here(acc[:e], patience)), None)
+            ours = next((e for e in range(1, len(acc) + 1) if cnn.stops_here(acc[:e], patience, cnn.STOP_MIN_DELTA)), None)
             assert ours == _keras_stop_epoch(acc, patience), (acc[:5], patience)
     # a curve still rising by more than min_delta every epoch never stops; a flat one does, after patience
-    assert not any(cnn.stops_here(np.linspace(0.1, 0.9, e), 5) for e in range(1, 60))
-    assert cnn.stops_here(np.r_[0.2, 0.5, np.full(5, 0.5)], 5) and not cnn.stops_here(np.r_[0.2, 0.5, np.full(4, 0.5)], 5)
+    assert not any(cnn.stops_here(np.linspace(0.1, 0.9, e), 5, cnn.STOP_MIN_DELTA) for e in range(1, 60))
+    assert cnn.stops_here(np.r_[0.2, 0.5, np.full(5, 0.5)], 5, 0.005) and not cnn.stops_here(np.r_[0.2, 0.5, np.full(4, 0.5)], 5, 0.005)
 
 
 @pytest.mark.parametrize("trainer", ["fused", "plain"])
@@ -233,7 +233,8 @@ def test_training_stops_where_the_training_accuracy_stops_rising(tmp_path, train
     # the toy fits its training frames early, so the run stops well before the cap, at the first
     # epoch the rule fires
     assert h["stopped_early"] and n < 25
-    assert cnn.stops_here(h["accuracy"], 3) and not any(cnn.stops_here(h["accuracy"][:e], 3) for e in range(1, n))
+    assert cnn.stops_here(h["accuracy"], 3, cnn.STOP_MIN_DELTA) and not any(cnn.stops_here(h["accuracy"][:e], 3, cnn.STOP_MIN_DELTA)
+                                                                          for e in range(1, n))
     if trainer == "plain":
         return
     _, full, _ = cnn.train(X, y, seed=0, epochs=25, cache=False, progress=False, trainer=trainer)

@@ -34,7 +34,7 @@ def converged(history: dict, converged_at: float = 0.95) -> bool:
     """Did a run converge: it fit its training frames (its final training accuracy, a fraction in
     [0, 1], ``history['accuracy'][-1]``, is at least converged_at, a fraction), or its training
     accuracy stopped rising before the epoch cap (``history['stopped_early']``, the early-stopping
-    rule ``cnn.stops_here``). A run that is neither ended on its budget while still able to rise."""
+    rule ``util.stopping.stops_here``). A run that is neither ended on its budget while still able to rise."""
     return bool(history["accuracy"][-1] >= converged_at or history.get("stopped_early", False))
 
 

@@ -1,4 +1,4 @@
 """Building blocks every stage shares, importing nothing else of greenloop: integer-argument
 checks (``checks``), atomic file writes (``files``), the on-disk model and descriptor cache
-(``cache``), terminal progress bars (``progress``), TensorFlow's devices where no GPU is
+(``cache``), terminal progress bars (``progress``), the early-stopping rule (``stopping``), TensorFlow's devices where no GPU is
 (``devices``) and the compiled CPU kernels (``kernels``)."""

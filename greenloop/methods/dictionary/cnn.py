@@ -15,6 +15,7 @@ from greenloop.util import numba_kernels as kernels
 from greenloop.util.cache import cache_key, cached_model
 from greenloop.util.checks import positive_int
 from greenloop.util.progress import bar as tqdm   # in the terminal, never in a notebook
+from greenloop.util.stopping import stops_here
 
 SPLITS = ("random", "blocked")
 STOP_MIN_DELTA = 0.005   # early stopping: a rise of the training accuracy (fraction) smaller than this is none
@@ -222,19 +223,6 @@ def _accelerator() -> bool:
     return False
 
 
-def stops_here(accuracy, patience: int, min_delta: float = STOP_MIN_DELTA) -> bool:
-    """Keras's ``EarlyStopping(monitor="accuracy", mode="max", patience, min_delta)`` rule after the
-    last epoch of ``accuracy`` (per-epoch training accuracies, fractions): True when none of the last
-    ``patience`` epochs beat the best before it by more than min_delta (the best counts only
-    improvements larger than min_delta, as Keras's does). tests/test_cnn.py checks it against Keras."""
-    best, wait = -np.inf, 0
-    for a in accuracy:
-        wait += 1
-        if a - min_delta > best:
-            best, wait = a, 0
-    return len(accuracy) > 1 and wait >= patience
-
-
 def _fit(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size, split, trainer, gap,
          block="random", train_size=None, stop_patience=0, **_):
     if trainer == "fused":
@@ -429,7 +417,7 @@ def _fit_fused(X, y, progress, *, n_classes, seed, epochs, batch_size, test_size
             epoch_seconds.append(time.perf_counter() - t_epoch)
             bar.update(1)
             bar.set_postfix(val_acc=f"{history['val_accuracy'][-1]:.3f}", refresh=False)
-            if stop_patience and stops_here(history["accuracy"], stop_patience):
+            if stop_patience and stops_here(history["accuracy"], stop_patience, STOP_MIN_DELTA):
                 break
     bar.close()
     Kc, bc, Wd, bd, Wo, bo = params

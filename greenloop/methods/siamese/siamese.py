@@ -95,6 +95,7 @@ from greenloop.methods.dictionary import spots
 from greenloop.util.cache import cache_key, cached_model, is_cached
 from greenloop.util.checks import positive_int
 from greenloop.util.progress import bar as tqdm  # in the terminal, never in a notebook
+from greenloop.util.stopping import stops_here
 
 LAYERS = ("conv1", "pool1", "conv2", "pool2", "conv3", "conv4", "conv5", "pool5")
 SUPERVISIONS = ("softmax", "contrastive", "multitask")
@@ -641,14 +642,12 @@ def _fit(X, labels, progress, gt=None, monitor=None, *, seed, supervision, fusio
 
 
 def plateaued(loss, patience: int = STOP_PATIENCE, min_delta: float = STOP_MIN_DELTA) -> bool:
-    """Did the training loss stop falling within its epochs: the early-stopping rule of
-    ``cnn.stops_here`` (Keras's ``EarlyStopping``, on the training part) fires after some epoch of
+    """Did the training loss stop falling within its epochs: the early-stopping rule
+    (``util.stopping.stops_here``, Keras's ``EarlyStopping``, on the training part) fires after some epoch of
     -log(loss), so a fall by less than about ``min_delta`` of the best loss (a fraction, whatever
     the loss's scale) counts as none for ``patience`` epochs. loss: per-epoch training losses
     (``history["loss"]``). False: the loss still fell within every ``patience`` epochs, and the
     network ended on its budget (``epochs``) before its training stopped improving."""
-    from greenloop.methods.dictionary.cnn import stops_here
-
     r = -np.log(np.maximum(np.asarray(loss, dtype=float), 1e-12))
     return any(stops_here(r[:e], patience, min_delta) for e in range(2, len(r) + 1))
 
