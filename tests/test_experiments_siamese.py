@@ -185,9 +185,9 @@ def test_the_arms_the_paper_ranks_get_their_own_seeds(setup, trained, tmp_path_f
 
 def test_timing_paper_vs_run_conclusion_and_summary(setup, trained, tiny_sequence, tmp_path):
     s, (sup, fus) = setup, trained
-    tim, n_native = sr.timing(s, sup, fus, tiny_sequence, "softmax", ["conv2"], 4)
+    tim, n_native = sr.timing(s, sup, fus, tiny_sequence, "softmax", ["conv2"], 4, vocab_size=16)
     assert tim.descriptor.tolist() == ["scnn softmax, RGB", "scnn early fusion", "scnn mid-level fusion at conv2",
-                                       "scnn late fusion", "sift_bovw (SIFT + 500-word quantisation)"]
+                                       "scnn late fusion", "sift_bovw (SIFT + 16-word quantisation)"]
     assert (tim.s_per_image_batched > 0).all() and (tim.s_per_image_one_at_a_time > 0).all() and n_native == 64
     cmp, t2, t3 = sr.paper_vs_run(s, sup, fus, tim, ["softmax"], ["conv2"], "sum", tiny_sequence)
     run, notes = cmp.set_index("quantity")["this run"], cmp.set_index("quantity")["note"]
