@@ -558,3 +558,35 @@ def test_keras_predict_runs_the_lite_network_as_its_tflite_graph_with_the_same_o
         FCNN.keras_predict(bad)
     vgg = FCNN._cnn_model("vgg19", None, (64, 64))
     assert FCNN.predictor(get_backbone("vgg19"), vgg) == vgg.predict_on_batch
+
+
+def test_a_network_is_converted_once_and_its_key_is_its_layers_and_weights(tmp_path, monkeypatch):
+    """The same network in two objects gets one key and one converted graph, which the second
+    loads instead of converting (a network built in another process too: the key leaves out the
+    layer names Keras numbers per process); other weights, or other converter settings, get another key."""
+    import tensorflow as tf
+
+    from greenloop.features import layers as FL
+    from greenloop.util import cache
+    if keras.backend.backend() != "tensorflow":
+        pytest.skip("the TFLite runtime is the tensorflow backend's")
+    monkeypatch.setattr(cache, "CACHE_DIR", tmp_path)
+    a = FL._keras_layers("efficientnetlite0", None, (32, 32), (FL.LAYERS["efficientnetlite0"]["mid"][1],))
+    b, c = keras.models.clone_model(a), keras.models.clone_model(a)       # other objects, other variables
+    b.set_weights(a.get_weights())
+    c.set_weights([w * 1.01 for w in a.get_weights()])
+    assert cache.model_key(a) == cache.model_key(b) != cache.model_key(c)
+    assert cache.model_key(a) != cache.model_key(a, converter="another")
+    small = [keras.Sequential([keras.Input((8, 8, 3)), keras.layers.Conv2D(4, 3), keras.layers.Flatten()]) for _ in "ab"]
+    small[1].set_weights(small[0].get_weights())
+    assert small[0].layers[0].name != small[1].layers[0].name                  # conv2d, conv2d_1
+    assert cache.model_key(small[0]) == cache.model_key(small[1])
+    converter, converted = tf.lite.TFLiteConverter.from_concrete_functions, []
+    monkeypatch.setattr(tf.lite.TFLiteConverter, "from_concrete_functions",
+                        lambda *args: converted.append(1) or converter(*args))
+    x = np.random.default_rng(0).uniform(-1, 1, (2, 32, 32, 3)).astype(np.float32)
+    for model, conversions in ((a, 1), (b, 1), (c, 2)):
+        want = np.asarray(model.predict_on_batch(x))
+        assert np.abs(FCNN.keras_predict(model)(x) - want).max() <= 1e-4 * np.abs(want).max()
+        assert len(converted) == conversions
+    assert len(list((tmp_path / cache.GRAPHS).glob("*/graph.tflite"))) == 2

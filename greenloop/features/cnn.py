@@ -22,7 +22,7 @@ from greenloop.backbones import efficientnet_lite as _lite, ghostnet as _ghostne
 from greenloop.features.frames import load, rgb_batch
 from greenloop.features.registry import Backbone, BACKBONES, Options, RANDOM_INIT_SEED
 from greenloop.features.weights import _missing_weights_message, source_key, WeightsNotFoundError
-from greenloop.util import devices
+from greenloop.util import cache, devices
 from greenloop.util.progress import bar as tqdm  # in the terminal, never in a notebook
 
 # the Keras ports: build (input_shape -> headless pooled model), native weights suffix, its loader
@@ -167,14 +167,18 @@ def keras_predict(model):
 
 def _lite_graph(model):
     """(interpreter, input index, output indices in the model's order) of a Keras model converted to a
-    float32 TFLite graph with a free batch dimension, after a probe batch gave the model's outputs."""
+    float32 TFLite graph with a free batch dimension (once per network: util.cache.cached_graph),
+    after a probe batch gave the model's outputs."""
     import tensorflow as tf
     # the model's own tf.function: from_keras_model (dictionary.stream's converter) fails on the Lite port's
     # several-output models under Keras 3
-    spec = tf.TensorSpec((None, *model.inputs[0].shape[1:]), tf.float32)
-    fn = tf.function(lambda x: model(x, training=False), input_signature=[spec])
-    with contextlib.redirect_stdout(io.StringIO()), devices.without_backend_notices():
-        flat = tf.lite.TFLiteConverter.from_concrete_functions([fn.get_concrete_function()], model).convert()
+    def convert() -> bytes:
+        spec = tf.TensorSpec((None, *model.inputs[0].shape[1:]), tf.float32)
+        fn = tf.function(lambda x: model(x, training=False), input_signature=[spec])
+        with contextlib.redirect_stdout(io.StringIO()), devices.without_backend_notices():
+            return tf.lite.TFLiteConverter.from_concrete_functions([fn.get_concrete_function()], model).convert()
+
+    flat = cache.cached_graph(cache.model_key(model, converter=f"from_concrete_functions {tf.__version__}"), convert)
     with warnings.catch_warnings():  # the interpreter's deprecation notice
         warnings.filterwarnings("ignore", message=r"(?s).*deprecated", category=UserWarning)
         interp = tf.lite.Interpreter(model_content=flat, num_threads=_tflite._threads())

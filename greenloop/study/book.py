@@ -23,7 +23,6 @@ import shutil
 from pathlib import Path
 
 import mistune
-import nbconvert
 
 from greenloop.study import provenance
 from greenloop.util.files import write_atomic
@@ -53,6 +52,7 @@ def notebook_html(folder: Path, stem: str) -> str:
     page = Path(folder) / f"{stem}.html"
     if page.is_file():
         return page.read_text()
+    import nbconvert        # here, not at the top: it costs every command-line call 1.5 s of import
     body, _ = nbconvert.HTMLExporter().from_filename(str(Path(folder) / f"{stem}.ipynb"))
     return body
 

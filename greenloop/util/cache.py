@@ -8,7 +8,8 @@ Keys: a model's (:func:`cache_key`) hashes its training data and parameters; a d
 (:func:`descriptor_key`) the frames' names, sizes and modification times, the descriptor code's
 version (:data:`DESCRIPTOR_CODE_VERSION`) and the settings. Formats: a model folder holds
 ``model.keras`` (:func:`cached_model`); a descriptor folder ``features.npy`` (:func:`cached_descriptor`)
-or, for one pass of a network at every depth, ``layers.npz`` (:func:`cached_layers`).
+or, for one pass of a network at every depth, ``layers.npz`` (:func:`cached_layers`); a converted
+network's (:func:`model_key`: its configuration and weights) ``graph.tflite`` (:func:`cached_graph`).
 """
 from __future__ import annotations
 
@@ -29,6 +30,7 @@ from greenloop.util.files import publish_folder
 ROOT = Path(__file__).resolve().parents[2]
 CACHE_DIR = Path(os.environ.get("GREENLOOP_CACHE", ROOT / "results" / "models"))
 DESCRIPTORS = "descriptors"    # the descriptor entries' folder under CACHE_DIR
+GRAPHS = "graphs"              # the converted networks' folder under CACHE_DIR (cached_graph)
 
 # Descriptor keys once hashed the live source of greenloop/features/*.py, datasets/sequence.py and
 # the backbone ports, so that any edit (a docstring, a move) re-extracted every cached descriptor.
@@ -199,3 +201,44 @@ def cached_layers(key: str, cache, fit):
         return feats, json.loads((folder / "info.json").read_text())
 
     return cached(key, descriptor_root(cache), fit, save, load, marker="layers.npz")
+
+
+def model_key(model, **settings) -> str:
+    """Hex key of a built Keras model: a sha1 of its configuration (layers and wiring, with each
+    layer's name, which Keras numbers per process, replaced by its order of appearance), every weight's shape
+    and bytes, its input shapes and ``settings`` (what else the cached result depends on: the
+    converter's version and options). The same network built in another process gets the same key;
+    any other weight or layer gets another."""
+    config = model.get_config()
+    text = json.dumps(config, sort_keys=True, default=str)
+    for i, name in sorted(enumerate(_names(config)), key=lambda p: -len(p[1])):    # longest first
+        text = text.replace(f'"{name}"', f'"#{i}"')
+    h = hashlib.sha1(text.encode())
+    for w in model.get_weights():
+        h.update(str(w.shape).encode())
+        h.update(np.ascontiguousarray(w).view(np.uint8))
+    inputs = [[str(d) for d in t.shape] for t in model.inputs]
+    h.update(json.dumps(dict(settings, inputs=inputs), sort_keys=True, default=str).encode())
+    return h.hexdigest()[:16]
+
+
+def _names(config) -> list[str]:
+    """The values of every "name" key in a nested Keras configuration, each once, in order."""
+    out = []
+    if isinstance(config, dict):
+        if isinstance(config.get("name"), str):
+            out.append(config["name"])
+        for v in config.values():
+            out += _names(v)
+    elif isinstance(config, (list, tuple)):
+        for v in config:
+            out += _names(v)
+    return list(dict.fromkeys(out))
+
+
+def cached_graph(key: str, convert) -> bytes:
+    """:func:`cached` for a converted network (a TFLite flatbuffer): convert() -> bytes, kept as
+    ``graph.tflite`` under ``CACHE_DIR/graphs`` (key: :func:`model_key`), so that each network
+    is converted once, not once per process. Returns the bytes."""
+    return cached(key, CACHE_DIR / GRAPHS, convert, lambda folder, flat: (folder / "graph.tflite").write_bytes(flat),
+                  lambda folder: (folder / "graph.tflite").read_bytes(), marker="graph.tflite")

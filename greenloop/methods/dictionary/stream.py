@@ -56,7 +56,7 @@ import numpy as np
 from greenloop.datasets.sequence import preprocess_image
 from greenloop.methods.dictionary import cnn
 from greenloop.methods.dictionary.dictionary import LoopDetector
-from greenloop.util import devices
+from greenloop.util import cache, devices
 from greenloop.util.checks import positive_int
 from greenloop.util.files import write_atomic
 from greenloop.util.threads import one_blas_thread, run_chunked
@@ -219,13 +219,18 @@ def _tensorflow_lite():
 
 
 def _convert(model, quantize: bool = False) -> bytes:
-    """Keras model -> TFLite flatbuffer bytes (TensorFlow's converter; quiet)."""
+    """Keras model -> TFLite flatbuffer bytes (TensorFlow's converter; quiet; once per network and
+    option: util.cache.cached_graph)."""
     tf = _tensorflow_lite()
-    conv = tf.lite.TFLiteConverter.from_keras_model(model)
-    if quantize:
-        conv.optimizations = [tf.lite.Optimize.DEFAULT]  # dynamic-range: int8 weights, float maths
-    with contextlib.redirect_stdout(io.StringIO()), devices.without_backend_notices():
-        return conv.convert()
+
+    def convert() -> bytes:
+        conv = tf.lite.TFLiteConverter.from_keras_model(model)
+        if quantize:
+            conv.optimizations = [tf.lite.Optimize.DEFAULT]  # dynamic-range: int8 weights, float maths
+        with contextlib.redirect_stdout(io.StringIO()), devices.without_backend_notices():
+            return conv.convert()
+    return cache.cached_graph(cache.model_key(model, converter=f"from_keras_model {tf.__version__}",
+                                              quantize=quantize), convert)
 
 
 def export_tflite(model, path, quantize: bool = False) -> Path:
