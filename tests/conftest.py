@@ -18,6 +18,16 @@ def real_trajectory():
     return path
 
 
+@pytest.fixture(scope="session")
+def shared_cache(tmp_path_factory, worker_id):
+    """A model cache folder that every xdist worker of this session shares: util.cache's file locks
+    make the first worker train a key and the others load it (a module fixture runs once per worker)."""
+    base = tmp_path_factory.getbasetemp()
+    folder = (base.parent if worker_id != "master" else base) / "shared-models"
+    folder.mkdir(exist_ok=True)
+    return folder
+
+
 def write_frames(folder: Path, n: int, size=(40, 30), ext=".png", seed=0) -> Path:
     """n colour frames of size (w, h) under folder/rgb, numbered 0..n-1."""
     rng = np.random.default_rng(seed)

@@ -80,9 +80,14 @@ def test_setup_composes_the_stage_functions(setup, tiny_sequence):
 
 
 @pytest.fixture(scope="module")
-def trained(setup, tmp_path_factory):
+def kw(shared_cache):
+    """The tests' training settings: one epoch of 20 pairs, a narrow trunk, the session's model cache."""
+    return dict(epochs=1, n_pairs=20, batch_size=10, width=W, hard_fraction=0.5, cache=shared_cache)
+
+
+@pytest.fixture(scope="module")
+def trained(setup, kw):
     """One supervision and the four fusions (one mid-level layer), two seeds, one epoch of 20 pairs each."""
-    kw = dict(epochs=1, n_pairs=20, batch_size=10, width=W, hard_fraction=0.5, cache=tmp_path_factory.mktemp("models"))
     sup = sr.supervisions(setup, ["softmax"], kw, SEEDS)
     fus = sr.fusions(setup, sup, "softmax", ["conv2"], "sum", kw, SEEDS)
     return sup, fus
@@ -169,16 +174,17 @@ def test_fusions_table_rgb_only_each_fusion_and_each_late_stream(setup, trained)
     assert sr.seed_summary(skipped.table) is skipped.table
 
 
-def test_the_arms_the_paper_ranks_get_their_own_seeds(setup, trained, tmp_path_factory):
+def test_the_arms_the_paper_ranks_get_their_own_seeds(setup, trained, kw):
     """ranking_seeds train early, the paper's layer (conv2) and late fusion on more seeds than the other
-    mid-level layers; the table keeps Figure 9's order (early, each layer, late)."""
+    mid-level layers; the table keeps Figure 9's order (early, each layer, late). (The networks of
+    ``trained`` come from the cache: only conv1 is trained here.)"""
     sup, _ = trained
-    kw = dict(epochs=1, n_pairs=20, batch_size=10, width=W, hard_fraction=0.5, cache=tmp_path_factory.mktemp("models2"))
     fus = sr.fusions(setup, sup, "softmax", ["conv1", "conv2"], "sum", kw, [0], ranking_seeds=SEEDS)
     t = fus.table[fus.table.fusion.isin(["early", "mid", "late"])]
     assert list(zip(t.fusion, t.layer.fillna(""), t.seed)) == (
         [("early", "", k) for k in SEEDS] + [("mid", "conv1", 0)] + [("mid", "conv2", k) for k in SEEDS]
         + [("late", "", k) for k in SEEDS])
+    assert t.loaded_from_cache.tolist() == [True, True, False, True, True, True, True]
     assert sr.seed_summary(fus.table).set_index("descriptor").seeds.to_dict()["scnn mid-level fusion at conv1"] == 1
     assert (fus.table[fus.table.fusion == "RGB only"].seed.tolist()) == SEEDS
 
