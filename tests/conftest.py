@@ -1,4 +1,7 @@
 """Shared fixtures: small sequence folders made on the fly (nothing downloaded)."""
+import contextlib
+import io
+import subprocess
 from pathlib import Path
 
 import cv2
@@ -16,6 +19,31 @@ def real_trajectory():
     if not path.is_file():
         pytest.skip(f"real GreenHouse trajectory not found at {path}")
     return path
+
+
+def run_cli(args) -> subprocess.CompletedProcess:
+    """``python -m greenloop ARGS`` in this process (no interpreter start, no second TensorFlow
+    import): a CompletedProcess with its exit status and what it printed. The tests that check a
+    command as a user types it run it once as a subprocess; their other calls go through this."""
+    from greenloop.cli import main
+
+    args = [str(a) for a in args]
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = main(args)
+        except SystemExit as e:                 # argparse's usage errors and --help
+            code = e.code
+    return subprocess.CompletedProcess(args, code, out.getvalue(), err.getvalue())
+
+
+@pytest.fixture
+def cli():
+    """``cli(*args)`` -> (exit status, stdout, stderr) of :func:`run_cli`."""
+    def run(*args):
+        r = run_cli(args)
+        return r.returncode, r.stdout, r.stderr
+    return run
 
 
 @pytest.fixture(scope="session")

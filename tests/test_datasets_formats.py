@@ -2,7 +2,6 @@
 (VPR-Bench, loop matrices, positions / GPS), the parameters a folder implies, the CLI, and the
 Gardens Point builder (on a tiny fake source, and on the real one where ../shared has it)."""
 import json
-import os
 import subprocess
 import sys
 from pathlib import Path
@@ -17,6 +16,8 @@ from greenloop import groundtruth
 from greenloop.datasets import gardenspoint, groundtruth_formats as fmts, sequence
 from greenloop.study import params
 from greenloop.cli import main as cli_main
+
+from conftest import run_cli as _cli
 
 ROOT = Path(__file__).resolve().parents[1]
 REAL_GP = ROOT.parent / "shared" / "real" / "gardenspoint"
@@ -268,12 +269,6 @@ def test_make_passes_the_folder_parameters_first_and_builds_gardenspoint(tmp_pat
 
 
 # ------------------------------------------------------------------------------ the CLI
-def _cli(args, **kw):
-    env = dict(os.environ, PYTHONPATH=str(ROOT), TF_CPP_MIN_LOG_LEVEL="3")
-    return subprocess.run([sys.executable, "-m", "greenloop", *args], capture_output=True, text=True, env=env,
-                          timeout=120, cwd=kw.get("cwd"))
-
-
 def test_detect_prints_tuned_knobs_keeps_every_frame_and_honours_sequence_yaml(tmp_path):
     f = _images(tmp_path / "rec" / "rgb", 24, size=(32, 24)).parent
     summary = tmp_path / "summary.json"

@@ -1,9 +1,6 @@
 """greenloop.exclusion: the one exclusion rule make and `detect` share, on folders a user
 could bring (no ground truth, a frame rate, GPS positions, loop pairs, poses), and the CLI's use
 of it (printed rule, the warning, --matches)."""
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import cv2
@@ -14,6 +11,8 @@ from greenloop import exclusion
 from greenloop.datasets import sequence
 from greenloop.methods.greenloop_seq import seqmatch
 from greenloop.study import params
+
+from conftest import run_cli as _cli
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -103,12 +102,6 @@ def _revisit_rgb(folder: Path, n0: int = 60, back: int = 30) -> Path:
     for i, f in enumerate(frames):
         cv2.imwrite(str(folder / "rgb" / f"{i}.png"), f)
     return folder
-
-
-def _cli(args):
-    env = dict(os.environ, PYTHONPATH=str(ROOT), TF_CPP_MIN_LOG_LEVEL="3")
-    return subprocess.run([sys.executable, "-m", "greenloop", *args], capture_output=True, text=True, env=env,
-                          timeout=180)
 
 
 def test_detect_with_no_flags_matches_csv_and_the_warning(tmp_path):

@@ -14,6 +14,8 @@ from greenloop import features
 from greenloop.features import layers
 from greenloop.methods.greenloop_seq import seqmatch, seqstream
 from greenloop.similarity import l2_normalise
+
+from conftest import run_cli
 from test_seqspeed import _drive, make_route, recall_at_1  # noqa: E402  (the drives of the target-5 and CLI tests)
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -84,10 +86,16 @@ def test_a_revisit_seen_a_cell_aside_is_found_through_the_fused_layout():
     assert r1[1] >= 0.9 and r1[1] > r1[0], r1
 
 
-def _detect_cnn(folder):
-    env = dict(os.environ, PYTHONPATH=str(ROOT), TF_CPP_MIN_LOG_LEVEL="3")
-    res = subprocess.run([sys.executable, "-m", "greenloop", "detect", str(folder), "--method", seqmatch.CNN_NAME],
-                         capture_output=True, text=True, env=env, timeout=300)
+def _detect_cnn(folder, in_process=False):
+    """The closures `python -m greenloop detect FOLDER --method greenloop-seq-cnn` prints (run in
+    this process with ``in_process``)."""
+    args = ["detect", str(folder), "--method", seqmatch.CNN_NAME]
+    if in_process:
+        res = run_cli(args)
+    else:
+        env = dict(os.environ, PYTHONPATH=str(ROOT), TF_CPP_MIN_LOG_LEVEL="3")
+        res = subprocess.run([sys.executable, "-m", "greenloop", *args], capture_output=True, text=True, env=env,
+                             timeout=300)
     assert res.returncode == 0, res.stderr
     return [line.split("\t") for line in res.stdout.splitlines() if line[:1].isdigit()]
 
@@ -96,7 +104,7 @@ def test_cli_cnn_configuration_is_silent_without_revisit_and_finds_one(tmp_path)
     """`detect --method greenloop-seq-cnn` with no knobs (CNN_KNOBS at CNN_THRESHOLD): silent on
     tests/test_seqspeed.py's 500-frame pan that never comes back; on the same drive whose last 150
     frames revisit places 0..149 it declares closures, each at its place."""
-    assert _detect_cnn(_drive(tmp_path / "once", range(500))) == []
+    assert _detect_cnn(_drive(tmp_path / "once", range(500)), in_process=True) == []
     rows = _detect_cnn(_drive(tmp_path / "back", list(range(350)) + list(range(150))))
     assert len(rows) >= 75
     assert all(int(r[0]) >= 350 and abs(int(r[1]) - (int(r[0]) - 350)) <= 2 for r in rows)

@@ -180,7 +180,7 @@ def test_tflite_round_trip(tmp_path, random_model, brightness_model):
     assert list(q.predict([_frame(v) for v in levels])) == [0, 1, 3, 3]
 
 
-def test_cli_detect_on_jpg_folder(tmp_path, brightness_model):
+def test_cli_detect_on_jpg_folder(tmp_path, brightness_model, cli):
     folder = tmp_path / "run"
     folder.mkdir()
     levels = [10] * 4 + [100] * 3 + [10] * 2 + [200] * 5
@@ -198,20 +198,14 @@ def test_cli_detect_on_jpg_folder(tmp_path, brightness_model):
     assert rows[0][3] == "frame2.jpg"
     summary = [l for l in res.stdout.splitlines() if "summary" in l]
     assert summary and "14 frames, 3 closures" in summary[0] and "frames/s" in summary[0]
-    helped = subprocess.run([sys.executable, "-m", "greenloop", "--help"], capture_output=True,
-                            text=True, env=env, timeout=60)
-    assert helped.returncode == 0 and "detect" in helped.stdout
-    missing = subprocess.run([sys.executable, "-m", "greenloop", "detect", str(folder), "--method", "dictionary",
-                              "--model", str(tmp_path / "nope.keras")], capture_output=True, text=True, env=env,
-                             timeout=60)
-    assert missing.returncode == 2 and "not found" in missing.stderr
-    nofolder = subprocess.run([sys.executable, "-m", "greenloop", "detect", str(tmp_path / "nodir"),
-                               "--method", "dictionary", "--model", str(model)], capture_output=True, text=True,
-                              env=env, timeout=60)
-    assert nofolder.returncode == 2 and "does not exist" in nofolder.stderr
-    stray = subprocess.run([sys.executable, "-m", "greenloop", "detect", str(folder), "--model", str(model)],
-                           capture_output=True, text=True, env=env, timeout=60)
-    assert stray.returncode == 2 and "--method dictionary" in stray.stderr and "needs no model" in stray.stderr
+    code, out, _ = cli("--help")
+    assert code == 0 and "detect" in out
+    code, _, err = cli("detect", folder, "--method", "dictionary", "--model", tmp_path / "nope.keras")
+    assert code == 2 and "not found" in err
+    code, _, err = cli("detect", tmp_path / "nodir", "--method", "dictionary", "--model", model)
+    assert code == 2 and "does not exist" in err
+    code, _, err = cli("detect", folder, "--model", model)
+    assert code == 2 and "--method dictionary" in err and "needs no model" in err
 
 
 def test_bad_inputs(tmp_path, random_model):
