@@ -35,9 +35,18 @@ def _params(stem) -> dict:
     return {**TINY, **OVERRIDES.get(stem, {})}
 
 
+def _results_folder(tmp_path_factory, shared_cache, name: str) -> Path:
+    """A results folder for one fixture sequence's runs; its models/ (each run's GREENLOOP_CACHE) is
+    the session's shared cache, whose keys hash the data: a network, descriptor or converted graph
+    that two sequences or two xdist workers need is computed once."""
+    folder = tmp_path_factory.mktemp(name)
+    (folder / "models").symlink_to(shared_cache, target_is_directory=True)
+    return folder
+
+
 @pytest.fixture(scope="module")
-def results(tmp_path_factory):
-    return tmp_path_factory.mktemp("results")
+def results(tmp_path_factory, shared_cache):
+    return _results_folder(tmp_path_factory, shared_cache, "results")
 
 
 NOISE = re.compile(r"it/s\]|s/it\]|\d+%\|[#\u2588 ]|oneDNN|cuInit|cudart|Skipping variable loading|retracing"
@@ -134,8 +143,8 @@ def test_notebook_runs_and_writes_results(notebook, tiny_sequence, results, monk
 
 
 @pytest.fixture(scope="module")
-def pair_results(tmp_path_factory):
-    return tmp_path_factory.mktemp("results-pairs")
+def pair_results(tmp_path_factory, shared_cache):
+    return _results_folder(tmp_path_factory, shared_cache, "results-pairs")
 
 
 @pytest.mark.notebook
@@ -688,8 +697,8 @@ PAIR_CHECKS = {"00_dataset": _check_00_pairs, "03_confusion_matrix": _check_03_p
 
 
 @pytest.fixture(scope="module")
-def end_loop_results(tmp_path_factory):
-    return tmp_path_factory.mktemp("results-end-loop")
+def end_loop_results(tmp_path_factory, shared_cache):
+    return _results_folder(tmp_path_factory, shared_cache, "results-end-loop")
 
 
 @pytest.mark.notebook
@@ -733,8 +742,8 @@ END_LOOP_CHECKS = {"08": _end_loop_08, "10": _end_loop_10, "12": _end_loop_12, "
 
 
 @pytest.fixture(scope="module")
-def near_loop_results(tmp_path_factory):
-    return tmp_path_factory.mktemp("results-near-loop")
+def near_loop_results(tmp_path_factory, shared_cache):
+    return _results_folder(tmp_path_factory, shared_cache, "results-near-loop")
 
 
 @pytest.mark.notebook
@@ -768,8 +777,8 @@ def test_notebook_runs_on_a_sequence_whose_loops_lie_inside_the_default_window(
 
 
 @pytest.fixture(scope="module")
-def no_counted_loop_results(tmp_path_factory):
-    return tmp_path_factory.mktemp("results-no-counted-loop")
+def no_counted_loop_results(tmp_path_factory, shared_cache):
+    return _results_folder(tmp_path_factory, shared_cache, "results-no-counted-loop")
 
 
 @pytest.mark.notebook
