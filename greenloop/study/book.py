@@ -52,7 +52,7 @@ def notebook_html(folder: Path, stem: str) -> str:
     page = Path(folder) / f"{stem}.html"
     if page.is_file():
         return page.read_text()
-    import nbconvert        # here, not at the top: it costs every command-line call 1.5 s of import
+    import nbconvert        # here, not at the top: its import would slow the start of every command-line call
     body, _ = nbconvert.HTMLExporter().from_filename(str(Path(folder) / f"{stem}.ipynb"))
     return body
 

@@ -478,8 +478,8 @@ def _fused_validate(params, Xg: np.ndarray, y: np.ndarray, test_idx: np.ndarray)
 
 def predict(model, X: np.ndarray, batch_size: int = 512) -> np.ndarray:
     """Predicted spot labels (N,) int64 for frames X (N, H, W, C), via ``model.predict_on_batch``
-    on batches of batch_size (the outputs of ``model.predict``, without the data pipeline it builds
-    on every call: 0.1 s, which the shift and control grids paid hundreds of times).
+    on batches of batch_size: the outputs of ``model.predict``, without the data pipeline it builds
+    on every call, which cost the shift and control grids' many small calls more than the network.
 
     TensorFlow's "triggered tf.function retracing" warning (each new model or input size traces
     the predict step again, which is expected here) is silenced for the call.
