@@ -47,11 +47,12 @@ def cli():
 
 
 @pytest.fixture(scope="session")
-def shared_cache(tmp_path_factory, worker_id):
+def shared_cache(tmp_path_factory, request):
     """A model cache folder that every xdist worker of this session shares: util.cache's file locks
     make the first worker train a key and the others load it (a module fixture runs once per worker)."""
     base = tmp_path_factory.getbasetemp()
-    folder = (base.parent if worker_id != "master" else base) / "shared-models"
+    worker = hasattr(request.config, "workerinput")       # an xdist worker: the session's folder is one up
+    folder = (base.parent if worker else base) / "shared-models"
     folder.mkdir(exist_ok=True)
     return folder
 
