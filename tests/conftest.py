@@ -1,7 +1,9 @@
 """Shared fixtures: small sequence folders made on the fly (nothing downloaded)."""
 import contextlib
 import io
+import os
 import subprocess
+import sys
 from pathlib import Path
 
 import cv2
@@ -21,13 +23,18 @@ def real_trajectory():
     return path
 
 
-def run_cli(args) -> subprocess.CompletedProcess:
-    """``python -m greenloop ARGS`` in this process (no interpreter start, no second TensorFlow
-    import): a CompletedProcess with its exit status and what it printed. The tests that check a
-    command as a user types it run it once as a subprocess; their other calls go through this."""
+def run_cli(args, process: bool = False, timeout: int = 300) -> subprocess.CompletedProcess:
+    """``python -m greenloop ARGS`` -> a CompletedProcess with its exit status and what it printed.
+    process: run it as a user types it, in a new interpreter (TensorFlow's logs quieted); otherwise
+    in this process, with no interpreter start and no second TensorFlow import. The tests that check
+    a command run it once as a process and their other calls in this one."""
+    args = [str(a) for a in args]
+    if process:
+        env = dict(os.environ, PYTHONPATH=str(ROOT), TF_CPP_MIN_LOG_LEVEL="3")
+        return subprocess.run([sys.executable, "-m", "greenloop", *args], capture_output=True, text=True, env=env,
+                              timeout=timeout)
     from greenloop.cli import main
 
-    args = [str(a) for a in args]
     out, err = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         try:
@@ -35,15 +42,6 @@ def run_cli(args) -> subprocess.CompletedProcess:
         except SystemExit as e:                 # argparse's usage errors and --help
             code = e.code
     return subprocess.CompletedProcess(args, code, out.getvalue(), err.getvalue())
-
-
-@pytest.fixture
-def cli():
-    """``cli(*args)`` -> (exit status, stdout, stderr) of :func:`run_cli`."""
-    def run(*args):
-        r = run_cli(args)
-        return r.returncode, r.stdout, r.stderr
-    return run
 
 
 @pytest.fixture(scope="session")

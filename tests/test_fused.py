@@ -1,9 +1,6 @@
 """The fused descriptor "gradients+efficientnetlite0" (features.layers.extract_fused) and the cell
 shift of its gradient part (seqmatch.shift_cells with part=): what the named CNN configuration
 (seqmatch.CNN_KNOBS) streams."""
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import cv2
@@ -86,16 +83,10 @@ def test_a_revisit_seen_a_cell_aside_is_found_through_the_fused_layout():
     assert r1[1] >= 0.9 and r1[1] > r1[0], r1
 
 
-def _detect_cnn(folder, in_process=False):
-    """The closures `python -m greenloop detect FOLDER --method greenloop-seq-cnn` prints (run in
-    this process with ``in_process``)."""
-    args = ["detect", str(folder), "--method", seqmatch.CNN_NAME]
-    if in_process:
-        res = run_cli(args)
-    else:
-        env = dict(os.environ, PYTHONPATH=str(ROOT), TF_CPP_MIN_LOG_LEVEL="3")
-        res = subprocess.run([sys.executable, "-m", "greenloop", *args], capture_output=True, text=True, env=env,
-                             timeout=300)
+def _detect_cnn(folder, process=True):
+    """The closures `python -m greenloop detect FOLDER --method greenloop-seq-cnn` prints (in this
+    process unless ``process``)."""
+    res = run_cli(["detect", folder, "--method", seqmatch.CNN_NAME], process=process)
     assert res.returncode == 0, res.stderr
     return [line.split("\t") for line in res.stdout.splitlines() if line[:1].isdigit()]
 
@@ -104,7 +95,7 @@ def test_cli_cnn_configuration_is_silent_without_revisit_and_finds_one(tmp_path)
     """`detect --method greenloop-seq-cnn` with no knobs (CNN_KNOBS at CNN_THRESHOLD): silent on
     tests/test_seqspeed.py's 500-frame pan that never comes back; on the same drive whose last 150
     frames revisit places 0..149 it declares closures, each at its place."""
-    assert _detect_cnn(_drive(tmp_path / "once", range(500)), in_process=True) == []
+    assert _detect_cnn(_drive(tmp_path / "once", range(500)), process=False) == []
     rows = _detect_cnn(_drive(tmp_path / "back", list(range(350)) + list(range(150))))
     assert len(rows) >= 75
     assert all(int(r[0]) >= 350 and abs(int(r[1]) - (int(r[0]) - 350)) <= 2 for r in rows)

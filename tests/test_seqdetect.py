@@ -1,9 +1,6 @@
 """greenloop.methods.greenloop_seq.seqmatch (the greenloop-seq detector) and `python -m greenloop detect --method greenloop-seq`.
 Fast: random descriptors and raw pixels only, no network weights."""
 import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import cv2
@@ -15,7 +12,7 @@ from greenloop.datasets import sequence
 from greenloop.methods.greenloop_seq import seqmatch, seqstream
 from greenloop.methods.greenloop_seq.seqstream import Detector
 
-from conftest import write_frames
+from conftest import run_cli, write_frames
 
 ROOT = Path(__file__).resolve().parents[1]
 D, N0, REPEAT, EXCLUDE = 32, 300, 100, 50
@@ -176,42 +173,40 @@ def _revisit_folder(folder: Path) -> Path:
     return folder
 
 
-def test_cli_detect_by_method(tmp_path, cli):
+def test_cli_detect_by_method(tmp_path):
     folder = _revisit_folder(tmp_path / "run")
-    env = dict(os.environ, PYTHONPATH=str(ROOT), TF_CPP_MIN_LOG_LEVEL="3")
-    cmd = [sys.executable, "-m", "greenloop", "detect", str(folder), "--method", "greenloop-seq",
-           "--descriptor", "pixels-patchnorm", "--exclude", "10", "--seq-len", "3", "--contrast-window", "0",
-           "--threshold", "0.8", "--window", "7"]
-    res = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=120)
+    cmd = ["detect", str(folder), "--method", "greenloop-seq", "--descriptor", "pixels-patchnorm", "--exclude", "10",
+           "--seq-len", "3", "--contrast-window", "0", "--threshold", "0.8", "--window", "7"]
+    res = run_cli(cmd, process=True, timeout=120)
     assert res.returncode == 0, res.stderr
     rows = [line.split("\t") for line in res.stdout.splitlines() if line and line[0].isdigit()]
     assert rows and all(int(r[0]) >= 30 and int(r[1]) == int(r[0]) - 30 for r in rows)
     assert len(rows) >= 10 and rows[0][3] == f"{rows[0][0]}.png"
     summary = [line for line in res.stdout.splitlines() if "summary" in line]
     assert summary and f"45 frames, {len(rows)} closures" in summary[0] and "4108 bytes per stored frame" in summary[0]
-    code, _, err = cli(*cmd[3:-4], "--threshold", "2")
-    assert code == 2 and "threshold must lie" in err
+    bad = run_cli(cmd[:-4] + ["--threshold", "2"])
+    assert bad.returncode == 2 and "threshold must lie" in bad.stderr
     # knobs and threshold read from a notebook 13 summary (the tuned variant), streamed at its frame_step
     summary = tmp_path / "summary.json"
     summary.write_text(json.dumps({"frame_step": 1, "exclude_steps": 10, "thresholds": {"greenloop-seq-fast": 0.8},
                                    "knobs": {"greenloop-seq-fast": {"descriptor": "pixels-patchnorm", "seq_len": 3,
                                                                     "contrast_window": 0}}}))
-    code, out, err = cli(*cmd[3:7], "--tuned", summary, "--window", "7")
-    assert code == 0, err
-    assert [line.split("\t")[:2] for line in out.splitlines() if line[:1].isdigit()] == [r[:2] for r in rows]
+    tuned = run_cli(cmd[:4] + ["--tuned", summary, "--window", "7"])
+    assert tuned.returncode == 0, tuned.stderr
+    assert [line.split("\t")[:2] for line in tuned.stdout.splitlines() if line[:1].isdigit()] == [r[:2] for r in rows]
     # no flags at all: the named default, its exclusion by the rule make uses (no ground truth, no frame
     # rate: 10 % of 45 frames, at least 20), printed with the rule
-    code, out, err = cli(*cmd[3:5])
-    assert code == 0, err
-    assert f"{seqmatch.DEFAULT_NAME} (gradients, seq_len 10, exclude 20," in out, out
-    assert "# exclude 20 (fraction)" in out and "10% of the 45 frames" in out
+    none = run_cli(cmd[:2])
+    assert none.returncode == 0, none.stderr
+    assert f"{seqmatch.DEFAULT_NAME} (gradients, seq_len 10, exclude 20," in none.stdout, none.stdout
+    assert "# exclude 20 (fraction)" in none.stdout and "10% of the 45 frames" in none.stdout
     # greenloop-seq (the tuned family) without --tuned or --threshold: refused, pointing at the named default
-    code, _, err = cli(*cmd[3:7])
-    assert code == 2 and "needs a threshold" in err and seqmatch.DEFAULT_NAME in err
-    code, _, err = cli(*cmd[3:7], "--tuned", summary, "--variant", "greenloop-seq")
-    assert code == 2 and "no variant 'greenloop-seq'" in err
-    code, _, err = cli("detect", folder, "--method", "dictionary")
-    assert code == 2 and "--model" in err and seqmatch.DEFAULT_NAME in err
+    plain = run_cli(cmd[:4])
+    assert plain.returncode == 2 and "needs a threshold" in plain.stderr and seqmatch.DEFAULT_NAME in plain.stderr
+    wrong = run_cli(cmd[:4] + ["--tuned", summary, "--variant", "greenloop-seq"])
+    assert wrong.returncode == 2 and "no variant 'greenloop-seq'" in wrong.stderr
+    nomodel = run_cli(["detect", folder, "--method", "dictionary"])
+    assert nomodel.returncode == 2 and "--model" in nomodel.stderr and seqmatch.DEFAULT_NAME in nomodel.stderr
 
 
 def test_tune_knobs_scores_every_combination_on_the_tuning_queries(revisit):

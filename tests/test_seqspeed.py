@@ -2,9 +2,6 @@
 sequence the test makes: a route of N0 random-walk descriptors, then a revisit of its first REVISIT
 places (noisy re-observations) replayed at other speeds (frames dropped or repeated), with a stop,
 or driven the opposite way. Recall@1 over the revisit queries, correct within +-2 places."""
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import cv2
@@ -13,6 +10,8 @@ import pytest
 
 from greenloop import evaluate, features
 from greenloop.methods.greenloop_seq import seqmatch, seqstream
+
+from conftest import run_cli
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -120,9 +119,7 @@ def _drive(folder: Path, places) -> Path:
 
 
 def _detect(folder, *flags):
-    env = dict(os.environ, PYTHONPATH=str(ROOT), TF_CPP_MIN_LOG_LEVEL="3")
-    res = subprocess.run([sys.executable, "-m", "greenloop", "detect", str(folder), *flags],   # the named default
-                         capture_output=True, text=True, env=env, timeout=120)
+    res = run_cli(["detect", folder, *flags], process=True, timeout=120)   # the named default
     assert res.returncode == 0, res.stderr
     return [line.split("\t") for line in res.stdout.splitlines() if line[:1].isdigit()]
 

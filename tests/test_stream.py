@@ -1,8 +1,6 @@
 """greenloop.methods.dictionary.stream (Detector, preprocessing, TFLite export) and the `python -m greenloop detect` CLI.
 Correctness only; speed is measured by `python -m greenloop bench`."""
 import os
-import subprocess
-import sys
 from pathlib import Path
 
 import cv2
@@ -15,6 +13,8 @@ keras = pytest.importorskip("keras")
 from greenloop.methods.dictionary import cnn, dictionary  # noqa: E402
 from greenloop.datasets import sequence  # noqa: E402
 from greenloop.methods.dictionary.stream import Detector, export_tflite, preprocess  # noqa: E402
+
+from conftest import run_cli
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -180,7 +180,7 @@ def test_tflite_round_trip(tmp_path, random_model, brightness_model):
     assert list(q.predict([_frame(v) for v in levels])) == [0, 1, 3, 3]
 
 
-def test_cli_detect_on_jpg_folder(tmp_path, brightness_model, cli):
+def test_cli_detect_on_jpg_folder(tmp_path, brightness_model):
     folder = tmp_path / "run"
     folder.mkdir()
     levels = [10] * 4 + [100] * 3 + [10] * 2 + [200] * 5
@@ -188,24 +188,22 @@ def test_cli_detect_on_jpg_folder(tmp_path, brightness_model, cli):
         cv2.imwrite(str(folder / f"frame{i}.jpg"), _frame(v, (90, 120, 3)))
     model = tmp_path / "m.keras"
     brightness_model.save(model)
-    env = dict(os.environ, PYTHONPATH=str(ROOT), TF_CPP_MIN_LOG_LEVEL="3")
-    cmd = [sys.executable, "-m", "greenloop", "detect", str(folder), "--method", "dictionary", "--model", str(model),
-           "--threshold", "3", "--window", "5", "--backend", "numpy"]
-    res = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=120)
+    res = run_cli(["detect", folder, "--method", "dictionary", "--model", model, "--threshold", "3", "--window", "5",
+                   "--backend", "numpy"], process=True, timeout=120)
     assert res.returncode == 0, res.stderr
     rows = [l.split("\t") for l in res.stdout.splitlines() if l and l[0].isdigit()]
     assert [(int(r[0]), int(r[1]), int(r[2])) for r in rows] == [(2, 0, 3), (6, 1, 3), (11, 3, 3)]
     assert rows[0][3] == "frame2.jpg"
     summary = [l for l in res.stdout.splitlines() if "summary" in l]
     assert summary and "14 frames, 3 closures" in summary[0] and "frames/s" in summary[0]
-    code, out, _ = cli("--help")
-    assert code == 0 and "detect" in out
-    code, _, err = cli("detect", folder, "--method", "dictionary", "--model", tmp_path / "nope.keras")
-    assert code == 2 and "not found" in err
-    code, _, err = cli("detect", tmp_path / "nodir", "--method", "dictionary", "--model", model)
-    assert code == 2 and "does not exist" in err
-    code, _, err = cli("detect", folder, "--model", model)
-    assert code == 2 and "--method dictionary" in err and "needs no model" in err
+    helped = run_cli(["--help"])
+    assert helped.returncode == 0 and "detect" in helped.stdout
+    missing = run_cli(["detect", folder, "--method", "dictionary", "--model", tmp_path / "nope.keras"])
+    assert missing.returncode == 2 and "not found" in missing.stderr
+    nofolder = run_cli(["detect", tmp_path / "nodir", "--method", "dictionary", "--model", model])
+    assert nofolder.returncode == 2 and "does not exist" in nofolder.stderr
+    stray = run_cli(["detect", folder, "--model", model])
+    assert stray.returncode == 2 and "--method dictionary" in stray.stderr and "needs no model" in stray.stderr
 
 
 def test_bad_inputs(tmp_path, random_model):

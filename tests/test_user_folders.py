@@ -3,9 +3,6 @@ Nordland and the synthetic generator; short, loop pairs only, GPS only, no revis
 user meets them: what make would pass each notebook, which notebooks it would skip and why, and
 `detect` with no flags. (`make quick` itself on such folders: the closing notes.)"""
 import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +13,8 @@ from greenloop import evaluate, exclusion, groundtruth
 from greenloop.study import params
 from greenloop.cli import main as cli_main
 from tests import user_folders
+
+from conftest import run_cli
 
 ROOT = Path(__file__).resolve().parents[1]
 QUICK = ROOT / "params" / "quick.yaml"
@@ -34,9 +33,7 @@ def _make_params(folder, stem, results):
 
 
 def _detect(folder):
-    env = dict(os.environ, PYTHONPATH=str(ROOT), TF_CPP_MIN_LOG_LEVEL="3")
-    r = subprocess.run([sys.executable, "-m", "greenloop", "detect", str(folder)], capture_output=True, text=True,
-                       env=env, timeout=300)
+    r = run_cli(["detect", folder], process=True)
     assert r.returncode == 0, r.stderr
     return r
 
