@@ -337,7 +337,7 @@ def best_of(summary: pd.DataFrame, names) -> tuple[str | None, str]:
 
 
 def timing(s: Setup, sup: Runs, fus: Runs, dataset, fusion_supervision: str, mid_layers,
-           timing_frames: int, vocab_size: int = 500) -> tuple[pd.DataFrame, int]:
+           timing_frames: int, vocab_size: int = features.DEFAULT_VOCAB_SIZE) -> tuple[pd.DataFrame, int]:
     """Table 3's measurements on this CPU: seconds per image of the networks (batched, and one at
     a time on timing_frames frames) and of SIFT-BoVW (SIFT and quantisation into vocab_size words,
     the vocabulary fitted untimed on the same frames) on up to 64 native frames spread over the

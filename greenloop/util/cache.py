@@ -204,11 +204,11 @@ def cached_layers(key: str, cache, fit):
 
 
 def model_key(model, **settings) -> str:
-    """Hex key of a built Keras model: a sha1 of its configuration (layers and wiring, with each
-    layer's name, which Keras numbers per process, replaced by its order of appearance), every weight's shape
-    and bytes, its input shapes and ``settings`` (what else the cached result depends on: the
-    converter's version and options). The same network built in another process gets the same key;
-    any other weight or layer gets another."""
+    """Hex key of a built Keras model: a sha1 of its configuration (layers and wiring, each name,
+    which Keras numbers per process, replaced by its order of appearance), every weight's shape and
+    bytes, its input shapes and ``settings`` (what else the cached result depends on: the converter's
+    version and options). The same network built in another process gets the same key; any other
+    weight or layer gets another."""
     config = model.get_config()
     text = json.dumps(config, sort_keys=True, default=str)
     for i, name in sorted(enumerate(_names(config)), key=lambda p: -len(p[1])):    # longest first
