@@ -235,7 +235,7 @@ def test_method_rows_one_per_mode_with_closures_in_loop_closure_only(revisit):
 def test_targets_table_judges_the_named_target_set_and_refuses_a_folder_name():
     board = pd.DataFrame([{"method": "greenloop-seq-grad", "mode": "loop closure", "R@1_%": 50.0}])
     t = lb.targets_table(board, "generic", 1)                    # a user's folder: the generic targets
-    assert t.target.str.startswith("highest R@1").any() and not t.target.str.startswith("frame step").any()
+    assert t.target.str.startswith("R@1 not below the best row").any() and not t.target.str.startswith("frame step").any()
     with pytest.raises(ValueError, match="none of the target sets"):
         lb.targets_table(board, "data/my-indoor-walk", 1)
     t = lb.targets_table(board, "nordland", 8)

@@ -31,6 +31,9 @@ def test_nordland_targets_met_and_not_met():
     step = {r["target"]: r for r in detector_targets(rows, "nordland", seq_len=10, frame_step=8)}
     assert step["frame step of the rows (1 = Nordland's full rate)"]["met"] is False
     assert m["frame step of the rows (1 = Nordland's full rate)"]["met"] is None   # not given: not measured
+    for r1, met in ((92.0, True), (91.9, False)):                           # issue 50: R@1 >= 92
+        rows[0]["R@1_%"] = r1
+        assert _met(detector_targets(rows, "nordland", seq_len=10))["R@1"] is met
 
 
 def test_gardenspoint_reads_place_recognition_and_absent_values_are_not_measured():
@@ -47,17 +50,19 @@ def _spread(v, half):
             "AUC-PR_%": v - 10, "AUC-PR_lo_%": v - 10 - half, "AUC-PR_hi_%": v - 10 + half}
 
 
-def test_generic_highest_of_every_method_ignores_chance_and_needs_separate_intervals():
+def test_generic_not_below_the_best_row_ignores_chance_and_reads_the_best_point():
+    """Rows alone: met where the method's R@1 interval reaches the best other row's point value."""
     rows = [{"method": "greenloop-seq", "mode": "loop closure", **_spread(80.0, 2.0)},
             {"method": "SeqSLAM", "mode": "loop closure", **_spread(70.0, 3.0)},
             {"method": "pixels (single frame)", "mode": "loop closure", **_spread(60.0, 5.0)},
             {"method": "chance (random scores)", "mode": "loop closure", "R@1_%": 99.0, "AUC-PR_%": 99.0}]
     out = detector_targets(rows)                                            # generic: the default set
-    assert [r["met"] for r in out[:2]] == [True, True]
-    assert out[0]["measured"] == 78.0 and out[0]["required"] == "> 73.0"  # its low end above SeqSLAM's high end
-    rows[1].update(_spread(75.0, 3.0))                                      # 80 > 75, but [78, 82] meets [72, 78]
-    assert [r["met"] for r in detector_targets(rows, "generic")[:2]] == [False, False]
-    rows[1].pop("R@1_hi_%")                                                 # no interval: not measured
+    assert out[0]["met"] is True and out[0]["measured"] == 82.0 and out[0]["required"] == ">= 70.0"
+    rows[1].update(_spread(81.0, 3.0))                                      # 81 > 80, and 82 reaches it
+    assert detector_targets(rows, "generic")[0]["met"] is True
+    rows[1].update(_spread(83.0, 1.0))                                      # 82 < 83: below the best row
+    assert detector_targets(rows, "generic")[0]["met"] is False
+    rows[0].pop("R@1_hi_%")                                                 # no interval: not measured
     assert detector_targets(rows, "generic")[0]["met"] is None
     missing = detector_targets(rows[1:], "generic")                       # no greenloop-seq row
     assert all(r["met"] is None for r in missing)
@@ -103,7 +108,11 @@ def test_with_comparisons_above_and_highest_are_the_paired_differences_not_the_i
     assert [r["met"] for r in absent if r["target"].startswith("R@1 above")] == [None]     # no such row: not measured
     comp = _paired([("SeqSLAM (published)", "R@1", 20.0, 10.0, 30.0), ("SeqSLAM (tuned)", "R@1", 2.0, 0.5, 3.5),
                     ("SeqSLAM (published)", "AUC-PR", 20.0, 10.0, 30.0), ("SeqSLAM (tuned)", "AUC-PR", 2.0, -1.0, 4.0)])
-    high = {r["target"].split(",")[0]: r for r in detector_targets(rows, "generic", comparisons=comp)}
-    assert high["highest R@1 of every method"]["met"] is True and high["highest R@1 of every method"]["measured"] == 0.5
-    assert high["highest AUC-PR of every method"]["met"] is False                 # not resolved against the tuned row
-    assert [r["met"] for r in detector_targets(rows, "generic")[:2]] == [False, False]   # rows alone: overlap
+    first = detector_targets(rows, "generic", comparisons=comp)[0]
+    assert first["target"].startswith("R@1 not below the best row")
+    assert first["met"] is True and first["measured"] == 3.5                     # the lowest high end
+    comp = _paired([("SeqSLAM (published)", "R@1", 20.0, 10.0, 30.0), ("SeqSLAM (tuned)", "R@1", -2.0, -3.5, -0.5)])
+    below = detector_targets(rows, "generic", comparisons=comp)[0]
+    assert below["met"] is False and below["measured"] == -0.5                   # resolved below the tuned row
+    comp = _paired([("SeqSLAM (published)", "R@1", 20.0, 10.0, 30.0), ("SeqSLAM (tuned)", "R@1", -2.0, -3.5, 0.5)])
+    assert detector_targets(rows, "generic", comparisons=comp)[0]["met"] is True  # behind, not resolved: not below

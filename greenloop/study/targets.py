@@ -10,25 +10,29 @@ never met.
 The target sets (evaluation part only, one configuration of greenloop-seq), TARGET_SETS; a dataset
 names its set in its sequence.yaml (``protocol: {targets: ...}``, ``datasets.sequence.Sequence.protocol``,
 the builders of Nordland and Gardens Point write it), and one that names none gets the generic set:
-    nordland      R@1 >= 95 % with seq_len <= 10, R@100P >= 60 %, R@1 above the SeqSLAM row (loop closure)
+    nordland      R@1 >= 92 % with seq_len <= 10, R@100P >= 60 %, R@1 above the SeqSLAM row (loop closure)
     gardenspoint  R@1 >= 90 %, R@100P >= 50 % (place recognition: reference = the day traversal)
-    generic       the highest R@1 and the highest AUC-PR of every method (loop closure, chance excluded):
-                  the synthetic sequence, the real GreenHouse set and users' own folders
+    generic       R@1 not below the best row (loop closure, chance excluded): the synthetic sequence, the
+                  real GreenHouse set and users' own folders, whose few revisit queries give every row a
+                  wide interval (issue 50 restated "highest", which no method could show there)
     every set     >= 920 frames/s (slowest repeat); closure precision >= 90 % at the threshold used
 
-"Above" and "highest" are judged from the paired comparisons where they are given (``comparisons``: the
+"Above" and "not below" are judged from the paired comparisons where they are given (``comparisons``: the
 table ``study.leaderboard.comparisons`` writes, notebook 13's comparisons.csv; :func:`paired_ahead`): met
 only where every paired difference (the method minus each other row, on the same queries) is resolved
 above 0. Rows alone (no comparisons, e.g. a leaderboard.csv read back) compare their 95 % intervals
 (``R@1_lo_%`` / ``R@1_hi_%``, the same for AUC-PR; :func:`separated`): met only where the method's
 interval lies wholly above the other rows'. Either way a point estimate inside the spread is never
-called ahead, and a comparison that is absent is not measured.
+called ahead, and a comparison that is absent is not measured. "Not below" is met unless some paired
+difference is resolved below 0 (:func:`paired_not_below`); from rows alone, where the method's interval
+reaches the best other row's point value.
 """
 from __future__ import annotations
 
 import math
 
-__all__ = ["FPS_TARGET", "PRECISION_TARGET", "TARGET_SETS", "detector_targets", "paired_ahead", "separated"]
+__all__ = ["FPS_TARGET", "PRECISION_TARGET", "TARGET_SETS", "detector_targets", "paired_ahead", "paired_not_below",
+           "separated"]
 
 FPS_TARGET = 920.0            # frames/s per stream on 2 cores, descriptor included (the main paper's)
 PRECISION_TARGET = 90.0       # % closure precision at the one threshold
@@ -87,6 +91,32 @@ def paired_ahead(comparisons, method: str, others, key: str):
     return min(_value(rows[n], "lo") for n in names), all(bool(rows[n]["resolved"]) and rows[n]["lo"] > 0 for n in names)
 
 
+def paired_not_below(comparisons, method: str, others, key: str):
+    """(the lowest high end, in points, of the paired differences ``method`` minus each of ``others`` on
+    ``key``'s metric; whether none of them is resolved below 0), read from ``comparisons`` as
+    :func:`paired_ahead` reads it. (None, False) where ``others`` is empty or the table lacks one."""
+    rows = {r["b"]: r for r in _rows(comparisons) if r.get("a") == method and r.get("metric") == key[:-2]}
+    names = [r.get("method") for r in others]
+    if not names or any(n not in rows or _value(rows[n], "hi") is None for n in names):
+        return None, False
+    return (min(_value(rows[n], "hi") for n in names),
+            not any(bool(rows[n]["resolved"]) and rows[n]["hi"] < 0 for n in names))
+
+
+def _not_below(target: str, row, others, key: str, comparisons=None) -> dict:
+    """A target met where ``row`` is not below the best of ``others`` on ``key``: with ``comparisons``,
+    no paired difference resolved below 0 (:func:`paired_not_below`: measured = the lowest high end);
+    without, its interval's high end reaches the best other row's point value."""
+    if comparisons is not None:
+        high, ok = (None, False) if row is None else paired_not_below(comparisons, row.get("method"), others, key)
+        return _judge(f"{target}: the lowest high end of its paired differences (points)", high,
+                      ">= 0 (none resolved below)", lambda v: ok)
+    best = max((_value(r, key) for r in others), default=None)
+    hi = _value(row, key[:-1] + "hi_%")
+    return _judge(f"{target}: the high end of its interval", None if best is None else hi, f">= {best}",
+                  lambda v: v >= best)
+
+
 def _above(target: str, row, others, key: str, comparisons=None) -> dict:
     """A target met where ``row`` is above every one of ``others`` on ``key``: with ``comparisons``,
     every paired difference resolved above 0 (:func:`paired_ahead`: measured = the lowest low end,
@@ -133,7 +163,7 @@ def _nordland(rows, lc, pr, method, seqslam, seq_len, frame_step, comparisons) -
     r1 = _value(lc, "R@1_%")
     out = [_judge("frame step of the rows (1 = Nordland's full rate)", None if frame_step is None else float(frame_step),
                   "== 1", lambda v: v == 1),
-           _judge("R@1 (%), loop closure", r1, ">= 95", lambda v: v >= 95.0),
+           _judge("R@1 (%), loop closure", r1, ">= 92", lambda v: v >= 92.0),
            _judge("frames of sequence", None if seq_len is None else float(seq_len), "<= 10", lambda v: v <= 10),
            _judge("R@100P (%), loop closure", _value(lc, "R@100P_%"), ">= 60", lambda v: v >= 60.0)]
     for name in ([seqslam] if isinstance(seqslam, str) else list(seqslam)):
@@ -152,12 +182,9 @@ def _gardenspoint(rows, lc, pr, method, seqslam, seq_len, frame_step, comparison
 
 
 def _generic(rows, lc, pr, method, seqslam, seq_len, frame_step, comparisons) -> list[dict]:
-    """The generic targets: the highest R@1 and AUC-PR of every method (loop closure, chance excluded)."""
-    out = []
-    for key in ("R@1_%", "AUC-PR_%"):
-        out.append(_above(f"highest {key[:-2]} of every method, loop closure", lc,
-                          _others(rows, method, "loop closure", key), key, comparisons))
-    return out + _common(lc, seq_len)
+    """The generic targets: R@1 not below the best other row (loop closure, chance excluded)."""
+    return [_not_below("R@1 not below the best row, loop closure", lc,
+                       _others(rows, method, "loop closure", "R@1_%"), "R@1_%", comparisons)] + _common(lc, seq_len)
 
 
 TARGET_SETS = {"generic": _generic, "nordland": _nordland, "gardenspoint": _gardenspoint}   # sequence.PROTOCOL_TARGETS
