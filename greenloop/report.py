@@ -165,11 +165,16 @@ def cpu_model() -> str:
     return f"{cpu_name()} ({os.cpu_count()} cores)"
 
 
+# tracked paths whose edits cannot change a result: git_state's dirty flag leaves them out
+NOT_RESULT_INPUTS = ("results", "docs", "tests", "README.md")
+
+
 def git_state(root=None) -> dict:
     """{'git_commit': HEAD's sha of the checkout greenloop runs from (root, default ROOT), 'git_dirty':
-    whether a tracked file outside results/ differs from it} (``git status --porcelain
-    --untracked-files=no -- . ':(exclude)results'``: a run rewrites results/ itself). Both None
-    where root is not the top of a git checkout, or without git."""
+    whether a tracked file that can change a result differs from it} (``git status --porcelain
+    --untracked-files=no`` outside NOT_RESULT_INPUTS: results/, which a run rewrites itself, and the
+    prose and tests, which no notebook reads). Both None where root is not the top of a git
+    checkout, or without git."""
     root = Path(root or ROOT)
 
     def git(*args):
@@ -179,7 +184,8 @@ def git_state(root=None) -> dict:
         if top.returncode != 0 or Path(top.stdout.strip()).resolve() != root.resolve():
             return {"git_commit": None, "git_dirty": None}
         head = git("rev-parse", "HEAD")
-        status = git("status", "--porcelain", "--untracked-files=no", "--", ".", ":(exclude)results")
+        status = git("status", "--porcelain", "--untracked-files=no", "--", ".",
+                     *(f":(exclude){p}" for p in NOT_RESULT_INPUTS))
     except (OSError, subprocess.SubprocessError):
         return {"git_commit": None, "git_dirty": None}
     return {"git_commit": head.stdout.strip() if head.returncode == 0 else None,

@@ -60,6 +60,15 @@ def test_dirty_means_a_tracked_file_outside_results_changed(tmp_path):
     (tmp_path / "results" / "t.csv").write_text("a\n2\n")          # a run rewrites its results
     (tmp_path / "notes.txt").write_text("untracked\n")
     assert report.git_state(tmp_path) == {"git_commit": head, "git_dirty": False}
+    (tmp_path / "README.md").write_text("prose\n")                  # prose and tests change no result
+    (tmp_path / "docs").mkdir()
+    (tmp_path / "docs" / "a.md").write_text("x\n")
+    git(tmp_path, "add", "README.md", "docs")
+    git(tmp_path, "commit", "-qm", "prose")
+    head = git(tmp_path, "rev-parse", "HEAD")
+    (tmp_path / "README.md").write_text("edited\n")
+    (tmp_path / "docs" / "a.md").write_text("edited\n")
+    assert report.git_state(tmp_path) == {"git_commit": head, "git_dirty": False}
     (tmp_path / "code.py").write_text("x = 2\n")
     assert report.git_state(tmp_path) == {"git_commit": head, "git_dirty": True}
     (tmp_path / "sub").mkdir()                                     # a folder inside a checkout is not its top

@@ -79,7 +79,9 @@ def markdown(results_dirs) -> str:
              "`manifest.json` and executed notebook; nothing is typed by hand. `—`: the manifest was "
              "written before that field was recorded.\n\n",
              "- **commit**: the checkout's `git rev-parse HEAD` when the notebook ran (first 12 digits); "
-             "*(dirty)*: a tracked file outside `results/` differed from it.\n",
+             "*(dirty)*: a tracked file that can change a result differed from it (any outside `results/`, `docs/`, "
+             "`tests/` and `README.md`; manifests written until 7 December 2026 counted those too: Gardens Point's run "
+             "of that day is marked dirty for edits to `docs/` and `README.md` made while it ran).\n",
              "- **environment**: sha256 of `python X.Y.Z\\n` (the interpreter's version) followed by "
              "the bytes of `environment.txt` (first 12 hex digits): equal values, same Python and pins.\n",
              "- **CPU**: `/proc/cpuinfo`'s model name (older manifests: the same, with the core count).\n",
