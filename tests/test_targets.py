@@ -31,7 +31,7 @@ def test_nordland_targets_met_and_not_met():
     step = {r["target"]: r for r in detector_targets(rows, "nordland", seq_len=10, frame_step=8)}
     assert step["frame step of the rows (1 = Nordland's full rate)"]["met"] is False
     assert m["frame step of the rows (1 = Nordland's full rate)"]["met"] is None   # not given: not measured
-    for r1, met in ((92.0, True), (91.9, False)):                           # issue 50: R@1 >= 92
+    for r1, met in ((92.0, True), (91.9, False)):                           # the target: R@1 >= 92
         rows[0]["R@1_%"] = r1
         assert _met(detector_targets(rows, "nordland", seq_len=10))["R@1"] is met
 

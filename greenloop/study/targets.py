@@ -14,7 +14,7 @@ the builders of Nordland and Gardens Point write it), and one that names none ge
     gardenspoint  R@1 >= 90 %, R@100P >= 50 % (place recognition: reference = the day traversal)
     generic       R@1 not below the best row (loop closure, chance excluded): the synthetic sequence, the
                   real GreenHouse set and users' own folders, whose few revisit queries give every row a
-                  wide interval (issue 50 restated "highest", which no method could show there)
+                  wide interval, so that no method can be shown highest there
     every set     >= 920 frames/s (slowest repeat); closure precision >= 90 % at the threshold used
 
 "Above" and "not below" are judged from the paired comparisons where they are given (``comparisons``: the
@@ -77,6 +77,16 @@ def separated(row, others, key: str):
     return _value(row, lo), top
 
 
+def _pairs(comparisons, method: str, others, key: str, end: str):
+    """The rows of ``comparisons`` for ``method`` minus each of ``others`` on ``key``'s metric, with
+    ``end`` ("lo" / "hi") as a float; None where ``others`` is empty or one of them is absent."""
+    rows = {r["b"]: r for r in _rows(comparisons) if r.get("a") == method and r.get("metric") == key[:-2]}
+    names = [r.get("method") for r in others]
+    if not names or any(n not in rows or _value(rows[n], end) is None for n in names):
+        return None
+    return [dict(rows[n], **{end: _value(rows[n], end)}) for n in names]
+
+
 def paired_ahead(comparisons, method: str, others, key: str):
     """(the lowest low end, in percentage points, of the paired differences ``method`` minus each of
     ``others`` (rows with ``method``) on ``key``'s metric ("R@1_%": "R@1"); whether every one of
@@ -84,23 +94,20 @@ def paired_ahead(comparisons, method: str, others, key: str):
     from ``comparisons`` (rows or a DataFrame with a, b, metric, lo, resolved, as
     ``study.leaderboard.comparisons`` writes them). (None, False) where ``others`` is empty or the
     table lacks one of them."""
-    rows = {r["b"]: r for r in _rows(comparisons) if r.get("a") == method and r.get("metric") == key[:-2]}
-    names = [r.get("method") for r in others]
-    if not names or any(n not in rows or _value(rows[n], "lo") is None for n in names):
+    pairs = _pairs(comparisons, method, others, key, "lo")
+    if pairs is None:
         return None, False
-    return min(_value(rows[n], "lo") for n in names), all(bool(rows[n]["resolved"]) and rows[n]["lo"] > 0 for n in names)
+    return min(r["lo"] for r in pairs), all(bool(r["resolved"]) and r["lo"] > 0 for r in pairs)
 
 
 def paired_not_below(comparisons, method: str, others, key: str):
     """(the lowest high end, in points, of the paired differences ``method`` minus each of ``others`` on
     ``key``'s metric; whether none of them is resolved below 0), read from ``comparisons`` as
     :func:`paired_ahead` reads it. (None, False) where ``others`` is empty or the table lacks one."""
-    rows = {r["b"]: r for r in _rows(comparisons) if r.get("a") == method and r.get("metric") == key[:-2]}
-    names = [r.get("method") for r in others]
-    if not names or any(n not in rows or _value(rows[n], "hi") is None for n in names):
+    pairs = _pairs(comparisons, method, others, key, "hi")
+    if pairs is None:
         return None, False
-    return (min(_value(rows[n], "hi") for n in names),
-            not any(bool(rows[n]["resolved"]) and rows[n]["hi"] < 0 for n in names))
+    return min(r["hi"] for r in pairs), not any(bool(r["resolved"]) and r["hi"] < 0 for r in pairs)
 
 
 def _not_below(target: str, row, others, key: str, comparisons=None) -> dict:
