@@ -208,6 +208,23 @@ def test_13_gives_the_dictionary_verdict_the_standing_and_the_targets(tmp_path):
             "1 not measured there") in text
     _no_order_word(text)
     assert "no paired comparisons in this folder: no order is called" in lbx.conclusion(_board(tmp_path / "b", False))
+    assert "false closures" not in text                   # no false_closures.csv: nothing said
+
+
+def test_13_says_where_the_named_defaults_false_closures_lie(tmp_path):
+    out = _board(tmp_path)
+    run = {"protocol": "leaderboard", "configuration": "greenloop-seq-grad", "first_query": [2064, 3000],
+           "last_query": [2096, 3000], "first_match": [1020, 40], "last_match": [1052, 40], "closures": [9, 1],
+           "with_partner": [4, 0], "offset_frames": [258.0, None], "max_score": [5.7, 3.1],
+           "distance_m": [1.96, 7.0], "angle_deg": [0.4, 90.0]}
+    pd.DataFrame(run).to_csv(out / "false_closures.csv", index=False)
+    assert ("Its 10 false closures at the fixed threshold lie in 2 run(s) of consecutive queries; the longest, queries "
+            "2064-2096 matched to frames 1020-1052 (9 closures), at 1.96 m from the query's camera, optical axes 0 "
+            "degrees apart (medians)") in lbx.conclusion(out)
+    pd.DataFrame(run).drop(columns=["distance_m", "angle_deg"]).to_csv(out / "false_closures.csv", index=False)
+    assert "at 258 frames from the query's nearest partner (median)" in lbx.conclusion(out)
+    pd.DataFrame(run).iloc[:0].to_csv(out / "false_closures.csv", index=False)
+    assert "Every closure greenloop-seq-grad declares on the leaderboard's evaluation queries is right." in lbx.conclusion(out)
 
 
 def test_every_conclusion_names_the_verdicts_of_its_notebook(tmp_path):

@@ -343,6 +343,32 @@ def test_closure_counts_tally():
     assert np.isnan(none["precision"]) and none["f1"] == 0.0 and none["first_delay"] is None
 
 
+def test_false_closure_runs_group_consecutive_false_queries_and_measure_them():
+    """20 frames, exclude 2: queries 10-12 match frames 1-3 wrongly (their partners are 5-7, 4 frames
+    on), query 15 matches frame 0 wrongly with no partner, query 17 matches its partner 9 (right) and
+    query 18 scores under the threshold; numbered x10, cameras 2 m apart sideways on the false matches."""
+    n = 20
+    S, GT = np.zeros((n, n)), np.zeros((n, n), bool)
+    for j, i, p in ((10, 1, 5), (11, 2, 6), (12, 3, 7)):
+        S[i, j], S[p, j], GT[p, j] = 0.9, 0.5, True
+    S[0, 15], S[9, 17], GT[9, 17], S[4, 18] = 0.8, 0.95, True, 0.3
+    GT |= GT.T
+    pos = np.zeros((n, 3))
+    pos[1:4, 0] = 2.0
+    axes = np.tile([0.0, 0.0, 1.0], (n, 1))
+    frames = 10 * np.arange(n)
+    runs = ev.false_closure_runs(S, GT, 0.7, exclude=2, frames=frames, positions=pos, axes=axes)
+    assert [(r["first_query"], r["last_query"], r["first_match"], r["last_match"], r["closures"], r["with_partner"])
+            for r in runs] == [(100, 120, 10, 30, 3, 3), (150, 150, 0, 0, 1, 0)]
+    assert runs[0]["offset_frames"] == 40 and np.isnan(runs[1]["offset_frames"])
+    assert runs[0]["distance_m"] == pytest.approx(2.0) and runs[0]["angle_deg"] == pytest.approx(0.0)
+    assert runs[0]["max_score"] == pytest.approx(0.9)
+    # the count is seqmatch.closures' false count; a threshold above every false score leaves none
+    from greenloop.methods.greenloop_seq import seqmatch
+    assert sum(r["closures"] for r in runs) == seqmatch.closures(S, GT, 0.7, 2)["false"]
+    assert ev.false_closure_runs(S, GT, 0.92, exclude=2) == []
+
+
 # ------------------------------------------------------------ the spot classifier
 def test_per_spot_on_hand_made_labels():
     t = np.array([0, 0, 0, 1, 1, 2])

@@ -558,6 +558,14 @@ def _check_13_counts(folder, t):
     assert f"step 1: {lc.revisit_queries})" in rule, rule
     carry = pd.read_csv(folder / "threshold_carry.csv")
     assert (carry[leaderboard.COUNTS] == lc[leaderboard.COUNTS].astype(int).tolist()).all().all()
+    # false_closures holds, per configuration, exactly the false closures threshold_carry counts at the fixed threshold
+    false = pd.read_csv(folder / "false_closures.csv")
+    assert "distance_m" in false.columns or not len(false)        # the tiny sequence has poses
+    for _, r in carry[carry.protocol == "leaderboard"].iterrows():
+        wrong = round(r.declared_at_fixed * (1 - r["precision_at_fixed_%"] / 100)) if r.declared_at_fixed else 0
+        mine = false[(false.protocol == "leaderboard") & (false.configuration == r.configuration)]
+        assert mine.closures.sum() == wrong, (r.configuration, mine, wrong)
+        assert (mine.first_query <= mine.last_query).all() and (mine.with_partner <= mine.closures).all()
     targets = pd.read_csv(folder / "targets.csv")
     counted = targets[targets.protocol == "leaderboard"].dropna(subset=["queries"])
     assert len(counted) and (counted.queries == lc.queries).all()

@@ -66,8 +66,11 @@ def test_gardenspoint_pairs_are_the_named_traversals_aligned(gp):
 def test_a_pair_run_is_the_default_streamed_over_the_pair_alone(gp):
     data, _ = gp
     d, s = ex.target_protocols(data, 0.5)["day_right -> night_right"]
-    result, check, carries = ex.run_protocol(d, s)
+    run = ex.run_protocol(d, s)
+    result, check, carries = run.board, run.stream_check, run.carry
     carry = {c["configuration"]: c for c in carries}
+    # its false closures: those threshold_check counts at the fixed threshold, none on this pair
+    assert [f["configuration"] for f in run.false_closures] == [] == [c for c in carry if carry[c]["precision_at_fixed_%"] < 100]
     assert list(carry) == [seqmatch.DEFAULT_NAME, seqmatch.CNN_NAME]      # both named configurations run here
     assert carry[seqmatch.CNN_NAME]["threshold_fixed"] == seqmatch.CNN_THRESHOLD and check[seqmatch.CNN_NAME]["equal"]
     carry = carry[seqmatch.DEFAULT_NAME]

@@ -51,7 +51,7 @@ from greenloop.evaluate.metrics import (
     pair_mask, pair_samples, pr_curve, average_precision, recall_at_precision,
     recall_at_100_precision, recall_at_k, Matches, candidate_mask, matches,
     best_matches, query_pr_curve, query_metrics, per_query, query_chance,
-    mean_per_class_accuracy, mpca_threshold, operating_point, closure_counts, pair_metrics,
+    mean_per_class_accuracy, mpca_threshold, operating_point, closure_counts, false_closure_runs, pair_metrics,
     chance_level, revisit_queries, precision_at_recall, interpolated_precision, overlap_recall,
     relative_rates, loss_per_time_saved,
 )
@@ -67,7 +67,7 @@ __all__ = [
     "recall_at_100_precision",
     "recall_at_k", "Matches", "candidate_mask", "matches", "best_matches", "query_pr_curve",
     "query_metrics", "per_query", "query_chance", "operating_point", "split_mask", "NoHonestSplit", "mean_per_class_accuracy",
-    "mpca_threshold", "closure_counts", "pair_metrics", "chance_level",
+    "mpca_threshold", "closure_counts", "false_closure_runs", "pair_metrics", "chance_level",
     "revisit_queries",
     "precision_at_recall", "interpolated_precision", "overlap_recall", "relative_rates",
     "loss_per_time_saved", "honest_split", "split_summary", "per_spot", "spot_errors", "same_place_errors",

@@ -334,17 +334,61 @@ def threshold_check(data: Data, tuned: Tuned) -> list[dict]:
     return rows
 
 
-def run_protocol(data: Data, split: Split) -> tuple[Board, dict, list]:
+def false_closures(data: Data, tuned: Tuned) -> list[dict]:
+    """Where each named configuration (NAMED) scored here declares its false closures: the runs of
+    ``evaluate.false_closure_runs`` on its score matrix at its fixed threshold, evaluation queries,
+    frames numbered as the dataset numbers them (``data.frames``), with the distance between camera
+    centres (metres) and the angle between optical axes (degrees) where the sequence has poses.
+    Returns one row (dict) per run, its configuration first; [] where every closure is right."""
+    seq, pos, axes = sequence.open(data.dataset), None, None
+    if seq.has_trajectory:
+        ids, poses = seq.poses()
+        at = {int(f): n for n, f in enumerate(ids)}
+        if all(int(f) in at for f in data.frames):
+            sel = [at[int(f)] for f in data.frames]
+            pos, axes = poses[sel, :3, 3], poses[sel, :3, 2]
+    rows = []
+    for m in (m for m in NAMED if m in tuned.S):
+        runs = evaluate.false_closure_runs(tuned.S[m], data.GT, tuned.knobs[m]["fixed_threshold"], data.exclude,
+                                           data.evalq, data.frames, pos, axes)
+        rows += [dict(configuration=m, **r) for r in runs]
+    return rows
+
+
+FALSE_COLUMNS = ["protocol", "configuration", "first_query", "last_query", "first_match", "last_match", "closures",
+                 "with_partner", "offset_frames", "max_score"]
+
+
+def false_table(data: Data, tuned: Tuned, runs: dict) -> pd.DataFrame:
+    """:func:`false_closures` of the leaderboard (protocol "leaderboard") and of each target protocol
+    run ({label: ProtocolRun}) as one table, FALSE_COLUMNS first, then distance_m and angle_deg where
+    some run has poses; no row where every closure is right."""
+    rows = ([dict(protocol="leaderboard", **f) for f in false_closures(data, tuned)]
+            + [dict(protocol=label, **f) for label, r in runs.items() for f in r.false_closures])
+    return pd.DataFrame(rows, columns=FALSE_COLUMNS + [c for c in ("distance_m", "angle_deg") if any(c in r for r in rows)])
+
+
+class ProtocolRun(NamedTuple):
+    """One target protocol's run (:func:`run_protocol`): its Board, the stream-vs-matrix check {method:
+    ``seqstream.stream_check``}, :func:`threshold_check`'s rows and :func:`false_closures`' rows."""
+    board: Board
+    stream_check: dict
+    carry: list
+    false_closures: list
+
+
+def run_protocol(data: Data, split: Split) -> ProtocolRun:
     """The named configurations and SeqSLAM (TARGET_ENTRIES) on one target protocol, as the leaderboard's
     rows are: tuned (SeqSLAM's grid on its tuning queries) and thresholded; the stream-vs-matrix
     check and the timing for the named configurations only: the leaderboard checks and times SeqSLAM,
     and at Nordland's full rate each timing repeat would first stream every earlier frame through
     each SeqSLAM row, one SAD against every stored frame each. Returns (Board, the stream check {method:
-    ``seqstream.stream_check``}, :func:`threshold_check`'s rows)."""
+    ``seqstream.stream_check``}, :func:`threshold_check`'s rows, :func:`false_closures`' rows) as a ProtocolRun."""
     reg = {k: REGISTRY[k] for k in TARGET_ENTRIES}
     tuned = tune(data, reg)
     timed = stream_and_time(data, tuned, (), reg, only=NAMED)
-    return board(data, split, tuned, timed), timed.stream_check, threshold_check(data, tuned)
+    return ProtocolRun(board(data, split, tuned, timed), timed.stream_check, threshold_check(data, tuned),
+                       false_closures(data, tuned))
 
 
 def protocol_tables(result: Board, runs: dict) -> tuple[pd.DataFrame, pd.DataFrame]:
@@ -511,8 +555,28 @@ def conclusion(out_dir) -> str:
     counts = f"{int(n.queries)} evaluation queries, {int(n.revisit_queries)} with a partner"
     lines = [f"On {verdict.dataset_name(out_dir.parent)} ({counts}; loop closure): "
              + ("; ".join(rows) if rows else "no greenloop-seq row was scored") + ".",
-             _targets_sentence(pd.read_csv(out_dir / "targets.csv"), seqmatch.DEFAULT_NAME)]
+             _targets_sentence(pd.read_csv(out_dir / "targets.csv"), seqmatch.DEFAULT_NAME),
+             _false_sentence(out_dir / "false_closures.csv", seqmatch.DEFAULT_NAME)]
     return wording.heading(Path(out_dir).parent, "13_leaderboard") + "\n\n" + " ".join(x for x in lines if x)
+
+
+def _false_sentence(path: Path, name: str) -> str:
+    """Where the named configuration ``name``'s false closures on the leaderboard lie (false_closures.csv,
+    :func:`false_table`): how many, in how many runs, and the longest run; "" without the table."""
+    if not path.is_file():
+        return ""
+    t = pd.read_csv(path)
+    t = t[(t.protocol == "leaderboard") & (t.configuration == name)]
+    if not len(t):
+        return f"Every closure {name} declares on the leaderboard's evaluation queries is right."
+    r = t.loc[t.closures.idxmax()]
+    where = (f"{r.distance_m:.2f} m from the query's camera, optical axes {r.angle_deg:.0f} degrees apart (medians)"
+             if "distance_m" in t and pd.notna(r.distance_m) else
+             f"{r.offset_frames:g} frames from the query's nearest partner (median)" if pd.notna(r.offset_frames) else
+             "queries without a partner")
+    return (f"Its {int(t.closures.sum())} false closures at the fixed threshold lie in {len(t)} run(s) of consecutive "
+            f"queries; the longest, queries {int(r.first_query)}-{int(r.last_query)} matched to frames "
+            f"{int(r.first_match)}-{int(r.last_match)} ({int(r.closures)} closures), at {where} (false_closures.csv).")
 
 
 def manifest_extra(data: Data, tuned: Tuned) -> dict:
