@@ -96,3 +96,18 @@ def test_provenance_md_lists_each_notebook_and_dashes_what_an_old_manifest_lacks
     assert rows["00_old"] == ["00_old", "—", "—", "AMD EPYC (2 cores)", "2026-12-05T01:53:16+00:00", "18.4 s †"]
     assert rows["02_bare"] == ["02_bare", "—", "—", "—", "—", "—"]
     assert list(rows) == ["00_old", "01_new", "02_bare"]
+
+
+def test_the_benchmarks_provenance_reads_scale_json_and_an_older_run_s_scale_md_line(tmp_path):
+    bench = tmp_path / "bench"
+    bench.mkdir()
+    (bench / "scale.md").write_text("# x\n\nMachine: AMD EPYC (2 cores), searches on 1 thread; written 2026-12-04 19:33 UTC by x\n")
+    (old,) = provenance.bench_rows(bench)                       # before scale.json: the md's line, dashes
+    assert old == {"notebook": "scale.md (`make bench-scale`)", "commit": "—", "environment": "—",
+                   "CPU": "AMD EPYC (2 cores)", "date": "2026-12-04 19:33 UTC", "duration": "—"}
+    report.write_json(bench / "scale.json", {"git_commit": "0123456789abcdef", "environment_hash": "fedcba9876543210",
+                                             "cpu_model": "AMD EPYC", "date": "2026-12-07T20:17:00+00:00",
+                                             "wall_seconds": 1623.4})
+    (new,) = provenance.bench_rows(bench)
+    assert new == {"notebook": "scale.json (`make bench-scale`)", "commit": "`0123456789ab`", "environment": "`fedcba987654`",
+                   "CPU": "AMD EPYC", "date": "2026-12-07T20:17:00+00:00", "duration": "1623.4 s †"}

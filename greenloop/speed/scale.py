@@ -194,9 +194,10 @@ def run(src, out, sizes=SIZES, dim: int = 64, queries=(2000, 1000, 300), n_inser
         seed: int = 0, methods=METHODS, note: str = "", decision_queries: int = 2000,
         decision_sizes=None) -> pd.DataFrame:
     """The whole benchmark (module doc); writes out/scale.{csv,md,png}, scale_decisions.{csv,png},
-    neighbourhood.{csv,md}. decision_sizes: the stored counts of the whole decision (default sizes)."""
+    neighbourhood.{csv,md} and scale.json (``report.provenance()``: date, commit, environment hash,
+    CPU; the library versions, the run's wall seconds and ``note``). decision_sizes: the stored counts of the whole decision (default sizes)."""
     retrieval.one_thread()
-    out = Path(out)
+    t0, out = time.perf_counter(), Path(out)
     real = augment.nordland_route(src)
     pca = fit_pca(real, dim)
     decision_sizes = sorted(decision_sizes or sizes)
@@ -227,6 +228,8 @@ def run(src, out, sizes=SIZES, dim: int = 64, queries=(2000, 1000, 300), n_inser
     decide = decisions(G, len(real), decision_sizes, decision_queries)
     decide = decide.assign(**describe_ms(real, gradients, max(decision_sizes), decision_queries, seed))
     _write(out, table, nb, dim, len(real), seed, decide, note, metrics)
+    report.write_json(out / "scale.json", {**report.provenance(), "versions": report.versions(),
+                                           "wall_seconds": time.perf_counter() - t0, "note": note})
     return table
 
 

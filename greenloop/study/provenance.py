@@ -106,16 +106,19 @@ def markdown(results_dirs) -> str:
     return "".join(parts)
 
 
-BENCH = {"bench.json": "make bench", "scale.md": "make bench-scale"}
+BENCH = {"bench.json": "make bench", "scale.json": "make bench-scale"}
+OLD_SCALE = "scale.md"   # a bench-scale run from before scale.json: its "Machine: ...; written <date>" line
 
 
 def bench_rows(bench_dir) -> list[dict]:
-    """The benchmarks' provenance (``results/bench``): bench.json's own date, CPU and (newer runs)
-    commit and environment, and scale.md's "Machine: ...; written <date> ..." line; ``—`` where the
-    file says nothing. Duration: bench.json's ``wall_seconds``."""
+    """The benchmarks' provenance (``results/bench``): bench.json's and scale.json's own date, CPU and
+    (newer runs) commit and environment; without scale.json, scale.md's "Machine: ...; written <date>
+    ..." line; ``—`` where the file says nothing. Duration: the JSON's ``wall_seconds``."""
     out = []
     for name, target in BENCH.items():
         path = Path(bench_dir) / name
+        if not path.is_file() and name == "scale.json":
+            name, path = OLD_SCALE, Path(bench_dir) / OLD_SCALE
         if not path.is_file():
             continue
         if name.endswith(".json"):
