@@ -195,9 +195,19 @@ def run(src, out, sizes=SIZES, dim: int = 64, queries=(2000, 1000, 300), n_inser
         decision_sizes=None) -> pd.DataFrame:
     """The whole benchmark (module doc); writes out/scale.{csv,md,png}, scale_decisions.{csv,png},
     neighbourhood.{csv,md} and scale.json (``report.provenance()``: date, commit, environment hash,
-    CPU; the library versions, the run's wall seconds and ``note``). decision_sizes: the stored counts of the whole decision (default sizes)."""
+    CPU; the library versions, the run's wall seconds (``timing.timed``) and ``note``).
+    decision_sizes: the stored counts of the whole decision (default sizes)."""
+    table, wall = timed(_measure, src, Path(out), sizes, dim, queries, n_insert, seed, methods, note,
+                        decision_queries, decision_sizes)
+    report.write_json(Path(out) / "scale.json", {**report.provenance(), "versions": report.versions(),
+                                                 "wall_seconds": wall, "note": note})
+    return table
+
+
+def _measure(src, out: Path, sizes, dim: int, queries, n_insert: int, seed: int, methods, note: str,
+             decision_queries: int, decision_sizes) -> pd.DataFrame:
+    """:func:`run`'s measurements and tables (everything but scale.json)."""
     retrieval.one_thread()
-    t0, out = time.perf_counter(), Path(out)
     real = augment.nordland_route(src)
     pca = fit_pca(real, dim)
     decision_sizes = sorted(decision_sizes or sizes)
@@ -228,8 +238,6 @@ def run(src, out, sizes=SIZES, dim: int = 64, queries=(2000, 1000, 300), n_inser
     decide = decisions(G, len(real), decision_sizes, decision_queries)
     decide = decide.assign(**describe_ms(real, gradients, max(decision_sizes), decision_queries, seed))
     _write(out, table, nb, dim, len(real), seed, decide, note, metrics)
-    report.write_json(out / "scale.json", {**report.provenance(), "versions": report.versions(),
-                                           "wall_seconds": time.perf_counter() - t0, "note": note})
     return table
 
 
