@@ -353,11 +353,10 @@ def test_false_closure_runs_group_consecutive_false_queries_and_measure_them():
         S[i, j], S[p, j], GT[p, j] = 0.9, 0.5, True
     S[0, 15], S[9, 17], GT[9, 17], S[4, 18] = 0.8, 0.95, True, 0.3
     GT |= GT.T
-    pos = np.zeros((n, 3))
-    pos[1:4, 0] = 2.0
-    axes = np.tile([0.0, 0.0, 1.0], (n, 1))
+    poses = np.tile(np.eye(4), (n, 1, 1))            # optical axes +z everywhere
+    poses[1:4, 0, 3] = 2.0
     frames = 10 * np.arange(n)
-    runs = ev.false_closure_runs(S, GT, 0.7, exclude=2, frames=frames, positions=pos, axes=axes)
+    runs = ev.false_closure_runs(S, GT, 0.7, exclude=2, frames=frames, poses=poses)
     assert [(r["first_query"], r["last_query"], r["first_match"], r["last_match"], r["closures"], r["with_partner"])
             for r in runs] == [(100, 120, 10, 30, 3, 3), (150, 150, 0, 0, 1, 0)]
     assert runs[0]["offset_frames"] == 40 and np.isnan(runs[1]["offset_frames"])

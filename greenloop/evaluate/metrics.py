@@ -451,20 +451,21 @@ def closure_counts(declared, correct, revisit, at=None) -> dict:
 
 
 def false_closure_runs(S, GT, threshold: float, exclude: int = DEFAULT_EXCLUDE, queries=None, frames=None,
-                       positions=None, axes=None) -> list[dict]:
+                       poses=None) -> list[dict]:
     """Where the false closures of a score matrix at a threshold lie: ``seqmatch.closures``' rule
     (each query's best candidate, :func:`best_matches`, declared when it scores >= threshold, false
     when it is no ground-truth loop), the false ones grouped into runs of consecutive query frames.
 
     S, GT, exclude, queries: as :func:`best_matches` (loop-closure mode). frames: (N,) int, each
     frame's number as the reader knows it (default 0..N-1; e.g. the original frame of a subsampled
-    stream). positions: optional (N, 3) camera centres (metres); axes: optional (N, 3) unit optical
-    axes. Returns one dict per run, in stream order: first_query, last_query, first_match,
-    last_match (``frames`` numbers), closures (false closures in the run), with_partner (of those,
-    queries that have a ground-truth partner among their candidates), offset_frames (median over
-    them of the match's distance, in ``frames`` numbers, to the query's nearest partner; NaN when
-    none has one), max_score, and with positions distance_m (median camera-centre distance of
-    query and match), with axes angle_deg (median angle between their optical axes, degrees).
+    stream). poses: optional (N, 4, 4) camera-to-world matrices (metres), one per frame of S.
+    Returns one dict per run, in stream order: first_query, last_query, first_match, last_match
+    (``frames`` numbers), closures (false closures in the run), with_partner (of those, queries that
+    have a ground-truth partner among their candidates), offset_frames (median over them of the
+    match's distance, in ``frames`` numbers, to the query's nearest partner; NaN when none has one),
+    max_score, and with poses distance_m (median distance of query's and match's camera centres)
+    and angle_deg (median angle between their optical axes, +z, degrees; as
+    ``groundtruth.loop_matrix_metric`` reads them).
     """
     m = best_matches(S, GT, exclude, queries)
     n = np.asarray(S).shape[0]
@@ -474,22 +475,19 @@ def false_closure_runs(S, GT, threshold: float, exclude: int = DEFAULT_EXCLUDE, 
     bad = np.flatnonzero((m.score >= threshold) & ~m.correct)
     G, cand = np.asarray(GT, dtype=bool), candidate_mask(n, exclude, queries)
     runs = np.split(bad, np.flatnonzero(np.diff(m.query[bad]) != 1) + 1) if len(bad) else []
+    P = None if poses is None else np.asarray(poses, dtype=np.float64)
     out = []
     for r in runs:
-        q, i = m.query[r], m.match[r]
-        offsets = [np.abs(f[np.flatnonzero(G[:, j] & cand[:, j])] - f[b]).min()
-                   for j, b in zip(q, i) if (G[:, j] & cand[:, j]).any()]
+        q, i, hp = m.query[r], m.match[r], m.has_partner[r]
+        offsets = [np.abs(f[np.flatnonzero(G[:, j] & cand[:, j])] - f[b]).min() for j, b in zip(q[hp], i[hp])]
         row = dict(first_query=int(f[q[0]]), last_query=int(f[q[-1]]), first_match=int(f[i[0]]),
                    last_match=int(f[i[-1]]), closures=len(r), with_partner=len(offsets),
                    offset_frames=float(np.median(offsets)) if offsets else float("nan"),
                    max_score=float(m.score[r].max()))
-        if positions is not None:
-            p = np.asarray(positions, dtype=np.float64)
-            row["distance_m"] = float(np.median(np.linalg.norm(p[q] - p[i], axis=1)))
-        if axes is not None:
-            a = np.asarray(axes, dtype=np.float64)
-            cos = np.clip((a[q] * a[i]).sum(1), -1.0, 1.0)
-            row["angle_deg"] = float(np.median(np.degrees(np.arccos(cos))))
+        if P is not None:
+            t, z = P[:, :3, 3], P[:, :3, 2]
+            row["distance_m"] = float(np.median(np.linalg.norm(t[q] - t[i], axis=1)))
+            row["angle_deg"] = float(np.median(np.degrees(np.arccos(np.clip((z[q] * z[i]).sum(1), -1.0, 1.0)))))
         out.append(row)
     return out
 

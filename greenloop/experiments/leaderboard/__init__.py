@@ -340,17 +340,12 @@ def false_closures(data: Data, tuned: Tuned) -> list[dict]:
     frames numbered as the dataset numbers them (``data.frames``), with the distance between camera
     centres (metres) and the angle between optical axes (degrees) where the sequence has poses.
     Returns one row (dict) per run, its configuration first; [] where every closure is right."""
-    seq, pos, axes = sequence.open(data.dataset), None, None
-    if seq.has_trajectory:
-        ids, poses = seq.poses()
-        at = {int(f): n for n, f in enumerate(ids)}
-        if all(int(f) in at for f in data.frames):
-            sel = [at[int(f)] for f in data.frames]
-            pos, axes = poses[sel, :3, 3], poses[sel, :3, 2]
+    seq = sequence.open(data.dataset)
+    poses = seq.poses()[1][data.frames] if seq.has_trajectory else None     # one pose per frame, by frame number
     rows = []
     for m in (m for m in NAMED if m in tuned.S):
         runs = evaluate.false_closure_runs(tuned.S[m], data.GT, tuned.knobs[m]["fixed_threshold"], data.exclude,
-                                           data.evalq, data.frames, pos, axes)
+                                           data.evalq, data.frames, poses)
         rows += [dict(configuration=m, **r) for r in runs]
     return rows
 
