@@ -43,7 +43,7 @@ GARDENSPOINT := data/gardenspoint
 GARDENSPOINT_SRC ?= $(if $(wildcard ../shared/real/gardenspoint/night_right),../shared/real/gardenspoint,)
 GARDENSPOINT_URL ?= https://github.com/aghagol/loop-detection
 
-.PHONY: all help venv synthetic data nordland gardenspoint test quick sweep bench bench-scale clean-results readme default-choice verify provenance summary book browser
+.PHONY: all help venv synthetic data nordland gardenspoint test quick sweep bench bench-scale bench-stream clean-results readme default-choice verify provenance summary book browser
 .DEFAULT_GOAL := help
 
 help: ## this list
@@ -233,6 +233,10 @@ SCALE_NOTE ?=
 bench-scale: | $(STAMP) ## retrieval indexes and the named default's whole decision (candidate mode vs the exact scan) at 10^4..10^6 stored frames (augmented Nordland) -> results/bench/scale.md (about an hour on 2 cores)
 	test -d "$(NORDLAND_SRC)" || { echo "bench-scale needs Nordland's frames: set NORDLAND_SRC=path (summer/, winter/), e.g. from git clone --depth 1 $(NORDLAND_URL)"; exit 1; }
 	OMP_NUM_THREADS=1 $(BIN)/python -m greenloop bench-scale --src $(NORDLAND_SRC) --out $(RESULTS)/bench --note "$(SCALE_NOTE)"
+
+bench-stream: | $(STAMP) ## a 100,000-frame augmented Nordland recording streamed through `detect --index hnsw`, stopped and resumed -> results/bench/stream100k.json, scale.md's section (about 20 min, 0.7 GB in /tmp)
+	test -d "$(NORDLAND_SRC)" || { echo "bench-stream needs Nordland's frames: set NORDLAND_SRC=path (summer/, winter/), e.g. from git clone --depth 1 $(NORDLAND_URL)"; exit 1; }
+	$(BIN)/python -m greenloop bench-stream --src $(NORDLAND_SRC) --out $(RESULTS)/bench --note "$(SCALE_NOTE)"
 
 # Optional, for the cross-checks against the torch originals only (GhostNet vs timm, the Lite0 port
 # and checkpoint reader vs efficientnet_lite_pytorch and torch.load): a CPU torch wheel where the

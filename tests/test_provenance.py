@@ -111,3 +111,8 @@ def test_the_benchmarks_provenance_reads_scale_json_and_an_older_run_s_scale_md_
     (new,) = provenance.bench_rows(bench)
     assert new == {"notebook": "scale.json (`make bench-scale`)", "commit": "`0123456789ab`", "environment": "`fedcba987654`",
                    "CPU": "AMD EPYC", "date": "2026-12-07T20:17:00+00:00", "duration": "1623.4 s †"}
+    report.write_json(bench / "stream100k.json", {"git_commit": "abcdef0123456789", "cpu_model": "AMD EPYC",
+                                                  "date": "2026-12-07T23:00:00+00:00", "wall_seconds": 301.26})
+    rows = provenance.bench_rows(bench)                         # the long CLI stream's run beside it
+    assert [r["notebook"] for r in rows] == ["scale.json (`make bench-scale`)", "stream100k.json (`make bench-stream`)"]
+    assert rows[1]["commit"] == "`abcdef012345`" and rows[1]["duration"] == "301.3 s †"

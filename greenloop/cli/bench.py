@@ -1,9 +1,9 @@
-"""The benchmarks and the named default's choice: ``bench``, ``bench-scale``, ``default-choice``
-(``make bench``, ``make bench-scale``, ``make default-choice``). Argument parsing and printing only."""
+"""The benchmarks and the named default's choice: ``bench``, ``bench-scale``, ``bench-stream``,
+``default-choice`` (``make bench``, ``make bench-scale``, ``make bench-stream``, ``make default-choice``). Argument parsing and printing only."""
 from __future__ import annotations
 
 from greenloop.experiments import default_choice
-from greenloop.speed import bench, scale
+from greenloop.speed import bench, long_stream, scale
 
 
 def _bench(sub) -> None:
@@ -38,6 +38,23 @@ def _scale(sub) -> None:
     s.set_defaults(func=run)
 
 
+def _stream(sub) -> None:
+    s = sub.add_parser("bench-stream", help="a long augmented recording streamed through `detect --index hnsw`")
+    s.add_argument("--src", default="../shared/real/nordland", help="Nordland source (summer/, winter/)")
+    s.add_argument("--out", default="results/bench", help="output folder (stream100k.json, scale.md's section)")
+    s.add_argument("--frames", type=int, default=100_000)
+    s.add_argument("--work", default="/tmp/greenloop-stream",
+                   help="folder for the recording's PNGs (about 6 kB a frame) and the state files")
+    s.add_argument("--save-every", type=int, default=25_000, help="detect --save-every")
+    s.add_argument("--note", default="", help="a sentence for the section (e.g. what shared the cores)")
+
+    def run(a) -> int:
+        r = long_stream.run(a.src, a.out, a.frames, a.work, save_every=a.save_every, note=a.note)
+        print("\n".join(long_stream.section(r)))
+        return 0
+    s.set_defaults(func=run)
+
+
 def _default_choice(sub) -> None:
     s = sub.add_parser("default-choice", help="the named default's windows, shift and thresholds, on tuning queries")
     s.add_argument("--nordland", default="data/nordland")
@@ -51,4 +68,5 @@ def add_parser(sub) -> None:
     """The benchmark commands' arguments."""
     _bench(sub)
     _scale(sub)
+    _stream(sub)
     _default_choice(sub)

@@ -503,8 +503,9 @@ def _write(out: Path, table, nb, dim: int, n_real: int, seed: int, decide: pd.Da
                "place +-2 route frames in any pass or season (speed.scale.route_ground_truth). Metrics in %; "
                "topk_MB: the lists' memory (a dense float32 matrix would be 4 N^2 bytes).", "",
                metrics.to_markdown(index=False, floatfmt=".4g"), ""]
-    md += _stream_section(out / "stream100k.json")
     report.write_atomic(out / "scale.md", "\n".join(md))
+    from greenloop.speed import long_stream        # here: long_stream reads scale's route rule
+    long_stream.write_section(out)                 # the last CLI stream's section (make bench-stream)
 
 
 def _decision_section(out: Path, decide: pd.DataFrame) -> list[str]:
@@ -597,20 +598,3 @@ def _plot_decisions(decide: pd.DataFrame, path: Path) -> None:
     fig.tight_layout()
     report.save_figure(fig, path)
     plt.close(fig)
-
-
-def _stream_section(path: Path) -> list[str]:
-    """scale.md's section on a recording streamed through the CLI, from the JSON of that measured
-    run (written by hand from /usr/bin/time -v; kept when the benchmark is rerun), if present."""
-    import json
-    if not path.is_file():
-        return []
-    r = json.loads(path.read_text())
-    return ["## A 100,000-frame recording streamed end to end through the CLI", "",
-            f"{r['recording']}. Command: `{r['command']}`.", "",
-            f"Wall time {r['wall_s']:.0f} s for {r['frames']:,} frames (target <= 900 s on 2 cores: "
-            f"{'met' if r['wall_s'] <= 900 else 'not met'}), {r['frames_per_s_reported']:.0f} frames/s with PNG decoding; "
-            f"peak RSS {r['peak_rss_kB'] / 1e6:.2f} GB; {r['bytes_per_stored_frame']} B per stored frame; "
-            f"state file {r['state_file_bytes'] / 1e9:.2f} GB saved {r['saves']} times; {r['closures']:,} closures, "
-            f"{r['closures_correct']:,} correct.", "",
-            *([f"Resume: {r['resume_check']}.", ""] if "resume_check" in r else []), f"Notes: {r['note']}", ""]

@@ -106,13 +106,13 @@ def markdown(results_dirs) -> str:
     return "".join(parts)
 
 
-BENCH = {"bench.json": "make bench", "scale.json": "make bench-scale"}
+BENCH = {"bench.json": "make bench", "scale.json": "make bench-scale", "stream100k.json": "make bench-stream"}
 OLD_SCALE = "scale.md"   # a bench-scale run from before scale.json: its "Machine: ...; written <date>" line
 
 
 def bench_rows(bench_dir) -> list[dict]:
-    """The benchmarks' provenance (``results/bench``): bench.json's and scale.json's own date, CPU and
-    (newer runs) commit and environment; without scale.json, scale.md's "Machine: ...; written <date>
+    """The benchmarks' provenance (``results/bench``): bench.json's, scale.json's and stream100k.json's
+    own date, CPU and (newer runs) commit and environment; without scale.json, scale.md's "Machine: ...; written <date>
     ..." line; ``—`` where the file says nothing. Duration: the JSON's ``wall_seconds``."""
     out = []
     for name, target in BENCH.items():
