@@ -45,4 +45,4 @@ def test_write_section_replaces_the_stream_section_only(tmp_path):
     text = md.read_text()
     assert text.startswith("# Scaling\n\nkept table\n\n") and "old" not in text
     assert text.count(long_stream.HEADING) == 1 and "Wall time 12 s for 1,000 frames" in text
-    assert "7 closures, 6 at the query's place" in text and "Resume: identical." in text
+    assert "7 closures, 6 at the query's place (+-2 route frames: 85.71 %)" in text and "Resume: identical." in text

@@ -161,7 +161,8 @@ def section(r: dict) -> list[str]:
             f"decoding as detect reports it; CPU {r['cpu_percent']} % of one core (user {r['user_s']:.0f} s, system "
             f"{r['system_s']:.0f} s); peak RSS {r['peak_rss_kB'] / 1e6:.2f} GB; {r['bytes_per_stored_frame']} B per "
             f"stored frame; state file {r['state_file_bytes'] / 1e9:.2f} GB; {r['closures']:,} closures, "
-            f"{r['closures_correct']:,} at the query's place (+-2 route frames).", "",
+            f"{r['closures_correct']:,} at the query's place (+-2 route frames: "
+            f"{100 * r['closures_correct'] / max(r['closures'], 1):.2f} %).", "",
             *([f"Resume: {r['resume_check']}.", ""] if "resume_check" in r else []),
             *([f"Notes: {r['note']}", ""] if r.get("note") else [])]
 
