@@ -2,7 +2,7 @@
 output, how it counts the closures at the query's place, and the scale.md section it rewrites."""
 import json
 
-from greenloop.speed import long_stream
+from greenloop.speed import long_stream, scale
 
 DETECT_OUT = """greenloop-seq: knobs of the named default
 # resumed at frame 40 (--state s.pkl)
@@ -32,7 +32,7 @@ def test_correct_counts_matches_at_the_querys_place():
 
 def test_write_section_replaces_the_stream_section_only(tmp_path):
     md = tmp_path / "scale.md"
-    md.write_text("# Scaling\n\nkept table\n\n## A 100,000-frame recording streamed end to end through the CLI\n\nold\n")
+    md.write_text(f"# Scaling\n\nkept table\n\n{scale.STREAM_HEADING}\n\nold\n")
     r = {"frames": 1000, "recording": "frames 0..999", "command": "python -m greenloop detect REC", "wall_seconds": 12.3,
          "frames_per_s_reported": 90.0, "cpu_percent": 97, "user_s": 10, "system_s": 2, "peak_rss_kB": 500_000,
          "bytes_per_stored_frame": 2312, "state_file_bytes": 3_000_000, "closures": 7, "closures_correct": 6,
@@ -44,5 +44,8 @@ def test_write_section_replaces_the_stream_section_only(tmp_path):
         long_stream.write_section(tmp_path)
     text = md.read_text()
     assert text.startswith("# Scaling\n\nkept table\n\n") and "old" not in text
-    assert text.count(long_stream.HEADING) == 1 and "Wall time 12 s for 1,000 frames" in text
+    assert text.count(scale.STREAM_HEADING) == 1 and "Wall time 12 s for 1,000 frames" in text
+    kept = scale.stream_section(md)                              # what bench-scale keeps when it rewrites scale.md
+    assert kept[0] == scale.STREAM_HEADING and "\n".join(kept) == text.split("kept table\n\n")[1]
+    assert scale.stream_section(tmp_path / "absent.md") == []
     assert "7 closures, 6 at the query's place (+-2 route frames: 85.71 %)" in text and "Resume: identical." in text

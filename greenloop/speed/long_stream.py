@@ -29,7 +29,6 @@ from greenloop.speed import scale
 from greenloop.speed.timing import timed
 
 ROUTE = 7152          # frames of the route the recording passes over (Nordland summer + winter)
-HEADING = "## A long recording streamed end to end through the CLI"
 
 
 class Child(NamedTuple):
@@ -155,7 +154,7 @@ def run(src, out, frames: int = 100_000, work="/tmp/greenloop-stream", seed: int
 def section(r: dict) -> list[str]:
     """scale.md's lines on the measured run ``r`` (stream100k.json)."""
     made = (f" Run {r['date'][:10]} on {r['cpu']}, commit {r['git_commit'][:12]}." if "git_commit" in r else "")
-    return [HEADING, "", f"{r['recording']}. Command: `{r['command']}` (`make bench-stream`).{made}", "",
+    return [scale.STREAM_HEADING, "", f"{r['recording']}. Command: `{r['command']}` (`make bench-stream`).{made}", "",
             f"Wall time {r['wall_seconds']:.0f} s for {r['frames']:,} frames (target <= 900 s on 2 cores: "
             f"{'met' if r['wall_seconds'] <= 900 else 'not met'}), {r['frames_per_s_reported']:.0f} frames/s with PNG "
             f"decoding as detect reports it; CPU {r['cpu_percent']} % of one core (user {r['user_s']:.0f} s, system "
@@ -168,11 +167,11 @@ def section(r: dict) -> list[str]:
 
 
 def write_section(out) -> None:
-    """Replace scale.md's section on the long CLI stream (from :data:`HEADING`, or the end) with the
+    """Replace scale.md's section on the long CLI stream (from ``scale.STREAM_HEADING``, or the end) with the
     one read from out/stream100k.json; nothing when either file is missing."""
     md, js = Path(out) / "scale.md", Path(out) / "stream100k.json"
     if not (md.is_file() and js.is_file()):
         return
     lines = md.read_text().split("\n")
-    cut = next((i for i, l in enumerate(lines) if l.startswith("## A ") and "streamed end to end" in l), len(lines))
-    report.write_atomic(md, "\n".join(lines[:cut] + section(json.loads(js.read_text()))))
+    kept = lines[:len(lines) - len(scale.stream_section(md))]
+    report.write_atomic(md, "\n".join(kept + section(json.loads(js.read_text()))))

@@ -326,6 +326,9 @@ def _stream(det, Q):
     return secs, best, fired
 
 
+STREAM_HEADING = "## A long recording streamed end to end through the CLI"
+
+
 def route_places(n: int, m: int) -> np.ndarray:
     """(n,) int64 place of each frame of a recording of passes over a route of m frames whose two
     halves are the same places (Nordland: summer, then winter): (t mod m) mod m/2."""
@@ -503,9 +506,14 @@ def _write(out: Path, table, nb, dim: int, n_real: int, seed: int, decide: pd.Da
                "place +-2 route frames in any pass or season (speed.scale.route_ground_truth). Metrics in %; "
                "topk_MB: the lists' memory (a dense float32 matrix would be 4 N^2 bytes).", "",
                metrics.to_markdown(index=False, floatfmt=".4g"), ""]
-    report.write_atomic(out / "scale.md", "\n".join(md))
-    from greenloop.speed import long_stream        # here: long_stream reads scale's route rule
-    long_stream.write_section(out)                 # the last CLI stream's section (make bench-stream)
+    report.write_atomic(out / "scale.md", "\n".join(md + stream_section(out / "scale.md")))
+
+
+def stream_section(md: Path) -> list[str]:
+    """The lines of ``md`` from :data:`STREAM_HEADING` on (the long CLI stream's section that
+    ``make bench-stream`` writes, ``speed.long_stream``), kept when the benchmark rewrites scale.md."""
+    lines = md.read_text().split("\n") if md.is_file() else []
+    return next((lines[i:] for i, l in enumerate(lines) if l == STREAM_HEADING), [])
 
 
 def _decision_section(out: Path, decide: pd.DataFrame) -> list[str]:
