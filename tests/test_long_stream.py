@@ -3,6 +3,7 @@ output, how it counts the closures at the query's place, and the scale.md sectio
 import json
 
 from greenloop.speed import long_stream, scale
+from test_seqspeed import _drive  # noqa: E402  (the pan whose end revisits its start)
 
 DETECT_OUT = """greenloop-seq: knobs of the named default
 # resumed at frame 40 (--state s.pkl)
@@ -49,3 +50,17 @@ def test_write_section_replaces_the_stream_section_only(tmp_path):
     assert kept[0] == scale.STREAM_HEADING and "\n".join(kept) == text.split("kept table\n\n")[1]
     assert scale.stream_section(tmp_path / "absent.md") == []
     assert "7 closures, 6 at the query's place (+-2 route frames: 85.71 %)" in text and "Resume: identical." in text
+
+
+def test_stream_and_resume_measure_a_detect_run(tmp_path):
+    """The benchmark's own runs of detect, on a 500-frame drive whose last 150 frames revisit its
+    start (test_seqspeed's pan): the closures it counts, the child's memory, the state file, and a
+    run stopped halfway and resumed that prints the same closures."""
+    rec = _drive(tmp_path / "back", list(range(350)) + list(range(150)))
+    r = long_stream.stream(rec, tmp_path, save_every=100)
+    events = r.pop("_events")
+    assert r["closures"] == len(events) >= 50 and all(f >= 350 for f, _, _ in events)
+    assert r["state_file_bytes"] > 0 and r["peak_rss_kB"] > 50_000 and r["bytes_per_stored_frame"] >= 2048
+    assert r["wall_seconds"] > 0 and r["frames_per_s_reported"] > 0
+    said = long_stream.resume_check(rec, tmp_path, 100, 500, events)
+    assert f"its {len(events):,} printed closures" in said and "are identical to" in said
