@@ -230,11 +230,11 @@ bench: | $(STAMP) ## speed benchmark: streaming detector and training vs plain K
 
 # SCALE_NOTE: a sentence for scale.md's header, e.g. what else shared the cores during the run
 SCALE_NOTE ?=
-bench-scale: | $(STAMP) ## retrieval indexes and the named default's whole decision (candidate mode vs the exact scan) at 10^4..10^6 stored frames (augmented Nordland) -> results/bench/scale.md (about an hour on 2 cores)
+bench-scale: | $(STAMP) ## retrieval indexes and the named default's whole decision (candidate mode vs the exact scan) at 10^4..10^6 stored frames (augmented Nordland) -> results/bench/scale.md (about 25 min on 2 cores)
 	test -d "$(NORDLAND_SRC)" || { echo "bench-scale needs Nordland's frames: set NORDLAND_SRC=path (summer/, winter/), e.g. from git clone --depth 1 $(NORDLAND_URL)"; exit 1; }
 	OMP_NUM_THREADS=1 $(BIN)/python -m greenloop bench-scale --src $(NORDLAND_SRC) --out $(RESULTS)/bench --note "$(SCALE_NOTE)"
 
-bench-stream: | $(STAMP) ## a 100,000-frame augmented Nordland recording streamed through `detect --index hnsw`, stopped and resumed -> results/bench/stream100k.json, scale.md's section (about 20 min, 0.7 GB in /tmp)
+bench-stream: | $(STAMP) ## a 100,000-frame augmented Nordland recording streamed through `detect --index hnsw`, stopped and resumed -> results/bench/stream100k.json, scale.md's section (about 10 min, 0.7 GB in /tmp)
 	test -d "$(NORDLAND_SRC)" || { echo "bench-stream needs Nordland's frames: set NORDLAND_SRC=path (summer/, winter/), e.g. from git clone --depth 1 $(NORDLAND_URL)"; exit 1; }
 	$(BIN)/python -m greenloop bench-stream --src $(NORDLAND_SRC) --out $(RESULTS)/bench --note "$(SCALE_NOTE)"
 
