@@ -1,5 +1,6 @@
 """The benchmarks and the named default's choice: ``bench``, ``bench-scale``, ``bench-stream``,
-``default-choice`` (``make bench``, ``make bench-scale``, ``make bench-stream``, ``make default-choice``). Argument parsing and printing only."""
+``default-choice`` (``make bench``, ``make bench-scale``, ``make bench-stream``, ``make default-choice``).
+Argument parsing and printing only."""
 from __future__ import annotations
 
 from greenloop.experiments import default_choice
