@@ -186,6 +186,11 @@ def test_positions_in_metres_and_gps_by_haversine(tmp_path):
     i, j = np.nonzero(np.triu(d <= 20.0, 1))
     assert 0 < len(i) < 40 * 39 / 2
     assert fmts.read(tmp_path / "gps.csv", threshold_m=20.0).tolist() == np.column_stack([i, j, 0 * i]).tolist()
+    # the track's length, its points in frame order: consecutive distances, haversine for lat/lon
+    assert fmts.track_length(tmp_path / "xy.csv") == pytest.approx(5 + np.sqrt(18.61) + np.sqrt(100.81) + np.sqrt(66))
+    (tmp_path / "shuffled.csv").write_text("frame,x,y\n2,6,8\n0,0,0\n1,3,4\n")
+    assert fmts.track_length(tmp_path / "shuffled.csv") == pytest.approx(10.0)
+    assert fmts.track_length(tmp_path / "gps.csv") == pytest.approx(np.diagonal(d, 1).sum(), rel=1e-9)
     (tmp_path / "broken.csv").write_text("lat,lon\n51.7,-1.2\n\n51.7,north\n")
     with pytest.raises(ValueError, match=r"broken.csv:4: expected numbers for lat, lon"):
         fmts.read(tmp_path / "broken.csv")

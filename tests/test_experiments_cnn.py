@@ -400,6 +400,12 @@ def test_dataset_summary_rows(tmp_path):
                                    "first_revisit_frame": int(pairs[:, 1].min())}
     none = dataset.summary(tmp_path, info, None, None).iloc[0]
     assert none.path_m is None and none.loop_pairs is None and none.first_revisit_frame is None
+    gps = tmp_path / "gps-only"                      # no poses, a positions file: its track's length
+    (gps / "rgb").mkdir(parents=True)
+    for k in range(4):
+        (gps / "rgb" / f"{k}.png").write_bytes(b"")
+    (gps / "positions.csv").write_text("frame,x,y\n0,0,0\n1,3,4\n2,3,0\n3,0,0\n")
+    assert dataset.summary(gps, {"kind": "user", "ground_truth": "pairs"}, None, None).iloc[0].path_m == pytest.approx(12)
     traj = tmp_path / "CameraTrajectory.txt"
     sequence.write_trajectory(traj, np.arange(30), poses)
     assert dataset.find_reference(str(tmp_path / "missing.txt")) is None and dataset.find_reference(str(traj)) == traj

@@ -228,6 +228,18 @@ def read_positions(path, threshold_m: float | None = None) -> np.ndarray:
     return np.column_stack([i[order], j[order], np.zeros(len(order), np.int64)]).astype(np.int64)
 
 
+def track_length(path) -> float:
+    """Length in metres of a positions / GPS file's track, its points in frame order: consecutive
+    points' Euclidean distances for x, y[, z] in metres, great-circle (haversine) ones for lat, lon."""
+    frames, xyz, geo = _positions(Path(path))
+    xyz = np.asarray(xyz, dtype=np.float64)[np.argsort(frames, kind="stable")]
+    if not geo:
+        return float(np.linalg.norm(np.diff(xyz, axis=0), axis=1).sum())
+    lat, lon = np.radians(xyz[:, 0]), np.radians(xyz[:, 1])
+    a = np.sin(np.diff(lat) / 2) ** 2 + np.cos(lat[:-1]) * np.cos(lat[1:]) * np.sin(np.diff(lon) / 2) ** 2
+    return float((2 * EARTH_RADIUS_M * np.arcsin(np.sqrt(np.minimum(a, 1.0)))).sum())
+
+
 def read(path, fmt: str = "auto", n_frames: int | None = None, n_reference: int | None = None,
          threshold_m: float | None = None) -> np.ndarray:
     """Any supported ground-truth file -> (P, 3) int64 loop pairs (i, j, tolerance).

@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 
 from greenloop import groundtruth
-from greenloop.datasets import sequence
+from greenloop.datasets import groundtruth_formats, sequence
 from greenloop.groundtruth import DEFAULT_EXCLUDE
 from greenloop.methods.dictionary import spots
 from greenloop.study import wording
@@ -20,10 +20,10 @@ from greenloop.study import wording
 REFERENCE_CANDIDATES = ("data/greenhouse/CameraTrajectory.txt", "../shared/greenhouse/CameraTrajectory.txt")
 
 
-def _row(name: str, frames: int, ground_truth, poses, gt) -> dict:
+def _row(name: str, frames: int, ground_truth, poses, gt, path_m=None) -> dict:
     pairs = None if gt is None else groundtruth.loop_pairs(gt)
     return {"sequence": name, "frames": frames, "ground_truth": ground_truth,
-            "path_m": None if poses is None else groundtruth.path_length(poses),
+            "path_m": groundtruth.path_length(poses) if poses is not None else path_m,
             "loop_pairs": None if gt is None else len(pairs),
             "revisit_frames": None if gt is None else int(groundtruth.revisit_frames(gt).sum()),
             "first_revisit_frame": int(pairs[:, 1].min()) if gt is not None and len(pairs) else None}
@@ -49,10 +49,14 @@ def summary(dataset, info: dict, poses, gt, reference_row: dict | None = None) -
 
     dataset: the sequence folder; info: ``sequence.folder_info(dataset)``; poses: (N, 4, 4) or None;
     gt: (N, N) bool loops or None; reference_row: :func:`reference`'s row or None. Columns:
-    sequence, frames, ground_truth, path_m (metres; None without poses), loop_pairs,
-    revisit_frames, first_revisit_frame (None without ground truth or loops).
+    sequence, frames, ground_truth, path_m (metres: the poses' path, else the track of a positions /
+    GPS ground-truth file; None without either), loop_pairs, revisit_frames, first_revisit_frame
+    (None without ground truth or loops).
     """
-    rows = [_row(f"{info['kind']} ({dataset})", len(sequence.list_frames(dataset)), info["ground_truth"], poses, gt)]
+    source = sequence.ground_truth_source(dataset) if poses is None else None
+    track = groundtruth_formats.track_length(source.path) if source and source.format == "positions" else None
+    rows = [_row(f"{info['kind']} ({dataset})", len(sequence.list_frames(dataset)), info["ground_truth"], poses, gt,
+                 track)]
     return pd.DataFrame(rows + ([reference_row] if reference_row else []))
 
 
