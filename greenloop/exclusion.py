@@ -10,8 +10,8 @@ the value from :func:`exclusion`, which takes the first of:
    camera has left the place (for every frame, the run of following frames the ground truth calls
    the same place; the longest run), then the paper's DEFAULT_EXCLUDE frames (Qi 2024, Eq. 5:
    "the neighbouring 150 images are disregarded") where that window still leaves at least half of
-   the revisit frames a partner, else half the distance of the closest revisit, so that revisits
-   count;
+   the frames of revisit pairs (either end) a partner, else half the distance of the closest
+   revisit, so that revisits count;
 3. capture time, when ``sequence.yaml`` gives ``frame_rate``: EXCLUDE_SECONDS of recording;
 4. else EXCLUDE_FRACTION of the recording, between MIN_EXCLUDE and DEFAULT_EXCLUDE frames.
 
@@ -123,11 +123,11 @@ def from_ground_truth(folder, loop_threshold: float = 0.5) -> Exclusion:
     left = f"the camera leaves a place within {reach} frames; revisits {int(rd.min())}..{int(rd.max())} frames apart"
     if reach <= DEFAULT_EXCLUDE and len(far) >= KEEP_SHARE * len(frames_with):
         return Exclusion(DEFAULT_EXCLUDE, "ground truth", f"exclude {DEFAULT_EXCLUDE} frames (the paper's window): "
-                         f"{left}, {len(far)} of {len(frames_with)} revisit frames beyond it")
+                         f"{left}, {len(far)} of {len(frames_with)} frames of revisit pairs beyond it")
     frames = max(reach, int(rd.min()) // 2)
     return Exclusion(frames, "ground truth", f"exclude {frames} frames (the longer of the camera's stay and half "
                      f"the closest revisit): {left}; the paper's {DEFAULT_EXCLUDE} would leave "
-                     f"{len(far)} of {len(frames_with)} revisit frames")
+                     f"{len(far)} of {len(frames_with)} frames of revisit pairs (either end)")
 
 
 def candidate_share(n_frames: int, exclude: int) -> float:

@@ -231,7 +231,7 @@ def test_loops_inside_the_default_window_get_a_fitting_exclude(tiny_near_loop_se
     p, notes = params.sequence_parameters(tiny_near_loop_sequence)
     assert p == {"exclude": 49, "first_traversal_end": 100}
     assert "half the closest revisit" in notes[0] and "revisits 99..101 frames apart" in notes[0]
-    assert "would leave 0 of 200 revisit frames" in notes[0]
+    assert "would leave 0 of 200 frames of revisit pairs" in notes[0]
 
 
 def test_a_notebook_without_any_counted_loop_is_skipped_with_the_reason(tiny_near_loop_sequence, tmp_path, capsys):
