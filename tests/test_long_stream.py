@@ -26,9 +26,9 @@ def test_correct_counts_matches_at_the_querys_place():
     # 7162 is pass 2's frame 10 (place 10): right; 3581 is winter's place 5, matched to summer's 5: right;
     # 7352 is place 200 matched to 205: 5 route frames off, outside +-2: wrong
     events = long_stream.closures(DETECT_OUT.splitlines())
-    assert long_stream.correct(events) == 2
-    assert long_stream.correct([(7354, 204, "3")]) == 1        # place 202 vs 204: within 2
-    assert long_stream.correct([]) == 0
+    assert long_stream.correct(events, 7152) == 2
+    assert long_stream.correct([(7354, 204, "3")], 7152) == 1        # place 202 vs 204: within 2
+    assert long_stream.correct([], 7152) == 0
 
 
 def test_write_section_replaces_the_stream_section_only(tmp_path):
@@ -57,10 +57,19 @@ def test_stream_and_resume_measure_a_detect_run(tmp_path):
     start (test_seqspeed's pan): the closures it counts, the child's memory, the state file, and a
     run stopped halfway and resumed that prints the same closures."""
     rec = _drive(tmp_path / "back", list(range(350)) + list(range(150)))
-    r = long_stream.stream(rec, tmp_path, save_every=100)
-    events = r.pop("_events")
+    r, events = long_stream.stream(rec, tmp_path, save_every=100, m=7152)
     assert r["closures"] == len(events) >= 50 and all(f >= 350 for f, _, _ in events)
     assert r["state_file_bytes"] > 0 and r["peak_rss_kB"] > 50_000 and r["bytes_per_stored_frame"] >= 2048
     assert r["wall_seconds"] > 0 and r["frames_per_s_reported"] > 0
     said = long_stream.resume_check(rec, tmp_path, 100, 500, events)
     assert f"its {len(events):,} printed closures" in said and "are identical to" in said
+
+
+def test_the_route_is_the_sources_summer_and_winter_frames(tmp_path):
+    import cv2
+    import numpy as np
+    for season in ("summer", "winter"):
+        (tmp_path / season).mkdir()
+        for k in range(3):
+            cv2.imwrite(str(tmp_path / season / f"images-{k:05d}.png"), np.zeros((32, 64, 3), np.uint8))
+    assert long_stream.route_frames(tmp_path) == 6

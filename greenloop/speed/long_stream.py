@@ -24,12 +24,9 @@ from typing import NamedTuple
 import numpy as np
 
 from greenloop import report
-from greenloop.datasets import augment
+from greenloop.datasets import augment, nordland
 from greenloop.speed import scale
 from greenloop.speed.timing import timed
-
-ROUTE = 7152          # frames of the route the recording passes over (Nordland summer + winter)
-
 
 class Child(NamedTuple):
     """One finished detect process: its stdout lines, wall and CPU seconds, peak memory (kB)."""
@@ -92,8 +89,15 @@ def summary(lines) -> dict:
     return {"frames_per_s_reported": float(fps.group(1)), "bytes_per_stored_frame": int(b.group(1)) if b else None}
 
 
-def correct(events, m: int = ROUTE, tolerance: int = 2) -> int:
-    """How many (frame, match, ...) events match the query's place within ``tolerance`` route frames."""
+def route_frames(src) -> int:
+    """Frames of the route the recording passes over: the source's summer plus winter frames."""
+    summer, winter, _ = nordland.check_source(nordland.source_folder(src))
+    return len(summer) + len(winter)
+
+
+def correct(events, m: int, tolerance: int = 2) -> int:
+    """How many (frame, match, ...) events match the query's place within ``tolerance`` frames of
+    a route of m frames (``scale.route_places``)."""
     if not events:
         return 0
     e = np.array([(f, k) for f, k, *_ in events])
@@ -101,17 +105,17 @@ def correct(events, m: int = ROUTE, tolerance: int = 2) -> int:
     return int((np.abs(places[e[:, 0]] - places[e[:, 1]]) <= tolerance).sum())
 
 
-def stream(rec: Path, work: Path, save_every: int) -> dict:
-    """The uninterrupted run of detect over ``rec`` (its state in work/): the measured fields of
-    stream100k.json, and its closures under ``_events``."""
+def stream(rec: Path, work: Path, save_every: int, m: int) -> tuple[dict, list]:
+    """The uninterrupted run of detect over ``rec`` (its state in work/), a recording over a route of
+    m frames: (the measured fields of stream100k.json, its closures as :func:`closures` gives them)."""
     state = work / "state.pkl"
     state.unlink(missing_ok=True)
     c = run_child(detect_command(rec, state, save_every))
     events = closures(c.lines)
     return {"wall_seconds": round(c.wall_s, 1), "cpu_percent": round(100 * (c.user_s + c.system_s) / c.wall_s),
             "user_s": round(c.user_s, 2), "system_s": round(c.system_s, 2), "peak_rss_kB": c.peak_rss_kB,
-            **summary(c.lines), "closures": len(events), "closures_correct": correct(events),
-            "state_file_bytes": state.stat().st_size, "_events": events}
+            **summary(c.lines), "closures": len(events), "closures_correct": correct(events, m),
+            "state_file_bytes": state.stat().st_size}, events
 
 
 def resume_check(rec: Path, work: Path, save_every: int, frames: int, events) -> str:
@@ -136,14 +140,13 @@ def run(src, out, frames: int = 100_000, work="/tmp/greenloop-stream", seed: int
     (:func:`write_section`). Returns the JSON's dict."""
     out, work = Path(out), Path(work)
     work.mkdir(parents=True, exist_ok=True)
-    rec = recording(src, work, frames, seed)
-    r = stream(rec, work, save_every)
-    events = r.pop("_events")
+    rec, m = recording(src, work, frames, seed), route_frames(src)
+    r, events = stream(rec, work, save_every, m)
     cmd = detect_command(Path("REC"), Path("STATE"), save_every)
     r = {"frames": frames, "command": " ".join(["python"] + cmd[1:]),
          "recording": f"frames 0..{frames - 1} of the augmented Nordland recording (seed {seed}, colour 64x32 PNGs "
                       f"written by greenloop.datasets.augment into {work}, not in the repo): "
-                      f"{frames / ROUTE:.1f} passes over the {ROUTE}-frame route", **r,
+                      f"{frames / m:.1f} passes over the {m}-frame route", **r,
          "resume_check": resume_check(rec, work, save_every, frames, events),
          **report.provenance(), "versions": report.versions(), "note": note}
     report.write_json(out / "stream100k.json", r)
