@@ -5,7 +5,9 @@ record (``Entry.cli_knobs``, or a notebook 13 ``summary.json`` row with ``tuned`
 detector (``Entry.stream``) and, for a detector fed descriptors, the frame -> descriptor step
 (``Entry.describer``); a detector with ``update_many`` (greenloop-seq's, the dictionary's) takes
 the decoded frames itself. The exclusion follows ``greenloop.exclusion`` (make's rule) unless
-given. Frames are decoded in colour (BGR, as a camera delivers them) in windows.
+given. A recording is an image folder, a ROS bag (one camera topic) or a video
+(``greenloop.datasets.recording``); its frames are decoded in colour (BGR, as a camera delivers
+them) in windows.
 
 Units: ``step``, ``exclude`` and ``seq_len`` count streamed frames (every ``step``-th frame of
 the folder); an event is a dict with ``frame`` (streamed frame number) and the detector's
@@ -19,11 +21,10 @@ import sys
 from pathlib import Path
 from typing import NamedTuple
 
-import cv2
 import numpy as np
 
 from greenloop import exclusion
-from greenloop.datasets import sequence
+from greenloop.datasets import recording
 from greenloop.datasets.sequence import DESCRIPTION_NAME
 from greenloop.methods import registry
 from greenloop.methods.greenloop_seq import seqmatch, seqstream
@@ -40,25 +41,20 @@ OVERRIDES = ("descriptor", "seq_len", "contrast_window", "model", "frames_per_sp
 class Plan(NamedTuple):
     """What one detect run streams. name: the method; knobs: its knob record (with where each
     came from in ``lines``); threshold: the score (or tau) to reach; step, exclude: streamed frames;
-    paths: the streamed frames' files; lines: the header lines printed before the stream."""
+    frames: the streamed frames (a ``recording.FrameSource`` view: len, names, read); lines: the
+    header lines printed before the stream."""
     name: str
     knobs: dict
     threshold: float
     step: int
     exclude: int
-    paths: list
+    frames: recording.FrameSource
     lines: list
 
 
-def read_window(paths) -> list[np.ndarray]:
-    """Frames (H, W, 3) uint8 BGR decoded from ``paths``; ValueError naming an unreadable file."""
-    frames = []
-    for p in paths:
-        img = cv2.imread(str(p), cv2.IMREAD_COLOR)
-        if img is None:
-            raise ValueError(f"cannot read image {p}: the file is missing, empty or not an image; replace or delete it")
-        frames.append(img)
-    return frames
+def read_window(frames: recording.FrameSource) -> list[np.ndarray]:
+    """Every frame of a FrameSource view, (H, W, 3) uint8 BGR; ValueError naming an unreadable one."""
+    return frames.read()
 
 
 def read_tuned(path, variant: str) -> tuple[dict, float, int, int]:
@@ -112,7 +108,8 @@ def knobs_for(name: str, folder, tuned=None, variant=None, threshold=None, step=
         raise ValueError(f"--method {name} needs a threshold chosen on your own data: pass --threshold T or --tuned "
                          f"<results>/13_leaderboard/summary.json (notebook 13 picks knobs and threshold on a tuning "
                          f"part); --method {seqmatch.DEFAULT_NAME} (the default) has a fixed one")
-    own_step = sequence.open(folder).frame_step
+    seq = recording.open_frames(folder).sequence
+    own_step = seq.frame_step if seq is not None else None
     step_from = "--step" if step is not None else (DESCRIPTION_NAME if own_step else "default")
     step = step or own_step or 1
     if step < 1:
@@ -129,31 +126,35 @@ def knobs_for(name: str, folder, tuned=None, variant=None, threshold=None, step=
 def exclusion_for(folder, n: int, step: int, exclude=None, tuned_exclude=None) -> tuple[int, str, str]:
     """The exclusion in streamed frames, its source and the rule's sentence: ``exclude`` (streamed frames), else
     the folder's sequence.yaml, else ``tuned_exclude`` (original frames), else greenloop.exclusion's
-    rule. Warns on stderr when fewer than half of the ``n`` streamed frames have a candidate."""
+    rule (a bag's or a video's: its frame times, ``exclusion.of_recording``). folder: a recording or its
+    FrameSource. Warns on stderr when fewer than half of the ``n`` streamed frames have a candidate."""
+    src = recording.open_frames(folder)
     if exclude is not None:
         frames, source, rule = exclude, "--exclude", f"--exclude {exclude} streamed frames"
     else:
-        found = exclusion.exclusion(folder)
+        found = exclusion.of_recording(src)
         if tuned_exclude is not None and found.source != DESCRIPTION_NAME:
             found = exclusion.Exclusion(tuned_exclude, "--tuned", f"exclude {tuned_exclude} frames, from --tuned")
         frames, source = found.frames // step, found.source
         rule = found.rule + ("" if step == 1 else f"; {frames} streamed frames at step {step}")
     if exclusion.candidate_share(n, frames) < 0.5:
         print(f"warning: exclude {frames} leaves only {max(n - frames - 1, 0)} of the {n} streamed frames any "
-              f"candidate (a loop is searched among frames more than {frames} frames older): pass --exclude N "
-              f"or write `exclude: N` in {Path(folder) / DESCRIPTION_NAME}", file=sys.stderr, flush=True)
+              f"candidate (a loop is searched among frames more than {frames} frames older): pass --exclude N"
+              + (f" or write `exclude: N` in {src.path / DESCRIPTION_NAME}" if src.sequence is not None else ""),
+              file=sys.stderr, flush=True)
     return frames, source, rule
 
 
 def plan(folder, name: str = seqmatch.DEFAULT_NAME, tuned=None, variant=None, threshold=None, step=None,
-         exclude=None, **flags) -> Plan:
+         exclude=None, topic=None, **flags) -> Plan:
     """Everything a detect run decides before its first frame (:func:`knobs_for`, :func:`exclusion_for`).
-    folder: a recording's folder (a sequence folder or a folder of images) or its ``sequence.Sequence``."""
-    folder = sequence.open(folder)
-    knobs, threshold, step, lines, tuned_ex = knobs_for(name, folder, tuned, variant, threshold, step, **flags)
-    paths = folder.frame_paths[::step]
-    ex, source, rule = exclusion_for(folder, len(paths), step, exclude, tuned_ex)
-    return Plan(name, knobs, threshold, step, ex, paths, lines + [f"# exclude {ex} ({source})", f"# exclusion: {rule}"])
+    folder: a recording (a sequence folder or a folder of images, a ROS bag, a video) or its
+    ``sequence.Sequence`` or ``recording.FrameSource``; topic: a bag's camera topic (``recording.open_frames``)."""
+    src = recording.open_frames(folder, topic)
+    knobs, threshold, step, lines, tuned_ex = knobs_for(name, src, tuned, variant, threshold, step, **flags)
+    frames = src[::step]
+    ex, source, rule = exclusion_for(src, len(frames), step, exclude, tuned_ex)
+    return Plan(name, knobs, threshold, step, ex, frames, lines + [f"# exclude {ex} ({source})", f"# exclusion: {rule}"])
 
 
 def header(p: Plan, folder, index=None, candidates: int = 20) -> str:
@@ -161,7 +162,7 @@ def header(p: Plan, folder, index=None, candidates: int = 20) -> str:
     k = p.knobs
     main = (f"{k['descriptor']}, seq_len {k['seq_len']}, exclude {p.exclude}, contrast window {k['contrast_window']}"
             if "seq_len" in k else f"exclude {p.exclude}")
-    return (f"# {len(p.paths)} frames from {folder} (every {p.step}); {p.name} ({main}); threshold {p.threshold:g}; "
+    return (f"# {len(p.frames)} frames from {p.frames} (every {p.step}); {p.name} ({main}); threshold {p.threshold:g}; "
             f"candidates: {'every stored frame' if index is None else f'{candidates} from {index}'}")
 
 
@@ -169,7 +170,7 @@ def data_for(p: Plan, folder, index=None, candidates: int = 20) -> Data:
     """The ``Data`` a registry entry's ``stream`` and ``describer`` read on a user's recording: no
     ground truth, no split; params: the default velocities, ImageNet weights, the index options."""
     params = {"velocities": seqmatch.DEFAULT_VELOCITIES, "weights": "auto", "index": index, "candidates": candidates}
-    return Data(str(folder), p.step, np.arange(len(p.paths)) * p.step, None, p.exclude, None, None, params, {}, {}, {})
+    return Data(str(folder), p.step, np.arange(len(p.frames)) * p.step, None, p.exclude, None, None, params, {}, {}, {})
 
 
 class FrameStream:
@@ -223,7 +224,7 @@ def open_stream(p: Plan, folder, index=None, candidates: int = 20, state=None) -
 def state_key(p: Plan, folder, index, candidates) -> dict:
     """What a saved state must match to be resumed: knobs, threshold, step, exclusion, folder, frames, index."""
     return dict(p.knobs, method=p.name, threshold=p.threshold, step=p.step, exclude=p.exclude,
-                folder=str(Path(folder).resolve()), frames=len(p.paths), index=index, candidates=candidates)
+                folder=str(Path(folder).resolve()), frames=len(p.frames), index=index, candidates=candidates)
 
 
 def save_state(stream: FrameStream, key: dict, path) -> None:
@@ -234,10 +235,11 @@ def save_state(stream: FrameStream, key: dict, path) -> None:
     write_atomic(path, dump)
 
 
-def matches_writer(path, paths, append: bool):
+def matches_writer(path, names, append: bool):
     """A function taking a window's decisions (``FrameStream.decide_many``) and appending one CSV line
     per frame (MATCH_COLUMNS: frame and file, its best stored match and file, empty while none is a
-    candidate, the score, 1 where a closure was declared) to ``path``; a new file unless ``append``."""
+    candidate, the score, 1 where a closure was declared) to ``path``; a new file unless ``append``.
+    names: the streamed frames' names (a file name, or a bag's or video's time stamp)."""
     path = Path(path)
     if path.parent and not path.parent.is_dir():
         raise FileNotFoundError(f"--matches {path}: folder {path.parent} does not exist")
@@ -248,8 +250,8 @@ def matches_writer(path, paths, append: bool):
         with open(path, "a") as f:
             for r in rows:
                 m = r["match"]
-                f.write(f"{r['frame']},{paths[r['frame']].name},{m if m >= 0 else ''},"
-                        f"{paths[m].name if m >= 0 else ''},{'' if m < 0 else format(r['score'], '.6g')},"
+                f.write(f"{r['frame']},{names[r['frame']]},{m if m >= 0 else ''},"
+                        f"{names[m] if m >= 0 else ''},{'' if m < 0 else format(r['score'], '.6g')},"
                         f"{int(r['closure'])}\n")
     return write
 
@@ -259,30 +261,30 @@ def event_columns(detector) -> tuple[str, ...]:
     return tuple(getattr(detector, "event_columns", ("match", "score")))
 
 
-def event_line(e: dict, columns, paths) -> str:
-    """One printed closure: frame, the event's columns, the frame's file (and the match's, if any)."""
+def event_line(e: dict, columns, names) -> str:
+    """One printed closure: frame, the event's columns, the frame's name (file or stamp; the match's too, if any)."""
     vals = [f"{e[c]:.4f}" if isinstance(e[c], float) else str(e[c]) for c in columns]
-    files = [paths[e["frame"]].name] + ([paths[e["match"]].name] if "match" in e else [])
+    files = [names[e["frame"]]] + ([names[e["match"]]] if "match" in e else [])
     return "\t".join([str(e["frame"]), *vals, *files])
 
 
-def run_windows(stream: FrameStream, paths, window: int, first: int = 0, stop=None, after=None, matches=None,
+def run_windows(stream: FrameStream, frames, window: int, first: int = 0, stop=None, after=None, matches=None,
                 out=print, desc: str = "detect") -> float:
-    """Decode paths[first:stop] in windows of ``window`` frames, feed each to ``stream``, ``out`` one
+    """Decode frames[first:stop] (a FrameSource) in windows of ``window`` frames, feed each to ``stream``, ``out`` one
     line per closure (:func:`event_line`), ``matches(rows)`` per window when given, ``after()`` per
     window (state saving); a progress bar on stderr. Returns the wall seconds (decoding included)."""
-    stop = len(paths) if stop is None else stop
-    columns = event_columns(stream.detector)
-    progress = bar(total=len(paths), initial=first, desc=desc, unit="frame")
+    stop = len(frames) if stop is None else stop
+    columns, names = event_columns(stream.detector), frames.names
+    progress = bar(total=len(frames), initial=first, desc=desc, unit="frame")
 
     def go():
         for start in range(first, stop, window):
-            chunk = paths[start:min(start + window, stop)]
-            frames = read_window(chunk)
-            rows = stream.decide_many(frames) if matches else stream.update_many(frames)
+            chunk = frames[start:min(start + window, stop)]
+            decoded = read_window(chunk)
+            rows = stream.decide_many(decoded) if matches else stream.update_many(decoded)
             for e in rows:
                 if e.get("closure", True):
-                    out(event_line(e, columns, paths))
+                    out(event_line(e, columns, names))
             if matches is not None:
                 matches(rows)
             progress.update(len(chunk))
@@ -315,23 +317,23 @@ def run(p: Plan, folder, window: int = 70, index=None, candidates: int = 20, sta
                          f"pass --method {seqmatch.DEFAULT_NAME} (the default) or another registered one")
     stream = open_stream(p, folder, index, candidates, state)
     key, first = state_key(p, folder, index, candidates), stream.detector.frame_index
-    stop = len(p.paths) if stop_after is None else min(len(p.paths), first + stop_after)
+    stop = len(p.frames) if stop_after is None else min(len(p.frames), first + stop_after)
     saved = [first]
 
     def save_now(force=False):
         if state and (force or stream.detector.frame_index - saved[0] >= save_every):
             save_state(stream, key, state)
             saved[0] = stream.detector.frame_index
-    write = None if matches is None else matches_writer(matches, p.paths, append=first > 0)
+    write = None if matches is None else matches_writer(matches, p.frames.names, append=first > 0)
     columns = event_columns(stream.detector)
     if first:
         out(f"# resumed at frame {first} (--state {state})")
     out("\t".join(["frame", *columns, "file"] + (["match_file"] if "match" in columns else [])))
     try:
-        seconds = run_windows(stream, p.paths, window, first, stop, save_now, write, out, p.name)
+        seconds = run_windows(stream, p.frames, window, first, stop, save_now, write, out, p.name)
     except KeyboardInterrupt:
         save_now(force=True)
         raise
     save_now(force=True)
     n = stream.detector.frame_index
-    return Run(stream, first, n, seconds, n == len(p.paths))
+    return Run(stream, first, n, seconds, n == len(p.frames))

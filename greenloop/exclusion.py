@@ -12,7 +12,8 @@ the value from :func:`exclusion`, which takes the first of:
    "the neighbouring 150 images are disregarded") where that window still leaves at least half of
    the frames of revisit pairs (either end) a partner, else half the distance of the closest
    revisit, so that revisits count;
-3. capture time, when ``sequence.yaml`` gives ``frame_rate``: EXCLUDE_SECONDS of recording;
+3. capture time, when ``sequence.yaml`` gives ``frame_rate`` (a bag's or a video's time stamps:
+   :func:`of_recording`): EXCLUDE_SECONDS of recording;
 4. else EXCLUDE_FRACTION of the recording, between MIN_EXCLUDE and DEFAULT_EXCLUDE frames.
 
 Every value is in ORIGINAL frames (a stream of every k-th frame excludes ``exclude // k`` of its
@@ -25,7 +26,7 @@ from typing import NamedTuple
 import numpy as np
 
 from greenloop import groundtruth
-from greenloop.datasets import sequence
+from greenloop.datasets import recording, sequence
 from greenloop.groundtruth import DEFAULT_EXCLUDE
 
 EXCLUDE_SECONDS = 10.0       # seconds of recording: a walking or driving camera has left a place by then
@@ -56,15 +57,31 @@ def exclusion(folder, loop_threshold: float = 0.5) -> Exclusion:
                          f"exclude {seq.exclude} frames, from {seq.path / sequence.DESCRIPTION_NAME}")
     if seq.ground_truth is not None:
         return from_ground_truth(seq, loop_threshold)
-    n = seq.n_frames
-    if d["frame_rate"] is not None:
-        frames = int(round(EXCLUDE_SECONDS * float(d["frame_rate"])))
+    return _by_time(seq.n_frames, d["frame_rate"], sequence.DESCRIPTION_NAME,
+                    f"no frame_rate in {sequence.DESCRIPTION_NAME}; write `exclude: N` or `frame_rate: FPS` there")
+
+
+def of_recording(source, loop_threshold: float = 0.5) -> Exclusion:
+    """The exclusion of any recording (greenloop.datasets.recording): a folder's by :func:`exclusion`;
+    a bag's or a video's, which carry no ground truth and no sequence.yaml, by rule 3 at the frame
+    rate of its time stamps, else rule 4. source: a FrameSource, or what ``open_frames`` opens."""
+    source = recording.open_frames(source)
+    if source.sequence is not None:
+        return exclusion(source.sequence, loop_threshold)
+    return _by_time(len(source), source.frame_rate, f"the time stamps of {source}",
+                    f"the {source.kind} has no frame times; pass --exclude N")
+
+
+def _by_time(n: int, frame_rate, where: str, fix: str) -> Exclusion:
+    """Rules 3 and 4: EXCLUDE_SECONDS at ``frame_rate`` (frames/s, from ``where``), else
+    EXCLUDE_FRACTION of the ``n`` frames within MIN_EXCLUDE..DEFAULT_EXCLUDE (``fix`` says how to choose)."""
+    if frame_rate is not None:
+        frames = int(round(EXCLUDE_SECONDS * float(frame_rate)))
         return Exclusion(frames, "frame rate", f"exclude {frames} frames: {EXCLUDE_SECONDS:g} s at the "
-                         f"{d['frame_rate']:g} frames/s of {sequence.DESCRIPTION_NAME} (no ground truth)")
+                         f"{frame_rate:g} frames/s of {where} (no ground truth)")
     frames = int(min(max(round(EXCLUDE_FRACTION * n), MIN_EXCLUDE), DEFAULT_EXCLUDE))
     return Exclusion(frames, "fraction", f"exclude {frames} frames: {EXCLUDE_FRACTION:.0%} of the {n} frames, "
-                     f"within {MIN_EXCLUDE}..{DEFAULT_EXCLUDE} (no ground truth, no frame_rate in "
-                     f"{sequence.DESCRIPTION_NAME}; write `exclude: N` or `frame_rate: FPS` there to choose)")
+                     f"within {MIN_EXCLUDE}..{DEFAULT_EXCLUDE} (no ground truth, {fix} to choose)")
 
 
 def partner_offsets(folder, loop_threshold: float = 0.5) -> tuple[np.ndarray, np.ndarray, int]:

@@ -1,4 +1,4 @@
-"""``python -m greenloop detect FOLDER``: argument parsing and printing only; the run is
+"""``python -m greenloop detect RECORDING``: argument parsing and printing only; the run is
 ``greenloop.detect`` (every method through its registry entry)."""
 from __future__ import annotations
 
@@ -6,6 +6,7 @@ import argparse
 import sys
 
 from greenloop import detect, exclusion, features
+from greenloop.datasets import recording
 from greenloop.methods import registry
 from greenloop.methods.dictionary import entry as dictionary
 from greenloop.methods.greenloop_seq import seqmatch, seqstream
@@ -76,7 +77,12 @@ def add_parser(sub) -> None:
     """The ``detect`` subcommand's arguments."""
     d = sub.add_parser("detect", help="stream a recording through a loop-closure detector and print its closures",
                        description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
-    d.add_argument("folder", metavar="SEQUENCE_FOLDER", help="sequence folder (its rgb/) or folder of .jpg/.png frames, any size")
+    d.add_argument("folder", metavar="RECORDING",
+                   help="sequence folder (its rgb/) or folder of .jpg/.png frames, any size; a ROS 1 .bag or ROS 2 bag "
+                        "folder (its camera topic: --topic); a video (" + " ".join(recording.VIDEO_SUFFIXES) + ")")
+    d.add_argument("--topic", default=None,
+                   help="a bag's camera topic (sensor_msgs/Image or CompressedImage); needed when the bag has several, "
+                        "which are listed when it is missing")
     d.add_argument("--method", default=seqmatch.DEFAULT_NAME, choices=list(registry.REGISTRY),
                    help=f"a registered detector (greenloop.methods.registry); default {seqmatch.DEFAULT_NAME}, "
                         f"the named default, which needs no model and no tuning")
@@ -105,7 +111,7 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     """Plan, print the header, stream, print the summary (``greenloop.detect``)."""
     p = detect.plan(args.folder, args.method, args.tuned, args.variant, args.threshold, args.step, args.exclude,
-                    **{k: getattr(args, k) for k in detect.OVERRIDES})
+                    args.topic, **{k: getattr(args, k) for k in detect.OVERRIDES})
     print("\n".join(p.lines), flush=True)
     print(detect.header(p, args.folder, args.index, args.candidates), flush=True)
     try:

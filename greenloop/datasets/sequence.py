@@ -452,12 +452,20 @@ def preprocess_image(img: np.ndarray, size=(32, 32), gray: bool = True, color: s
     return img
 
 
-def _read_one(path: Path, size, gray: bool) -> np.ndarray:
+def read_image(path) -> np.ndarray:
+    """One image file decoded as a camera delivers it: (H, W, 3) uint8 BGR (``cv2.imread``'s
+    IMREAD_COLOR; a gray file is repeated into 3 channels). The one decoder of image files
+    (greenloop.datasets.recording reads a folder's frames through it). Raises ValueError naming
+    an unreadable file."""
     img = cv2.imread(str(path), cv2.IMREAD_COLOR)
     if img is None:
         raise ValueError(f"cannot read image {path}: the file is missing, empty or not an image; "
                          f"replace or delete it")
-    return preprocess_image(img, size, gray)
+    return img
+
+
+def _read_one(path: Path, size, gray: bool) -> np.ndarray:
+    return preprocess_image(read_image(path), size, gray)
 
 
 def load_frames(folder, size=(32, 32), gray: bool = True, limit: int | None = None,
@@ -553,6 +561,21 @@ def _read_trajectory_file(path: Path, n_frames: int | None):
     if not path.is_file():
         raise FileNotFoundError(f"trajectory {path} not found: a sequence folder needs "
                                 f"CameraTrajectory.txt (TUM format) for pose ground truth")
+    t, poses = read_tum(path)
+    frame_ids = np.rint(t).astype(np.int64)
+    if n_frames is not None and len(frame_ids) != n_frames:
+        raise ValueError(f"{path} has {len(frame_ids)} poses but the sequence has {n_frames} frames: "
+                         f"use the trajectory that belongs to these images (or trim the frames to match)")
+    return frame_ids, poses
+
+
+def read_tum(path) -> tuple[np.ndarray, np.ndarray]:
+    """A TUM trajectory file ``t tx ty tz qx qy qz qw`` (``#`` comments, commas allowed), as written:
+    (t (N,) float64 as in the file (seconds, or frame numbers in CameraTrajectory.txt), poses
+    (N, 4, 4) float64 homogeneous, translation in the file's unit). ValueError naming a bad line."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"trajectory {path} not found: give a TUM file `t tx ty tz qx qy qz qw`")
     rows = []
     for lineno, line in enumerate(path.read_text().splitlines(), 1):
         line = line.strip()
@@ -577,11 +600,7 @@ def _read_trajectory_file(path: Path, n_frames: int | None):
     poses = np.tile(np.eye(4), (len(a), 1, 1))
     poses[:, :3, :3] = Rotation.from_quat(q).as_matrix()  # scalar-last (x, y, z, w), normalises
     poses[:, :3, 3] = a[:, 1:4]
-    frame_ids = np.rint(a[:, 0]).astype(np.int64)
-    if n_frames is not None and len(frame_ids) != n_frames:
-        raise ValueError(f"{path} has {len(frame_ids)} poses but the sequence has {n_frames} frames: "
-                         f"use the trajectory that belongs to these images (or trim the frames to match)")
-    return frame_ids, poses
+    return a[:, 0].copy(), poses
 
 
 def write_trajectory(path, frame_ids, poses) -> None:
