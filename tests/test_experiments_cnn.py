@@ -421,8 +421,7 @@ def test_speed_claim_is_the_benchs_table(monkeypatch):
     from greenloop.speed import bench
     monkeypatch.setattr(speed_claim, "Detector", lambda model, threshold, backend: backend)
     monkeypatch.setattr(speed_claim.sequence, "list_frames", lambda d: ["a.png"] * 500)
-    import cv2
-    monkeypatch.setattr(cv2, "imread", lambda p: np.zeros((6, 8, 3), np.uint8))
+    monkeypatch.setattr(speed_claim.sequence, "read_image", lambda p: np.zeros((6, 8, 3), np.uint8))
     asked = {}
     monkeypatch.setattr(bench, "bench_windows", lambda m, raw, dets, rounds: asked.setdefault("w", (len(raw), dets, rounds)) and
                         {"reference": {"frames_per_s": 10.0, "median_ms": 100.0},

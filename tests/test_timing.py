@@ -90,7 +90,7 @@ def test_decode_ms(tmp_path):
     d = timing.decode_ms(sorted(tmp_path.glob("*.png")))
     assert 0 < d["decode_ms_min"] <= d["decode_ms_median"] <= d["decode_ms_max"]
     (tmp_path / "bad.png").write_text("not an image")
-    with pytest.raises(ValueError, match="cannot decode"):
+    with pytest.raises(ValueError, match="cannot read image"):
         timing.decode_ms([tmp_path / "bad.png"])
 
 

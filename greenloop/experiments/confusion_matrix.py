@@ -115,7 +115,6 @@ def figure_misclassified(dataset, run: dict, labels, n: int = 6):
     was taken for (middle) and of its true spot (bottom), in colour from the dataset's frames.
     run: one ``cnn.run_seeds`` dict; labels: (N,) spots. Returns the figure, or None when the run
     misclassified no test frame."""
-    import cv2
     import matplotlib.pyplot as plt
 
     labels = np.asarray(labels)
@@ -130,7 +129,7 @@ def figure_misclassified(dataset, run: dict, labels, n: int = 6):
         f, p = int(test[w]), int(pred[w])
         for row, (k, what) in enumerate(((f, f"test frame {f}"), (middle[p], f"predicted: class {p + 1}"),
                                          (middle[labels[f]], f"true: class {labels[f] + 1}"))):
-            axes[row, col].imshow(cv2.cvtColor(cv2.imread(str(paths[k])), cv2.COLOR_BGR2RGB))
+            axes[row, col].imshow(sequence.read_image(paths[k])[..., ::-1])     # BGR -> RGB
             axes[row, col].set_title(f"{what}\n(frame {k})" if row else what, fontsize=8)
             axes[row, col].axis("off")
     fig.suptitle(f"Misclassified test frames (random split, seed {run['seed']}): the frame, the middle frame of the "

@@ -97,13 +97,12 @@ def figure_frames(paths, small: np.ndarray, pick, depth: np.ndarray | None = Non
     """The frames ``pick`` (indices) along the path: RGB as recorded from ``paths`` (top), the CNN's
     32x32 grayscale input from ``small`` ((N, 32, 32, 1) in [0, 1], middle) and, when given, ``depth``
     ((len(pick), H, W) metres, bottom). Returns the figure."""
-    import cv2
     import matplotlib.pyplot as plt
 
     rows = 2 if depth is None else 3
     fig, axes = plt.subplots(rows, len(pick), figsize=(2 * len(pick), 1.8 * rows), squeeze=False)
     for col, k in enumerate(pick):
-        axes[0, col].imshow(cv2.cvtColor(cv2.imread(str(paths[k])), cv2.COLOR_BGR2RGB))
+        axes[0, col].imshow(sequence.read_image(paths[k])[..., ::-1])         # BGR -> RGB
         axes[0, col].set_title(f"frame {k}", fontsize=9)
         axes[1, col].imshow(small[k, ..., 0], cmap="gray", vmin=0, vmax=1)
         if depth is not None:

@@ -319,9 +319,8 @@ def figure_accuracy(per_seed: pd.DataFrame, runs, revisit, queries, frames_per_s
 
 
 def _rgb(path):
-    import cv2
-
-    return cv2.cvtColor(cv2.imread(str(path), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+    """One frame file as (H, W, 3) uint8 RGB, for a figure."""
+    return sequence.read_image(path)[..., ::-1]
 
 
 def figure_examples(dataset, t: FirstTraversal, pred, right, examples: int, seed):

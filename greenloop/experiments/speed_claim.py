@@ -32,9 +32,7 @@ def stream_comparison(model, dataset, X: np.ndarray, window: int, repeats: int):
     Returns (table, timings, frame_shape): ``bench.stream_rows`` as a DataFrame; {'windows',
     'single', 'labels_equal'} the raw measurements (ms, frames/s); (H, W, 3) of a raw frame.
     """
-    import cv2
-
-    raw = [cv2.imread(str(p)) for p in sequence.list_frames(dataset)[: 3 * window]]
+    raw = [sequence.read_image(p) for p in sequence.list_frames(dataset)[: 3 * window]]
     dets = {b: Detector(model, None, backend=b) for b in BACKENDS}  # threshold None: count, declare nothing
     wins = bench.bench_windows(model, raw, dets, rounds=max(3, repeats // 10))
     single = bench.bench_single(model, raw, dets, n_ref=max(5, repeats // 4), n_ours=max(50, 5 * repeats))

@@ -35,7 +35,7 @@ import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
 from greenloop.methods.dictionary import cnn, spots  # noqa: E402
-from greenloop.datasets import sequence  # noqa: E402
+from greenloop.datasets import recording, sequence  # noqa: E402
 from greenloop.methods.dictionary.dictionary import LoopDetector  # noqa: E402
 from greenloop.methods.dictionary.stream import Detector, export_tflite, preprocess  # noqa: E402
 from greenloop.speed.timing import timed  # noqa: E402
@@ -63,10 +63,7 @@ def _load(dataset: Path):
     """(raw frames list for timing, u8 (N, 32, 32) preprocessed frames, y (N,), info dict)."""
     n_raw = 2 * WINDOW
     if dataset.is_dir():
-        paths = sequence.list_frames(dataset)
-        raw = [cv2.imread(str(p), cv2.IMREAD_COLOR) for p in paths[:n_raw]]
-        if any(r is None for r in raw):
-            raise ValueError(f"cannot read the first {n_raw} frames of {dataset}")
+        raw = recording.open_frames(dataset)[:n_raw].read()
         u8 = sequence.load_frames(dataset, dtype=np.uint8, progress=False)[..., 0]
         info = {"dataset": str(dataset), "random_frames": False, **sequence.folder_info(dataset)}
     else:

@@ -10,11 +10,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import cv2
 import numpy as np
 import pandas as pd
 
 from greenloop import evaluate
+from greenloop.datasets import sequence
 from greenloop.methods.greenloop_seq import seqmatch, seqstream
 from greenloop.speed import timing
 from greenloop.study import targets as goals
@@ -401,12 +401,10 @@ def timing_window(evalq, n_frames: int):
 
 
 def decode_window(paths, frames, start: int, stop: int):
-    """The decoded frames (cv2.imread, BGR) of described frames start..stop-1 and their paths."""
+    """The decoded frames ((H, W, 3) uint8 BGR, ``sequence.read_image``) of described frames start..stop-1
+    and their paths; ValueError naming a frame that cannot be decoded."""
     sel = [paths[int(i)] for i in np.asarray(frames)[start:stop]]
-    raw = [cv2.imread(str(p), cv2.IMREAD_COLOR) for p in sel]
-    if any(r is None for r in raw):
-        raise ValueError("a frame of the timed window cannot be decoded; check the sequence folder")
-    return raw, sel
+    return [sequence.read_image(p) for p in sel], sel
 
 
 def stream_checks(names, dets: dict, knobs: dict, descriptors: dict, S: dict, GT) -> dict:
