@@ -54,6 +54,7 @@ class FrameSource:
 
     def __init__(self, path, kind: str, names: list, stamps, decoder, topic=None, seq=None, index=None):
         self.path, self.kind, self.topic, self.sequence = Path(path), kind, topic, seq
+        self._given = os.fspath(path)                    # as given: "data/x/" prints as typed
         self._all_names, self._all_stamps, self._decoder = names, stamps, decoder
         self._index = np.arange(len(names), dtype=np.int64) if index is None else np.asarray(index, np.int64)
 
@@ -65,13 +66,13 @@ class FrameSource:
             f", topic {self.topic})" if self.topic else ")")
 
     def __str__(self) -> str:
-        """The recording as named in printouts: its path, and the topic of a bag."""
-        return os.fspath(self.path) + (f" (topic {self.topic})" if self.topic else "")
+        """The recording as named in printouts: its path as given, and the topic of a bag."""
+        return self._given + (f" (topic {self.topic})" if self.topic else "")
 
     def __getitem__(self, key) -> FrameSource:
         """A view of some frames: ``src[::step]``, ``src[a:b]`` or an (M,) index array."""
         sub = self._index[key] if isinstance(key, slice) else self._index[np.asarray(key, np.int64)]
-        return FrameSource(self.path, self.kind, self._all_names, self._all_stamps, self._decoder,
+        return FrameSource(self._given, self.kind, self._all_names, self._all_stamps, self._decoder,
                            self.topic, self.sequence, np.atleast_1d(sub))
 
     @property
@@ -121,15 +122,15 @@ def open_frames(path, topic: str | None = None) -> FrameSource:
     """The frames of a recording (module doc), indexed, none decoded yet.
 
     path: an image folder, a ``sequence.Sequence``, a ROS 1 .bag, a ROS 2 bag folder, a video file,
-        or a FrameSource (returned as it is). topic: the bag's image topic (needed when it has
+        or a FrameSource (returned as it is; reopened for another topic). topic: the bag's image topic (needed when it has
         several); ValueError when given for a folder or a video.
     Raises FileNotFoundError for a missing path, ValueError (listing the bag's image topics with
     their message counts) for a bag without the topic or with several and none chosen.
     """
     if isinstance(path, FrameSource):
-        return path
-    if isinstance(path, sequence.Sequence):
-        return _folder(path)
+        if topic in (None, path.topic):
+            return path
+        path = path.path                                 # another topic of the same bag
     if not Path(path).exists():
         raise FileNotFoundError(f"recording {path} does not exist: give a folder of images, a ROS bag or a video file")
     kind = kind_of(path)
@@ -155,7 +156,7 @@ def _folder(folder) -> FrameSource:
     paths = seq.frame_paths
     rate = seq.description["frame_rate"]
     stamps = None if rate is None else np.arange(len(paths), dtype=np.float64) / float(rate)
-    return FrameSource(seq.path, "folder", [p.name for p in paths], stamps, _FileDecoder(paths), seq=seq)
+    return FrameSource(seq, "folder", [p.name for p in paths], stamps, _FileDecoder(paths), seq=seq)
 
 
 # ------------------------------------------------------------- ROS bags
