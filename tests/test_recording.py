@@ -240,3 +240,10 @@ def test_detect_on_a_bag_and_a_video_declares_the_planted_revisit(tiny_sequence,
         assert "exclude 20 (frame rate)" in r.stdout and "120 frames from" in r.stdout
         found = _closures(r.stdout)
         assert found and all(f >= 80 and m == f - 80 for f, m in found), r.stdout
+
+
+def test_a_bag_whose_driver_left_header_stamps_unset_is_timed_by_its_log_times(tmp_path):
+    path = write_bag(tmp_path / "unset.bag", True, _frames(3, 4), [0.0, 1.0, 2.0])   # frame 0's stamp is 0
+    src = recording.open_frames(path)
+    np.testing.assert_allclose(src.stamps, [0.001, 1.001, 2.001], atol=1e-9)        # write_bag logs at stamp + 1 ms
+    assert src.names[1] == "1.001000"
