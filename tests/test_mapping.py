@@ -27,7 +27,7 @@ def test_rectangle_route_closes_and_walks_its_perimeter():
     gt = tj.rectangle_route(4, 6, 0.5, laps=2)
     assert np.allclose(gt[0], np.eye(4)) and np.allclose(gt[-1, :3, 3], 0, atol=1e-9)
     assert tj.distances(gt)[-1] == pytest.approx(2 * 2 * (4 + 6))
-    assert metrics.plane_axes(gt) == (0, 2)                  # x-z: camera axes, y down
+    assert tj.plane_axes(gt) == (0, 2)                  # x-z: camera axes, y down
     with pytest.raises(ValueError, match="step_m"):
         tj.rectangle_route(4, 6, 0)
 
@@ -56,6 +56,18 @@ def test_a_false_loop_wrecks_plain_lm_and_gnc_rejects_it(square):
     assert metrics.ate(gt, gnc.poses) == pytest.approx(true_only, rel=1e-3)
     cauchy = posegraph.optimize(odo, true + [false], "cauchy")  # a kernel down-weights, keeps some pull
     assert cauchy.weights[1] < 0.01 < 0.9 < cauchy.weights[0]
+
+
+def test_pose2_for_a_planar_robot_corrects_and_rejects_alike(square):
+    gt, odo, true, false = square
+    flat = tj.make_poses([[0, 0.3, 0], [0, -2.0, 0]], [[1, 0, 2], [-3, 0, 0.5]])   # turns about y only
+    assert np.allclose(tj.from_planar(tj.to_planar(flat, (0, 2)), (0, 2)), flat)
+    gnc = posegraph.optimize(odo, true + [false], "gnc", planar=True)
+    assert gnc.weights[1] < 1e-3 and gnc.weights[0] > 0.99
+    assert metrics.ate(gt, gnc.poses) < 0.15 * metrics.ate(gt, odo)
+    lifted = gnc.poses[:, 1, 3] - odo[:, 1, 3]                               # height stays the odometry's
+    assert np.allclose(lifted, 0, atol=1e-9)
+    assert metrics.ate(gt, posegraph.optimize(odo, true + [false], "lm", planar=True).poses) > metrics.ate(gt, odo)
 
 
 def test_a_direction_only_loop_fixes_rotation_and_weakly_translation(square):

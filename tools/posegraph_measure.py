@@ -9,7 +9,7 @@ resident memory is its own): the seconds to build and optimise, the peak RSS, th
 after and the loops kept (weight > 0.5).
 
     OMP_NUM_THREADS=1 PYTHONPATH=. .venv/bin/python tools/posegraph_measure.py [--poses 10000]
-        [--loops 200] [--false 0.2] [--methods lm gnc]
+        [--loops 200] [--false 0.2] [--methods lm gnc] [--planar]
 
 Numbers printed, not written: results/ holds the committed tables only.
 """
@@ -49,13 +49,13 @@ def problem(n_poses: int, n_loops: int, false: float, seed: int = 0):
 
 def measure(args_method):
     """One back end on the case, in this process: a dict of its numbers."""
-    (n_poses, n_loops, false), method = args_method
+    (n_poses, n_loops, false, planar), method = args_method
     gt, odo, loops, is_false = problem(n_poses, n_loops, false)
     t0 = time.perf_counter()
-    r = posegraph.optimize(odo, loops, method)
+    r = posegraph.optimize(odo, loops, method, planar=planar)
     seconds = time.perf_counter() - t0
     kept = r.weights > 0.5
-    return dict(method=method, poses=len(gt), loops=len(loops), false_loops=int(is_false.sum()),
+    return dict(method=method + (" Pose2" if planar else " Pose3"), poses=len(gt), loops=len(loops), false_loops=int(is_false.sum()),
                 seconds=round(seconds, 2), peak_rss_mib=round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
                 ate_odometry_m=round(metrics.ate(gt, odo), 3), ate_m=round(metrics.ate(gt, r.poses), 3),
                 true_kept=int((kept & ~is_false).sum()), false_kept=int((kept & is_false).sum()))
@@ -68,11 +68,12 @@ def main() -> None:
     ap.add_argument("--loops", type=int, default=200)
     ap.add_argument("--false", type=float, default=0.0, help="fraction of false loops among the loop factors")
     ap.add_argument("--methods", nargs="+", default=["lm", "gnc"])
+    ap.add_argument("--planar", action="store_true", help="Pose2 instead of Pose3")
     a = ap.parse_args()
     ctx = mp.get_context("spawn")
     for method in a.methods:
         with ctx.Pool(1, maxtasksperchild=1) as pool:
-            print(json.dumps(pool.map(measure, [((a.poses, a.loops, a.false), method)])[0]), flush=True)
+            print(json.dumps(pool.map(measure, [((a.poses, a.loops, a.false, a.planar), method)])[0]), flush=True)
 
 
 if __name__ == "__main__":

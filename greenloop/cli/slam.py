@@ -24,12 +24,15 @@ def add_parser(sub) -> None:
     s.add_argument("--back-end", default="gnc", choices=posegraph.METHODS,
                    help="gnc: graduated non-convexity, TLS (default); lm: plain Levenberg-Marquardt; "
                         "huber / cauchy: a robust kernel on the loop factors")
+    s.add_argument("--planar", action="store_true",
+                   help="a ground robot: optimise Pose2 in the odometry's plane (yaw only), keep its height, pitch, roll")
     s.set_defaults(func=run)
 
 
 def run(args) -> int:
     """Correct, then say what was written and, with ground truth, the errors before and after."""
-    c = slam.correct(args.recording, args.odometry, args.out, args.closures, args.weights, args.back_end)
+    c = slam.correct(args.recording, args.odometry, args.out, args.closures, args.weights, args.back_end,
+                     planar=args.planar)
     kept = int((c.result.weights > slam.KEPT).sum())
     skipped = f" ({c.skipped} rows of {args.closures} without a verified pose skipped)" if c.skipped else ""
     print(f"wrote {len(c.odometry)} corrected poses to {c.out} (back end {args.back_end}: {kept} of "

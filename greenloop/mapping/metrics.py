@@ -166,14 +166,6 @@ def associate(stamps_a, stamps_b, max_diff: float = 0.01) -> tuple[np.ndarray, n
     return (i_long, i_short) if swap else (i_short, i_long)
 
 
-def plane_axes(*trajectories) -> tuple[int, int]:
-    """The two coordinate axes (indices 0..2) of largest extent over the given (N, 4, 4) trajectories,
-    in index order: (0, 1) x-y or (0, 2) x-z for most robots (camera axes: y is down)."""
-    p = np.concatenate([np.asarray(t)[:, :3, 3] for t in trajectories if t is not None])
-    extent = np.ptp(p, axis=0)
-    return tuple(sorted(int(k) for k in np.argsort(-extent, kind="stable")[:2]))
-
-
 def plot_trajectories(ground_truth=None, odometry=None, corrected=None, loops=(), weights=None, ax=None):
     """A top-down figure: ground truth (black), odometry (grey dashed), corrected (blue), each loop
     (pairs (i, j), drawn between the corrected poses) coloured by its final weight (0 red .. 1
@@ -181,7 +173,7 @@ def plot_trajectories(ground_truth=None, odometry=None, corrected=None, loops=()
     Figure (a new one unless ``ax`` is given)."""
     import matplotlib.pyplot as plt
     fig, ax = (plt.subplots(figsize=(6, 6)) if ax is None else (ax.figure, ax))
-    a, b = plane_axes(ground_truth, odometry, corrected)
+    a, b = tj.plane_axes(ground_truth, odometry, corrected)
     styles = (("ground truth", ground_truth, dict(color="black", lw=1.5)),
               ("odometry", odometry, dict(color="0.5", ls="--", lw=1.2)),
               ("corrected", corrected, dict(color="tab:blue", lw=1.2)))

@@ -18,6 +18,11 @@ the two poses (the only scale at hand) and its translation sigma widened to
 max(``loop_trans_m``, ``direction_trans_per_m`` * that distance): the factor constrains the
 rotation as strongly as a metric loop and the translation weakly (tests/test_mapping.py holds this).
 
+Pose2 (``planar=True``, for a ground robot): the odometry is projected on the plane of its two
+axes of largest extent (``trajectory.to_planar``: position on those axes, yaw about their normal),
+the loops' relative poses likewise; the optimised planar poses are lifted back by moving each
+odometry pose by its planar correction, so its height, pitch and roll stay the odometry's.
+
 Back ends (:data:`METHODS`): ``lm`` plain Levenberg-Marquardt (every loop weight 1.0); ``gnc``
 graduated non-convexity with the truncated-least-squares loss (Yang, Antonante, Tzoumas, Carlone,
 RA-L 2020; ``gtsam.GncLMOptimizer``, the prior and odometry factors set as known inliers, GTSAM's
@@ -79,11 +84,46 @@ def _gtsam():
     return gtsam
 
 
-def _sigmas(rot_rad, trans_m):
-    """A Pose3 diagonal noise model: rotation sigma (radians) then translation sigma (metres) per axis
-    (GTSAM's tangent order)."""
-    gtsam = _gtsam()
-    return gtsam.noiseModel.Diagonal.Sigmas(np.array([rot_rad] * 3 + [trans_m] * 3, dtype=np.float64))
+class _Space(NamedTuple):
+    """Pose3 or Pose2 in GTSAM: axes None (Pose3) or the plane's two axes (Pose2, yaw about their
+    normal); the types, and the order of a noise model's sigmas."""
+    axes: tuple[int, int] | None
+
+    def pose(self, T):
+        """A (4, 4) pose (planar already for Pose2) as a GTSAM Pose3 / Pose2."""
+        g = _gtsam()
+        return g.Pose3(T) if self.axes is None else g.Pose2(*tj.to_planar(T, self.axes)[0])
+
+    def sigmas(self, rot_rad, trans_m):
+        """A diagonal noise model: Pose3 (r, r, r, t, t, t), Pose2 (t, t, r): GTSAM's tangent orders."""
+        s = [rot_rad] * 3 + [trans_m] * 3 if self.axes is None else [trans_m, trans_m, rot_rad]
+        return _gtsam().noiseModel.Diagonal.Sigmas(np.array(s, dtype=np.float64))
+
+    def prior(self, key, T, model):
+        """A prior factor on key at the (4, 4) pose T."""
+        g = _gtsam()
+        return (g.PriorFactorPose3 if self.axes is None else g.PriorFactorPose2)(key, self.pose(T), model)
+
+    def between(self, i, j, T, model):
+        """A between-factor measuring the (4, 4) relative pose T = inv(X_i) X_j."""
+        g = _gtsam()
+        return (g.BetweenFactorPose3 if self.axes is None else g.BetweenFactorPose2)(i, j, self.pose(T), model)
+
+    def flat(self, poses) -> np.ndarray:
+        """(N, 4, 4) poses as the graph sees them: as given (Pose3), projected on the plane (Pose2)."""
+        return poses if self.axes is None else tj.from_planar(tj.to_planar(poses, self.axes), self.axes)
+
+    def poses(self, values, odometry) -> np.ndarray:
+        """(N, 4, 4) optimised poses: Pose3 as they are; Pose2 lifted, each odometry pose moved by the
+        planar correction (its in-plane shift and yaw) that takes its projection to the optimum."""
+        g = _gtsam()
+        if self.axes is None:
+            m = g.utilities.extractPose3(values)
+            out = np.tile(np.eye(4), (len(m), 1, 1))
+            out[:, :3, :3], out[:, :3, 3] = m[:, :9].reshape(-1, 3, 3), m[:, 9:]
+            return out
+        opt = tj.from_planar(g.utilities.extractPose2(values), self.axes)
+        return opt @ tj.inverse(self.flat(odometry)) @ odometry
 
 
 def check_loops(loops, n_poses: int) -> list[Loop]:
@@ -114,62 +154,56 @@ def loop_measurement(loop: Loop, odometry: np.ndarray, noise: Noise) -> tuple[np
     return T, (np.radians(noise.loop_rot_deg), sigma_t)
 
 
-def build_graph(odometry, loops, noise: Noise = Noise(), kernel: str | None = None):
+def _space(odometry, planar: bool) -> _Space:
+    """Pose3, or Pose2 in the plane of the odometry's two axes of largest extent."""
+    return _Space(tj.plane_axes(odometry) if planar else None)
+
+
+def build_graph(odometry, loops, noise: Noise = Noise(), kernel: str | None = None, planar: bool = False):
     """The pose graph (module doc) of odometry (N, 4, 4) and loops (:class:`Loop` records).
 
     kernel: None (Gaussian loop factors) or a key of KERNEL_WIDTH (a robust kernel on the loop
-    factors). Returns (graph, initial values (the odometry), loop factor indices (L,) int): factor
-    0 is the prior, 1..N-1 the odometry, N.. the loops in their order.
+    factors). planar: Pose2 in the odometry's plane (module doc) instead of Pose3. Returns (graph,
+    initial values (the odometry), loop factor indices (L,) int): factor 0 is the prior, 1..N-1 the
+    odometry, N.. the loops in their order.
     """
     gtsam = _gtsam()
     odo = tj.check_poses(odometry, "odometry")
     loops = check_loops(loops, len(odo))
+    space = _space(odo, planar)
+    flat = space.flat(odo)
     graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
-    for k, T in enumerate(odo):
-        values.insert(k, gtsam.Pose3(T))
-    graph.add(gtsam.PriorFactorPose3(0, gtsam.Pose3(odo[0]), _sigmas(noise.prior, noise.prior)))
-    motion = tj.steps(odo) if len(odo) > 1 else np.zeros((0, 4, 4))
-    d = np.linalg.norm(motion[:, :3, 3], axis=1)
+    for k, T in enumerate(flat):
+        values.insert(k, space.pose(T))
+    graph.add(space.prior(0, flat[0], space.sigmas(noise.prior, noise.prior)))
+    motion = tj.steps(flat) if len(flat) > 1 else np.zeros((0, 4, 4))
+    d = np.linalg.norm(tj.steps(odo)[:, :3, 3], axis=1) if len(odo) > 1 else np.zeros(0)
     s_t = np.maximum(noise.odom_trans_min_m, noise.odom_trans_per_sqrt_m * np.sqrt(d))
     s_r = np.radians(np.maximum(noise.odom_rot_min_deg, noise.odom_rot_deg_per_sqrt_m * np.sqrt(d)))
     for k, M in enumerate(motion):
-        graph.add(gtsam.BetweenFactorPose3(k, k + 1, gtsam.Pose3(M), _sigmas(s_r[k], s_t[k])))
+        graph.add(space.between(k, k + 1, M, space.sigmas(s_r[k], s_t[k])))
     first = graph.size()
     for loop in loops:
         T, (sr, st) = loop_measurement(loop, odo, noise)
-        model = _sigmas(sr, st)
+        model = space.sigmas(sr, st)
         if kernel is not None:
             model = gtsam.noiseModel.Robust.Create(_kernel(kernel), model)
-        graph.add(gtsam.BetweenFactorPose3(loop.i, loop.j, gtsam.Pose3(T), model))
+        graph.add(space.between(loop.i, loop.j, space.flat(T[None])[0], model))
     return graph, values, np.arange(first, graph.size())
 
 
 def _kernel(name: str):
     """The GTSAM m-estimator of a KERNEL_WIDTH name at its width."""
-    gtsam = _gtsam()
-    m = gtsam.noiseModel.mEstimator
+    m = _gtsam().noiseModel.mEstimator
     make = {"huber": m.Huber, "cauchy": m.Cauchy}[name]
     return make.Create(KERNEL_WIDTH[name])
 
 
 def _lm_params():
     """Levenberg-Marquardt at GTSAM's defaults, silent, at most 100 iterations."""
-    gtsam = _gtsam()
-    p = gtsam.LevenbergMarquardtParams()
+    p = _gtsam().LevenbergMarquardtParams()
     p.setMaxIterations(100)
     return p
-
-
-def poses_of(values, n: int) -> np.ndarray:
-    """(n, 4, 4) poses of keys 0..n-1 of GTSAM values holding Pose3 only."""
-    gtsam = _gtsam()
-    m = gtsam.utilities.extractPose3(values)
-    if len(m) != n:
-        raise ValueError(f"expected {n} poses in the values, found {len(m)}")
-    out = np.tile(np.eye(4), (n, 1, 1))
-    out[:, :3, :3] = m[:, :9].reshape(n, 3, 3)
-    out[:, :3, 3] = m[:, 9:]
-    return out
 
 
 def _kernel_weights(graph, values, index, kernel: str) -> np.ndarray:
@@ -184,16 +218,17 @@ def _kernel_weights(graph, values, index, kernel: str) -> np.ndarray:
     return np.asarray(out, dtype=np.float64)
 
 
-def optimize(odometry, loops, method: str = "gnc", noise: Noise = Noise()) -> Result:
+def optimize(odometry, loops, method: str = "gnc", noise: Noise = Noise(), planar: bool = False) -> Result:
     """Optimise the pose graph of odometry (N, 4, 4) and loops (:class:`Loop` records) with one back
-    end of METHODS (module doc). Returns a :class:`Result`: the poses (N, 4, 4) and each loop's final
-    weight (L,): GNC's weight (about 0: rejected, 1: kept), the kernel's weight, or 1.0 (lm)."""
+    end of METHODS (module doc), in Pose3 or (``planar``) Pose2. Returns a :class:`Result`: the poses
+    (N, 4, 4) and each loop's final weight (L,): GNC's weight (about 0: rejected, 1: kept), the
+    kernel's weight, or 1.0 (lm)."""
     gtsam = _gtsam()
     if method not in METHODS:
         raise ValueError(f"unknown back end {method!r}: choose one of {', '.join(METHODS)}")
     kernel = method if method in KERNEL_WIDTH else None
-    graph, values, index = build_graph(odometry, loops, noise, kernel)
-    n = values.size()
+    odo = tj.check_poses(odometry, "odometry")
+    graph, values, index = build_graph(odo, loops, noise, kernel, planar)
     if method == "gnc" and len(index):
         params = gtsam.GncLMParams(_lm_params())
         params.setKnownInliers([int(k) for k in range(int(index[0]))])
@@ -203,7 +238,7 @@ def optimize(odometry, loops, method: str = "gnc", noise: Noise = Noise()) -> Re
     else:
         result = gtsam.LevenbergMarquardtOptimizer(graph, values, _lm_params()).optimize()
         weights = _kernel_weights(graph, result, index, kernel) if kernel else np.ones(len(index))
-    return Result(poses_of(result, n), weights, method)
+    return Result(_space(odo, planar).poses(result, odo), weights, method)
 
 
 def loops_from_poses(poses, pairs, metric: bool = True) -> list[Loop]:

@@ -103,14 +103,15 @@ def _errors(recording: Path, stamps, odometry, corrected) -> dict | None:
 
 
 def correct(recording, odometry, out, closures=None, weights_out=None, method: str = "gnc",
-            noise: posegraph.Noise = posegraph.Noise()) -> Corrected:
+            noise: posegraph.Noise = posegraph.Noise(), planar: bool = False) -> Corrected:
     """Optimise the recording's pose graph and write it.
 
     recording: the sequence folder (its CameraTrajectory.txt, if any, is the ground truth; its frame
     count, if it holds frames, must equal the odometry's poses). odometry: a TUM or KITTI file, one
     pose per frame. closures: a closures CSV (module doc) or None (odometry alone). out: the TUM
     file to write (the odometry's stamps). weights_out: the loop weights' CSV (default: ``out`` with
-    ``_loops.csv``). method: a back end of posegraph.METHODS. Returns :class:`Corrected`.
+    ``_loops.csv``). method: a back end of posegraph.METHODS. planar: Pose2 (posegraph's module doc).
+    Returns :class:`Corrected`.
     """
     recording = Path(recording)
     if not recording.is_dir():
@@ -121,7 +122,7 @@ def correct(recording, odometry, out, closures=None, weights_out=None, method: s
         raise ValueError(f"{odometry} holds {len(odo)} poses but {recording} has {len(frames)} frames: "
                          f"give one odometry pose per frame")
     loops, skipped = read_closures(closures) if closures is not None else ([], 0)
-    result = posegraph.optimize(odo, loops, method, noise)
+    result = posegraph.optimize(odo, loops, method, noise, planar)
     out = tj.write_tum(out, stamps, result.poses)
     weights_out = Path(weights_out) if weights_out else out.with_name(out.stem + "_loops.csv")
     write_weights(weights_out, posegraph.check_loops(loops, len(odo)), result.weights)

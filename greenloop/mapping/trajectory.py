@@ -95,6 +95,35 @@ def distances(poses) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
 
 
+def plane_axes(*trajectories) -> tuple[int, int]:
+    """The two coordinate axes (indices 0..2, ascending) of largest extent over the given (N, 4, 4)
+    trajectories (None ones skipped): (0, 1) x-y, or (0, 2) x-z for a camera's axes (y down)."""
+    p = np.concatenate([np.asarray(t)[:, :3, 3] for t in trajectories if t is not None])
+    extent = np.ptp(p, axis=0)
+    return tuple(sorted(int(k) for k in np.argsort(-extent, kind="stable")[:2]))
+
+
+def to_planar(poses, axes: tuple[int, int]) -> np.ndarray:
+    """(N, 4, 4) poses (or relative poses) -> (N, 3) planar (u, v, theta): the position's components
+    on the axes (a, b), and the yaw theta (radians) about n = e_a x e_b, the angle of R e_a within
+    the plane. Exact for motion that rotates about n only."""
+    p = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
+    a, b = axes
+    return np.column_stack([p[:, a, 3], p[:, b, 3], np.arctan2(p[:, b, a], p[:, a, a])])
+
+
+def from_planar(planar, axes: tuple[int, int]) -> np.ndarray:
+    """(N, 3) planar (u, v, theta) -> (N, 4, 4) poses rotating by theta about n = e_a x e_b, at
+    (u, v) on the axes (a, b) and 0 on the third axis (the inverse of :func:`to_planar` there)."""
+    q = np.asarray(planar, dtype=np.float64).reshape(-1, 3)
+    a, b = axes
+    n = np.cross(np.eye(3)[a], np.eye(3)[b])
+    out = np.tile(np.eye(4), (len(q), 1, 1))
+    out[:, :3, :3] = _axis_rotations(n, q[:, 2])
+    out[:, a, 3], out[:, b, 3] = q[:, 0], q[:, 1]
+    return out
+
+
 def _axis_rotations(axis, angles) -> np.ndarray:
     """(M, 3, 3) rotations by ``angles`` (M,) radians about the unit ``axis`` (3,)."""
     axis = np.asarray(axis, dtype=np.float64)
