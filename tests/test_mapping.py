@@ -171,6 +171,10 @@ def test_rpe_pairs_in_metres_follow_the_travelled_distance():
     assert np.all(np.diff(pairs, axis=1) == 8) and pairs[0, 0] == 8 and len(pairs) == 11
     allp = metrics.rpe_pairs(line, 1.0, "m", all_pairs=True)
     assert len(allp) == 93 and np.all(allp[:, 1] - allp[:, 0] == 8)
+    slow = line.copy()
+    slow[:, :3, 3] *= 0.5                                   # the estimate travels half as far
+    assert metrics.rpe(line, slow, 1.0, "m").pairs == 5                              # evo: pairs along the estimate
+    assert metrics.rpe(line, slow, 1.0, "m", pairs_from_reference=True).pairs == 11
     with pytest.raises(ValueError, match="no pair"):
         metrics.rpe_pairs(line, 50.0, "m")
     with pytest.raises(ValueError, match="unit"):

@@ -12,8 +12,9 @@ Definitions (M. Grupp, evo, github.com/MichaelGrupp/evo: ``core/metrics.py``, ``
   reference, P the estimate); translation error ``||E[:3, 3]||`` metres, rotation error the angle
   of ``E[:3, :3]`` (degrees); the RMSE over the pairs. Pairs (evo's ``filters``): a delta in frames,
   (0, d), (d, 2d), ... (``all_pairs``: every (i, i + d)); a delta in metres, consecutive indices at
-  which the reference's travelled distance since the last one first reaches ``delta``
-  (``all_pairs``: for each i, the j whose distance from i is nearest ``delta``, within 10 %).
+  which the travelled distance since the last one first reaches ``delta`` (``all_pairs``: for each
+  i, the j whose distance from i is nearest ``delta``, within 10 %), the distance travelled along
+  the estimate unless ``pairs_from_reference`` (evo's default, its ``--pairs_from_reference``).
 - **Association** by timestamps (evo's ``matching_time_indices``): each stamp of the shorter
   trajectory to the nearest of the other's, kept within ``max_diff``.
 """
@@ -92,10 +93,10 @@ def end_point_error(reference, estimate) -> float:
     return float(np.linalg.norm(moved[:3, 3] - ref[-1, :3, 3]))
 
 
-def rpe_pairs(reference, delta: float, unit: str = "frames", all_pairs: bool = False) -> np.ndarray:
-    """(P, 2) int index pairs of the RPE (module doc) from the reference (N, 4, 4): delta frames
+def rpe_pairs(poses, delta: float, unit: str = "frames", all_pairs: bool = False) -> np.ndarray:
+    """(P, 2) int index pairs of the RPE (module doc) along a trajectory (N, 4, 4): delta frames
     (an integer >= 1) or metres (> 0) of travelled distance; ValueError when none."""
-    ref = tj.check_poses(reference, "reference")
+    ref = tj.check_poses(poses, "poses")
     n = len(ref)
     if unit == "frames":
         if delta != int(delta) or delta < 1:
@@ -134,11 +135,13 @@ def _metre_pairs(dist: np.ndarray, delta: float, all_pairs: bool) -> np.ndarray:
     return np.column_stack([ids[:-1], ids[1:]]) if len(ids) > 1 else np.zeros((0, 2))
 
 
-def rpe(reference, estimate, delta: float = 1, unit: str = "frames", all_pairs: bool = False) -> RPE:
+def rpe(reference, estimate, delta: float = 1, unit: str = "frames", all_pairs: bool = False,
+        pairs_from_reference: bool = False) -> RPE:
     """RPE (module doc) of estimate against reference, both (N, 4, 4), over pairs ``delta`` frames or
-    metres apart (:func:`rpe_pairs`): translation RMSE (metres) and rotation RMSE (degrees)."""
+    metres apart (:func:`rpe_pairs` of the estimate, or of the reference when
+    ``pairs_from_reference``): translation RMSE (metres) and rotation RMSE (degrees)."""
     ref, est = _pair(reference, estimate)
-    p = rpe_pairs(ref, delta, unit, all_pairs)
+    p = rpe_pairs(ref if pairs_from_reference else est, delta, unit, all_pairs)
     q_rel = tj.relative(ref[p[:, 0]], ref[p[:, 1]])
     p_rel = tj.relative(est[p[:, 0]], est[p[:, 1]])
     e = tj.relative(q_rel, p_rel)

@@ -58,8 +58,13 @@ class Loop(NamedTuple):
 
 
 class Noise(NamedTuple):
-    """The graph's noise model (module doc): odometry sigmas per metre of step with floors, loop
-    sigmas, the widening of a direction-only loop's translation, the prior's sigma."""
+    """The graph's noise model (module doc), standard deviations per axis. Odometry: translation
+    ``odom_trans_per_sqrt_m`` metres and rotation ``odom_rot_deg_per_sqrt_m`` degrees times the square
+    root of the step's metres, floored at ``odom_trans_min_m`` / ``odom_rot_min_deg``; generous on
+    purpose: GNC's inlier test judges a loop by its residual against these, and an odometry sigma
+    below its real drift makes true loops look like outliers. Loops: ``loop_trans_m`` metres,
+    ``loop_rot_deg`` degrees; a direction-only loop's translation: ``direction_trans_per_m`` times the
+    odometry's distance between its poses. ``prior``: pose 0's sigma (radians and metres)."""
     odom_trans_per_sqrt_m: float = 0.1
     odom_rot_deg_per_sqrt_m: float = 3.0
     odom_trans_min_m: float = 0.01
