@@ -186,10 +186,11 @@ def plot_trajectories(ground_truth=None, odometry=None, corrected=None, loops=()
     base = corrected if corrected is not None else odometry
     w = np.ones(len(loops)) if weights is None else np.asarray(weights, dtype=np.float64)
     cmap = plt.get_cmap("RdYlGn")
-    for (i, j, *_), wk in zip(loops, w):
+    for k, ((i, j, *_), wk) in enumerate(zip(loops, w)):
         if base is not None:
             p = np.asarray(base)[[int(i), int(j)], :3, 3]
-            ax.plot(p[:, a], p[:, b], color=cmap(float(np.clip(wk, 0, 1))), lw=0.8, alpha=0.8)
+            ax.plot(p[:, a], p[:, b], color=cmap(float(np.clip(wk, 0, 1))), lw=0.8, alpha=0.8,
+                    label="loops (weight: red 0 .. green 1)" if k == 0 else None)
     ax.set_xlabel(f"{'xyz'[a]} (m)")
     ax.set_ylabel(f"{'xyz'[b]} (m)")
     ax.set_aspect("equal", adjustable="datalim")
