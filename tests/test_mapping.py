@@ -115,6 +115,25 @@ def test_inject_false_loops_adds_the_fraction_far_apart(square):
         posegraph.inject_false_loops(many, len(gt), 1.0, seed=0)
 
 
+def test_gnc_holds_the_true_loops_result_over_the_robustness_curve():
+    """Two laps, 8 true loops between them, false loops injected at 10-50 % of the loop factors:
+    GNC keeps every true loop, drops every false one, and ends where the true loops alone end; plain
+    LM ends worse than the odometry at every fraction."""
+    gt = tj.rectangle_route(10, 10, 0.1, laps=2)
+    n, lap = len(gt), len(gt) // 2
+    odo = tj.simulate_odometry(gt, seed=2)
+    true = posegraph.loops_from_poses(gt, [(lap + k, k) for k in range(20, lap - 20, 50)])
+    assert len(true) == 8
+    alone = metrics.ate(gt, posegraph.optimize(odo, true, "gnc").poses)
+    assert alone < 0.1 * metrics.ate(gt, odo)
+    for fraction in (0.1, 0.3, 0.5):
+        loops, is_false = posegraph.inject_false_loops(true, n, fraction, seed=0, positions=gt[:, :3, 3])
+        gnc = posegraph.optimize(odo, loops, "gnc")
+        assert np.all(gnc.weights[is_false] < 0.01) and np.all(gnc.weights[~is_false] > 0.99)
+        assert metrics.ate(gt, gnc.poses) == pytest.approx(alone, rel=1e-3)
+        assert metrics.ate(gt, posegraph.optimize(odo, loops, "lm").poses) > metrics.ate(gt, odo)
+
+
 def _random_poses(n, seed):
     rng = np.random.default_rng(seed)
     return tj.make_poses(rng.normal(0, 0.5, (n, 3)), rng.normal(0, 3, (n, 3)))
