@@ -26,13 +26,15 @@ odometry pose by its planar correction, so its height, pitch and roll stay the o
 Back ends (:data:`METHODS`): ``lm`` plain Levenberg-Marquardt (every loop weight 1.0); ``gnc``
 graduated non-convexity with the truncated-least-squares loss (Yang, Antonante, Tzoumas, Carlone,
 RA-L 2020; ``gtsam.GncLMOptimizer``, the prior and odometry factors set as known inliers, GTSAM's
-default inlier threshold: a factor's cost 0.5 r^T Sigma^-1 r below 0.5 chi2_6(0.99)), its final
-weights 0..1 per loop; ``huber``, ``cauchy`` a robust kernel on the loop factors with plain LM, the
-weight reported being the kernel's weight at the final residual (labelled as such: a kernel keeps
-every loop's pull, down-weighted, where GNC's TLS drops a rejected one). Not built here: Kimera-RPGO's
-PCM (pairwise consistency of the loops, a maximum clique, before optimisation) and switchable
-constraints / DCS (GTSAM's ``mEstimator.DCS`` at Phi = 1 rejected the true loop of the square test:
-the drifted odometry's start leaves its residual large).
+default inlier threshold: a factor's cost 0.5 r^T Sigma^-1 r below 0.5 chi2_d(0.99), d = 6 for Pose3,
+3 for Pose2), its final weights 0..1 per loop; ``huber``, ``cauchy`` a robust kernel on the loop
+factors with plain LM, the weight reported being the kernel's weight at the final residual (labelled
+as such: a kernel keeps every loop's pull, down-weighted, where GNC's TLS drops a rejected one).
+
+Not built here: Kimera-RPGO's PCM (each loop checked against the odometry between its ends, then
+pairs of loops for mutual consistency, the largest consistent set kept by a maximum clique, before
+optimisation) and switchable constraints / DCS (GTSAM's ``mEstimator.DCS`` at Phi = 1 rejected the
+true loop of the square test: the drifted odometry's start leaves its residual large).
 """
 from __future__ import annotations
 
