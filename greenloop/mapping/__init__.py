@@ -7,6 +7,9 @@
                 false loops injected for the robustness curve
 ``metrics``     ATE after SE(3) Umeyama alignment, the end-point error, RPE (evo's definitions,
                 written here: evo is GPL-3.0), timestamp association, a top-down trajectory plot
+``slam``        ``python -m greenloop slam``'s work: an odometry file and a closures CSV in, the
+                corrected TUM trajectory and each loop factor's weight out, errors against the
+                recording's ground truth
 
 Poses everywhere are camera-to-world (or body-to-world) homogeneous matrices, metres and radians,
 as ``greenloop.datasets.sequence.read_trajectory`` returns them.
