@@ -43,6 +43,8 @@ LAYERS: tuple[Layer, ...] = (
           "results on disk: tables, figures, JSON, manifests and their provenance"),
     Layer("truth", ("groundtruth", "exclusion", "evaluate"),
           "the one definition of a loop, the one exclusion rule, scoring against them"),
+    Layer("mapping", ("mapping",),
+          "odometry and closures to a corrected trajectory: SE(3) poses, the pose graph (GTSAM), ATE / RPE"),
     Layer("descriptors", ("backbones", "similarity", "features"),
           "CNN ports and weights, similarity and whitening, whole-image descriptors"),
     Layer("methods", ("methods",),

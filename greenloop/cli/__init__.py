@@ -14,9 +14,9 @@ import sys
 
 os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
 
-from greenloop.cli import bench, data, detect, import_gt, layers, notebook_params, results, sweep  # noqa: E402
+from greenloop.cli import bench, data, detect, import_gt, layers, notebook_params, results, slam, sweep  # noqa: E402
 
-COMMANDS = (detect, import_gt, data, sweep, notebook_params, results, bench, layers)
+COMMANDS = (detect, slam, import_gt, data, sweep, notebook_params, results, bench, layers)
 
 
 def build_parser() -> argparse.ArgumentParser:

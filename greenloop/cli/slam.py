@@ -1,0 +1,44 @@
+"""``python -m greenloop slam RECORDING --odometry FILE``: argument parsing and printing only; the work
+is ``greenloop.mapping.slam.correct``."""
+from __future__ import annotations
+
+from greenloop.mapping import posegraph, slam
+
+
+def add_parser(sub) -> None:
+    """The ``slam`` subcommand's arguments."""
+    s = sub.add_parser("slam", help="correct a recording's odometry with its loop closures (a robust pose graph)",
+                       description="Build a pose graph of the odometry (one pose per frame) and the loop "
+                                   "closures, optimise it (GTSAM; default GNC with the odometry as known "
+                                   "inliers), write the corrected trajectory (TUM) and each loop factor's "
+                                   "final weight (CSV); print the ATE when the folder has CameraTrajectory.txt.")
+    s.add_argument("recording", metavar="RECORDING", help="the sequence folder (its CameraTrajectory.txt is the ground truth)")
+    s.add_argument("--odometry", required=True, metavar="FILE", help="odometry poses, TUM or KITTI, one per frame")
+    s.add_argument("--closures", default=None, metavar="CSV",
+                   help="loop closures: query (or frame), match, rx ry rz (rotation vector, rad), tx ty tz (m) of "
+                        "inv(T_query) T_match, metric (1: metric translation, 0: direction only); detect's "
+                        "--matches file with these columns (rows with closure 0 are skipped)")
+    s.add_argument("--out", required=True, metavar="TRAJ.tum", help="the corrected trajectory to write (TUM)")
+    s.add_argument("--weights", default=None, metavar="CSV",
+                   help="each loop factor's final weight (default: beside --out, *_loops.csv)")
+    s.add_argument("--back-end", default="gnc", choices=posegraph.METHODS,
+                   help="gnc: graduated non-convexity, TLS (default); lm: plain Levenberg-Marquardt; "
+                        "huber / cauchy: a robust kernel on the loop factors")
+    s.add_argument("--planar", action="store_true",
+                   help="a ground robot: optimise Pose2 in the odometry's plane (yaw only), keep its height, pitch, roll")
+    s.set_defaults(func=run)
+
+
+def run(args) -> int:
+    """Correct, then say what was written and, with ground truth, the errors before and after."""
+    c = slam.correct(args.recording, args.odometry, args.out, args.closures, args.weights, args.back_end,
+                     planar=args.planar)
+    kept = int((c.result.weights > slam.KEPT).sum())
+    skipped = f" ({c.skipped} rows of {args.closures} without a verified pose skipped)" if c.skipped else ""
+    print(f"wrote {len(c.odometry)} corrected poses to {c.out} (back end {args.back_end}: {kept} of "
+          f"{len(c.loops)} loop factors kept{skipped}); loop weights to {c.weights_out}")
+    if c.errors:
+        o, k = c.errors["odometry"], c.errors["corrected"]
+        print(f"ATE (RMSE after SE(3) alignment): odometry {o['ate_m']:.3f} m, corrected {k['ate_m']:.3f} m; "
+              f"end-point error: odometry {o['end_point_m']:.3f} m, corrected {k['end_point_m']:.3f} m")
+    return 0
