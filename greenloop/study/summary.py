@@ -30,7 +30,7 @@ import re
 from pathlib import Path
 
 from greenloop.report import fill_block
-from greenloop.study import provenance
+from greenloop.study import convergence, provenance
 from greenloop.util.files import write_atomic
 
 DASH = "–"
@@ -306,10 +306,12 @@ def paper_detector_cells(folder: Path) -> tuple[list[str], str, dict]:
     fps, n3 = speed_row(folder)
     acc, row, fps = acc or {}, row or {}, fps or {}
     accuracy = DASH if num(acc.get("acc_mean_%")) == DASH else (
-        f"{num(acc.get('acc_mean_%'))} ± {num(acc.get('acc_std_%'))}")
+        f"{num(acc.get('acc_mean_%'))} ± {num(acc.get('acc_std_%'))}; {num(acc.get('acc_median_converged_%'))}")
+    accuracy = accuracy.removesuffix(f"; {DASH}")
     precision, recall = closure_rates(row)
     pair_p, pair_r = pair_rates(row.get("scored_on"))
-    cells = [name(folder), accuracy, num(acc.get("seeds")), num(acc.get("converged_seeds")),
+    conv = convergence.spot_cnn_convergence(folder, T1, SPOT_FRAMES) if acc else None
+    cells = [name(folder), accuracy, num(acc.get("seeds")), DASH if conv is None else conv.text(),
              num(row.get("threshold")), num(row.get("closures_declared")), num(row.get("closures_false")),
              percent(precision), percent(recall), num(pair_p), num(pair_r), num(fps.get("this run"))]
     return cells, n1 + n2 + n3, {"acc": num(acc.get("paper_acc_%")), "fps": num(fps.get("paper"))}
@@ -318,7 +320,7 @@ def paper_detector_cells(folder: Path) -> tuple[list[str], str, dict]:
 def paper_detector(results_dirs) -> str:
     """Section 2: the main paper's detector (spot CNN + dictionary at tau) per dataset, and a row
     "paper" with the paper's accuracy (L = 60) and frames/s as the folders' tables give them."""
-    head = ["dataset", f"CNN accuracy, L = {num(SPOT_FRAMES)} (%, mean ± sd)", "seeds", "converged", "τ",
+    head = ["dataset", f"CNN accuracy, L = {num(SPOT_FRAMES)} (%, mean ± sd; median of the converged seeds)", "seeds", "converged", "τ",
             "closures declared", "closures false", "closure precision %", "closure recall %",
             "pair precision %", "pair recall %", "frames/s"]
     rows, notes, paper = [], "", {"acc": [], "fps": []}
@@ -333,7 +335,7 @@ def paper_detector(results_dirs) -> str:
     rows.append(["paper"] + [paper_cell("acc")] + [DASH] * 9 + [paper_cell("fps")])
     return ("\n## 2. The main paper's detector as a loop-closure detector\n\n"
             "Accuracy: `01_spot_grouping/table1.csv` (the spot CNN's classification accuracy over its seeds; "
-            "converged: seeds whose final training accuracy reached the notebook's convergence threshold). "
+            f"converged, as the verdict counts it: {convergence.CONVERGED['spot CNN']}). "
             "τ and closures: the `13_leaderboard/leaderboard.csv` row whose method starts with "
             f"\"{MAIN_PAPER}\" (τ: its threshold, a count of frames classified as one spot; closure precision "
             "and recall as in section 1; pair precision and recall: its scored_on note's, over pairs of "
