@@ -87,7 +87,7 @@ def spot_cnn_convergence(folder: Path, run: str, frames_per_spot=None) -> Conver
         training = _epochs(folder, run, r.get("epochs_min"), r.get("epochs_max"))
         low = r.get("final_train_acc_min_pct")
         return Convergence(int(r.converged_seeds), int(r.seeds),
-                           training + ("" if low is None else f"; final training accuracy from {fmt(low)} %"))
+                           training + ("" if low is None else f"; lowest final training accuracy {fmt(low)} %"))
     t = read_table(folder, "02_training_over_seeds/per_seed.csv")
     if t is None:
         return None

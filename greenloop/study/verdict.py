@@ -79,7 +79,7 @@ def converged_median(values: pd.Series, flags: pd.Series, unit: str = "") -> tup
     med = float(conv.median()) if len(conv) else None
     head = (f"median of the converged seeds {_g(med)}{unit}" if med is not None
             else f"no converged seed (median of all {_g(values.median())}{unit})")
-    return f"{head}, seeds [{_g(values.min())}, {_g(values.max())}]{unit}", med
+    return f"{head}, all seeds [{_g(values.min())}, {_g(values.max())}]{unit}", med
 
 
 def rank_verdict(claimed: str, arms: dict[str, tuple[int, float, float]]) -> str:
@@ -162,7 +162,7 @@ def confusion(folder: Path):
     cell, med = converged_median(share, converged_flags(folder, t.seed), " %")
     conv = spot_cnn_convergence(folder, "02_training_over_seeds") or Convergence(0, len(t), "02 not run")
     text = (f"{between(t.misclassified.min(), t.misclassified.max())} of {int(t.test_frames.iloc[0])} "
-            f"misclassified; share {cell}; {conv.text()}")
+            f"misclassified; share: {cell}; {conv.text()}")
     return text, value_verdict(100 * 10 / 452, med, conv, higher_is_better=False)
 
 
