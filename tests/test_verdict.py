@@ -55,6 +55,17 @@ def test_the_rules_printed_are_the_rules_judged():
     assert all(f"{k}: {v}" in verdict.RULES for k, v in verdict.CONVERGED.items())
 
 
+@pytest.mark.parametrize("lo, hi, word", [(1.74, 10.86, verdict.HOLDS), (-9.0, -0.5, verdict.FAILS),
+                                          (0.0, 0.0, f"{verdict.UNRESOLVED} (tie)"),
+                                          (-61.19, 0.0, f"{verdict.UNRESOLVED} (uninformative)"),
+                                          (0.0, 78.05, f"{verdict.UNRESOLVED} (uninformative)"),
+                                          (-5.43, 8.64, f"{verdict.UNRESOLVED} (the paired interval holds 0)")])
+def test_a_paired_order_calls_a_tie_a_tie_and_a_bound_on_zero_uninformative(lo, hi, word):
+    """A ten-block bootstrap's bound landing on exactly 0 resolves nothing, either way; the rule is printed."""
+    assert verdict.paired_verdict(lo, hi) == word
+    assert "(tie) where both ends are exactly 0" in verdict.RULES and "(uninformative)" in verdict.RULES
+
+
 def spot_cnn_run(folder: Path, converged=(True,) * 5, epochs=200, dictionary_rows=1, precision=95.0):
     """02's per_seed.csv (seed 4 stopped early at 80 % training accuracy: converged by the flag), 03's
     errors, 04's table3 and 13's dictionary rows, with 02's and 13's manifests (same L, epochs)."""

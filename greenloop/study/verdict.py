@@ -50,7 +50,10 @@ RULES = (
     f"not resolved: a value from fewer than {MIN_SEEDS} trained seeds; an order with fewer than {MIN_SEEDS} seeds per "
     f"arm, overlapping seed ranges, or single values without spread (with 5 seeds per arm, separate ranges are a "
     f"one-sided Mann-Whitney U of 0, p = 1/252). not testable here: networks without ImageNet weights here, or data "
-    f"the folder lacks. Converged, per model family: "
+    f"the folder lacks. A claimed order read from a paired interval (a minus b on the same queries): "
+    f"holds / does not hold where it excludes 0; {UNRESOLVED} ({targets.TIE}) where both ends are exactly 0, "
+    f"({targets.UNINFORMATIVE}) where one end lands exactly on 0 (a bootstrap over few blocks). "
+    f"Converged, per model family: "
     + "; ".join(f"{k}: {v}" for k, v in CONVERGED.items()) + ".")
 
 
@@ -98,6 +101,16 @@ def rank_verdict(claimed: str, arms: dict[str, tuple[int, float, float]]) -> str
     if any(v[1] > hi for v in others.values()):
         return FAILS
     return f"{UNRESOLVED} (seed ranges overlap)"
+
+
+def paired_verdict(lo: float, hi: float) -> str:
+    """Verdict on a claimed "a above b" from the paired interval [lo, hi] of a minus b (points, the
+    same queries): holds / does not hold where it excludes 0; else not resolved, saying whether it is
+    a tie or uninformative (``targets.paired_word``'s one rule) or holds 0 inside."""
+    word = targets.paired_word(lo, hi)
+    if word == targets.RESOLVED:
+        return HOLDS if lo > 0 else FAILS
+    return f"{UNRESOLVED} ({'the paired interval holds 0' if word == targets.NOT_RESOLVED else word})"
 
 
 def _seeds_range(n, lo, hi) -> str:
