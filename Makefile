@@ -30,7 +30,6 @@ export PYTHONUNBUFFERED := 1
 
 NOTEBOOKS := $(sort $(wildcard notebooks/[0-9][0-9]_*.ipynb))
 EXECUTED  := $(patsubst notebooks/%.ipynb,$(RESULTS)/%.ipynb,$(NOTEBOOKS))
-HTML      := $(EXECUTED:.ipynb=.html)
 SOURCES   := $(wildcard greenloop/*.py greenloop/*/*.py)
 STAMP     := $(VENV)/.installed
 SYNTHETIC := data/synthetic-greenhouse
@@ -126,7 +125,9 @@ endif
 
 # the tables across the committed results folders; `make quick` (a first look) leaves them alone
 CROSS ?= results/datasets.md results/coverage.md results/verdict.md results/PROVENANCE.md results/summary.md
-all: $(HTML) $(RESULTS)/tables.md $(CROSS) ## run every notebook into results/, render HTML, assemble results/tables.md
+# The executed notebooks and their tables are the record; their rendered pages are not committed: `make book`
+# builds them into build/ from the executed notebooks (nothing re-executed).
+all: $(EXECUTED) $(RESULTS)/tables.md $(CROSS) ## run every notebook into results/, assemble results/tables.md (pages: make book)
 
 # One table across every dataset that has results: results/ (synthetic) and results/<name>/.
 DATASET_RESULTS := results $(filter-out results/quick,$(patsubst %/07_feature_baselines/,%,$(wildcard results/*/07_feature_baselines/)))
@@ -204,10 +205,6 @@ $(RESULTS)/%.ipynb: notebooks/%.ipynb $(SOURCES) $(DATA_DEP) $(wildcard $(DATASE
 	@mv $(@D)/.tmp-$*.ipynb $@
 	@rm -f $(@D)/.tmp-$*.yaml $(@D)/.tmp-$*.args
 
-$(RESULTS)/%.html: $(RESULTS)/%.ipynb
-	$(BIN)/jupyter nbconvert --to html --log-level WARN --output-dir $(@D) --output .tmp-$* $<
-	@mv $(@D)/.tmp-$*.html $@
-
 # results/tables.md also holds results/coverage.md, which every dataset's run may rewrite
 $(RESULTS)/tables.md: $(EXECUTED) $(wildcard $(RESULTS)/coverage.md)
 	$(BIN)/python -m greenloop tables $(RESULTS)
@@ -275,4 +272,4 @@ test: $(VENV)/.timm browser | $(STAMP) ## run the test suite (unit tests and eve
 	$(TEST_THREADS) $(BIN)/python -m pytest -q -n auto --dist worksteal tests
 
 clean-results: ## remove executed notebooks and tables (keeps the model cache)
-	rm -rf $(EXECUTED) $(HTML) $(RESULTS)/tables.md
+	rm -rf $(EXECUTED) $(RESULTS)/tables.md

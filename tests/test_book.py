@@ -16,9 +16,10 @@ CHROMIUM, DRIVER = shutil.which("chromium"), shutil.which("chromedriver")
 PNG = ("iVBORw0KGgoAAAANSUhEUgAAAAIAAAACCAIAAAD91JpzAAAAFklEQVR4nGP8z8DAwMDAxMDAwMDAAAANHQEDasKb6QAAAABJRU5ErkJggg==")
 
 
-def executed(folder: Path, stem: str, dataset: str, html: bool) -> None:
+def executed(folder: Path, stem: str, dataset: str, stale: bool = False) -> None:
     """A small executed notebook (a title, a figure output) with the manifest its folder's notebooks
-    write; ``html``: also the page nbconvert would have rendered beside it."""
+    write; ``stale``: also an old rendered page beside it, which the book must not read (results
+    folders hold no rendered pages: the book renders the .ipynb)."""
     nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_markdown_cell(f"# {stem} on {dataset}"),
                                          nbformat.v4.new_code_cell("fig", outputs=[nbformat.v4.new_output(
                                              "display_data", data={"image/png": PNG, "text/plain": "<Figure>"})])])
@@ -26,19 +27,18 @@ def executed(folder: Path, stem: str, dataset: str, html: bool) -> None:
     nbformat.write(nb, folder / f"{stem}.ipynb")
     (folder / stem).mkdir(exist_ok=True)
     (folder / stem / "manifest.json").write_text(json.dumps({"dataset": f"data/{dataset}"}))
-    if html:
-        (folder / f"{stem}.html").write_text(f"<html><body><h1>{stem} on {dataset}</h1>"
-                                             f"<img src='data:image/png;base64,{PNG}'></body></html>")
+    if stale:
+        (folder / f"{stem}.html").write_text("<html><body><h1>a stale page</h1></body></html>")
 
 
 @pytest.fixture(scope="module")
 def site(tmp_path_factory):
-    """A book of two datasets (two notebooks on the first, one on the second, one without its HTML)
-    and the generated pages, one linking a file in a subfolder and another page."""
+    """A book of two datasets (two notebooks on the first, one on the second, one with a stale page
+    beside it) and the generated pages, one linking a file in a subfolder and another page."""
     results = tmp_path_factory.mktemp("results")
-    executed(results, "00_dataset", "synthetic-greenhouse", html=True)
-    executed(results, "13_leaderboard", "synthetic-greenhouse", html=False)       # rendered by nbconvert
-    executed(results / "nordland", "00_dataset", "nordland", html=True)
+    executed(results, "00_dataset", "synthetic-greenhouse", stale=True)
+    executed(results, "13_leaderboard", "synthetic-greenhouse")
+    executed(results / "nordland", "00_dataset", "nordland")
     (results / "verdict.md").write_text("# Verdict\n\n| claim | synthetic |\n| --- | --- |\n| 920 frames/s | **holds** |\n")
     (results / "bench").mkdir()
     (results / "bench" / "scale.md").write_text("# Scale\n\n![plot](scale.png)\n")
@@ -55,6 +55,7 @@ def test_every_notebook_of_every_dataset_has_a_page_with_its_navigation(site):
     first = (out / "synthetic-greenhouse" / "00_dataset.html").read_text()
     assert 'href="13_leaderboard.html"' in first and 'href="../nordland/00_dataset.html"' in first
     assert "previous:" not in first and 'href="../index.html"' in first
+    assert "00_dataset on synthetic-greenhouse" in first and "a stale page" not in first   # the .ipynb, rendered
     assert "13_leaderboard on synthetic-greenhouse" in (out / "synthetic-greenhouse" / "13_leaderboard.html").read_text()
     landing = site.read_text()
     assert "<table>" in landing and "holds" in landing                 # the verdict table is the landing page

@@ -2,6 +2,7 @@
 notebook's manifest, and no copy of a table that differs from its source."""
 import json
 import re
+import subprocess
 from pathlib import Path
 
 import pytest
@@ -92,3 +93,31 @@ def test_the_step_rule_keeps_each_committed_leaderboards_frame_step(folder):
     params = json.loads((folder / "13_leaderboard" / "manifest.json").read_text())["parameters"]
     assert params["frame_step"] == 1 or rests_on(board) >= MIN_REVISIT_QUERIES, (params["frame_step"], rests_on(board))
     assert params.get("frame_step_requested", params["frame_step"]) == params["frame_step"]
+
+
+# a path on the machine that ran a notebook (its checkout, home, scratch): it says nothing to a reader
+# and names the machine; a warning's "file:line:" prefix is the usual way one gets into an output
+ABSOLUTE = re.compile(r"(?<![\w.:/~-])/(?:work|home|root|tmp|Users|mnt|srv|scratch)/[^\s\"']*")
+
+
+def absolute_paths(text: str) -> list[str]:
+    """The absolute machine paths in a notebook's JSON text (:data:`ABSOLUTE`)."""
+    return ABSOLUTE.findall(text)
+
+
+def test_the_path_check_finds_a_warning_s_absolute_path():
+    warned = '"text": ["/work/main/greenloop/features/descriptor.py:145: UserWarning: no keypoints\\n"]'
+    assert absolute_paths(warned) == ["/work/main/greenloop/features/descriptor.py:145:"]
+    assert absolute_paths('"dataset = \\"data/nordland\\"", "https://x.org/home/a", "results/tmp/x"') == []
+
+
+def test_no_committed_notebook_holds_an_absolute_path():
+    """Executed notebooks carry their outputs into the repository: none may name the machine's paths."""
+    try:
+        listed = subprocess.run(["git", "ls-files", "*.ipynb"], cwd=ROOT, capture_output=True, text=True,
+                                check=True).stdout.split()
+    except (OSError, subprocess.CalledProcessError):      # not a git checkout: every notebook on disk
+        listed = [p.relative_to(ROOT).as_posix() for p in ROOT.rglob("*.ipynb") if ".venv" not in p.parts]
+    found = {p: absolute_paths((ROOT / p).read_text()) for p in listed if (ROOT / p).is_file()}
+    found = {p: hits[:2] for p, hits in found.items() if hits}
+    assert not found, f"absolute paths in committed notebooks (strip the outputs that print them): {found}"

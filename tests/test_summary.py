@@ -52,8 +52,8 @@ def _planted(res: Path) -> Path:
                                                   "date": "2026-01-02T03:04:05+00:00", "git_commit": "ab" * 20,
                                                   "git_dirty": False}))
     _csv(res / "01_spot_grouping" / "table1.csv", ["frames_per_spot", "seeds", "acc_mean_%", "acc_std_%",
-                                                   "converged_seeds", "paper_acc_%"],
-         [[50, 5, 60.0, 4.0, 5, 97], [60, 5, 91.5, 2.25, 3, 98]])
+                                                   "converged_seeds", "acc_median_converged_%", "paper_acc_%"],
+         [[50, 5, 60.0, 4.0, 5, 61, 97], [60, 5, 91.5, 2.25, 3, 92, 98]])
     _csv(res / "06_speed" / "paper_vs_run.csv", ["quantity", "paper", "this run", "note"],
          [["seconds per 70-frame window", 0.076, "0.05", ""], ["frames per second", 920.0, "1500", ""]])
     return res
@@ -101,9 +101,11 @@ def test_a_planted_folder_gives_its_closure_rates_and_every_row(tmp_path, capsys
     assert "pair precision 0.250, recall 0.125 (main paper" in board
     compared = _rows(board, "leaderboard")
     assert [r[1] for r in compared] == ["greenloop-seq-grad", "greenloop-seq-cnn"]   # a = greenloop-seq left out
-    assert compared[0][4:] == ["35 [10.5, 60.25]", "yes", "20"] and compared[1][4:] == ["-1.5 [-9, 4]", "no", "20"]
+    assert compared[0][4:] == ["35 [10.5, 60.25]", "resolved", "20"]
+    assert compared[1][4:] == ["-1.5 [-9, 4]", "not resolved", "20"]
     detector = _rows(_section(text, 2), f"`{res.as_posix()}` (planted-set)")
-    assert detector == [[f"`{res.as_posix()}` (planted-set)", "91.5 ± 2.25", "5", "3", "70", "8", "6", "25",
+    assert detector == [[f"`{res.as_posix()}` (planted-set)", "91.5 ± 2.25; 92", "5",
+                         "3 of 5 seeds converged (epochs not recorded)", "70", "8", "6", "25",
                          "12.5", "25", "12.5", "1500"]]
     assert _rows(_section(text, 2), "paper") == [["paper", "98"] + ["–"] * 9 + ["920"]]
     goals = _section(text, 3)
@@ -153,3 +155,27 @@ def test_the_readme_standing_table_is_the_generated_one():
     text = (root / "README.md").read_text()
     block = text.split("<!-- standing:start -->\n", 1)[1].split("<!-- standing:end -->", 1)[0]
     assert block == summary.standing(dirs), "README's standing table is stale: make readme"
+
+
+def test_the_standing_shows_each_target_protocol_beside_the_leaderboard_and_words_its_pairs(tmp_path):
+    """Nordland's leaderboard at every 8th frame stands beside its full-rate stream (target_protocols.csv),
+    and a paired bound exactly on 0 reads uninformative, in the standing and in the targets."""
+    res = _planted(tmp_path / "results")
+    lb = res / "13_leaderboard"
+    _csv(lb / "targets.csv", ["protocol", "configuration", "target", "measured", "required", "met"], [
+        ["leaderboard", "greenloop-seq-grad", "frame step of the rows (1 = Nordland's full rate)", 8.0, "== 1", False],
+        ["leaderboard", "greenloop-seq-grad", "R@1 above SeqSLAM (tuned) (9 %): the lowest low end of its paired "
+         "differences (points)", 0.0, "> 0, each resolved", False]])
+    _csv(lb / "target_protocols.csv", ["protocol"] + LB_COLUMNS, [
+        ["every frame", "greenloop-seq-grad", "loop closure", 1768, 1768, 86.65, 80.65, 91.4, 86.2, 67.0, 829.9,
+         820.1, 832.6, 2088.0, 3.0, 1339.0, 18.0, NOTE]])
+    _csv(lb / "comparisons.csv", ["protocol", "a", "b", "metric", "difference", "lo", "hi", "resolved", "queries"], [
+        ["leaderboard", "greenloop-seq-grad", "SeqSLAM (tuned)", "R@1", -22.39, -61.19, 0.0, False, 91],
+        ["every frame", "greenloop-seq-grad", "SeqSLAM (tuned)", "R@1", 6.39, 1.74, 10.86, True, 1768]])
+    rows = {(r[1], r[2]): r for r in summary.standing_rows(res)}
+    assert rows[("leaderboard, every 8th frame", "loop closure")][8] == "-22.39 [-61.19, 0], uninformative"
+    full = rows[("every frame", "loop closure")]
+    assert full[4] == "86.65 [80.65, 91.4]" and full[8] == "6.39 [1.74, 10.86], resolved"
+    assert full[9] == "829.9 [820.1, 832.6]"
+    goals = _rows(_section(summary.markdown([res]), 3), "leaderboard")
+    assert [g[5] for g in goals] == ["no", "uninformative"]

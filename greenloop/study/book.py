@@ -5,9 +5,8 @@ plain HTML that opens from disk or any static host:
 
 * ``index.html``: the landing page: the verdict table (``results/verdict.md``), the headline figure,
   and for each results folder (dataset) the list of its executed notebooks;
-* ``<dataset>/<NN_name>.html``: each executed notebook as nbconvert rendered it (the ``.html`` beside
-  the executed ``.ipynb``, or nbconvert's HTML exporter on the ``.ipynb`` when there is none: no cell
-  runs), with a navigation bar on top: the landing page, the previous and next notebook of the same
+* ``<dataset>/<NN_name>.html``: each executed notebook as nbconvert's HTML exporter renders the
+  executed ``.ipynb`` (no cell runs; the results folders hold no rendered pages), with a navigation bar on top: the landing page, the previous and next notebook of the same
   dataset, and the same notebook on the other datasets;
 * the generated pages (``verdict``, ``summary``, ``coverage``, ``PROVENANCE``, ``datasets``) as HTML,
   every relative link of theirs rewritten to the page or file it names, copied beside it.
@@ -47,11 +46,8 @@ def dataset_key(folder: Path) -> str:
 
 
 def notebook_html(folder: Path, stem: str) -> str:
-    """The rendered HTML of an executed notebook: its ``.html`` beside it, or nbconvert's export of
-    the ``.ipynb`` (nothing executed)."""
-    page = Path(folder) / f"{stem}.html"
-    if page.is_file():
-        return page.read_text()
+    """The rendered HTML of an executed notebook: nbconvert's export of ``folder/stem.ipynb`` (nothing
+    executed; a stale ``.html`` left beside it is not read)."""
     import nbconvert        # here, not at the top: its import would slow the start of every command-line call
     body, _ = nbconvert.HTMLExporter().from_filename(str(Path(folder) / f"{stem}.ipynb"))
     return body

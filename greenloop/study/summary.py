@@ -30,7 +30,7 @@ import re
 from pathlib import Path
 
 from greenloop.report import fill_block
-from greenloop.study import provenance
+from greenloop.study import convergence, provenance, targets as goals
 from greenloop.util.files import write_atomic
 
 DASH = "–"
@@ -85,11 +85,6 @@ def interval(value, lo, hi) -> str:
     if num(value) == DASH:
         return DASH
     return num(value) if num(lo) == DASH or num(hi) == DASH else f"{num(value)} [{num(lo)}, {num(hi)}]"
-
-
-def yes_no(cell) -> str:
-    """``True`` / ``False`` as yes / no, ``–`` where empty."""
-    return {"true": "yes", "false": "no"}.get(str(cell).strip().lower(), DASH if not cell else str(cell))
 
 
 def table(header, rows) -> str:
@@ -198,58 +193,88 @@ def comparisons_section(folder: Path) -> str:
     if rows is None:
         return f"No paired comparisons: this folder has no `{path.as_posix()}`.\n"
     ours = [[r.get("protocol") or DASH, r.get("a"), r.get("b") or DASH, r.get("metric") or DASH,
-             interval(r.get("difference"), r.get("lo"), r.get("hi")), yes_no(r.get("resolved")),
+             interval(r.get("difference"), r.get("lo"), r.get("hi")), pair_word(r),
              num(r.get("queries"))] for r in rows if r.get("a") in NAMED]
     head = (f"Paired comparisons from `{path.as_posix()}` (a minus b on the same queries, percentage points, "
-            f"95 % interval; resolved: the interval excludes 0), rows whose a is {' or '.join(NAMED)}:\n\n")
+            f"95 % interval), rows whose a is {' or '.join(NAMED)}. {goals.PAIRED_RULE}\n\n")
     if not ours:
         return head + "none.\n"
-    return head + table(["protocol", "a", "b", "metric", "difference [lo, hi]", "resolved", "queries"], ours)
+    return head + table(["protocol", "a", "b", "metric", "difference [lo, hi]", "paired", "queries"], ours)
 
 
 DEFAULT, CNN, SEQSLAM = "greenloop-seq-grad", "greenloop-seq-cnn", "SeqSLAM (tuned)"
-STANDING = ["dataset", "mode", "queries", f"{DEFAULT} (the default) R@1 %", f"{CNN} R@1 %", f"{SEQSLAM} R@1 %",
-            "best single frame R@1 %", f"default minus {SEQSLAM}, paired", "default frames/s [slowest, fastest]"]
+LEADERBOARD_PROTOCOL = "leaderboard"        # comparisons.csv's protocol of the leaderboard's own rows
+STANDING = ["dataset", "protocol", "mode", "queries", f"{DEFAULT} (the default) R@1 %", f"{CNN} R@1 %",
+            f"{SEQSLAM} R@1 %", "best single frame R@1 %", f"default minus {SEQSLAM}, paired",
+            "default frames/s [slowest, fastest]"]
+
+
+def pair_word(row: dict) -> str:
+    """A comparisons.csv row's paired interval in words (``study.targets.paired_word``), "–" without one."""
+    lo, hi = _float(row.get("lo")), _float(row.get("hi"))
+    return DASH if lo is None or hi is None else goals.paired_word(lo, hi)
 
 
 def _r1(row: dict | None) -> str:
     return DASH if row is None else interval(row.get("R@1_%"), row.get("R@1_lo_%"), row.get("R@1_hi_%"))
 
 
-def _paired(folder: Path, mode: str) -> str:
-    """The default minus SeqSLAM tuned in R@1, points [95 % paired interval], from comparisons.csv
-    (loop closure, the leaderboard's own rows; "–" where the folder wrote none)."""
+def _paired(folder: Path, mode: str, protocol: str = LEADERBOARD_PROTOCOL) -> str:
+    """The default minus SeqSLAM tuned in R@1, points [95 % paired interval] and its word
+    (:func:`pair_word`), from comparisons.csv (loop closure, the rows of ``protocol``; "–" where the
+    folder wrote none)."""
     rows = read_csv(folder / LB / "comparisons.csv") or []
     for r in rows:
-        if (r.get("protocol") == "leaderboard" and r.get("a") == DEFAULT and r.get("b") == SEQSLAM
+        if (r.get("protocol") == protocol and r.get("a") == DEFAULT and r.get("b") == SEQSLAM
                 and r.get("metric") == "R@1" and mode == "loop closure"):
-            word = "resolved" if r.get("resolved") == "True" else "not resolved"
-            return f"{interval(r['difference'], r['lo'], r['hi'])}, {word}"
+            return f"{interval(r['difference'], r['lo'], r['hi'])}, {pair_word(r)}"
     return DASH
 
 
+def frame_step(folder: Path) -> str:
+    """The leaderboard's frame step as a protocol name: "leaderboard, every 8th frame" where the
+    folder's targets.csv measured a step above 1 (its "frame step of the rows" target), else "leaderboard"."""
+    rows = read_csv(folder / LB / "targets.csv") or []
+    steps = [_float(r.get("measured")) for r in rows if r.get("protocol") == LEADERBOARD_PROTOCOL
+             and str(r.get("target", "")).startswith("frame step")]
+    step = next((int(x) for x in steps if x is not None), 1)
+    return LEADERBOARD_PROTOCOL + (f", every {step}th frame" if step > 1 else "")
+
+
+def _standing_row(folder: Path, protocol: str, label: str, mode: str, rows: dict) -> list[str]:
+    """One standing row: ``protocol``'s ``mode`` (shown as ``label``), ``rows`` {method: leaderboard-shaped row}."""
+    single = [r for m, r in rows.items() if m.endswith("(single frame)") and ":random" not in m]
+    best = max(single, key=lambda r: _float(r.get("R@1_%")) or -1, default=None)
+    d = rows.get(DEFAULT)
+    return [provenance.dataset_name(folder) or folder.name, label, mode, (d or {}).get("queries", DASH),
+            _r1(d), _r1(rows.get(CNN)), _r1(rows.get(SEQSLAM)),
+            DASH if best is None else f"{_r1(best)} ({best['method'].replace(' (single frame)', '')})",
+            _paired(folder, mode, protocol),
+            DASH if d is None else interval(d.get("fps_median"), d.get("fps_min"), d.get("fps_max"))]
+
+
 def standing_rows(folder: Path) -> list[list[str]]:
-    """One row per mode of a folder's leaderboard: the named configurations, SeqSLAM tuned and the
-    single-frame row with the highest R@1 point (ImageNet or hand-crafted; random-init rows left out)."""
+    """One row per protocol and mode: the leaderboard's (its frame step named), then each stream of
+    target_protocols.csv (the targets' own protocols, e.g. Nordland at every frame): the named
+    configurations, SeqSLAM tuned and the single-frame row with the highest R@1 point (ImageNet or
+    hand-crafted; random-init rows left out; "–" in a protocol without single-frame rows)."""
     board = read_csv(folder / LB / "leaderboard.csv") or []
-    out = []
-    for mode in dict.fromkeys(r["mode"] for r in board):
-        rows = {r["method"]: r for r in board if r["mode"] == mode}
-        single = [r for m, r in rows.items() if m.endswith("(single frame)") and ":random" not in m]
-        best = max(single, key=lambda r: _float(r.get("R@1_%")) or -1, default=None)
-        d = rows.get(DEFAULT)
-        out.append([provenance.dataset_name(folder) or folder.name, mode, (d or {}).get("queries", DASH),
-                    _r1(d), _r1(rows.get(CNN)), _r1(rows.get(SEQSLAM)),
-                    DASH if best is None else f"{_r1(best)} ({best['method'].replace(' (single frame)', '')})",
-                    _paired(folder, mode),
-                    DASH if d is None else interval(d.get("fps_median"), d.get("fps_min"), d.get("fps_max"))])
+    out = [_standing_row(folder, LEADERBOARD_PROTOCOL, frame_step(folder), mode,
+                         {r["method"]: r for r in board if r["mode"] == mode})
+           for mode in dict.fromkeys(r["mode"] for r in board)]
+    streams = read_csv(folder / LB / "target_protocols.csv") or []
+    for protocol in dict.fromkeys(r["protocol"] for r in streams):
+        mine = [r for r in streams if r["protocol"] == protocol]
+        out += [_standing_row(folder, protocol, protocol, mode, {r["method"]: r for r in mine if r["mode"] == mode})
+                for mode in dict.fromkeys(r["mode"] for r in mine)]
     return out
 
 
 def standing(results_dirs) -> str:
-    """Where greenloop's detector stands: one table over every folder and mode (README and summary.md)."""
+    """Where greenloop's detector stands: one table over every folder, protocol and mode (README and
+    summary.md), the paired rule under it."""
     rows = [r for d in map(Path, results_dirs) for r in standing_rows(d)]
-    return table(STANDING, rows)
+    return table(STANDING, rows) + "\n" + goals.PAIRED_RULE + "\n"
 
 
 def leaderboards(results_dirs) -> str:
@@ -306,10 +331,12 @@ def paper_detector_cells(folder: Path) -> tuple[list[str], str, dict]:
     fps, n3 = speed_row(folder)
     acc, row, fps = acc or {}, row or {}, fps or {}
     accuracy = DASH if num(acc.get("acc_mean_%")) == DASH else (
-        f"{num(acc.get('acc_mean_%'))} ± {num(acc.get('acc_std_%'))}")
+        f"{num(acc.get('acc_mean_%'))} ± {num(acc.get('acc_std_%'))}; {num(acc.get('acc_median_converged_%'))}")
+    accuracy = accuracy.removesuffix(f"; {DASH}")
     precision, recall = closure_rates(row)
     pair_p, pair_r = pair_rates(row.get("scored_on"))
-    cells = [name(folder), accuracy, num(acc.get("seeds")), num(acc.get("converged_seeds")),
+    conv = convergence.spot_cnn_convergence(folder, T1, SPOT_FRAMES) if acc else None
+    cells = [name(folder), accuracy, num(acc.get("seeds")), DASH if conv is None else conv.text(),
              num(row.get("threshold")), num(row.get("closures_declared")), num(row.get("closures_false")),
              percent(precision), percent(recall), num(pair_p), num(pair_r), num(fps.get("this run"))]
     return cells, n1 + n2 + n3, {"acc": num(acc.get("paper_acc_%")), "fps": num(fps.get("paper"))}
@@ -318,7 +345,7 @@ def paper_detector_cells(folder: Path) -> tuple[list[str], str, dict]:
 def paper_detector(results_dirs) -> str:
     """Section 2: the main paper's detector (spot CNN + dictionary at tau) per dataset, and a row
     "paper" with the paper's accuracy (L = 60) and frames/s as the folders' tables give them."""
-    head = ["dataset", f"CNN accuracy, L = {num(SPOT_FRAMES)} (%, mean ± sd)", "seeds", "converged", "τ",
+    head = ["dataset", f"CNN accuracy, L = {num(SPOT_FRAMES)} (%, mean ± sd; median of the converged seeds)", "seeds", "converged", "τ",
             "closures declared", "closures false", "closure precision %", "closure recall %",
             "pair precision %", "pair recall %", "frames/s"]
     rows, notes, paper = [], "", {"acc": [], "fps": []}
@@ -333,7 +360,7 @@ def paper_detector(results_dirs) -> str:
     rows.append(["paper"] + [paper_cell("acc")] + [DASH] * 9 + [paper_cell("fps")])
     return ("\n## 2. The main paper's detector as a loop-closure detector\n\n"
             "Accuracy: `01_spot_grouping/table1.csv` (the spot CNN's classification accuracy over its seeds; "
-            "converged: seeds whose final training accuracy reached the notebook's convergence threshold). "
+            f"converged, as the verdict counts it: {convergence.CONVERGED['spot CNN']}). "
             "τ and closures: the `13_leaderboard/leaderboard.csv` row whose method starts with "
             f"\"{MAIN_PAPER}\" (τ: its threshold, a count of frames classified as one spot; closure precision "
             "and recall as in section 1; pair precision and recall: its scored_on note's, over pairs of "
@@ -346,7 +373,8 @@ def targets(results_dirs) -> str:
     """Section 3: each folder's targets.csv, every row (measured: % or frames/s as the target says)."""
     parts = ["\n## 3. The detector's targets\n\n",
              "Every row of each folder's `13_leaderboard/targets.csv` (greenloop.study.targets on the "
-             "leaderboard and on each stream the targets name); met: – where the value was not measured.\n"]
+             "leaderboard and on each stream the targets name); met: – where the value was not measured, "
+             "uninformative where it is a paired bound exactly 0 (the paired rule of section 1).\n"]
     for d in map(Path, results_dirs):
         path = d / LB / "targets.csv"
         rows = read_csv(path)
@@ -355,7 +383,7 @@ def targets(results_dirs) -> str:
             parts.append(missing(path))
             continue
         cells = [[r.get("protocol") or DASH, r.get("configuration") or DASH, r.get("target") or DASH,
-                  num(r.get("measured")), r.get("required") or DASH, yes_no(r.get("met")),
+                  num(r.get("measured")), r.get("required") or DASH, goals.met_word(r),
                   num(r.get("queries")), num(r.get("revisit_queries"))] for r in rows]
         parts += [f"From `{path.as_posix()}`.\n\n", table(TARGETS, cells)]
     return "".join(parts)

@@ -26,14 +26,26 @@ interval lies wholly above the other rows'. Either way a point estimate inside t
 called ahead, and a comparison that is absent is not measured. "Not below" is met unless some paired
 difference is resolved below 0 (:func:`paired_not_below`); from rows alone, where the method's interval
 reaches the best other row's point value.
+
+A paired interval is worded by one rule (:func:`paired_word`, :data:`PAIRED_RULE`, printed where a
+table shows it): resolved where it excludes 0; a tie where both ends are exactly 0 (the same on every
+resample); uninformative where one end lands exactly on 0 (a block bootstrap over few blocks, ten on 91
+queries, puts a bound on a whole block's difference: 0 there shows neither an order nor its absence);
+not resolved where it holds 0 strictly inside. A target judged on an uninformative pair is neither
+met nor not met (met None, the target says why).
 """
 from __future__ import annotations
 
 import math
 
-__all__ = ["FPS_TARGET", "PRECISION_TARGET", "TARGET_SETS", "detector_targets", "paired_ahead", "paired_not_below",
-           "separated"]
+__all__ = ["FPS_TARGET", "PAIRED_RULE", "PRECISION_TARGET", "TARGET_SETS", "detector_targets", "met_word", "paired_ahead",
+           "paired_not_below", "paired_word", "separated"]
 
+RESOLVED, TIE, UNINFORMATIVE, NOT_RESOLVED = "resolved", "tie", "uninformative", "not resolved"
+PAIRED_RULE = (f"Paired intervals (a minus b on the same queries, 95 % block bootstrap): {RESOLVED} where the "
+               f"interval excludes 0; {TIE} where both ends are exactly 0; {UNINFORMATIVE} where one end lands "
+               f"exactly on 0 (a bootstrap over few blocks puts a bound on a whole block's difference); "
+               f"{NOT_RESOLVED} where 0 lies strictly inside.")
 FPS_TARGET = 920.0            # frames/s per stream on 2 cores, descriptor included (the main paper's)
 PRECISION_TARGET = 90.0       # % closure precision at the one threshold
 
@@ -50,9 +62,35 @@ def _value(row, key):
 
 
 def _judge(target: str, measured, required: str, ok) -> dict:
-    """One target: met None when the value is absent (not measured)."""
-    return {"target": target, "measured": measured, "required": required,
-            "met": None if measured is None else bool(ok(measured))}
+    """One target: met None when the value is absent (not measured) or ``ok`` answers None (undecided)."""
+    met = None if measured is None else ok(measured)
+    return {"target": target, "measured": measured, "required": required, "met": None if met is None else bool(met)}
+
+
+def paired_word(lo, hi) -> str:
+    """The one wording of a paired interval [lo, hi] (points, a minus b; module doc, :data:`PAIRED_RULE`):
+    "resolved" (excludes 0), "tie" (both ends exactly 0), "uninformative" (one end exactly 0) or
+    "not resolved" (0 strictly inside). Raises ValueError for a missing end."""
+    if lo is None or hi is None or lo != lo or hi != hi:
+        raise ValueError(f"a paired interval needs both ends, got [{lo}, {hi}]: read lo and hi from comparisons.csv")
+    lo, hi = float(lo), float(hi)
+    if lo > 0 or hi < 0:
+        return RESOLVED
+    if lo == 0 and hi == 0:
+        return TIE
+    return UNINFORMATIVE if lo == 0 or hi == 0 else NOT_RESOLVED
+
+
+def met_word(row: dict) -> str:
+    """A targets.csv row's "met" cell as the summary prints it: "uninformative" where the target is
+    judged on a paired bound that lies exactly on 0 (:func:`paired_word`; rows written before the rule
+    read met or not met there; the row holds that one end, so a tie reads uninformative too), else
+    yes / no / "–" (not measured)."""
+    measured = _value(row, "measured") if not isinstance(row.get("measured"), str) else (
+        float(row["measured"]) if row["measured"].strip() not in ("", "nan") else None)
+    if "paired differences" in str(row.get("target", "")) and measured == 0:
+        return UNINFORMATIVE
+    return {"true": "yes", "false": "no"}.get(str(row.get("met")).strip().lower(), "–")
 
 
 def _find(rows, method: str, mode: str):
@@ -90,24 +128,33 @@ def _pairs(comparisons, method: str, others, key: str, end: str):
 def paired_ahead(comparisons, method: str, others, key: str):
     """(the lowest low end, in percentage points, of the paired differences ``method`` minus each of
     ``others`` (rows with ``method``) on ``key``'s metric ("R@1_%": "R@1"); whether every one of
-    them is resolved with ``method`` ahead (its ``resolved`` True and its interval above 0)), read
+    them is resolved with ``method`` ahead (its ``resolved`` True and its interval above 0), None
+    where that lowest low end is exactly 0: uninformative, :func:`paired_word`), read
     from ``comparisons`` (rows or a DataFrame with a, b, metric, lo, resolved, as
     ``study.leaderboard.comparisons`` writes them). (None, False) where ``others`` is empty or the
     table lacks one of them."""
     pairs = _pairs(comparisons, method, others, key, "lo")
     if pairs is None:
         return None, False
-    return min(r["lo"] for r in pairs), all(bool(r["resolved"]) and r["lo"] > 0 for r in pairs)
+    low = min(r["lo"] for r in pairs)
+    if any(paired_word(r["lo"], _value(r, "hi")) == UNINFORMATIVE and r["lo"] == 0 for r in pairs):
+        return low, None                                  # a low end exactly 0: uninformative (paired_word)
+    return low, all(bool(r["resolved"]) and r["lo"] > 0 for r in pairs)
 
 
 def paired_not_below(comparisons, method: str, others, key: str):
     """(the lowest high end, in points, of the paired differences ``method`` minus each of ``others`` on
-    ``key``'s metric; whether none of them is resolved below 0), read from ``comparisons`` as
-    :func:`paired_ahead` reads it. (None, False) where ``others`` is empty or the table lacks one."""
+    ``key``'s metric; whether none of them is resolved below 0, None where that lowest high end is
+    exactly 0: uninformative, :func:`paired_word`), read from ``comparisons`` as :func:`paired_ahead` reads it. (None, False) where ``others`` is empty or the table lacks one."""
     pairs = _pairs(comparisons, method, others, key, "hi")
     if pairs is None:
         return None, False
-    return min(r["hi"] for r in pairs), not any(bool(r["resolved"]) and r["hi"] < 0 for r in pairs)
+    high = min(r["hi"] for r in pairs)
+    if any(bool(r["resolved"]) and r["hi"] < 0 for r in pairs):
+        return high, False
+    if any(paired_word(_value(r, "lo"), r["hi"]) == UNINFORMATIVE and r["hi"] == 0 for r in pairs):
+        return high, None                                 # a high end exactly 0: uninformative (paired_word)
+    return high, True
 
 
 def _not_below(target: str, row, others, key: str, comparisons=None) -> dict:
@@ -117,7 +164,7 @@ def _not_below(target: str, row, others, key: str, comparisons=None) -> dict:
     if comparisons is not None:
         high, ok = (None, False) if row is None else paired_not_below(comparisons, row.get("method"), others, key)
         return _judge(f"{target}: the lowest high end of its paired differences (points)", high,
-                      ">= 0 (none resolved below)", lambda v: ok)
+                      ">= 0 (none resolved below; exactly 0: uninformative)", lambda v: ok)
     best = max((_value(r, key) for r in others), default=None)
     hi = _value(row, key[:-1] + "hi_%")
     return _judge(f"{target}: the high end of its interval", None if best is None else hi, f">= {best}",
@@ -131,8 +178,8 @@ def _above(target: str, row, others, key: str, comparisons=None) -> dict:
     measured = its low end, required = "> the others' highest high end")."""
     if comparisons is not None:
         low, ahead = (None, False) if row is None else paired_ahead(comparisons, row.get("method"), others, key)
-        return _judge(f"{target}: the lowest low end of its paired differences (points)", low, "> 0, each resolved",
-                      lambda v: ahead)
+        return _judge(f"{target}: the lowest low end of its paired differences (points)", low,
+                      "> 0, each resolved (exactly 0: uninformative)", lambda v: ahead)
     lo, top = separated(row, others, key)
     return _judge(f"{target}: the low end of its interval", None if top is None else lo, f"> {top}", lambda v: v > top)
 

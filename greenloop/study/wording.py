@@ -34,9 +34,7 @@ def span(lo, hi, places: int = 2, unit: str = "") -> str:
     return (a if a == b else f"[{a}, {b}]") + unit
 
 
-def between(lo, hi) -> str:
-    """A range of counts as "lo-hi", or the one count where lo equals hi."""
-    return f"{int(lo)}" if int(lo) == int(hi) else f"{int(lo)}-{int(hi)}"
+between = verdict.between          # a range of counts as "lo-hi" (one definition, in verdict)
 
 
 def count(n, noun: str) -> str:
