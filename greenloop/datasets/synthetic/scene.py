@@ -9,7 +9,7 @@ colours BGR 0..255.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -20,6 +20,7 @@ from greenloop.datasets.synthetic.plants import _make_plants
 from greenloop.datasets.synthetic.textures import _texture_atlas
 
 LIGHT = np.array([0.35, 1.0, 0.25]) / np.linalg.norm([0.35, 1.0, 0.25])
+FOG_COLOR = np.array([205, 210, 205], np.float32)   # BGR of the haze (render: distance fog)
 
 
 @dataclass
@@ -34,6 +35,8 @@ class Scene:
     plant_color (P, 3), plant_flat (P,) (0 = rosette, 1 = flat disc), plant_leaves (P + 1,) CSR
     offsets into the leaf arrays. atlas (Ha, Wa, 3) uint8 hall textures; atlas_rows (6,) first
     atlas row of floor, roof, left, right, front, back. light_phase (6,): phases (radians) of the lighting drift.
+    hall_size (width x, height y, depth z) metres of the hall box (default: ``hall``'s hall);
+    fog_color (3,) float32 BGR of the haze (darker at night in the days' hall).
     """
     quads: np.ndarray
     quad_color: np.ndarray
@@ -54,6 +57,8 @@ class Scene:
     atlas: np.ndarray
     atlas_rows: np.ndarray
     light_phase: np.ndarray
+    hall_size: tuple = (HALL_WIDTH, HALL_HEIGHT, HALL_DEPTH)
+    fog_color: np.ndarray = field(default_factory=FOG_COLOR.copy)
 
 
 def _new_builder() -> dict:
@@ -251,11 +256,12 @@ def _add_equipment(sb: dict) -> None:
     _box(sb, (10.55, 1.25, BED_Z0 + 2.1), (11.05, 1.3, BED_Z0 + 2.7), (40, 40, 40))
 
 
-def _finish_quads(sb: dict, rng):
+def _finish_quads(sb: dict, rng, light: np.ndarray = LIGHT):
     """Stack the builder's polygons, orient their normals outwards and shade them.
 
     Returns (quads (Q, 4, 3) float64 metres, normals (Q, 3) outward unit vectors, colour (Q, 3)
-    float64 BGR 0..255 after Lambert shading (emissive quads unshaded) and a seeded +-4 %
+    float64 BGR 0..255 after Lambert shading by the unit direction ``light`` (3,) towards the
+    light (emissive quads unshaded) and a seeded +-4 %
     brightness per quad, obj (Q,) object index, lo / hi (O, 3) object bounding boxes in metres).
     Draws Q uniforms from ``rng``.
     """
@@ -271,7 +277,7 @@ def _finish_quads(sb: dict, rng):
     n[flip] *= -1
     color = np.asarray(sb["color"], np.float64)
     emit = np.asarray(sb["emit"])
-    shade = 0.5 + 0.55 * np.clip(n @ LIGHT, 0, None)
+    shade = 0.5 + 0.55 * np.clip(n @ light, 0, None)
     color = np.where(emit[:, None], color, color * shade[:, None])
     color = np.clip(color * rng.uniform(0.96, 1.04, (len(color), 1)), 0, 255)
     return quads, n, color, obj, lo, hi
