@@ -150,23 +150,29 @@ def build_scene(seed: int = 0) -> Scene:
 
 
 def _add_beds(sb: dict) -> None:
-    """Cultivation beds (tray, growing surface, stand), split into 1 m modules along z so the
-    painter's order stays right. Draws no random numbers."""
+    """The six cultivation beds of the hall (``_add_bed``). Draws no random numbers."""
     tops = [(215, 220, 218), (60, 72, 88), (218, 222, 220), (215, 220, 218), (60, 72, 88),
             (210, 215, 215)]
     for k, xc in enumerate(BED_X):
-        edges = np.linspace(BED_Z0, BED_Z0 + BED_LENGTH, int(round(BED_LENGTH)) + 1)
-        for z0, z1 in zip(edges[:-1], edges[1:]):
-            _box(sb, (xc - BED_WIDTH / 2, BED_TOP - 0.13, z0), (xc + BED_WIDTH / 2, BED_TOP, z1),
-                 (200, 202, 200), far=True)
-            # the growing surface, a hair above the tray
-            top = np.array([[xc - BED_WIDTH / 2 + 0.04, BED_TOP + 0.001, z0],
-                            [xc + BED_WIDTH / 2 - 0.04, BED_TOP + 0.001, z0],
-                            [xc + BED_WIDTH / 2 - 0.04, BED_TOP + 0.001, z1],
-                            [xc - BED_WIDTH / 2 + 0.04, BED_TOP + 0.001, z1]])
-            _add_object(sb, [top], tops[k], far=True)
-            _box(sb, (xc - BED_WIDTH / 2 + 0.1, 0.0, z0), (xc + BED_WIDTH / 2 - 0.1, BED_TOP - 0.13, z1),
-                 (62, 64, 66), far=True)
+        _add_bed(sb, xc, BED_Z0, BED_LENGTH, tops[k])
+
+
+def _add_bed(sb: dict, xc: float, z0: float, length: float, top_color) -> None:
+    """One cultivation bed (tray, growing surface of ``top_color`` BGR, stand) centred on x = xc
+    from z0 to z0 + length (metres), split into 1 m modules along z so the painter's order stays
+    right. Draws no random numbers."""
+    edges = np.linspace(z0, z0 + length, int(round(length)) + 1)
+    for z0, z1 in zip(edges[:-1], edges[1:]):
+        _box(sb, (xc - BED_WIDTH / 2, BED_TOP - 0.13, z0), (xc + BED_WIDTH / 2, BED_TOP, z1),
+             (200, 202, 200), far=True)
+        # the growing surface, a hair above the tray
+        top = np.array([[xc - BED_WIDTH / 2 + 0.04, BED_TOP + 0.001, z0],
+                        [xc + BED_WIDTH / 2 - 0.04, BED_TOP + 0.001, z0],
+                        [xc + BED_WIDTH / 2 - 0.04, BED_TOP + 0.001, z1],
+                        [xc - BED_WIDTH / 2 + 0.04, BED_TOP + 0.001, z1]])
+        _add_object(sb, [top], top_color, far=True)
+        _box(sb, (xc - BED_WIDTH / 2 + 0.1, 0.0, z0), (xc + BED_WIDTH / 2 - 0.1, BED_TOP - 0.13, z1),
+             (62, 64, 66), far=True)
 
 
 def _add_posts(sb: dict, truss_z: np.ndarray) -> None:
