@@ -72,6 +72,8 @@ def test_stream_lists_the_days_as_traversals(tiny_days):
     assert [t.name for t in seq.traversals] == [d.name for d in days]
     assert [(t.start, t.stop) for t in seq.traversals] == [(0, len(poses[0])), (len(poses[0]), len(poses[0]) + len(poses[1]))]
     assert seq.n_frames == len(poses[0]) + len(poses[1]) and seq.has_depth and seq.has_camera
+    # the paper's 150-frame window (~4.1 m) and the leaderboard's every 4th frame (~0.11 m) at 0.25 m
+    assert seq.exclude == round(daysmake.EXCLUDE_M / 0.25) == 16 and seq.frame_step == 1
     _, stream = sequence.read_trajectory(out)
     assert np.allclose(stream[0], np.eye(4), atol=1e-8)            # day-00's first camera is the world
     for k, d in enumerate(days):
