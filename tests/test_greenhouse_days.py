@@ -10,13 +10,14 @@ import filecmp
 import hashlib
 import json
 
+import cv2
 import numpy as np
 import pytest
 
 from greenloop import groundtruth
 from greenloop.cli import main as cli_main
 from greenloop.datasets import odometry, sequence
-from greenloop.datasets.synthetic import daysmake
+from greenloop.datasets.synthetic import daysmake, make_greenhouse
 from greenloop.datasets.synthetic.days import design_days, TINY_HALL
 from greenloop.datasets.synthetic.dayscene import build_day_scene
 from greenloop.datasets.synthetic.render import _grid, render_frame
@@ -28,6 +29,9 @@ from greenloop.datasets.synthetic.sensor import _sensor
 # sequence and of its poses rounded to 1e-9, computed from the code before the days existed
 SINGLE_DAY_FRAMES = "04650c8272bc22e44593bafc293b24d1e964d2ae52b8ee4d2f0b9c9ac3e291c5"
 SINGLE_DAY_POSES = "f1ac80a5730d8d3e6e2ded48af83b4d404ba1bd55e967c2e01a8493c0ed39e68"
+# sha256 of the same frames' decoded rgb/ and depth/ PNGs and CameraTrajectory.txt as
+# make_greenhouse writes them (200 frames, 160x120, seed 0), from the code before the days
+SINGLE_DAY_FOLDER = "5b66429b2113221732c1c4361b68f2a8f0a2fcbf3694bdedae44cba8f1a53f49"
 
 
 def test_single_day_sequence_unchanged():
@@ -42,6 +46,16 @@ def test_single_day_sequence_unchanged():
         h.update(d16.tobytes())
     assert h.hexdigest() == SINGLE_DAY_FRAMES
     assert hashlib.sha256(np.round(route(n, 0), 9).tobytes()).hexdigest() == SINGLE_DAY_POSES
+
+
+def test_single_day_folder_unchanged(tmp_path):
+    out = make_greenhouse(tmp_path / "s", 200, (160, 120), 0, progress=False, workers=1)
+    h = hashlib.sha256()
+    for i in (0, 77, 150, 199):
+        h.update(cv2.imread(str(out / "rgb" / f"{i}.png"), cv2.IMREAD_UNCHANGED).tobytes())
+        h.update(cv2.imread(str(out / "depth" / f"{i}.png"), cv2.IMREAD_UNCHANGED).tobytes())
+    h.update((out / "CameraTrajectory.txt").read_bytes())
+    assert h.hexdigest() == SINGLE_DAY_FOLDER
 
 
 # ------------------------------------------------------------------------------ the days
