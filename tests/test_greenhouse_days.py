@@ -18,7 +18,7 @@ from greenloop import groundtruth
 from greenloop.cli import main as cli_main
 from greenloop.datasets import odometry, sequence
 from greenloop.datasets.synthetic import daysmake, make_greenhouse
-from greenloop.datasets.synthetic.days import design_days, TINY_HALL
+from greenloop.datasets.synthetic.days import day_route, design_days, TINY_HALL
 from greenloop.datasets.synthetic.dayscene import build_day_scene
 from greenloop.datasets.synthetic.render import _grid, render_frame
 from greenloop.datasets.synthetic.route import route, route_world
@@ -233,3 +233,15 @@ def test_cli_renders_then_reuses_the_cache(tiny_days, tmp_path, capsys):
     assert cli_main(["data", "greenhouse-days", str(out), "--tiny", "--days", "1", "--quiet"]) == 0
     assert "up to date" in capsys.readouterr().out
     assert not list(tmp_path.glob(".cli.tmp-*"))
+
+
+def test_bad_hall_and_route_raise_value_error():
+    with pytest.raises(ValueError, match="n_aisles"):
+        dataclasses.replace(TINY_HALL, n_aisles=0)
+    with pytest.raises(ValueError, match="hall too small"):
+        dataclasses.replace(TINY_HALL, bed_length=1.0)
+    day = design_days(1, TINY_HALL)[0]
+    with pytest.raises(ValueError, match="route step"):
+        day_route(dataclasses.replace(day, route=((5, 1),)), TINY_HALL, 0.25)
+    with pytest.raises(ValueError, match="spacing"):
+        daysmake.make_greenhouse_days("/nonexistent/x", n_days=1, tiny=True, spacing=0.0)

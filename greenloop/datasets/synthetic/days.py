@@ -41,6 +41,14 @@ class DaysHall:
     back: float = 3.8             # back cross aisle: beds to the back wall
     height: float = 4.2
 
+    def __post_init__(self):
+        if isinstance(self.n_aisles, bool) or int(self.n_aisles) != self.n_aisles or self.n_aisles < 1:
+            raise ValueError(f"n_aisles must be an integer >= 1, got {self.n_aisles!r}")
+        if not (self.bed_length >= 2.0 and self.bed_pitch >= 1.9 and self.side >= 1.2 and self.front >= 3.5
+                and self.back >= 3.0 and self.height >= 3.0):
+            raise ValueError(f"hall too small for the route's turns and the fixtures: {self}; use bed_length >= 2, "
+                             f"bed_pitch >= 1.9, side >= 1.2, front >= 3.5, back >= 3, height >= 3 metres")
+
     @property
     def bed_x(self) -> np.ndarray:
         """(n_aisles + 1,) x of the beds' centre lines."""
@@ -213,9 +221,6 @@ def day_route(day: Day, hall: DaysHall, spacing: float, seed: int = 0, index: in
     if not spacing > 0:
         raise ValueError(f"spacing must be > 0 metres between frames, got {spacing!r}")
     wp = day_waypoints(day, hall)
-    seg = np.linalg.norm(np.diff(wp, axis=0), axis=1)
-    if np.any(seg < 2 * TURN_RADIUS * 0.5):
-        raise ValueError(f"{day.name}: the hall is too small for the route's turns; use longer beds")
     length = _filleted_path(wp, TURN_RADIUS)[0][-1]
     n = max(2, int(round(length / spacing)) + 1)
     return _path_poses(wp, n, np.random.default_rng([_check_seed(seed), int(index), 0x5EED]))
