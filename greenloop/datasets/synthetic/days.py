@@ -11,6 +11,12 @@ drives its aisles in its order, each in its direction (+1: from the front toward
 What a ``Day`` changes: the light (sun from an azimuth / elevation, overcast, or night under the
 LED bars), the growth stage of the plants (size, leaf count, colour), which beds are harvested
 (empty holes), where the carts and crates stand, and the route. The layout never changes.
+
+Ground truth across days is the one pose rule (``groundtruth.for_sequence`` on the stream: Qi 2024
+Eq. 5 < 0.5 with the stream's ``exclude``), which admits at most 20.4 degrees between two views
+(at zero distance), so an aisle driven the other way on another day is never a loop by it,
+however close the cameras; ``groundtruth.relative_poses`` gives the true relative pose of any
+pair, opposite ones included, to score a closure's estimated pose.
 """
 from __future__ import annotations
 
