@@ -33,6 +33,7 @@ EXECUTED  := $(patsubst notebooks/%.ipynb,$(RESULTS)/%.ipynb,$(NOTEBOOKS))
 SOURCES   := $(wildcard greenloop/*.py greenloop/*/*.py)
 STAMP     := $(VENV)/.installed
 SYNTHETIC := data/synthetic-greenhouse
+DAYS      := data/greenhouse-days
 NORDLAND  := data/nordland
 # a local copy of the Nordland source (summer/, winter/); empty: clone it from NORDLAND_URL
 NORDLAND_SRC ?= $(if $(wildcard ../shared/real/nordland/summer),../shared/real/nordland,)
@@ -42,7 +43,7 @@ GARDENSPOINT := data/gardenspoint
 GARDENSPOINT_SRC ?= $(if $(wildcard ../shared/real/gardenspoint/night_right),../shared/real/gardenspoint,)
 GARDENSPOINT_URL ?= https://github.com/aghagol/loop-detection
 
-.PHONY: all help venv synthetic data nordland gardenspoint test quick sweep bench bench-scale bench-stream clean-results readme default-choice verify provenance summary book browser
+.PHONY: all help venv synthetic greenhouse-days data nordland gardenspoint test quick sweep bench bench-scale bench-stream clean-results readme default-choice verify provenance summary book browser
 .DEFAULT_GOAL := help
 
 help: ## this list
@@ -82,6 +83,13 @@ synthetic: $(SYNTHETIC)/synthetic.json ## generate the embedded synthetic greenh
 # in place means a complete sequence.
 $(SYNTHETIC)/synthetic.json: | $(STAMP)
 	$(BIN)/python -m greenloop data synthetic $(SYNTHETIC) --overwrite
+
+greenhouse-days: $(DAYS)/greenhouse_days.json ## render the greenhouse over 5 days (issue 65: ~8,000 frames, the days and their stream)
+
+# Rendered into a temporary folder and renamed at the end: greenhouse_days.json in place means a
+# complete render (and the command itself skips a folder already rendered with the same arguments).
+$(DAYS)/greenhouse_days.json: | $(STAMP)
+	$(BIN)/python -m greenloop data greenhouse-days $(DAYS) --overwrite
 
 data: | $(STAMP) ## download the real GreenHouse set into data/greenhouse (resumable)
 	$(BIN)/python -m greenloop data greenhouse data/greenhouse

@@ -25,7 +25,7 @@ Poses are close by one of two criteria:
 * ``loop_matrix`` (Qi 2024, Eq. 5): ``e = ||T_i^-1 T_j - I||_F < threshold``, the Frobenius
   norm of the relative pose minus identity. It mixes units: the translation part is in metres,
   the rotation part is ``2*sqrt(2)*|sin(theta/2)|`` for a rotation by theta about one axis
-  (0.5 is about 10 degrees, or 0.5 m).
+  (0.5 is about 20 degrees at zero distance: 2*sqrt(2)*sin(10.2 deg) = 0.5; or 0.5 m at zero rotation).
 * ``loop_matrix_metric``: translation distance < ``max_distance`` metres **and** viewing
   direction difference < ``max_angle`` degrees. Easier to argue about.
 
@@ -297,6 +297,35 @@ def path_length(poses) -> float:
     """Length of the camera path in metres (sum of frame-to-frame translation)."""
     t = np.asarray(poses)[:, :3, 3]
     return float(np.linalg.norm(np.diff(t, axis=0), axis=1).sum())
+
+
+def relative_poses(poses, pairs) -> np.ndarray:
+    """The true relative pose of every pair, T_i^-1 T_j: pose j in camera i's frame.
+
+    poses: (N, 4, 4) camera-to-world (metres; any one world frame, e.g. the days' stream's);
+    pairs: (P, 2) frame numbers (i, j). Returns (P, 4, 4) float64, the motion a loop closure
+    between i and j should estimate (score one with :func:`relative_pose_error`).
+    """
+    T = np.asarray(poses, dtype=np.float64)
+    p = np.asarray(pairs)
+    if T.ndim != 3 or T.shape[1:] != (4, 4):
+        raise ValueError(f"poses must have shape (N, 4, 4), got {T.shape}; read them with "
+                         f"greenloop.datasets.sequence.read_trajectory")
+    if p.ndim != 2 or p.shape[1] != 2 or not np.issubdtype(p.dtype, np.integer) or \
+            (p.size and (p.min() < 0 or p.max() >= len(T))):
+        raise ValueError(f"pairs must be (P, 2) integer frame numbers within 0..{len(T) - 1}, got shape {p.shape}")
+    return np.linalg.inv(T[p[:, 0]]) @ T[p[:, 1]]
+
+
+def relative_pose_error(estimated, true) -> tuple[np.ndarray, np.ndarray]:
+    """How far estimated relative poses are from the true ones (:func:`relative_poses`).
+
+    estimated, true: (P, 4, 4) rigid transforms (metres). Returns (translation error (P,) metres,
+    rotation error (P,) degrees) of E = true^-1 estimated: ||t_E|| and the angle of R_E.
+    """
+    E = np.linalg.inv(np.asarray(true, dtype=np.float64)) @ np.asarray(estimated, dtype=np.float64)
+    cos = np.clip((np.trace(E[:, :3, :3], axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
+    return np.linalg.norm(E[:, :3, 3], axis=1), np.degrees(np.arccos(cos))
 
 
 class Imported(NamedTuple):

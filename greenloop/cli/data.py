@@ -107,6 +107,35 @@ def _synthetic(sets) -> None:
     s.set_defaults(func=run)
 
 
+def _greenhouse_days(sets) -> None:
+    dm = synthetic.daysmake
+    s = sets.add_parser("greenhouse-days", help="render the greenhouse over days (issue 65): a larger hall, "
+                                                "one sequence folder per day and the multi-day stream")
+    s.add_argument("out", help="output folder (the stream; the days in OUT/days/)")
+    s.add_argument("--days", type=int, default=5, help="recording days (default %(default)s; >= 5 for every light)")
+    s.add_argument("--tiny", action="store_true", help="the two-aisle hall at 160x120 every 0.25 m (tests)")
+    s.add_argument("--size", type=_size, default=None, help="WxH (default 640x480, --tiny 160x120)")
+    s.add_argument("--spacing", type=float, default=None,
+                   help=f"metres between frames (default {dm.SPACING}, --tiny {dm.TINY_SPACING})")
+    s.add_argument("--seed", type=int, default=0, help="random seed (>= 0)")
+    s.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
+    s.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
+    s.add_argument("--quiet", action="store_true", help="no progress bar")
+
+    def run(a) -> int:
+        t0 = time.perf_counter()
+        kw = dict(n_days=a.days, tiny=a.tiny, seed=a.seed, size=a.size, spacing=a.spacing)
+        if not a.overwrite and dm.up_to_date(a.out, **kw):
+            print(f"{a.out} is up to date (same arguments in {dm.META}); --overwrite renders it again")
+            return 0
+        out = dm.make_greenhouse_days(a.out, workers=a.workers, overwrite=a.overwrite, progress=not a.quiet, **kw)
+        meta = json.loads((out / dm.META).read_text())
+        frames = ", ".join(f"{d['name']} {d['frames']}" for d in meta["days"])
+        print(f"wrote {meta['n_days']} days ({frames} frames) to {out} in {time.perf_counter() - t0:.1f} s")
+        return 0
+    s.set_defaults(func=run)
+
+
 def _others(sets) -> None:
     g = sets.add_parser("greenhouse", help="download the real GreenHouse set (needs the internet)")
     g.add_argument("out", nargs="?", default="data/greenhouse")
@@ -137,6 +166,7 @@ def add_parser(sub) -> None:
     d = sub.add_parser("data", help="build a dataset's sequence folder (synthetic, nordland, gardenspoint, greenhouse)")
     sets = d.add_subparsers(dest="set", metavar="SET", required=True)
     _synthetic(sets)
+    _greenhouse_days(sets)
     _nordland(sets)
     _gardenspoint(sets)
     _others(sets)

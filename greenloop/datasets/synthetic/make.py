@@ -50,14 +50,20 @@ def _render_chunk(frames) -> int:
     """Render and write the frames (list of int indices); returns how many were written."""
     wk = _WORKER
     for i in frames:
-        img, depth = render_frame(wk["scene"], wk["poses"][i], wk["size"], wk["grid"])
-        rng = np.random.default_rng([wk["seed"], int(i), 0xF4A3E])
-        bgr, d16 = _sensor(wk["scene"], img, depth, float(wk["s"][i]), wk["grid"], rng, wk["noise"])
-        if not cv2.imwrite(str(wk["out"] / "rgb" / f"{i}.png"), bgr, [cv2.IMWRITE_PNG_COMPRESSION, PNG_LEVEL]):
-            raise OSError(f"could not write {wk['out'] / 'rgb' / f'{i}.png'}")
-        if not cv2.imwrite(str(wk["out"] / "depth" / f"{i}.png"), d16, [cv2.IMWRITE_PNG_COMPRESSION, PNG_LEVEL]):
-            raise OSError(f"could not write {wk['out'] / 'depth' / f'{i}.png'}")
+        _write_frame(wk["out"], i, wk["scene"], wk["poses"][i], float(wk["s"][i]), wk["grid"],
+                     np.random.default_rng([wk["seed"], int(i), 0xF4A3E]), wk["noise"])
     return len(frames)
+
+
+def _write_frame(out: Path, i: int, scene, pose: np.ndarray, s_m: float, grid, rng, noise: float) -> None:
+    """Render frame ``i`` of ``scene`` from ``pose`` (4, 4) camera-to-hall at route position
+    ``s_m`` metres, pass it through the sensor model (``rng`` the frame's generator, ``noise`` grey
+    levels) and write out/rgb/i.png and out/depth/i.png."""
+    img, depth = render_frame(scene, pose, (grid.w, grid.h), grid)
+    bgr, d16 = _sensor(scene, img, depth, s_m, grid, rng, noise)
+    for sub, im in (("rgb", bgr), ("depth", d16)):
+        if not cv2.imwrite(str(out / sub / f"{i}.png"), im, [cv2.IMWRITE_PNG_COMPRESSION, PNG_LEVEL]):
+            raise OSError(f"could not write {out / sub / f'{i}.png'}")
 
 
 def make_greenhouse(folder, n_frames: int = DEFAULT_FRAMES, size=DEFAULT_SIZE, seed: int = 0,

@@ -14,14 +14,12 @@ import cv2
 import numpy as np
 
 from greenloop.datasets.synthetic.camera import camera_intrinsics, DEFAULT_SIZE
-from greenloop.datasets.synthetic.hall import HALL_DEPTH, HALL_HEIGHT, HALL_WIDTH
-from greenloop.datasets.synthetic.scene import Scene
+from greenloop.datasets.synthetic.scene import FOG_COLOR, Scene
 from greenloop.datasets.synthetic.textures import TEX_RES
 
 NEAR = 0.1                # near clipping plane (metres)
 FAR = 30.0                # primitives farther than this are culled (metres)
 FOG_DIST = 28.0           # metres: haze, contrast halves every ~19 m
-FOG_COLOR = np.array([205, 210, 205], np.float32)
 SHIFT = 4                 # sub-pixel bits for OpenCV drawing
 ONE = 1 << SHIFT
 
@@ -72,6 +70,7 @@ def _render_hall(scene: Scene, g: _Grid, R: np.ndarray, o: np.ndarray):
     """
     r = R.astype(np.float32)
     xg, yg = g.xg, g.yg
+    HALL_WIDTH, HALL_HEIGHT, HALL_DEPTH = scene.hall_size   # noqa: N806 (the hall's constants)
     ox, oy, oz = (float(v) for v in o)
     d = [r[i, 0] * xg + r[i, 1] * yg + r[i, 2] for i in range(3)]   # hall-frame ray, camera z = 1
     # inverse ray parameter to the wall each ray reaches: the larger, the nearer
@@ -95,7 +94,7 @@ def _render_hall(scene: Scene, g: _Grid, R: np.ndarray, o: np.ndarray):
                     borderMode=cv2.BORDER_REPLICATE)
     keep = cv2.exp(t * np.float32(-1.0 / FOG_DIST))
     fog = np.float32(1.0) - keep
-    img = (img * keep[..., None] + fog[..., None] * FOG_COLOR).astype(np.uint8)
+    img = (img * keep[..., None] + fog[..., None] * scene.fog_color).astype(np.uint8)
     return img, t.astype(np.float32)
 
 
@@ -111,7 +110,7 @@ def _draw_list(scene: Scene, g: _Grid, R: np.ndarray, o: np.ndarray):
     C, rpx, detail, blob = _plant_visibility(scene, g, R, o)
     leaves = _leaf_ellipses(scene, g, R, o, detail)
     blobs = _blob_ellipses(scene, g, C, rpx, blob)
-    return _sorted_items(pkeys, pplanes, polys, pcol, leaves, blobs)
+    return _sorted_items(pkeys, pplanes, polys, pcol, leaves, blobs, scene.fog_color)
 
 
 def _draw_polygons(scene: Scene, g: _Grid, R: np.ndarray, o: np.ndarray):
@@ -158,7 +157,7 @@ def _draw_polygons(scene: Scene, g: _Grid, R: np.ndarray, o: np.ndarray):
             polys.append(np.clip(np.rint(uv * ONE), -2**24, 2**24).astype(np.int32))
         else:
             polys.append(P[j])
-    pcol = _fog(scene.quad_color[qi], pkeys).tolist()
+    pcol = _fog(scene.quad_color[qi], pkeys, scene.fog_color).tolist()
     return pkeys, pplanes, polys, pcol
 
 
@@ -231,16 +230,17 @@ def _blob_ellipses(scene: Scene, g: _Grid, C: np.ndarray, rpx: np.ndarray, blob:
     return b_c, b_ax, np.zeros(len(bid)), scene.plant_color[bid], b_key, bz
 
 
-def _sorted_items(pkeys, pplanes, polys, pcol, leaves, blobs):
+def _sorted_items(pkeys, pplanes, polys, pcol, leaves, blobs, fog_color=FOG_COLOR):
     """Merge polygons (from ``_draw_polygons``) and ellipses (``leaves`` then ``blobs``, each the
-    six arrays of ``_leaf_ellipses``) into one far-to-near draw list.
+    six arrays of ``_leaf_ellipses``, fogged towards ``fog_color`` (3,) BGR) into one far-to-near
+    draw list.
 
     Returns (items, planes) as ``_draw_list``: items are (0, polygon, colour, id) or
     (1, (centre, axes, angle) in 1/ONE pixels and degrees, colour, id), ids 1..K in input order
     (polygons first); planes (K + 1, 3) with 1/z = C (A = B = 0) for the ellipses.
     """
     ec, eax, eang, ecol, ekey, edepth = (np.concatenate([a, b]) for a, b in zip(leaves, blobs))
-    ecol = _fog(ecol, ekey).tolist()
+    ecol = _fog(ecol, ekey, fog_color).tolist()
     eci = np.rint(ec * ONE).astype(np.int64).tolist()
     eai = np.maximum(np.rint(eax * ONE), 1).astype(np.int64).tolist()
     eang = eang.tolist()
@@ -262,10 +262,11 @@ def _sorted_items(pkeys, pplanes, polys, pcol, leaves, blobs):
     return items, planes
 
 
-def _fog(color: np.ndarray, dist: np.ndarray) -> np.ndarray:
-    """Colours (K, 3) seen through ``dist`` (K,) metres of haze (one value per primitive)."""
+def _fog(color: np.ndarray, dist: np.ndarray, fog_color=FOG_COLOR) -> np.ndarray:
+    """Colours (K, 3) seen through ``dist`` (K,) metres of haze (one value per primitive) of
+    colour ``fog_color`` (3,) BGR."""
     keep = np.exp(-np.asarray(dist, np.float64) / FOG_DIST)[:, None]
-    return color * keep + FOG_COLOR * (1.0 - keep)
+    return color * keep + fog_color * (1.0 - keep)
 
 
 def _project_ellipses(Cc, A1, A2, fx, fy):

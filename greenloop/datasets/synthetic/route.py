@@ -146,7 +146,17 @@ def route_world(n_frames: int = DEFAULT_FRAMES, seed: int = 0):
     """
     n = _check_frames(n_frames)
     seed = _check_seed(seed)
-    s_d, xz_d, head_d = _filleted_path(route_waypoints(), TURN_RADIUS)
+    return _path_poses(route_waypoints(), n, np.random.default_rng([seed, 0x5EED]))
+
+
+def _path_poses(waypoints: np.ndarray, n: int, rng):
+    """Camera poses on the rounded path through ``waypoints`` (K, 2) (x, z) metres, hall frame.
+
+    n: poses, uniform in arc length; rng: draws the smoothed jitter and the wander's phases
+    (``route_world``). Returns (poses (n, 4, 4) float64 camera-to-hall, OpenCV camera axes;
+    s (n,) arc length in metres).
+    """
+    s_d, xz_d, head_d = _filleted_path(waypoints, TURN_RADIUS)
     step = s_d[1] - s_d[0]
     head_d = gaussian_filter1d(head_d, 0.2 / step, mode="nearest")   # smooth yaw rate
     length = s_d[-1]
@@ -156,7 +166,6 @@ def route_world(n_frames: int = DEFAULT_FRAMES, seed: int = 0):
     yaw = np.interp(s, s_d, head_d)
 
     # jitter on a 1 cm grid along the route, smoothed over ~8 cm: independent of n_frames
-    rng = np.random.default_rng([seed, 0x5EED])
     grid = np.arange(0.0, length + 0.02, 0.01)
     noise = gaussian_filter1d(rng.standard_normal((len(grid), 5)), 8.0, axis=0, mode="wrap")
     noise /= noise.std(axis=0, keepdims=True)

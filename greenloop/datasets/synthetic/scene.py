@@ -9,7 +9,7 @@ colours BGR 0..255.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -20,6 +20,7 @@ from greenloop.datasets.synthetic.plants import _make_plants
 from greenloop.datasets.synthetic.textures import _texture_atlas
 
 LIGHT = np.array([0.35, 1.0, 0.25]) / np.linalg.norm([0.35, 1.0, 0.25])
+FOG_COLOR = np.array([205, 210, 205], np.float32)   # BGR of the haze (render: distance fog)
 
 
 @dataclass
@@ -34,6 +35,8 @@ class Scene:
     plant_color (P, 3), plant_flat (P,) (0 = rosette, 1 = flat disc), plant_leaves (P + 1,) CSR
     offsets into the leaf arrays. atlas (Ha, Wa, 3) uint8 hall textures; atlas_rows (6,) first
     atlas row of floor, roof, left, right, front, back. light_phase (6,): phases (radians) of the lighting drift.
+    hall_size (width x, height y, depth z) metres of the hall box (default: ``hall``'s hall);
+    fog_color (3,) float32 BGR of the haze (darker at night in the days' hall).
     """
     quads: np.ndarray
     quad_color: np.ndarray
@@ -54,6 +57,8 @@ class Scene:
     atlas: np.ndarray
     atlas_rows: np.ndarray
     light_phase: np.ndarray
+    hall_size: tuple = (HALL_WIDTH, HALL_HEIGHT, HALL_DEPTH)
+    fog_color: np.ndarray = field(default_factory=FOG_COLOR.copy)
 
 
 def _new_builder() -> dict:
@@ -145,23 +150,29 @@ def build_scene(seed: int = 0) -> Scene:
 
 
 def _add_beds(sb: dict) -> None:
-    """Cultivation beds (tray, growing surface, stand), split into 1 m modules along z so the
-    painter's order stays right. Draws no random numbers."""
+    """The six cultivation beds of the hall (``_add_bed``). Draws no random numbers."""
     tops = [(215, 220, 218), (60, 72, 88), (218, 222, 220), (215, 220, 218), (60, 72, 88),
             (210, 215, 215)]
     for k, xc in enumerate(BED_X):
-        edges = np.linspace(BED_Z0, BED_Z0 + BED_LENGTH, int(round(BED_LENGTH)) + 1)
-        for z0, z1 in zip(edges[:-1], edges[1:]):
-            _box(sb, (xc - BED_WIDTH / 2, BED_TOP - 0.13, z0), (xc + BED_WIDTH / 2, BED_TOP, z1),
-                 (200, 202, 200), far=True)
-            # the growing surface, a hair above the tray
-            top = np.array([[xc - BED_WIDTH / 2 + 0.04, BED_TOP + 0.001, z0],
-                            [xc + BED_WIDTH / 2 - 0.04, BED_TOP + 0.001, z0],
-                            [xc + BED_WIDTH / 2 - 0.04, BED_TOP + 0.001, z1],
-                            [xc - BED_WIDTH / 2 + 0.04, BED_TOP + 0.001, z1]])
-            _add_object(sb, [top], tops[k], far=True)
-            _box(sb, (xc - BED_WIDTH / 2 + 0.1, 0.0, z0), (xc + BED_WIDTH / 2 - 0.1, BED_TOP - 0.13, z1),
-                 (62, 64, 66), far=True)
+        _add_bed(sb, xc, BED_Z0, BED_LENGTH, tops[k])
+
+
+def _add_bed(sb: dict, xc: float, z0: float, length: float, top_color) -> None:
+    """One cultivation bed (tray, growing surface of ``top_color`` BGR, stand) centred on x = xc
+    from z0 to z0 + length (metres), split into 1 m modules along z so the painter's order stays
+    right. Draws no random numbers."""
+    edges = np.linspace(z0, z0 + length, int(round(length)) + 1)
+    for z0, z1 in zip(edges[:-1], edges[1:]):
+        _box(sb, (xc - BED_WIDTH / 2, BED_TOP - 0.13, z0), (xc + BED_WIDTH / 2, BED_TOP, z1),
+             (200, 202, 200), far=True)
+        # the growing surface, a hair above the tray
+        top = np.array([[xc - BED_WIDTH / 2 + 0.04, BED_TOP + 0.001, z0],
+                        [xc + BED_WIDTH / 2 - 0.04, BED_TOP + 0.001, z0],
+                        [xc + BED_WIDTH / 2 - 0.04, BED_TOP + 0.001, z1],
+                        [xc - BED_WIDTH / 2 + 0.04, BED_TOP + 0.001, z1]])
+        _add_object(sb, [top], top_color, far=True)
+        _box(sb, (xc - BED_WIDTH / 2 + 0.1, 0.0, z0), (xc + BED_WIDTH / 2 - 0.1, BED_TOP - 0.13, z1),
+             (62, 64, 66), far=True)
 
 
 def _add_posts(sb: dict, truss_z: np.ndarray) -> None:
@@ -251,11 +262,12 @@ def _add_equipment(sb: dict) -> None:
     _box(sb, (10.55, 1.25, BED_Z0 + 2.1), (11.05, 1.3, BED_Z0 + 2.7), (40, 40, 40))
 
 
-def _finish_quads(sb: dict, rng):
+def _finish_quads(sb: dict, rng, light: np.ndarray = LIGHT):
     """Stack the builder's polygons, orient their normals outwards and shade them.
 
     Returns (quads (Q, 4, 3) float64 metres, normals (Q, 3) outward unit vectors, colour (Q, 3)
-    float64 BGR 0..255 after Lambert shading (emissive quads unshaded) and a seeded +-4 %
+    float64 BGR 0..255 after Lambert shading by the unit direction ``light`` (3,) towards the
+    light (emissive quads unshaded) and a seeded +-4 %
     brightness per quad, obj (Q,) object index, lo / hi (O, 3) object bounding boxes in metres).
     Draws Q uniforms from ``rng``.
     """
@@ -271,7 +283,7 @@ def _finish_quads(sb: dict, rng):
     n[flip] *= -1
     color = np.asarray(sb["color"], np.float64)
     emit = np.asarray(sb["emit"])
-    shade = 0.5 + 0.55 * np.clip(n @ LIGHT, 0, None)
+    shade = 0.5 + 0.55 * np.clip(n @ light, 0, None)
     color = np.where(emit[:, None], color, color * shade[:, None])
     color = np.clip(color * rng.uniform(0.96, 1.04, (len(color), 1)), 0, 255)
     return quads, n, color, obj, lo, hi

@@ -182,7 +182,12 @@ def _texture_atlas(rng):
     """
     floor, roof = _texture_floor(rng), _texture_roof(rng)
     walls = _texture_walls(rng)
-    faces = [floor, roof] + walls
+    return _stack_atlas([floor, roof] + walls)
+
+
+def _stack_atlas(faces):
+    """Stack the six face textures (floor, roof, left, right, front, back; BGR uint8) into one
+    atlas as ``_texture_atlas`` returns it: (atlas (Ha, Wa, 3) uint8, rows (6,) first rows)."""
     width = max(t.shape[1] for t in faces)
     rows = np.cumsum([0] + [t.shape[0] + 2 for t in faces])[:-1]
     atlas = np.zeros((rows[-1] + faces[-1].shape[0] + 2, width, 3), np.uint8)
