@@ -26,10 +26,8 @@ from greenloop import exclusion
 from greenloop.datasets import sequence
 from greenloop.datasets.sequence import DESCRIPTION_NAME
 from greenloop.methods import registry
-from greenloop.methods.greenloop_seq import seqmatch, seqstream
 from greenloop.methods.interface import Data
-from greenloop.methods.lsh import retrieval
-from greenloop.speed import timing
+from greenloop.util.clock import timed
 from greenloop.util.files import write_atomic
 from greenloop.util.progress import bar
 
@@ -111,7 +109,7 @@ def knobs_for(name: str, folder, tuned=None, variant=None, threshold=None, step=
     if threshold is None:
         raise ValueError(f"--method {name} needs a threshold chosen on your own data: pass --threshold T or --tuned "
                          f"<results>/13_leaderboard/summary.json (notebook 13 picks knobs and threshold on a tuning "
-                         f"part); --method {seqmatch.DEFAULT_NAME} (the default) has a fixed one")
+                         f"part); --method {registry.DEFAULT} (the default) has a fixed one")
     own_step = sequence.open(folder).frame_step
     step_from = "--step" if step is not None else (DESCRIPTION_NAME if own_step else "default")
     step = step or own_step or 1
@@ -145,7 +143,7 @@ def exclusion_for(folder, n: int, step: int, exclude=None, tuned_exclude=None) -
     return frames, source, rule
 
 
-def plan(folder, name: str = seqmatch.DEFAULT_NAME, tuned=None, variant=None, threshold=None, step=None,
+def plan(folder, name: str = registry.DEFAULT, tuned=None, variant=None, threshold=None, step=None,
          exclude=None, **flags) -> Plan:
     """Everything a detect run decides before its first frame (:func:`knobs_for`, :func:`exclusion_for`).
     folder: a recording's folder (a sequence folder or a folder of images) or its ``sequence.Sequence``."""
@@ -167,8 +165,8 @@ def header(p: Plan, folder, index=None, candidates: int = 20) -> str:
 
 def data_for(p: Plan, folder, index=None, candidates: int = 20) -> Data:
     """The ``Data`` a registry entry's ``stream`` and ``describer`` read on a user's recording: no
-    ground truth, no split; params: the default velocities, ImageNet weights, the index options."""
-    params = {"velocities": seqmatch.DEFAULT_VELOCITIES, "weights": "auto", "index": index, "candidates": candidates}
+    ground truth, no split; params: ``registry.user_params`` (default velocities, ImageNet weights, the index)."""
+    params = registry.user_params(index, candidates)
     return Data(str(folder), p.step, np.arange(len(p.paths)) * p.step, None, p.exclude, None, None, params, {}, {}, {})
 
 
@@ -176,11 +174,11 @@ class FrameStream:
     """A registered detector fed decoded frames: ``update_many(frames)`` -> closure events and
     ``decide_many(frames)`` -> one decision per frame ({'frame', 'match', 'score', 'closure'});
     a detector that takes frames itself is called directly, one fed descriptors through ``describe``
-    (the timed path, ``speed.timing.detector_method``)."""
+    (``update_descriptor(describe(frame))``, the path ``speed.timing`` times)."""
 
     def __init__(self, name: str, detector, describe):
         self.detector = detector
-        self._step = None if describe is None else timing.detector_method(name, detector, describe).step
+        self._step = None if describe is None else (lambda det, frame: det.update_descriptor(describe(frame)))
 
     def update_many(self, frames) -> list[dict]:
         if self._step is None:
@@ -193,7 +191,7 @@ class FrameStream:
         rows = []
         for f in frames:
             j, event = self.detector.frame_index, self._step(self.detector, f)
-            match, score = seqstream.best_candidate(self.detector)
+            match, score = registry.best_candidate(self.detector)
             rows.append(dict(event or {"frame": j, "match": match, "score": score}, closure=event is not None))
         return rows
 
@@ -210,9 +208,7 @@ def open_stream(p: Plan, folder, index=None, candidates: int = 20, state=None) -
                              f"and options, or delete the file to start over")
         det = saved["detector"]
     else:
-        if index is not None:
-            retrieval.one_thread()
-        det = registry.get(p.name).stream(p.knobs, p.threshold, data_for(p, folder, index, candidates))
+        det = registry.stream(p.name, p.knobs, p.threshold, data_for(p, folder, index, candidates))
     entry = registry.get(p.name)
     # a detector that describes frames with the record's own descriptor takes them in windows (one
     # batched pass); the others are fed the entry's describer's output, frame by frame
@@ -289,7 +285,7 @@ def run_windows(stream: FrameStream, paths, window: int, first: int = 0, stop=No
             if after is not None:
                 after()
     try:
-        return timing.timed(go)[1]
+        return timed(go)[1]
     finally:
         progress.close()
 
@@ -312,7 +308,7 @@ def run(p: Plan, folder, window: int = 70, index=None, candidates: int = 20, sta
     ``stop_after`` frames in this run."""
     if matches is not None and registry.get(p.name).describer is None:
         raise ValueError("--matches needs a method that matches frames (the dictionary counts spot labels): "
-                         f"pass --method {seqmatch.DEFAULT_NAME} (the default) or another registered one")
+                         f"pass --method {registry.DEFAULT} (the default) or another registered one")
     stream = open_stream(p, folder, index, candidates, state)
     key, first = state_key(p, folder, index, candidates), stream.detector.frame_index
     stop = len(p.paths) if stop_after is None else min(len(p.paths), first + stop_after)

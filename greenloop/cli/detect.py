@@ -7,16 +7,17 @@ import sys
 
 from greenloop import detect, exclusion, features
 from greenloop.methods import registry
-from greenloop.methods.dictionary import entry as dictionary
-from greenloop.methods.greenloop_seq import seqmatch, seqstream
-from greenloop.methods.lsh import retrieval
 
+_DEFAULT = registry.get(registry.DEFAULT).cli_knobs
+_OTHERS = [f"{n} (descriptor {registry.get(n).cli_knobs['descriptor']}, threshold {t:g})"
+           for n, t in registry.named().items() if n != registry.DEFAULT]
+_DICTIONARY = registry.get("dictionary")
 DESCRIPTION = (
     f"Stream a recording frame by frame through a detector and print each declared loop closure "
     f"(frame, matched earlier frame, score) and a summary. With no flags it runs the named default "
-    f"{seqmatch.DEFAULT_NAME} (descriptor {seqmatch.DEFAULT_KNOBS['descriptor']}, seq_len "
-    f"{seqmatch.DEFAULT_KNOBS['seq_len']}, threshold {seqmatch.DEFAULT_THRESHOLD:g}): no model, no poses, no "
-    f"tuning. {seqmatch.CNN_NAME} adds an ImageNet CNN (threshold {seqmatch.CNN_THRESHOLD:g}). The frames it "
+    f"{registry.DEFAULT} (descriptor {_DEFAULT['descriptor']}, seq_len "
+    f"{_DEFAULT['seq_len']}, threshold {_DEFAULT['fixed_threshold']:g}): no model, no poses, no "
+    f"tuning. The other named configuration{'s' if len(_OTHERS) > 1 else ''}: {'; '.join(_OTHERS)}. The frames it "
     f"never compares with a query (the exclusion) follow one rule, the one make uses, printed at the start. "
     f"For long recordings --index hnsw (or ivf, ...) runs the same configuration and threshold on the frames "
     f"an index retrieves, at a cost per frame that does not grow with the recording; --state makes it resumable. "
@@ -32,13 +33,13 @@ def _defaults(knob: str) -> str:
 def _stream_options(d) -> None:
     """--index, --candidates, --state, --save-every, --stop-after."""
     g = d.add_argument_group("long recordings")
-    g.add_argument("--index", default=None, choices=retrieval.KINDS,
+    g.add_argument("--index", default=None, choices=registry.INDEX.kinds,
                    help="verify sequences on the --candidates frames this index retrieves (scan, flat: exact; ivf, "
                         "hnsw, swp, qdp: approximate) instead of on every stored frame, so the per-frame cost stops "
                         "growing with the recording (greenloop.methods.lsh.retrieval); the method's configuration and "
                         "fixed threshold apply as they are (the calibration's null from "
-                        f"{seqstream.NULL_SAMPLE} sampled stored frames); the index holds the stored descriptors "
-                        f"reduced to {seqstream.INDEX_DIM} dims by a PCA fitted on the first {seqstream.INDEX_FIT} "
+                        f"{registry.INDEX.null_sample} sampled stored frames); the index holds the stored descriptors "
+                        f"reduced to {registry.INDEX.dim} dims by a PCA fitted on the first {registry.INDEX.fit} "
                         "candidate frames, the verification reads them in full")
     g.add_argument("--candidates", type=int, default=20, help="--index: frames retrieved per query (default 20)")
     g.add_argument("--state", default=None, metavar="FILE",
@@ -65,9 +66,10 @@ def _knob_options(d) -> None:
                    help="local contrast window in frames, 0 = off (default: " + _defaults("contrast_window") + ")")
     g.add_argument("--model", default=None, help="dictionary: the trained CNN, a .keras or .tflite file (needed)")
     g.add_argument("--frames-per-spot", type=int, default=None, metavar="L",
-                   help=f"dictionary: frames per spot the model was trained with (default {dictionary.FRAMES_PER_SPOT})")
+                   help=f"dictionary: frames per spot the model was trained with (default "
+                        f"{_DICTIONARY.cli_threshold(_DICTIONARY.cli_knobs) - _DICTIONARY.cli_knobs['margin']}, the paper's)")
     g.add_argument("--margin", type=int, default=None,
-                   help=f"dictionary: Delta in tau = L + Delta (default {dictionary.CLI_KNOBS['margin']})")
+                   help=f"dictionary: Delta in tau = L + Delta (default {_DICTIONARY.cli_knobs['margin']})")
     g.add_argument("--backend", default=None, choices=("auto", "numpy", "tflite", "keras"),
                    help="dictionary: inference backend (default auto)")
 
@@ -77,11 +79,11 @@ def add_parser(sub) -> None:
     d = sub.add_parser("detect", help="stream a recording through a loop-closure detector and print its closures",
                        description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
     d.add_argument("folder", metavar="SEQUENCE_FOLDER", help="sequence folder (its rgb/) or folder of .jpg/.png frames, any size")
-    d.add_argument("--method", default=seqmatch.DEFAULT_NAME, choices=list(registry.REGISTRY),
-                   help=f"a registered detector (greenloop.methods.registry); default {seqmatch.DEFAULT_NAME}, "
+    d.add_argument("--method", default=registry.DEFAULT, choices=list(registry.REGISTRY),
+                   help=f"a registered detector (greenloop.methods.registry); default {registry.DEFAULT}, "
                         f"the named default, which needs no model and no tuning")
     d.add_argument("--threshold", "--tau", type=float, default=None,
-                   help="the score to reach: " + "; ".join(f"{n}: {t:g}" for n, (_, t) in seqmatch.NAMED.items())
+                   help="the score to reach: " + "; ".join(f"{n}: {t:g}" for n, t in registry.named().items())
                         + " (calibrated z-scores, with or without --index; a value given overrides it); "
                           "dictionary: tau, an integer (default frames-per-spot + margin)")
     d.add_argument("--matches", default=None, metavar="FILE.csv",

@@ -87,6 +87,17 @@ class Entry(NamedTuple):
     decide: Callable | None = None
 
 
+class IndexOptions(NamedTuple):
+    """The candidate index a streaming detector may search instead of every stored frame
+    (``detect --index``). kinds: the index names (``methods.lsh.retrieval``); dim: the dims the
+    index holds (a PCA of the stored descriptors); fit: the candidate frames that PCA is fitted on;
+    null_sample: the stored frames sampled for the calibration's null in candidate mode."""
+    kinds: tuple
+    dim: int
+    fit: int
+    null_sample: int
+
+
 def no_descriptors(data: Data) -> tuple[dict, dict]:
     """``describe`` of a family that needs no descriptor beyond those already in ``data``."""
     return {}, {}
