@@ -10,6 +10,15 @@ given. Frames are decoded in colour (BGR, as a camera delivers them) in windows.
 Units: ``step``, ``exclude`` and ``seq_len`` count streamed frames (every ``step``-th frame of
 the folder); an event is a dict with ``frame`` (streamed frame number) and the detector's
 ``event_columns`` (default ``match``, ``score``).
+
+Verification (``run(verifier=...)``, :class:`Checker`): each event the detector declares is a
+candidate; a geometric verifier ``(frame_q, frame_m, depth_q, depth_m) -> Verification-like``
+(fields accepted, inliers, model, R, t, metric) is applied to its two decoded frames (the match
+read from disk when it is older than the window; depth in metres from the folder's depth/ where it
+has one, else None). The rule, stated once (:meth:`Checker.check`): a candidate is declared when
+the verifier accepts it, and declared unverified (verified None) where it could not check it
+(accepted None, or model "too-small"); a rejected one is not declared. Each declared closure is an
+``interface.Closure`` (``Run.closures``) carrying the inlier count and the relative pose.
 """
 from __future__ import annotations
 
@@ -26,12 +35,16 @@ from greenloop import exclusion
 from greenloop.datasets import sequence
 from greenloop.datasets.sequence import DESCRIPTION_NAME
 from greenloop.methods import registry
-from greenloop.methods.interface import Data
+from greenloop.methods.interface import Closure, Data
 from greenloop.util.clock import timed
 from greenloop.util.files import write_atomic
 from greenloop.util.progress import bar
 
 MATCH_COLUMNS = ("frame", "file", "match", "match_file", "score", "closure")
+# --matches' columns after MATCH_COLUMNS under a verifier: verified 1/0 (empty: unchecked), the inlier count,
+# the model, the rotation vector (rad) and translation of the relative pose, metric 1 (t in metres) / 0 (direction)
+VERIFY_COLUMNS = ("verified", "inliers", "model", "rx", "ry", "rz", "tx", "ty", "tz", "metric")
+UNCHECKED = dict(verified=None, inliers=0, model="none", R=None, t=None, metric=False)   # a closure not verified
 OVERRIDES = ("descriptor", "seq_len", "contrast_window", "model", "frames_per_spot", "margin", "backend")
 
 
@@ -230,15 +243,16 @@ def save_state(stream: FrameStream, key: dict, path) -> None:
     write_atomic(path, dump)
 
 
-def matches_writer(path, paths, append: bool):
+def matches_writer(path, paths, append: bool, verified: bool = False):
     """A function taking a window's decisions (``FrameStream.decide_many``) and appending one CSV line
     per frame (MATCH_COLUMNS: frame and file, its best stored match and file, empty while none is a
-    candidate, the score, 1 where a closure was declared) to ``path``; a new file unless ``append``."""
+    candidate, the score, 1 where a closure was declared; with ``verified``, VERIFY_COLUMNS, empty
+    where the frame was not checked) to ``path``; a new file unless ``append``."""
     path = Path(path)
     if path.parent and not path.parent.is_dir():
         raise FileNotFoundError(f"--matches {path}: folder {path.parent} does not exist")
     if not append or not path.is_file():
-        path.write_text(",".join(MATCH_COLUMNS) + "\n")
+        path.write_text(",".join(MATCH_COLUMNS + (VERIFY_COLUMNS if verified else ())) + "\n")
 
     def write(rows):
         with open(path, "a") as f:
@@ -246,8 +260,73 @@ def matches_writer(path, paths, append: bool):
                 m = r["match"]
                 f.write(f"{r['frame']},{paths[r['frame']].name},{m if m >= 0 else ''},"
                         f"{paths[m].name if m >= 0 else ''},{'' if m < 0 else format(r['score'], '.6g')},"
-                        f"{int(r['closure'])}\n")
+                        f"{int(r['closure'])}" + (("," + verification_fields(r)) if verified else "") + "\n")
     return write
+
+
+def verification_fields(r: dict) -> str:
+    """VERIFY_COLUMNS of one decision as CSV fields: verified 1/0, inliers, model, rotation vector
+    rx ry rz (rad, ``cv2.Rodrigues``), translation tx ty tz (metres where metric, else a unit
+    direction), metric 1/0; empty fields where the frame was not checked or has no pose."""
+    if r.get("model") is None:
+        return "," * (len(VERIFY_COLUMNS) - 1)
+    pose = ["", "", ""] * 2
+    if r["R"] is not None and r["t"] is not None:
+        pose = [format(v, ".6g") for v in (*rotation_vector(r["R"]), *np.asarray(r["t"], float).ravel())]
+    flag = "" if r["verified"] is None else str(int(r["verified"]))
+    return ",".join([flag, str(r["inliers"]), r["model"], *pose, str(int(r["metric"]))])
+
+
+def rotation_vector(R) -> np.ndarray:
+    """(3,) float64 rotation vector (axis times angle, rad) of a (3, 3) rotation matrix."""
+    return cv2.Rodrigues(np.asarray(R, dtype=np.float64))[0].ravel()
+
+
+def pose_text(e: dict) -> str:
+    """A verified closure's printed columns: verified (yes / no / unchecked), inliers, model, the
+    rotation as its angle in degrees about a unit axis, the translation with its unit (m, or dir
+    for a unit direction); '-' where there is no pose."""
+    flag = {True: "yes", False: "no", None: "unchecked"}[e["verified"]]
+    rot = trans = "-"
+    if e["R"] is not None and e["t"] is not None:
+        v = rotation_vector(e["R"])
+        angle = float(np.linalg.norm(v))
+        axis = v / angle if angle > 0 else np.array([0.0, 0.0, 1.0])
+        rot = f"{np.degrees(angle):.1f} deg about ({axis[0]:.2f},{axis[1]:.2f},{axis[2]:.2f})"
+        t = np.asarray(e["t"], float).ravel()
+        trans = f"({t[0]:.3f},{t[1]:.3f},{t[2]:.3f}) {'m' if e['metric'] else 'dir'}"
+    return "\t".join([flag, str(e["inliers"]), e["model"], rot, trans])
+
+
+class Checker:
+    """A run's geometric verification (module doc): the verifier, the streamed frames' files and
+    depth files (None without depth/), and how many candidates it checked and rejected."""
+
+    def __init__(self, verifier, paths, depth_paths=None):
+        self.verifier, self.paths, self.depth_paths = verifier, paths, depth_paths
+        self.checked = self.rejected = 0
+
+    def check(self, e: dict, frames, start: int) -> dict:
+        """Event ``e`` (a closure candidate: frame, match) with UNCHECKED's fields from the verifier
+        and ``closure`` False where it rejects. frames: the window's decoded frames, frames[0] is
+        streamed frame ``start``."""
+        q, m = int(e["frame"]), int(e["match"])
+        fm = frames[m - start] if m >= start else read_window([self.paths[m]])[0]
+        dq, dm = ((None, None) if self.depth_paths is None else
+                  (sequence.read_depth(self.depth_paths[q]), sequence.read_depth(self.depth_paths[m])))
+        v = self.verifier(frames[q - start], fm, dq, dm)
+        verified = None if v.accepted is None or v.model == "too-small" else bool(v.accepted)
+        self.checked += 1
+        self.rejected += verified is False
+        as_array = lambda a: None if a is None else np.asarray(a, dtype=np.float64)
+        return dict(e, closure=verified is not False, verified=verified, inliers=int(v.inliers), model=str(v.model),
+                    R=as_array(v.R), t=as_array(v.t), metric=bool(v.metric))
+
+
+def closure(e: dict) -> Closure:
+    """The ``interface.Closure`` of a declared event (UNCHECKED's values where it was not verified)."""
+    return Closure(int(e["frame"]), int(e.get("match", -1)), float(e.get("score", np.nan)),
+                   *(e.get(k, v) for k, v in UNCHECKED.items()))
 
 
 def event_columns(detector) -> tuple[str, ...]:
@@ -263,10 +342,12 @@ def event_line(e: dict, columns, paths) -> str:
 
 
 def run_windows(stream: FrameStream, paths, window: int, first: int = 0, stop=None, after=None, matches=None,
-                out=print, desc: str = "detect") -> float:
-    """Decode paths[first:stop] in windows of ``window`` frames, feed each to ``stream``, ``out`` one
-    line per closure (:func:`event_line`), ``matches(rows)`` per window when given, ``after()`` per
-    window (state saving); a progress bar on stderr. Returns the wall seconds (decoding included)."""
+                out=print, desc: str = "detect", checker: Checker | None = None, declared=None) -> float:
+    """Decode paths[first:stop] in windows of ``window`` frames, feed each to ``stream``, verify each
+    candidate with ``checker`` when given (:meth:`Checker.check`), ``out`` one line per declared closure
+    (:func:`event_line`, then :func:`pose_text` under a checker) and append its ``Closure`` to the list
+    ``declared`` when given, ``matches(rows)`` per window when given, ``after()`` per window (state
+    saving); a progress bar on stderr. Returns the wall seconds (decoding and verification included)."""
     stop = len(paths) if stop is None else stop
     columns = event_columns(stream.detector)
     progress = bar(total=len(paths), initial=first, desc=desc, unit="frame")
@@ -276,9 +357,14 @@ def run_windows(stream: FrameStream, paths, window: int, first: int = 0, stop=No
             chunk = paths[start:min(start + window, stop)]
             frames = read_window(chunk)
             rows = stream.decide_many(frames) if matches else stream.update_many(frames)
+            if checker is not None:
+                rows = [checker.check(e, frames, start) if e.get("closure", True) and e["match"] >= 0 else e
+                        for e in rows]
             for e in rows:
                 if e.get("closure", True):
-                    out(event_line(e, columns, paths))
+                    out(event_line(e, columns, paths) + ("" if checker is None else "\t" + pose_text(e)))
+                    if declared is not None:
+                        declared.append(closure(e))
             if matches is not None:
                 matches(rows)
             progress.update(len(chunk))
@@ -292,20 +378,45 @@ def run_windows(stream: FrameStream, paths, window: int, first: int = 0, stop=No
 
 class Run(NamedTuple):
     """A finished (or stopped) detect run: the stream, the first and next frame numbers, the wall
-    seconds (decoding included) and whether the recording was finished."""
+    seconds (decoding and verification included), whether the recording was finished, the closures
+    declared in this run (``interface.Closure``, in order) and the candidates verification rejected."""
     stream: FrameStream
     first: int
     next: int
     seconds: float
     finished: bool
+    closures: list = []
+    rejected: int = 0
+
+
+def checker_for(p: Plan, folder, verifier, columns) -> Checker | None:
+    """The run's :class:`Checker` (None without ``verifier``): the plan's frames and, where the folder
+    has depth/, its depth frames at the plan's step. ValueError for a detector that names no match."""
+    if verifier is None:
+        return None
+    if "match" not in columns:
+        raise ValueError(f"--verify needs a method that matches frames (--method {p.name} names no earlier "
+                         f"frame to verify against): pass --method {registry.DEFAULT} or --no-verify")
+    depths = sequence.open(folder).depth_paths
+    return Checker(verifier, p.paths, None if depths is None else depths[::p.step])
+
+
+def verifier_for(folder):
+    """The registered geometric verifier for ``folder`` (``registry.verifier`` given its camera's
+    intrinsics, from camera.yaml, or None), or None where none is registered."""
+    seq = sequence.open(folder)
+    return registry.verifier(seq.camera() if seq.has_camera else None)
 
 
 def run(p: Plan, folder, window: int = 70, index=None, candidates: int = 20, state=None, save_every: int = 10000,
-        stop_after=None, matches=None, out=print) -> Run:
+        stop_after=None, matches=None, out=print, verifier=None) -> Run:
     """Stream the plan's frames (from where ``state`` stopped, if it exists) through its detector:
     closures to ``out`` as declared, every frame's decision to the ``matches`` CSV, the detector to
     ``state`` every ``save_every`` frames, on Ctrl-C (re-raised) and at the end; at most
-    ``stop_after`` frames in this run."""
+    ``stop_after`` frames in this run. verifier: None (every candidate the detector declares is a
+    closure, unverified) or a callable (frame_q, frame_m, depth_q, depth_m) -> a record with fields
+    accepted, inliers, model, R, t, metric applied to each candidate (module doc: the rule); its
+    fields follow each printed closure and fill --matches' VERIFY_COLUMNS."""
     if matches is not None and registry.get(p.name).describer is None:
         raise ValueError("--matches needs a method that matches frames (the dictionary counts spot labels): "
                          f"pass --method {registry.DEFAULT} (the default) or another registered one")
@@ -318,16 +429,19 @@ def run(p: Plan, folder, window: int = 70, index=None, candidates: int = 20, sta
         if state and (force or stream.detector.frame_index - saved[0] >= save_every):
             save_state(stream, key, state)
             saved[0] = stream.detector.frame_index
-    write = None if matches is None else matches_writer(matches, p.paths, append=first > 0)
     columns = event_columns(stream.detector)
+    checker = checker_for(p, folder, verifier, columns)
+    write = None if matches is None else matches_writer(matches, p.paths, append=first > 0, verified=checker is not None)
     if first:
         out(f"# resumed at frame {first} (--state {state})")
-    out("\t".join(["frame", *columns, "file"] + (["match_file"] if "match" in columns else [])))
+    out("\t".join(["frame", *columns, "file"] + (["match_file"] if "match" in columns else [])
+                  + ([] if checker is None else ["verified", "inliers", "model", "rotation", "translation"])))
+    declared = []
     try:
-        seconds = run_windows(stream, p.paths, window, first, stop, save_now, write, out, p.name)
+        seconds = run_windows(stream, p.paths, window, first, stop, save_now, write, out, p.name, checker, declared)
     except KeyboardInterrupt:
         save_now(force=True)
         raise
     save_now(force=True)
     n = stream.detector.frame_index
-    return Run(stream, first, n, seconds, n == len(p.paths))
+    return Run(stream, first, n, seconds, n == len(p.paths), declared, 0 if checker is None else checker.rejected)

@@ -99,26 +99,46 @@ def add_parser(sub) -> None:
                    help="stream every step-th frame (default: sequence.yaml's frame_step, else 1; --tuned's "
                         "frame_step is printed, not applied)")
     d.add_argument("--window", type=int, default=70, help="frames decoded per batch (default 70)")
+    d.add_argument("--verify", action=argparse.BooleanOptionalAction, default=None,
+                   help="verify each closure candidate geometrically (local features, a robust fit of the relative "
+                        "pose; the registry's verifier) and declare only the accepted ones, each with its inliers "
+                        "and relative pose; default: verify when a verifier is registered")
     _knob_options(d)
     _stream_options(d)
     d.set_defaults(func=run)
+
+
+def _verifier(args):
+    """The verifier --verify / --no-verify asks for (``detect.verifier_for``): None for --no-verify, and
+    by default where none is registered; ValueError for --verify where none is."""
+    if args.verify is False:
+        return None
+    found = detect.verifier_for(args.folder)
+    if found is None and args.verify:
+        raise ValueError("--verify: no geometric verifier is registered yet (greenloop.methods.registry.verifier); "
+                         "run without --verify")
+    return found
 
 
 def run(args) -> int:
     """Plan, print the header, stream, print the summary (``greenloop.detect``)."""
     p = detect.plan(args.folder, args.method, args.tuned, args.variant, args.threshold, args.step, args.exclude,
                     **{k: getattr(args, k) for k in detect.OVERRIDES})
+    verifier = _verifier(args)
     print("\n".join(p.lines), flush=True)
     print(detect.header(p, args.folder, args.index, args.candidates), flush=True)
     try:
         r = detect.run(p, args.folder, args.window, args.index, args.candidates, args.state, args.save_every,
-                       args.stop_after, args.matches, out=lambda line: print(line, flush=True))
+                       args.stop_after, args.matches, out=lambda line: print(line, flush=True), verifier=verifier)
     except KeyboardInterrupt:
         print("detect: interrupted" + (f"; state saved in {args.state}: run the same command again to continue"
                                        if args.state else ""), file=sys.stderr)
         return 130
     det = r.stream.detector
-    print(f"# summary: {r.next} frames, {len(det.events)} closures, {(r.next - r.first) / max(r.seconds, 1e-9):.1f} "
+    closures = (f"{len(det.events)} closures" if verifier is None else
+                f"{len(r.closures)} closures ({sum(c.verified is None for c in r.closures)} unverified), "
+                f"{r.rejected} candidates rejected by verification")
+    print(f"# summary: {r.next} frames, {closures}, {(r.next - r.first) / max(r.seconds, 1e-9):.1f} "
           f"frames/s (decoding included, {r.seconds:.2f} s for frames {r.first}..{r.next - 1})"
           + (f"; {det.bytes_per_frame} bytes per stored frame" if hasattr(det, "bytes_per_frame") else "")
           + ("" if r.finished else f"; stopped, state in {args.state}: run again to continue"), flush=True)

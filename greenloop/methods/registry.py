@@ -71,11 +71,14 @@ def best_candidate(detector) -> tuple[int, float]:
     return seqstream.best_candidate(detector)
 
 
-def verifier():
-    """The geometric verifier ``detect --verify`` applies to each closure candidate: a callable
-    (frame_q, frame_m, depth_q, depth_m) -> a Verification-like record (``interface.Closure``'s
-    fields: accepted, inliers, model, R, t, metric), or None where none is registered (then
-    ``--verify`` says so and ``detect`` runs unverified)."""
-    # TODO: return greenloop.methods.verification's verifier (verify_pair with the recording's camera)
-    # once that stage lands; ``detect.run(verifier=...)`` already applies any such callable.
+def verifier(camera: dict | None = None):
+    """The geometric verifier ``detect`` applies to each closure candidate (``detect.run(verifier=...)``):
+    a callable (frame_q, frame_m, depth_q, depth_m) -> a Verification-like record with fields accepted
+    (bool | None), inliers, model, R, t, metric (``interface.Closure``'s), frames (H, W, 3) uint8 BGR,
+    depth (H, W) float32 metres or None; or None where no verifier is registered. camera: the
+    recording's intrinsics (``sequence.Sequence.camera()``: fx, fy, cx, cy, ...), None where the folder
+    has no camera file (the verifier then states its default from the image size)."""
+    # TODO(greenloop/methods/verification): return
+    #   lambda fq, fm, dq, dm: verification.verify_pair(fq, fm, camera, dq, dm)
+    # once that stage lands (imported at module level above); until then detect runs unverified.
     return None
