@@ -15,6 +15,7 @@ from greenloop.datasets import sequence
 from greenloop.methods import registry
 from greenloop.methods.interface import Closure
 
+from conftest import run_cli
 from test_seqdetect import _revisit_folder
 
 KNOBS = dict(descriptor="pixels-patchnorm", seq_len=3, contrast_window=0)
@@ -122,3 +123,16 @@ def test_verification_needs_a_matched_frame_and_no_verifier_is_registered_yet(tm
     with pytest.raises(ValueError, match="names no earlier frame"):
         detect.checker_for(p._replace(name="dictionary"), folder, _fake(folder)[0], ("spot", "count"))
     assert registry.verifier() is None and detect.verifier_for(folder) is None
+
+
+def test_the_verify_flags(tmp_path):
+    """--no-verify and the default print what detect printed before (no verifier is registered yet);
+    --verify says none is registered and exits 2."""
+    folder = _revisit_folder(tmp_path / "rec")
+    cmd = ["detect", folder, "--method", "greenloop-seq", "--threshold", "0.8", "--exclude", "10", "--seq-len", "3",
+           "--contrast-window", "0", "--descriptor", "pixels-patchnorm"]
+    plain, off = run_cli(cmd), run_cli(cmd + ["--no-verify"])
+    assert plain.returncode == off.returncode == 0 and plain.stdout.splitlines()[:-1] == off.stdout.splitlines()[:-1]
+    assert "rotation" not in plain.stdout and "closures, " in plain.stdout.splitlines()[-1]
+    on = run_cli(cmd + ["--verify"])
+    assert on.returncode == 2 and "no geometric verifier is registered" in on.stderr

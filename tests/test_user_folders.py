@@ -137,6 +137,9 @@ def test_a_gps_only_survey_with_early_revisits_skips_or_runs_notebook_12(tmp_pat
     run, skipped = _make_params(f, "12_revisit_protocol", tmp_path / "r")
     assert run is None and "frames 0..15" in skipped and "holds 1 spot of frames_per_spot=60" in skipped
     assert "frames_per_spot <= 8" in skipped
+    for other in ("00_dataset", "01_spot_grouping", "02_training_over_seeds", "03_confusion_matrix",
+                  "04_shift_robustness", "05_dictionary_threshold", "13_leaderboard"):   # their spots: every frame's
+        assert _make_params(f, other, tmp_path / "r")[1] is None, other
     nb = ROOT / "notebooks" / "12_revisit_protocol.ipynb"
     reason = params.skip_reason(nb, f, dict(params.notebook_defaults(nb), frames_per_spot=8, exclude=e.frames))
     assert "the blocked split leaves no training frame" in reason and "gap of 5" in reason
