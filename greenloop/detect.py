@@ -385,7 +385,7 @@ class Run(NamedTuple):
     next: int
     seconds: float
     finished: bool
-    closures: list = []
+    closures: list = ()        # interface.Closure records (a list from run)
     rejected: int = 0
 
 
