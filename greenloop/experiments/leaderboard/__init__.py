@@ -79,11 +79,11 @@ class Timed(NamedTuple):
 
 
 class Board(NamedTuple):
-    """board: the leaderboard (``rows.COLUMNS``, unrounded; ``leaderboard.rounded`` is
-    its written form); target: ``leaderboard.targets``; targets: the targets table; statement:
+    """board: the leaderboard (``rows.COLUMNS``, unrounded; ``rows.rounded`` is
+    its written form); target: ``rows.targets``; targets: the targets table; statement:
     the printed sentences (these three judge the written, rounded numbers, and read "above",
     "higher" and "highest" from comparisons only); comparisons: the paired comparisons as written
-    (``leaderboard.comparisons``: each greenloop-seq row against every other scored row, loop closure)."""
+    (``rows.comparisons``: each greenloop-seq row against every other scored row, loop closure)."""
     board: pd.DataFrame
     target: dict
     targets: pd.DataFrame
@@ -576,6 +576,6 @@ def _false_sentence(path: Path, name: str) -> str:
 
 def manifest_extra(data: Data, tuned: Tuned) -> dict:
     """The manifest's run-dependent entries: the knobs used, the CPU and the weights of each
-    single-frame descriptor (``detectors.single_frame.specs``)."""
+    single-frame descriptor (``methods.single_frame.entry.specs``)."""
     return {"knobs": tuned.knobs, "cpu": report.cpu_model(),
             "weights_used": {b: data.infos[b].weights for b in single_frame.specs(data.params)}}
