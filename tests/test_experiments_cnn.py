@@ -282,21 +282,50 @@ def test_paper_scores_all_frames_and_test_only():
 def test_perturbation_grid_by_direction():
     X, y = _dots()
     grid = shift_robustness.perturbation_grid(_column, _runs()[1:], X, y, shifts=[1, 2], rotations=[180])  # test 0, 7
-    got = grid.set_index(["perturbation", "amount"])["accuracy_%"]
+    got = grid.set_index(["perturbation", "amount"])["heldout_%"]
     assert len(grid) == 4 * 2 + 2 and (grid.seed == 1).all()
     assert got["shift right", 1] == 0.0                  # 0 -> column 1, 7 falls off (blank: 0)
     assert got["shift left", 1] == 50.0                  # 0 falls off and reads as 0; 7 -> 6
     assert got["shift up", 2] == got["shift down", 1] == 100.0   # the column does not move
     assert got["rotation", 180] == got["rotation", -180] == 0.0  # column c -> 7 - c
+    every = grid.set_index(["perturbation", "amount"])["all_frames_%"]
+    assert every["shift left", 1] == 12.5 and every["shift up", 2] == 100.0     # of 8 frames, only frame 0 reads 0
+
+
+def _memoriser(model, X):
+    """A planted classifier that memorises its training frames: the label of the nearest training frame
+    (model: {"X": (M, H, W, 1), "y": (M,)}); it knows nothing of a frame it did not see."""
+    d = ((X[:, None] - model["X"][None]) ** 2).sum(axis=(2, 3, 4))
+    return model["y"][d.argmin(1)]
+
+
+def test_a_memorising_model_scores_high_on_all_frames_and_low_held_out():
+    yy, xx = np.mgrid[:32, :32]
+    centres = np.array([(6 + 6 * (k % 4), 8 + 8 * (k // 4)) for k in range(10)])[:, :, None, None]  # 6 px apart
+    X = np.exp(-((xx - centres[:, 0]) ** 2 + (yy - centres[:, 1]) ** 2) / 8.0)[..., None].astype(np.float32)  # one class each
+    y = np.arange(10)
+    train, test = np.arange(8), np.array([8, 9])
+    runs = [{"seed": 0, "model": {"X": X[train], "y": y[train]}, "split": {"train": train, "test": test}}]
+    grid = shift_robustness.perturbation_grid(_memoriser, runs, X, y, shifts=[1], rotations=[])
+    assert (grid["all_frames_%"] == 80.0).all() and (grid["heldout_%"] == 0.0).all()   # 8 of 10 remembered
+    s = shift_robustness.perturbation_summary(grid)
+    assert (s.all_frames_minus_heldout_points == 80.0).all() and (s.heldout_mean == 0.0).all()
+    table3 = shift_robustness.paper_scores(_memoriser, [dict(runs[0], test_accuracy=0.0)], shift.shift(X, dx=1), y)
+    cmp = shift_robustness.comparison(table3, 10, np.zeros(10), np.zeros(10), 256).set_index("quantity")
+    judged = cmp.loc["accuracy, held-out test frames shifted 1 px right (%)"]
+    assert judged["note"].startswith("judged") and judged.iloc[1].startswith("0.00")
+    assert cmp.loc["accuracy, all frames shifted 1 px right (%)"].iloc[1].startswith("80.00")
 
 
 def test_perturbation_summary_over_runs():
     X, y = _dots()
     s = shift_robustness.perturbation_summary(shift_robustness.perturbation_grid(_column, _runs(), X, y, [1], [180]))
-    assert list(s.columns) == ["perturbation", "amount", "mean", "std", "min"]
+    assert list(s.columns) == ["perturbation", "amount", "heldout_mean", "heldout_std", "heldout_min", "all_frames_mean",
+                               "all_frames_std", "all_frames_min", "all_frames_minus_heldout_points"]
     assert list(zip(s.perturbation, s.amount))[:2] == [("rotation", -180), ("rotation", 180)] and len(s) == 6
     left = s[(s.perturbation == "shift left") & (s.amount == 1)].iloc[0]      # seed 0: 0 %, seed 1: 50 %
-    assert (left["mean"], left["std"], left["min"]) == (25.0, np.std([0, 50], ddof=1), 0.0)
+    assert (left["heldout_mean"], left["heldout_std"], left["heldout_min"]) == (25.0, np.std([0, 50], ddof=1), 0.0)
+    assert left["all_frames_mean"] == 12.5 and left["all_frames_minus_heldout_points"] == -12.5
 
 
 def test_frame_set_scores_subtracts_the_same_runs_test_frames():

@@ -239,6 +239,11 @@ def _check_04(folder):
     assert tf.n_frames.tolist()[0] == 200 and tf.shift1_vs_test_only_points.iloc[-1] == 0
     t3 = pd.read_csv(folder / "table3.csv")
     assert abs(tf["shift1_%"].iloc[0] - t3["shift1_all_frames_%"].mean()) < 0.01
+    p = pd.read_csv(folder / "perturbations.csv").set_index(["perturbation", "amount"])
+    assert abs(p.loc[("shift right", 1), "heldout_mean"] - t3["shift1_test_only_%"].mean()) < 0.01   # the same shift
+    assert abs(p.loc[("shift right", 1), "all_frames_mean"] - t3["shift1_all_frames_%"].mean()) < 0.01
+    cmp = pd.read_csv(folder / "paper_vs_run.csv").set_index("quantity")
+    assert cmp.loc["accuracy, held-out test frames shifted 1 px right (%)", "note"].startswith("judged")
     assert (folder / "shift_controls.png").is_file()
 
 
