@@ -402,6 +402,13 @@ def _check_08(folder):
     assert (tuning.knob == "pca dim").any() and tuning.knob.str.startswith("median size").any()
     m = json.loads((folder / "manifest.json").read_text())
     assert m["parameters"]["tune_frames"] > 0 and m["parameters"]["eval_frames"] > 0
+    p = pd.read_csv(folder / "paired.csv")                     # the papers' orders, paired over the same queries
+    assert sorted(p.backbone.unique()) == sorted(done) and len(p) == 3 * 2 * len(done)
+    assert (p.low <= p.difference).all() and (p.difference <= p.high).all() and (p.blocks >= 1).all()
+    assert (p.resolved == ((p.low > 0) | (p.high < 0))).all() and (p.result[~p.resolved] == "tie").all()
+    one = p[p.comparison == "ZCA + median filter (tuned) minus ZCA"].merge(
+        t[(t.variant == "ZCA, tuned dim") & (t.median_filter != "none")][["backbone", "size"]], on="backbone")
+    assert (one[one["size"] == 1].result == "tie").all()       # a median filter of size 1 changes nothing
 
 
 def _check_09(folder):
@@ -412,6 +419,9 @@ def _check_09(folder):
     for c in ("AP_RGB_%", "AP_depth_%", "AP_RGB-D_%"):
         assert t[c].between(0, 100).all()
     _assert_relative_accuracy(t.set_index("backbone"), "ghostnet", "AP_RGB-D_%")   # Tables 3/4: against GhostNet
+    p = pd.read_csv(folder / "paired.csv")                     # RGB-D minus RGB on the same queries
+    assert p.backbone.tolist() == [b for b in cnns for _ in range(2)] and set(p.comparison) == {"RGB-D minus RGB"}
+    assert (p.low <= p.difference).all() and (p.difference <= p.high).all()
     d = pd.read_csv(folder / "paper_vs_run.csv")
     assert len(d) > 0
 
