@@ -411,6 +411,29 @@ def test_variants_scores_events_and_sweep(monkeypatch):
     assert sw.iloc[:2, 1:6].to_dict("records") == [{k: r[k] for k in list(r)[:5]} for r in direct]
 
 
+def test_the_detector_over_seeds_gives_each_seeds_precision_recall_and_convergence(monkeypatch):
+    pred, ref, gt = revisit_example()               # the loop-aware model: pred; the paper's: its labels exactly
+    fit, short = {"accuracy": [0.5, 0.99]}, {"accuracy": [0.3, 0.6]}
+    monkeypatch.setattr(cnn, "run_seeds", lambda X, y, seeds, **kw: [
+        {"seed": seeds[0], "model": "aware", "history": fit if seeds[0] == 7 else short}])
+    monkeypatch.setattr(cnn, "predict", lambda model, X: pred if model == "aware" else ref)
+    runs = [{"seed": s, "model": "paper", "history": h} for s, h in ((7, fit), (8, short))]
+    per_seed, first = dictionary_threshold.over_seeds(np.zeros((40, 1, 1, 1)), gt, 10, runs, 12, exclude=5)
+    assert per_seed[["seed", "variant"]].values.tolist() == [[s, v] for s in (7, 8) for v in dictionary_threshold.VARIANTS]
+    assert per_seed.converged.tolist() == [True, True, False, False] and per_seed.epochs.tolist() == [2] * 4
+    direct = dictionary.score_closures(pred, spots.by_place(10, gt), gt, 12, 5)
+    aware = per_seed[per_seed.variant == dictionary_threshold.VARIANTS[1]].iloc[0]
+    assert aware["precision_%"] == 100 * direct["precision"] and aware["recall_%"] == 90.0    # 9 of 10 revisit frames
+    paper = per_seed[per_seed.variant == dictionary_threshold.VARIANTS[0]]
+    assert paper["precision_%"].isna().all() and (paper["recall_%"] == 0).all()   # spots by index: the revisit is new
+    assert first[dictionary_threshold.VARIANTS[1]][0] is pred
+    s = dictionary_threshold.seed_summary(per_seed.assign(**{"recall_%": [0.0, 90.0, 0.0, 50.0]})).set_index("variant")
+    row = s.loc[dictionary_threshold.VARIANTS[1]]
+    assert (row.seeds, row.converged_seeds) == (2, 1)
+    assert (row["recall_median_%"], row["recall_min_%"], row["recall_max_%"], row["recall_median_converged_%"]) == (
+        70.0, 50.0, 90.0, 90.0)
+
+
 # ------------------------------------------------------------ 00: the dataset
 def test_dataset_summary_rows(tmp_path):
     from greenloop.datasets import sequence

@@ -263,6 +263,14 @@ def _check_05(folder):
         assert (at.true_events, at.false_events, at.true_frames, at.false_frames) == (
             sc["true_events"], sc["false_events"], sc["true_frames"], sc["false_frames"]), variant
         assert at["revisit_recall_%"] == pytest.approx(100 * sc["revisits_detected"] / max(1, sc["revisit_frames"]), abs=0.06)
+    per_seed = pd.read_csv(folder / "seeds.csv")               # the detector with every seed's CNN
+    assert sorted(per_seed.seed.unique()) == TINY["seeds"] and len(per_seed) == 2 * len(TINY["seeds"])
+    summ = pd.read_csv(folder / "seeds_summary.csv").set_index("variant")
+    assert (summ.seeds == len(TINY["seeds"])).all()
+    assert summ.converged_seeds.tolist() == per_seed.groupby("variant", sort=False).converged.sum().tolist()
+    first = per_seed[per_seed.seed == TINY["seeds"][0]].set_index("variant")
+    for variant, sc in s["scores"].items():                  # the figures' seed is the table's first
+        assert first.loc[variant, "true_events"] == sc["true_events"], variant
         assert sc["revisits_detected"] <= sc["revisit_frames"]
 
 
