@@ -514,6 +514,14 @@ def _check_10(folder):
     assert best["best mid-level layer (Table 2)"] == siamese_rgbd.UNRESOLVED        # one layer is never best
     assert best[siamese_rgbd.LEVELLING].startswith("n/a") and TINY["siamese_epochs"] < 3     # no thirds to compare
     assert (folder / "convergence.png").is_file()
+    # early stopping on, capped at one epoch: every network took its cap and none could stop before it
+    assert (trained.epochs == 1).all() and (trained.epoch_cap == TINY["siamese_epochs"]).all()
+    rule = pd.read_csv(folder / "paper_vs_run.csv").set_index("quantity").loc[siamese_rgbd.CONVERGED, "note"]
+    assert rule.startswith("siamese.converged: early stopping on a held-out loss")
+    assert best["epochs taken per network, min - median - max"] == f"1 - 1 - 1 (cap {TINY['siamese_epochs']})"
+    ranked = siamese_rgbd.ranked_fusions(fus, TINY["mid_layers"])    # what Fig. 9's header and the verdict count
+    assert set(ranked.fusion) == {"early", "mid", "late"} and len(ranked) == 3 * len(seeds)
+    assert (sup.epochs_max.max(), sup.epochs_min.min()) == (1, 0)   # trained rows 1 epoch, the untrained 0
 
 
 def _check_12(folder):
