@@ -187,6 +187,16 @@ def test_table1_figure_names_its_budget_limited_rows():
     ax = fig.axes[0]
     assert "budget-limited at L = 50:" in ax.get_title() and "2 epochs" in ax.get_title()
     assert [a.get_text() for a in ax.texts] == ["budget-limited"] and ax.texts[0].xy == (50, 50.0)
+    # L = 50's seeds did not converge: hollow (white face), L = 60's did: filled; no line joins the means
+    import matplotlib.colors as mc
+    dots = [c for c in ax.collections if c.get_offsets().shape[0] and c.get_label() != "_nolegend_"
+            and c.get_offsets()[0][0] in (50 - 1.2, 60 - 1.2)]
+    face = {round(float(c.get_offsets()[0][0])): mc.to_hex(c.get_facecolor()[0]) for c in dots}
+    assert face == {49: "#ffffff", 59: mc.to_hex("tab:blue")}
+    assert {h.get_label() for h in ax.get_legend().legend_handles} >= {"one seed, converged",
+                                                                       "one seed, did not converge (hollow)"}
+    assert not [ln for ln in ax.lines if ln.get_linestyle() not in ("None", "")
+                and len(set(np.asarray(ln.get_xdata(), float))) > 1]
 
 
 def test_controls_by_grouping_runs_one_gap_per_grouping(monkeypatch):
