@@ -224,7 +224,7 @@ def figure_grid(grid: pd.DataFrame, no_shift: float, table3: pd.DataFrame | None
         for col, fmt, what in (("shift1_test_only_%", "k*", "held-out frames (judged)"),
                                ("shift1_all_frames_%", "kP", "all frames (paper's protocol)")):
             v = table3[col]
-            a.errorbar([1], [v.mean()], yerr=[[v.mean() - v.min()], [v.max() - v.mean()]], fmt=fmt, ms=10, capsize=4,
+            a.errorbar([0.85], [v.mean()], yerr=[[v.mean() - v.min()], [v.max() - v.mean()]], fmt=fmt, ms=10, capsize=4,
                        label=f"1 px right, {what}: mean, seed min-max")
     a.axhline(PAPER_SHIFT1, color="r", ls="--", label=f"paper: {PAPER_SHIFT1} % (1 px right, all frames)")
     a.axhline(no_shift, color="k", ls=":", label="no shift (held-out frames)")
