@@ -520,7 +520,8 @@ def _check_10(folder):
     # early stopping on, capped at one epoch: every network took its cap and none could stop before it
     assert (trained.epochs == 1).all() and (trained.epoch_cap == TINY["siamese_epochs"]).all()
     rule = pd.read_csv(folder / "paper_vs_run.csv").set_index("quantity").loc[siamese_rgbd.CONVERGED, "note"]
-    assert rule.startswith("siamese.converged: early stopping on a held-out loss")
+    assert rule.startswith("siamese.converged: early stopping on a held-out loss") and \
+        f"of its best for {TINY['siamese_patience']} epochs" in rule
     assert best["epochs taken per network, min - median - max"] == f"1 - 1 - 1 (cap {TINY['siamese_epochs']})"
     ranked = siamese_rgbd.ranked_fusions(fus, TINY["mid_layers"])    # what Fig. 9's header and the verdict count
     assert set(ranked.fusion) == {"early", "mid", "late"} and len(ranked) == 3 * len(seeds)

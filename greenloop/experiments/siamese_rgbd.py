@@ -303,9 +303,10 @@ def convergence_rule(hists) -> str:
     """The convergence rule the networks of ``hists`` (histories) were judged by, in words
     (``siamese.converged``): the held-out loss under early stopping, else the training loss."""
     if any(h.get("val_loss") for h in hists):
+        patience = "/".join(sorted({str(h.get("stop_patience", "?")) for h in hists if h.get("val_loss")}))
         return (f"siamese.converged: early stopping on a held-out loss (pairs of every {siamese.VALIDATION_EVERY}th "
-                f"training frame, never trained on) that fell by less than {100 * siamese.STOP_MIN_DELTA:g} % of its best "
-                f"for the patience's epochs before the epoch cap")
+                f"training frame of a place, never trained on) that fell by less than {100 * siamese.STOP_MIN_DELTA:g} % "
+                f"of its best for {patience} epochs before the epoch cap")
     return (f"siamese.converged: the training loss fell by less than {100 * siamese.STOP_MIN_DELTA:g} % of its best "
             f"for {siamese.STOP_PATIENCE} epochs before the budget's last epoch (a fixed budget, no early stopping)")
 

@@ -650,7 +650,8 @@ def _fit(X, labels, progress, gt=None, monitor=None, *, seed, supervision, fusio
     keys = _output_keys(supervision, fusion)
     rng = np.random.default_rng(seed)
     steps = -(-int(n_pairs) // batch_size)
-    history = {"loss": [], "val_loss": [], "epoch_seconds": [], "monitor": [], "stopped": False}
+    history = {"loss": [], "val_loss": [], "epoch_seconds": [], "monitor": [], "stopped": False,
+               "stop_patience": int(stop_patience)}
     full = labels
     if stop_patience:                           # validation frames out of every training pair, fixed pairs among them
         val = validation_frames(full)
