@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from greenloop.datasets.synthetic import build_scene, camera_intrinsics, render_frame, route_world
+from conftest import write_frames
+from greenloop.datasets.synthetic import build_scene, camera_intrinsics, render_frame, route_world, write_camera_yaml
 from greenloop.methods.verification import (camera as vcamera, Consistency, default_camera, DEFAULT_RULE,
-                                            verify_closures, verify_pair)
+                                            verify_closures, verify_pair, Verifier)
 
 SIZE = (640, 480)
 QUERY = 2120          # the route's last leg retraces aisle A1: frame 2120 revisits frame 29 (5 cm apart)
@@ -100,6 +101,18 @@ def test_neighbouring_aisle_is_accepted_with_its_true_offset(greenhouse):
     assert abs(v.t[0] - T[0, 3]) <= 0.3                  # the 2 m across, along the camera's x
 
 
+@pytest.mark.parametrize("query", [2134, 2141])
+def test_neighbouring_aisle_with_a_wrong_pose_is_rejected(greenhouse, query):
+    """Frames query - 1100 drive aisle A2 level with the query, 2.5 m across: the trusses and lights
+    repeat, and the geometry fitted on them gives a wrong pose (results/verification/summary.md,
+    'neighbour aisle'); the rule rejects such pairs, with depth and without."""
+    render, _, cam = greenhouse
+    (fq, _), (fm, dm) = render(query), render(query - 1100)
+    for depth in (None, dm):
+        v = verify_pair(fq, fm, cam, depth_m=depth)
+        assert not v.accepted and v.inliers > 0
+
+
 def _texture(seed=0) -> np.ndarray:
     """(480, 640, 3) uint8 random rectangles and circles: a planar texture rich in corners."""
     rng = np.random.default_rng(seed)
@@ -163,6 +176,16 @@ def test_default_camera_has_a_60_degree_field_of_view():
     assert np.allclose(K[:2, :3], np.array(vcamera.matrix(camera_intrinsics((640, 480)), (480, 640)))[:2] / 2)
 
 
+def test_camera_for_reads_camera_yaml_or_states_the_default(tmp_path):
+    bare = write_frames(tmp_path / "bare", 2, size=(320, 180))
+    cam = vcamera.camera_for(bare)
+    assert cam["source"].startswith("default") and cam["fx"] == default_camera(320, 180)["fx"]
+    with_yaml = write_frames(tmp_path / "yaml", 2, size=(320, 240))
+    write_camera_yaml(with_yaml / "camera.yaml", (320, 240))
+    cam = vcamera.camera_for(with_yaml)
+    assert cam["source"] == "camera.yaml" and np.isclose(cam["fx"], camera_intrinsics((320, 240))["fx"], atol=1e-5)
+
+
 def test_consistency_declares_after_k_agreeing_candidates_and_resets_on_a_jump():
     c = Consistency(k=3, tol=2)
     assert [c.update(q, m, True) for q, m in [(10, 100), (11, 101), (12, 102), (13, 104)]] == [False, False, True, True]
@@ -213,18 +236,22 @@ def test_verify_closures_passes_too_small_frames_through_unverified():
         (4, 1, False, "too-small"), (5, 2, False, "too-small")]
     with pytest.raises(ValueError, match="query order"):
         verify_closures(frames.__getitem__, [(5, 0, 0.5), (4, 1, 0.5)], default_camera(64, 32))
+    stream = Verifier(frames.__getitem__, default_camera(64, 32))          # the same, query by query
+    assert stream.update(3, []) is None
+    assert stream.update(4, [(0, 0.5), (1, 0.7)]) == out[0]
 
 
 @pytest.mark.skipif(not (REAL_GP / "day_left").is_dir(), reason=f"Gardens Point not found at {REAL_GP}")
 def test_gardens_point_true_pairs_accepted_false_pairs_rejected():
     """day_right frame k against day_left frame k (the same place, walked on the other side of the
-    path) and frame k + 100 (another place), every 10th k, default intrinsics (no camera.yaml)."""
-    cam = default_camera(640, 360)
+    path) and frame k + 100 (another place), every 10th k, at their native 960x540, default
+    intrinsics (no camera.yaml)."""
+    cam = default_camera(960, 540)
     read = lambda side, k: cv2.imread(str(REAL_GP / side / f"Image{k:03d}.jpg"))
     true, false = [], []
     for k in range(0, 200, 10):
         q = read("day_right", k)
         true.append(verify_pair(q, read("day_left", k), cam).accepted)
         false.append(verify_pair(q, read("day_left", (k + 100) % 200), cam).accepted)
-    assert np.mean(true) >= 0.6          # measured: 70 % of every 2nd frame (results/verification/)
-    assert sum(false) <= 1               # measured: none of 100
+    assert np.mean(true) >= 0.3          # a lateral viewpoint change: results/verification/summary.md
+    assert sum(false) <= 1               # has the measured shares

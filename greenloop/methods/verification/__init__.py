@@ -1,5 +1,6 @@
 """Verification: appearance proposes, geometry confirms. A stage any registered detector can put
-after its candidates (the best match of a query, or its top few): :func:`verify_closures`.
+after its candidates (the best match of a query, or its top few): :func:`verify_closures` over a
+list, a :class:`Verifier` fed query by query in a stream.
 
 The pair check (:func:`verify_pair`): ORB features (3000 per frame) on the two frames at their
 native resolution, matched by Lowe's ratio test (0.8) and a mutual nearest-neighbour check; then
@@ -10,10 +11,13 @@ a planar scene or a rotation. With depth, the metric pose by RANSAC PnP (3-D poi
 frame's depth, else the query's) is the model wherever it has at least ``min_inliers`` inliers.
 
 **The rule** (:class:`Rule`, stated once): a candidate is accepted when its model has at least
-``min_inliers`` = 20 inliers and ``min_ratio`` = 20 % of the points it was fitted on are inliers.
-Frames whose shorter side is below ``min_side`` = 180 px are 'too-small': not checked, accepted
-False, reported unverified (Nordland's 64x32, a 160x120 corridor). The defaults come from
-Gardens Point (``tools/verification_measure.py`` -> results/verification/).
+``min_inliers`` = 50 inliers and ``min_ratio`` = 30 % of the points it was fitted on are inliers
+(ORB-SLAM2 closes a loop at 40 matches after its Sim3; the synthetic greenhouse's neighbouring
+aisle, a repetitive scene, gave wrong poses with up to 43 inliers). Frames whose shorter side is
+below ``min_side`` = 240 px are 'too-small': not checked, accepted False, reported unverified
+(Nordland's 64x32, a 160x120 corridor, 320x180). The defaults come from the measurements of
+``tools/verification_measure.py`` (results/verification/summary.md): Gardens Point's loop and
+other-place pairs, the greenhouse's loops, neighbouring aisle and other places.
 
 **Consistency** (:class:`Consistency`): a closure is declared only once k = 3 consecutive verified
 candidates agree with the motion (the match advancing with the query, forwards or backwards,
@@ -27,11 +31,11 @@ camera only rotated). Intrinsics are ``datasets.sequence.read_camera``'s record;
 camera.yaml gets :func:`default_camera` (a 60 degree horizontal field of view).
 """
 from greenloop.methods.verification.camera import camera_for, default_camera, DEFAULT_HFOV_DEG
-from greenloop.methods.verification.closures import Closure, verify_closures
+from greenloop.methods.verification.closures import Closure, verify_closures, Verifier
 from greenloop.methods.verification.consistency import Consistency, DEFAULT_K, DEFAULT_TOL
 from greenloop.methods.verification.pair import (DEFAULT_RULE, MODELS, Rule, too_small, Verification,
                                                  verify_pair)
 
-__all__ = ["verify_pair", "verify_closures", "Verification", "Closure", "Rule", "DEFAULT_RULE", "MODELS",
+__all__ = ["verify_pair", "verify_closures", "Verifier", "Verification", "Closure", "Rule", "DEFAULT_RULE", "MODELS",
            "Consistency", "DEFAULT_K", "DEFAULT_TOL", "too_small", "camera_for", "default_camera",
            "DEFAULT_HFOV_DEG"]

@@ -58,6 +58,35 @@ def _check_candidates(candidates) -> list[tuple[int, int, float]]:
     return out
 
 
+class Verifier:
+    """The verification stage of one stream, fed query by query (what :func:`verify_closures`
+    runs over a list): the feature memo (at most FEATURE_MEMO frames) and the :class:`Consistency`.
+
+    frames_of, camera, depth_of, rule, k, tol: as :func:`verify_closures`.
+    """
+
+    def __init__(self, frames_of: Callable, camera, depth_of: Callable | None = None,
+                 rule: Rule = DEFAULT_RULE, k: int = DEFAULT_K, tol: int = DEFAULT_TOL):
+        self.camera, self.depth_of, self.rule = camera, depth_of, rule
+        self.features, self.consistency = _Features(frames_of, rule), Consistency(k, tol)
+
+    def update(self, query: int, candidates) -> Closure | None:
+        """One query's candidates [(match, score), ...] (best score tried first until one is
+        accepted) -> the Closure declared for it (verified, or unverified for too-small frames),
+        or None."""
+        ranked = sorted(((int(m), float(s)) for m, s in candidates), key=lambda c: -c[1])
+        if not ranked:
+            return None
+        for m, score in ranked:
+            v = _verify(self.features, int(query), m, self.camera, self.depth_of, self.rule)
+            if v.model == "too-small":
+                return Closure(int(query), m, score, v, False)
+            if v.accepted:
+                return Closure(int(query), m, score, v, True) if self.consistency.update(query, m, True) else None
+        self.consistency.update(query, ranked[0][0], False)
+        return None
+
+
 def verify_closures(frames_of, candidates, camera, depth_of=None, rule: Rule = DEFAULT_RULE,
                     k: int = DEFAULT_K, tol: int = DEFAULT_TOL) -> list[Closure]:
     """Verify a detector's loop candidates by geometry and temporal consistency.
@@ -69,21 +98,14 @@ def verify_closures(frames_of, candidates, camera, depth_of=None, rule: Rule = D
     rule: the acceptance rule; k, tol: the consistency (:class:`Consistency`).
     Returns the declared closures in query order: each query's accepted candidate once its chain
     holds k agreeing candidates (verified=True), and, for frames too small for local features,
-    each query's best candidate unverified (verified=False).
+    each query's best candidate unverified (verified=False). A stream feeds a :class:`Verifier`.
     """
-    feats, chain, out = _Features(frames_of, rule), Consistency(k, tol), []
+    verifier = Verifier(frames_of, camera, depth_of, rule, k, tol)
+    out = []
     for q, group in groupby(_check_candidates(candidates), key=lambda c: c[0]):
-        ranked = sorted(group, key=lambda c: -c[2])
-        found = None
-        for _, m, score in ranked:
-            v = _verify(feats, q, m, camera, depth_of, rule)
-            if v.model == "too-small" or v.accepted:
-                found = (m, score, v)
-                break
-        if found is not None and found[2].model == "too-small":
-            out.append(Closure(q, found[0], found[1], found[2], False))
-        elif chain.update(q, found[0] if found else ranked[0][1], found is not None):
-            out.append(Closure(q, found[0], found[1], found[2], True))
+        closure = verifier.update(q, [(m, s) for _, m, s in group])
+        if closure is not None:
+            out.append(closure)
     return out
 
 

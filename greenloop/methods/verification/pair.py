@@ -10,7 +10,8 @@ from greenloop.methods.verification import camera as _camera, features, geometry
 
 
 class Rule(NamedTuple):
-    """The one acceptance rule (defaults measured: results/verification/).
+    """The one acceptance rule (the package docstring says why these defaults; the measurements:
+    tools/verification_measure.py -> results/verification/summary.md).
 
     min_inliers: a pair is accepted with at least this many inliers of its model ...
     min_ratio: ... and at least this share of the points the model was fitted on inliers.
@@ -21,9 +22,9 @@ class Rule(NamedTuple):
     h_share: the homography is the model when n_H / (n_H + n_E) > h_share (ORB-SLAM's
     initialiser: 0.45), n_H, n_E the inliers of each fit.
     """
-    min_inliers: int = 20
-    min_ratio: float = 0.2
-    min_side: int = 180
+    min_inliers: int = 50
+    min_ratio: float = 0.3
+    min_side: int = 240
     features: str = "orb"
     n_features: int = 3000
     ratio: float = 0.8
