@@ -13,11 +13,12 @@ frame's depth, else the query's) is the model wherever it has at least ``min_inl
 **The rule** (:class:`Rule`, stated once): a candidate is accepted when its model has at least
 ``min_inliers`` = 50 inliers and ``min_ratio`` = 30 % of the points it was fitted on are inliers
 (ORB-SLAM2 closes a loop at 40 matches after its Sim3; the synthetic greenhouse's neighbouring
-aisle, a repetitive scene, gave wrong poses with up to 43 inliers). Frames whose shorter side is
-below ``min_side`` = 240 px are 'too-small': not checked, accepted False, reported unverified
-(Nordland's 64x32, a 160x120 corridor, 320x180). The defaults come from the measurements of
+aisle, a repetitive scene, gives wrong poses with inlier counts just below 50). Frames whose
+shorter side is below ``min_side`` = 240 px are 'too-small': not checked, accepted False,
+reported unverified (Nordland's 64x32, a 160x120 corridor, 320x180, where the rule keeps few of
+the loops it keeps at 640x360). The defaults come from the measurements of
 ``tools/verification_measure.py`` (results/verification/summary.md): Gardens Point's loop and
-other-place pairs, the greenhouse's loops, neighbouring aisle and other places.
+other-place pairs at several sizes, the greenhouse's loops, neighbouring aisle and other places.
 
 **Consistency** (:class:`Consistency`): a closure is declared only once k = 3 consecutive verified
 candidates agree with the motion (the match advancing with the query, forwards or backwards,
