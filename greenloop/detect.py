@@ -317,7 +317,7 @@ class Checker:
         fm = frames[m - start] if m >= start else self.frames.read([m])[0]
         dq, dm = ((None, None) if self.depth_paths is None else
                   (sequence.read_depth(self.depth_paths[q]), sequence.read_depth(self.depth_paths[m])))
-        v = self.verifier(frames[q - start], fm, dq, dm)
+        v = self.verifier(q, m, frames[q - start], fm, dq, dm)
         verified = None if v.accepted is None or v.model == "too-small" else bool(v.accepted)
         self.checked += 1
         self.rejected += verified is False

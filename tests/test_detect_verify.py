@@ -14,6 +14,7 @@ from greenloop import detect
 from greenloop.datasets import sequence
 from greenloop.methods import registry
 from greenloop.methods.interface import Closure
+from greenloop.methods.verification import PairCheck
 
 from conftest import run_cli
 from test_seqdetect import _revisit_folder
@@ -42,8 +43,9 @@ def _fake(folder):
     known = {cv2.imread(str(p)).tobytes(): k for k, p in enumerate(sequence.list_frames(folder))}
     calls = []
 
-    def verify(fq, fm, dq, dm):
+    def verify(query, match, fq, fm, dq, dm):
         q, m = known[fq.tobytes()], known[fm.tobytes()]
+        assert (query, match) == (q, m), "detect must pass the candidate's frame numbers with its frames"
         calls.append((q, m, dq, dm))
         if q % 3 == 0:
             return Verification(False, 4, 0.1, 40, "essential", None, None, False, "4 inliers < 15")
@@ -117,22 +119,25 @@ def test_the_verifier_gets_the_folders_depth_and_the_same_closures_without_match
     assert [c[:3] for c in again.closures] == [c[:3] for c in r.closures]
 
 
-def test_verification_needs_a_matched_frame_and_no_verifier_is_registered_yet(tmp_path):
+def test_verification_needs_a_matched_frame_and_the_registered_verifier_is_the_geometric_stage(tmp_path):
     folder = _revisit_folder(tmp_path / "rec")
     p = detect.plan(folder, "greenloop-seq", threshold=0.8, exclude=10, **KNOBS)
     with pytest.raises(ValueError, match="names no earlier frame"):
         detect.checker_for(p._replace(name="dictionary"), folder, _fake(folder)[0], ("spot", "count"))
-    assert registry.verifier() is None and detect.verifier_for(folder) is None
+    assert isinstance(registry.verifier(), PairCheck) and isinstance(detect.verifier_for(folder), PairCheck)
+    assert registry.verifier() is not registry.verifier()          # a fresh consistency chain per run
 
 
 def test_the_verify_flags(tmp_path):
-    """--no-verify and the default print what detect printed before (no verifier is registered yet);
-    --verify says none is registered and exits 2."""
+    """By default detect verifies (a verifier is registered): on frames too small for local features
+    (this folder's) every candidate is declared unverified, so the closures are --no-verify's, printed
+    with 'unchecked' and no pose; --no-verify prints what detect printed before verification."""
     folder = _revisit_folder(tmp_path / "rec")
     cmd = ["detect", folder, "--method", "greenloop-seq", "--threshold", "0.8", "--exclude", "10", "--seq-len", "3",
            "--contrast-window", "0", "--descriptor", "pixels-patchnorm"]
-    plain, off = run_cli(cmd), run_cli(cmd + ["--no-verify"])
-    assert plain.returncode == off.returncode == 0 and plain.stdout.splitlines()[:-1] == off.stdout.splitlines()[:-1]
-    assert "rotation" not in plain.stdout and "closures, " in plain.stdout.splitlines()[-1]
-    on = run_cli(cmd + ["--verify"])
-    assert on.returncode == 2 and "no geometric verifier is registered" in on.stderr
+    plain, off, on = run_cli(cmd), run_cli(cmd + ["--no-verify"]), run_cli(cmd + ["--verify"])
+    assert plain.returncode == off.returncode == on.returncode == 0
+    assert plain.stdout.splitlines()[:-1] == on.stdout.splitlines()[:-1] and "rotation" not in off.stdout and "rotation" in plain.stdout
+    rows = lambda out: [ln.split("\t")[:3] for ln in out.splitlines() if ln[:1].isdigit()]
+    assert rows(plain.stdout) == rows(off.stdout) and len(rows(off.stdout)) >= 10
+    assert all("\tunchecked\t0\ttoo-small\t-\t-" in ln for ln in plain.stdout.splitlines() if ln[:1].isdigit())

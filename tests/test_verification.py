@@ -11,7 +11,7 @@ from scipy.spatial.transform import Rotation
 
 from conftest import write_frames
 from greenloop.datasets.synthetic import build_scene, camera_intrinsics, render_frame, route_world, write_camera_yaml
-from greenloop.methods.verification import (camera as vcamera, Consistency, default_camera, DEFAULT_RULE,
+from greenloop.methods.verification import (camera as vcamera, Consistency, default_camera, DEFAULT_RULE, PairCheck,
                                             verify_closures, verify_pair, Verifier)
 
 SIZE = (640, 480)
@@ -222,18 +222,18 @@ def test_verify_closures_declares_only_consistent_verified_candidates(greenhouse
             cands.append((q, 25 + k, 0.8))
     out = verify_closures(lambda i: render(i)[0], cands, cam, depth_of=lambda i: render(i)[1], k=3)
     assert [(c.query, c.match) for c in out] == [(2118, 27), (2119, 28), (2123, 32), (2124, 33)]
-    assert all(c.verified and c.verification.accepted and c.verification.model == "pnp" for c in out)
+    assert all(c.verified and c.model == "pnp" and c.inliers >= DEFAULT_RULE.min_inliers for c in out)
     assert all(c.score == 0.8 for c in out)
     for c in out:
-        assert _errors(c.verification, _truth(poses, c.query, c.match))[2] <= 0.3
+        assert _errors(c, _truth(poses, c.query, c.match))[2] <= 0.3
 
 
 def test_verify_closures_passes_too_small_frames_through_unverified():
     rng = np.random.default_rng(0)
     frames = {i: rng.integers(0, 256, (32, 64, 3), dtype=np.uint8) for i in range(6)}
     out = verify_closures(frames.__getitem__, [(4, 0, 0.5), (4, 1, 0.7), (5, 2, 0.6)], default_camera(64, 32))
-    assert [(c.query, c.match, c.verified, c.verification.model) for c in out] == [
-        (4, 1, False, "too-small"), (5, 2, False, "too-small")]
+    assert [(c.query, c.match, c.verified, c.model) for c in out] == [
+        (4, 1, None, "too-small"), (5, 2, None, "too-small")]
     with pytest.raises(ValueError, match="query order"):
         verify_closures(frames.__getitem__, [(5, 0, 0.5), (4, 1, 0.5)], default_camera(64, 32))
     stream = Verifier(frames.__getitem__, default_camera(64, 32))          # the same, query by query
@@ -255,3 +255,23 @@ def test_gardens_point_true_pairs_accepted_false_pairs_rejected():
         false.append(verify_pair(q, read("day_left", (k + 100) % 200), cam).accepted)
     assert np.mean(true) >= 0.3          # a lateral viewpoint change: results/verification/summary.md
     assert sum(false) <= 1               # has the measured shares
+
+
+def test_detects_pair_check_accepts_only_the_kth_consistent_candidate_and_restarts_after_a_false_one(greenhouse):
+    """registry.verifier()'s stage, fed candidate by candidate as detect does: the true place of queries
+    2116..2120 (frames 25..29) holds by geometry from the first; it is accepted from the third on (k = 3);
+    a planted far frame is rejected and ends the chain, so the next true one waits again."""
+    render, poses, cam = greenhouse
+    check = PairCheck(cam)
+    got = []
+    for k, q in enumerate(range(QUERY - 4, QUERY + 1)):
+        v = check(q, 25 + k, render(q)[0], render(25 + k)[0], None, render(25 + k)[1])
+        got.append((v.accepted, v.model))
+        assert v.inliers >= DEFAULT_RULE.min_inliers and _errors(v, _truth(poses, q, 25 + k))[2] <= 0.3
+    assert got == [(False, "pnp"), (False, "pnp"), (True, "pnp"), (True, "pnp"), (True, "pnp")]
+    assert not check(QUERY + 1, 900, render(QUERY + 1)[0], render(900)[0]).accepted
+    v = check(QUERY + 2, 31, render(QUERY + 2)[0], render(31)[0])
+    assert not v.accepted and not v.metric and "1 of 3 consistent" in v.reason
+    small = PairCheck()                                           # no camera: the default from the frame size
+    tiny = np.zeros((32, 64, 3), np.uint8)
+    assert small(5, 1, tiny, tiny).model == "too-small" and small.camera["width"] == 64

@@ -19,6 +19,7 @@ from greenloop.methods.lsh import retrieval
 from greenloop.methods.seqslam import entry as seqslam
 from greenloop.methods.siamese import entry as scnn
 from greenloop.methods.single_frame import cnn_layers, entry as single_frame
+from greenloop.methods import verification
 
 ENTRIES = (
     single_frame.ENTRY,            # "single-frame": CNNs, SIFT-BoVW, pixels
@@ -73,12 +74,9 @@ def best_candidate(detector) -> tuple[int, float]:
 
 def verifier(camera: dict | None = None):
     """The geometric verifier ``detect`` applies to each closure candidate (``detect.run(verifier=...)``):
-    a callable (frame_q, frame_m, depth_q, depth_m) -> a Verification-like record with fields accepted
-    (bool | None), inliers, model, R, t, metric (``interface.Closure``'s), frames (H, W, 3) uint8 BGR,
-    depth (H, W) float32 metres or None; or None where no verifier is registered. camera: the
-    recording's intrinsics (``sequence.Sequence.camera()``: fx, fy, cx, cy, ...), None where the folder
-    has no camera file (the verifier then states its default from the image size)."""
-    # TODO(greenloop/methods/verification): return
-    #   lambda fq, fm, dq, dm: verification.verify_pair(fq, fm, camera, dq, dm)
-    # once that stage lands (imported at module level above); until then detect runs unverified.
-    return None
+    a fresh ``verification.PairCheck`` (it keeps a stream's feature memo and consistency chain), a callable
+    (query, match, frame_q, frame_m, depth_q, depth_m) -> ``verification.Verification`` (accepted, inliers,
+    model, R, t as T_match_query, metric), frames (H, W, 3) uint8 BGR, depth (H, W) metres or None.
+    camera: the recording's intrinsics (``sequence.Sequence.camera()``), None where it has no camera file
+    (the verifier then states its default from the image size: ``verification.default_camera``)."""
+    return verification.PairCheck(camera)

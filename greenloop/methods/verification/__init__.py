@@ -1,6 +1,7 @@
 """Verification: appearance proposes, geometry confirms. A stage any registered detector can put
 after its candidates (the best match of a query, or its top few): :func:`verify_closures` over a
-list, a :class:`Verifier` fed query by query in a stream.
+list, a :class:`Verifier` fed query by query in a stream, a :class:`PairCheck` fed candidate by
+candidate with their frames (what ``detect`` runs, through ``registry.verifier``).
 
 The pair check (:func:`verify_pair`): ORB features (3000 per frame) on the two frames at their
 native resolution, matched by Lowe's ratio test (0.8) and a mutual nearest-neighbour check; then
@@ -32,11 +33,11 @@ camera only rotated). Intrinsics are ``datasets.sequence.read_camera``'s record;
 camera.yaml gets :func:`default_camera` (a 60 degree horizontal field of view).
 """
 from greenloop.methods.verification.camera import camera_for, default_camera, DEFAULT_HFOV_DEG
-from greenloop.methods.verification.closures import Closure, verify_closures, Verifier
+from greenloop.methods.verification.closures import Closure, PairCheck, verify_closures, Verifier
 from greenloop.methods.verification.consistency import Consistency, DEFAULT_K, DEFAULT_TOL
 from greenloop.methods.verification.pair import (DEFAULT_RULE, MODELS, Rule, too_small, Verification,
                                                  verify_pair)
 
-__all__ = ["verify_pair", "verify_closures", "Verifier", "Verification", "Closure", "Rule", "DEFAULT_RULE", "MODELS",
+__all__ = ["verify_pair", "verify_closures", "Verifier", "PairCheck", "Verification", "Closure", "Rule", "DEFAULT_RULE", "MODELS",
            "Consistency", "DEFAULT_K", "DEFAULT_TOL", "too_small", "camera_for", "default_camera",
            "DEFAULT_HFOV_DEG"]

@@ -1,5 +1,6 @@
-"""The verification stage over a detector's candidates: :func:`verify_closures`, what a detector
-calls, and the :class:`Closure` record it returns."""
+"""The verification stage over a detector's candidates: :func:`verify_closures` over a list, a
+:class:`Verifier` query by query, a :class:`PairCheck` candidate by candidate (detect's), each
+declaring ``interface.Closure`` records (query, match, score, verified, inliers, model, R, t, metric)."""
 from __future__ import annotations
 
 from collections import OrderedDict
@@ -8,6 +9,7 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
+from greenloop.methods.interface import Closure
 from greenloop.methods.verification import camera as _camera, features
 from greenloop.methods.verification.consistency import Consistency, DEFAULT_K, DEFAULT_TOL
 from greenloop.methods.verification.pair import (check_sizes, DEFAULT_RULE, Rule, too_small, unverified,
@@ -16,16 +18,11 @@ from greenloop.methods.verification.pair import (check_sizes, DEFAULT_RULE, Rule
 FEATURE_MEMO = 64    # frames whose features verify_closures keeps (the most recently used)
 
 
-class Closure(NamedTuple):
-    """One declared closure: query and match frame numbers (int), score: the candidate's score
-    (higher = more similar), verification: its :class:`Verification` (pose T_match_query,
-    inliers), verified: True where geometry and consistency confirmed it, False where the frames
-    were too small to check (model 'too-small': an appearance-only closure, reported unverified)."""
-    query: int
-    match: int
-    score: float
-    verification: Verification
-    verified: bool
+def closure(query: int, match: int, score: float, v: Verification) -> Closure:
+    """The ``interface.Closure`` record of a declared candidate and its :class:`Verification`:
+    verified True where the geometry confirmed it, None where the frames were too small to check."""
+    return Closure(int(query), int(match), float(score), None if v.model == "too-small" else True,
+                   int(v.inliers), v.model, v.R, v.t, bool(v.metric))
 
 
 class _Features:
@@ -80,9 +77,9 @@ class Verifier:
         for m, score in ranked:
             v = _verify(self.features, int(query), m, self.camera, self.depth_of, self.rule)
             if v.model == "too-small":
-                return Closure(int(query), m, score, v, False)
+                return closure(query, m, score, v)
             if v.accepted:
-                return Closure(int(query), m, score, v, True) if self.consistency.update(query, m, True) else None
+                return closure(query, m, score, v) if self.consistency.update(query, m, True) else None
         self.consistency.update(query, ranked[0][0], False)
         return None
 
@@ -117,3 +114,33 @@ def _verify(feats: _Features, q: int, m: int, camera, depth_of, rule: Rule) -> V
     if fq is None:
         return unverified(shape, rule)
     return verify_features(fq, fm, _camera.matrix(camera, shape), *depth, rule=rule)
+
+
+class PairCheck:
+    """The verification stage of one ``detect`` run, called once per closure candidate with its
+    decoded frames: the pair check through a feature memo (FEATURE_MEMO frames), then the
+    :class:`Consistency`. camera: the recording's intrinsics (read_camera record), or None for
+    :func:`camera.default_camera` of the first frame's size; rule, k, tol: as :func:`verify_closures`.
+    State: the feature memo and the consistency chain (one object per stream)."""
+
+    def __init__(self, camera=None, rule: Rule = DEFAULT_RULE, k: int = DEFAULT_K, tol: int = DEFAULT_TOL):
+        self.camera, self.rule, self._frames = camera, rule, {}
+        self.features, self.consistency = _Features(self._frames.__getitem__, rule), Consistency(k, tol)
+
+    def __call__(self, query: int, match: int, frame_q, frame_m, depth_q=None, depth_m=None) -> Verification:
+        """The Verification of candidate (query, match): frames (H, W, 3) uint8 BGR, depth (H, W)
+        metres or None. ``accepted`` holds only where the geometry holds and the candidate completes
+        k consistent ones (its reason says so otherwise); 'too-small' frames pass unverified."""
+        q, m = int(query), int(match)
+        if self.camera is None:
+            self.camera = _camera.default_camera(np.shape(frame_q)[1], np.shape(frame_q)[0])
+        self._frames.update({q: frame_q, m: frame_m})
+        depths = {q: depth_q, m: depth_m}
+        try:
+            v = _verify(self.features, q, m, self.camera, depths.__getitem__, self.rule)
+        finally:
+            self._frames.clear()
+        if v.model == "too-small" or self.consistency.update(q, m, v.accepted) or not v.accepted:
+            return v
+        return v._replace(accepted=False, reason=f"{v.reason}; geometry holds, {self.consistency.length} of "
+                                                 f"{self.consistency.k} consistent candidates so far")
