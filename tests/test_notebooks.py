@@ -12,6 +12,7 @@ import yaml
 from greenloop.experiments import siamese_rgbd
 from greenloop.methods.greenloop_seq import seqmatch
 from greenloop.cli import main as cli_main
+from conftest import execute_notebook
 
 ROOT = Path(__file__).resolve().parents[1]
 NOTEBOOKS = sorted((ROOT / "notebooks").glob("[0-9][0-9]_*.ipynb"))
@@ -68,17 +69,13 @@ def _run(notebook, dataset, results, monkeypatch, parameters=None) -> Path:
     """Execute one notebook on `dataset` into `results` (on TINY, or on `parameters` instead, with the
     notebook's OVERRIDES over either);
     check what every notebook must write."""
-    import papermill
-
     monkeypatch.setenv("PYTHONPATH", str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     monkeypatch.setenv("GREENLOOP_CACHE", str(results / "models"))
     monkeypatch.setenv("TF_CPP_MIN_LOG_LEVEL", "2")
     out = results / notebook.name
-    papermill.execute_notebook(str(notebook), str(out), kernel_name="greenloop", cwd=str(ROOT),
-                               parameters=dict(TINY if parameters is None else parameters,
-                                               **OVERRIDES.get(notebook.stem, {}),
-                                               dataset=str(dataset), results_dir=str(results)),
-                               execution_timeout=600, progress_bar=False)
+    execute_notebook(notebook, out, cwd=str(ROOT),
+                     parameters=dict(TINY if parameters is None else parameters, **OVERRIDES.get(notebook.stem, {}),
+                                     dataset=str(dataset), results_dir=str(results)))
     noise = _noise(out)
     assert not noise, f"progress bars or log lines in the executed notebook: {noise[:3]}"
     folder = results / notebook.stem
