@@ -12,6 +12,11 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared" / "greenhouse"
+# Hang guards, not time limits: far above what any test takes on the slowest, busiest machine, so no
+# test's outcome depends on the machine's speed; they only end a test that would hang. A papermill
+# kernel gets KERNEL_START_S to answer (papermill's default 60 s was missed on a loaded 2-core machine).
+HANG_S = 3600
+KERNEL_START_S = 600
 
 
 @pytest.fixture(scope="session")
@@ -23,7 +28,7 @@ def real_trajectory():
     return path
 
 
-def run_cli(args, process: bool = False, timeout: int = 300) -> subprocess.CompletedProcess:
+def run_cli(args, process: bool = False, timeout: int = HANG_S) -> subprocess.CompletedProcess:
     """``python -m greenloop ARGS`` -> a CompletedProcess with its exit status and what it printed.
     process: run it as a user types it, in a new interpreter (TensorFlow's logs quieted); otherwise
     in this process, with no interpreter start and no second TensorFlow import. The tests that check
@@ -42,6 +47,17 @@ def run_cli(args, process: bool = False, timeout: int = 300) -> subprocess.Compl
         except SystemExit as e:                 # argparse's usage errors and --help
             code = e.code
     return subprocess.CompletedProcess(args, code, out.getvalue(), err.getvalue())
+
+
+def execute_notebook(src, out, **kw):
+    """``papermill.execute_notebook(src, out, **kw)`` on the greenloop kernel, without a progress bar,
+    with the hang guards (KERNEL_START_S for the kernel to answer, HANG_S per cell) unless kw says
+    otherwise. Returns the executed notebook (nbformat)."""
+    import papermill
+
+    kw = {"kernel_name": "greenloop", "progress_bar": False, "start_timeout": KERNEL_START_S,
+          "execution_timeout": HANG_S, **kw}
+    return papermill.execute_notebook(str(src), str(out), **kw)
 
 
 @pytest.fixture(scope="session")

@@ -12,6 +12,7 @@ import pytest
 
 pytest.importorskip("keras")
 
+from conftest import HANG_S  # noqa: E402
 from greenloop.speed import bench  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -21,7 +22,7 @@ def test_bench_quick_writes_figures_and_backends_agree(tiny_sequence, tmp_path):
     out = tmp_path / "bench"
     env = dict(os.environ, PYTHONPATH=str(ROOT), GREENLOOP_CACHE=str(tmp_path / "models"))
     r = subprocess.run([sys.executable, "-m", "greenloop", "bench", "--quick", "--dataset", str(tiny_sequence),
-                        "--out", str(out)], capture_output=True, text=True, env=env, timeout=600)
+                        "--out", str(out)], capture_output=True, text=True, env=env, timeout=HANG_S)
     assert r.returncode == 0, r.stderr[-3000:]
     res = json.loads((out / "bench.json").read_text())
     assert res["data"]["random_frames"] is False and res["data"]["n_frames"] == 200

@@ -17,7 +17,7 @@ from greenloop.datasets import gardenspoint, groundtruth_formats as fmts, sequen
 from greenloop.study import params
 from greenloop.cli import main as cli_main
 
-from conftest import run_cli as _cli
+from conftest import HANG_S, run_cli as _cli
 
 ROOT = Path(__file__).resolve().parents[1]
 REAL_GP = ROOT.parent / "shared" / "real" / "gardenspoint"
@@ -257,7 +257,7 @@ def test_make_passes_the_folder_parameters_first_and_builds_gardenspoint(tmp_pat
     venv, target = Path(sys.prefix), tmp_path / "gardenspoint"
     r = subprocess.run(["make", "-n", "all", f"DATASET={target}", f"GARDENSPOINT={target}", f"VENV={venv}",
                         f"RESULTS={tmp_path / 'res'}", "GARDENSPOINT_SRC=/some/copy", "PARAMS=-p exclude 7"],
-                       cwd=ROOT, capture_output=True, text=True, timeout=60)
+                       cwd=ROOT, capture_output=True, text=True, timeout=HANG_S)
     assert r.returncode == 0, r.stderr
     text = r.stdout.replace("\\\n", " ")
     lines = text.splitlines()
@@ -375,7 +375,7 @@ def test_make_skips_a_notebook_without_counted_loops_and_carries_on(tiny_near_lo
     (res / "07_feature_baselines" / "older_version.png").write_bytes(b"")   # what an older notebook wrote
     r = subprocess.run(["make", f"{res}/07_feature_baselines.ipynb", f"DATASET={tiny_near_loop_sequence}",
                         f"RESULTS={res}", f"VENV={venv}", "PARAMS=-p exclude 120"], cwd=ROOT,
-                       capture_output=True, text=True, timeout=300)
+                       capture_output=True, text=True, timeout=HANG_S)
     assert r.returncode == 0, r.stderr[-2000:]
     assert "closest loop is 99 frames apart" in r.stdout and "PARAMS='-p exclude 49'" in r.stdout
     assert "skipped" in (res / "07_feature_baselines.ipynb").read_text() and not list(res.glob("*.html"))

@@ -1,19 +1,27 @@
 """Notebook 10's protocol (greenloop.experiments.siamese_rgbd): every table equals the stage
 functions it composes, scored on the held-out part only; nothing is named best unless its seed
 range lies above every other's."""
+import ast
+from pathlib import Path
+
 import matplotlib
 import numpy as np
 import pandas as pd
 import pytest
+import yaml
 
 from greenloop import evaluate, features, groundtruth
 from greenloop.experiments import siamese_rgbd as sr
 from greenloop.methods.siamese import siamese as sm
+from greenloop.study import sweep
 
 matplotlib.use("Agg")
 W = 0.25            # small networks: the tests check structure and numbers, not accuracy
-STEP = 2            # every 2nd frame of the tests' 200-frame sequence: 100 frames
+STEP = 1            # every frame of the tests' 200-frame sequence, as notebook 10's tiny run (params/tiny.yaml)
 SEEDS = [0, 1]
+ROOT = Path(__file__).resolve().parents[1]
+NB10 = ROOT / "notebooks" / "10_siamese_rgbd.ipynb"
+TINY = yaml.safe_load((ROOT / "params" / "tiny.yaml").read_text())
 
 
 def _loop_gt(n=120, shift=90, length=30):
@@ -62,18 +70,19 @@ def test_fit_and_score_row_and_the_references(tmp_path):
 
 @pytest.fixture(scope="module")
 def setup(tiny_sequence):
+    """Notebook 10's setup in its tiny run (params/tiny.yaml: L 20, exclude 20, gap 5, 32x32 inputs)."""
     return sr.setup(tiny_sequence, STEP, 20, 0.5, 20, 0.5, 5, 32, 10.0)
 
 
 def test_setup_composes_the_stage_functions(setup, tiny_sequence):
     s = setup
     frames, ex, GT, summary = groundtruth.described_frames(tiny_sequence, STEP, 0.5, 20)
-    assert np.array_equal(s.frames, frames) and s.exclude_steps == ex == 10 and np.array_equal(s.GT, GT)
+    assert np.array_equal(s.frames, frames) and s.exclude_steps == ex == 20 // STEP and np.array_equal(s.GT, GT)
     assert (s.gap, s.L) == (5 // STEP, 20 // STEP)                      # ORIGINAL frames in steps
     train, held, note = sm.training_split(len(frames), 0.5, GT, s.gap, s.L, frames)
     assert np.array_equal(s.train, train) and np.array_equal(s.held, held) and s.split_note == note
     assert np.array_equal(s.labels, sm.place_labels(train, GT, s.L)) and (s.labels[~train] == -1).all()
-    assert s.has_depth and s.X.shape == (100, 32, 32, 4)
+    assert s.has_depth and s.X.shape == (200, 32, 32, 4)
     assert np.array_equal(s.X, sm.load_inputs(tiny_sequence, (32, 32), step=STEP, depth=True, max_depth=10.0))
     assert s.chance == evaluate.chance_level(GT, ex, queries=held)
     assert summary in s.text and f"chance AP on the held-out part: {100 * s.chance:.2f} %" in s.text
@@ -81,35 +90,43 @@ def test_setup_composes_the_stage_functions(setup, tiny_sequence):
 
 @pytest.fixture(scope="module")
 def kw(shared_cache):
-    """The tests' training settings: one epoch of 20 pairs, a narrow trunk, the session's model cache."""
-    return dict(epochs=1, n_pairs=20, batch_size=10, width=W, hard_fraction=0.5, cache=shared_cache)
+    """Notebook 10's training settings in its tiny run (params/tiny.yaml over the notebook's defaults: one
+    epoch of 40 pairs, a narrow trunk) and the session's model cache: with setup's frames, the networks
+    these tests train are the ones that run trains (its supervision and fusions at conv2, seeds 0 and 1),
+    so whichever comes first trains them and the other loads them."""
+    nb = {k: ast.literal_eval(v) for k, v in sweep.notebook_parameters(NB10).items()}
+    return dict(epochs=TINY["siamese_epochs"], n_pairs=TINY["siamese_pairs"], batch_size=TINY["siamese_batch"],
+                positive_fraction=nb["positive_fraction"], margin=nb["contrastive_margin"], lam=nb["multitask_lambda"],
+                width=TINY["siamese_width"], optimizer=nb["optimizer"], hard_fraction=nb["hard_fraction"],
+                hard_k=nb["hard_k"], augment_shift=nb["augment_shift"], augment_light=nb["augment_light"],
+                cache=shared_cache)
 
 
 @pytest.fixture(scope="module")
 def trained(setup, kw):
-    """One supervision and the four fusions (one mid-level layer), two seeds, one epoch of 20 pairs each."""
-    sup = sr.supervisions(setup, ["softmax"], kw, SEEDS)
-    fus = sr.fusions(setup, sup, "softmax", ["conv2"], "sum", kw, SEEDS)
+    """One supervision and the four fusions (one mid-level layer), two seeds: notebook 10's tiny run's."""
+    sup = sr.supervisions(setup, ["multitask"], kw, SEEDS)
+    fus = sr.fusions(setup, sup, "multitask", ["conv2"], "sum", kw, SEEDS)
     return sup, fus
 
 
-def test_supervisions_table_is_each_network_scored_on_the_heldout_part(setup, trained):
+def test_supervisions_table_is_each_network_scored_on_the_heldout_part(setup, trained, kw):
     s, (sup, _) = setup, trained
     t = sup.table
-    assert t.descriptor.tolist() == ["scnn softmax, RGB"] * 2 + ["scnn untrained, RGB"] * 2 + ["pixels (32x32 gray)"]
+    assert t.descriptor.tolist() == ["scnn multitask, RGB"] * 2 + ["scnn untrained, RGB"] * 2 + ["pixels (32x32 gray)"]
     assert t.seed.tolist()[:4] == SEEDS * 2 and np.isnan(t.seed.iloc[4])
     assert t.weights.tolist() == ["trained here"] * 2 + ["random init"] * 2 + ["none"]
-    assert list(sup.sims) == [("softmax", 0), ("softmax", 1), ("untrained", 0), ("untrained", 1), ("pixels", None)]
+    assert list(sup.sims) == [("multitask", 0), ("multitask", 1), ("untrained", 0), ("untrained", 1), ("pixels", None)]
     for k, seed in enumerate(SEEDS):
-        _, ap, r100 = sr.score_descriptors(sm.describe(sup.models["softmax", seed], s.X[..., :3]), s.GT, s.exclude_steps, s.held)
-        assert t.loc[k, "AP_%"] == ap and t.loc[k, "R@100P_%"] == r100 and t.loc[k, "train_pairs"] == 20
+        _, ap, r100 = sr.score_descriptors(sm.describe(sup.models["multitask", seed], s.X[..., :3]), s.GT, s.exclude_steps, s.held)
+        assert t.loc[k, "AP_%"] == ap and t.loc[k, "R@100P_%"] == r100 and t.loc[k, "train_pairs"] == kw["epochs"] * kw["n_pairs"]
     assert t.loc[0, "AP_%"] != t.loc[1, "AP_%"]                      # two seeds, two networks
-    assert [name for name, *_ in sup.trained] == ["scnn softmax, RGB, seed 0", "scnn softmax, RGB, seed 1"]
+    assert [name for name, *_ in sup.trained] == ["scnn multitask, RGB, seed 0", "scnn multitask, RGB, seed 1"]
     summ = sr.seed_summary(t).set_index("descriptor")
     assert summ.seeds.tolist() == [2, 2, 1]
-    assert summ.loc["scnn softmax, RGB", "AP_mean"] == pytest.approx(t["AP_%"][:2].mean())
-    assert summ.loc["scnn softmax, RGB", "AP_std"] == pytest.approx(t["AP_%"][:2].std(ddof=1))
-    assert summ.loc["scnn softmax, RGB", "AP_min"] == t["AP_%"][:2].min() and summ.loc["scnn softmax, RGB", "AP_max"] == t["AP_%"][:2].max()
+    assert summ.loc["scnn multitask, RGB", "AP_mean"] == pytest.approx(t["AP_%"][:2].mean())
+    assert summ.loc["scnn multitask, RGB", "AP_std"] == pytest.approx(t["AP_%"][:2].std(ddof=1))
+    assert summ.loc["scnn multitask, RGB", "AP_min"] == t["AP_%"][:2].min() and summ.loc["scnn multitask, RGB", "AP_max"] == t["AP_%"][:2].max()
 
 
 def test_best_of_needs_five_seeds_and_separated_seed_ranges():
@@ -155,9 +172,9 @@ def test_fusions_table_rgb_only_each_fusion_and_each_late_stream(setup, trained)
     t = fus.table
     assert t.fusion.tolist() == [f for f in ["RGB only", "early", "mid", "late", "late (rgb stream)", "late (depth stream)"]
                                  for _ in SEEDS]
-    assert t.seed.tolist() == SEEDS * 6 and t.layer.tolist()[4] == "conv2" and t.descriptor.tolist()[0] == "RGB only (softmax)"
+    assert t.seed.tolist() == SEEDS * 6 and t.layer.tolist()[4] == "conv2" and t.descriptor.tolist()[0] == "RGB only (multitask)"
     rgb = t.iloc[0].drop(["descriptor", "fusion"])
-    assert rgb.equals(sup.table.iloc[0].drop(["descriptor", "fusion"]))          # the softmax RGB row, unchanged
+    assert rgb.equals(sup.table.iloc[0].drop(["descriptor", "fusion"]))          # the multitask RGB row, unchanged
     for stream in ("rgb", "depth"):
         for seed in SEEDS:
             _, ap, r100 = sr.score_descriptors(sm.describe(fus.models["late", seed], s.X, stream=stream), s.GT,
@@ -169,7 +186,7 @@ def test_fusions_table_rgb_only_each_fusion_and_each_late_stream(setup, trained)
     assert t.loc[5, "AP_%"] == ap
     assert [n for n, *_ in fus.trained] == [f"{n}, seed {k}" for n in ("scnn early fusion", "scnn mid-level fusion at conv2",
                                                                       "scnn late fusion") for k in SEEDS]
-    skipped = sr.fusions(s._replace(has_depth=False), sup, "softmax", ["conv2"], "sum", {}, SEEDS)
+    skipped = sr.fusions(s._replace(has_depth=False), sup, "multitask", ["conv2"], "sum", {}, SEEDS)
     assert skipped.table.status.str.startswith("skipped").all() and len(skipped.table) == 3 and not skipped.trained
     assert sr.seed_summary(skipped.table) is skipped.table
 
@@ -179,7 +196,7 @@ def test_the_arms_the_paper_ranks_get_their_own_seeds(setup, trained, kw):
     mid-level layers; the table keeps Figure 9's order (early, each layer, late). (The networks of
     ``trained`` come from the cache: only conv1 is trained here.)"""
     sup, _ = trained
-    fus = sr.fusions(setup, sup, "softmax", ["conv1", "conv2"], "sum", kw, [0], ranking_seeds=SEEDS)
+    fus = sr.fusions(setup, sup, "multitask", ["conv1", "conv2"], "sum", kw, [0], ranking_seeds=SEEDS)
     t = fus.table[fus.table.fusion.isin(["early", "mid", "late"])]
     assert list(zip(t.fusion, t.layer.fillna(""), t.seed)) == (
         [("early", "", k) for k in SEEDS] + [("mid", "conv1", 0)] + [("mid", "conv2", k) for k in SEEDS]
@@ -191,11 +208,11 @@ def test_the_arms_the_paper_ranks_get_their_own_seeds(setup, trained, kw):
 
 def test_timing_paper_vs_run_conclusion_and_summary(setup, trained, tiny_sequence, tmp_path):
     s, (sup, fus) = setup, trained
-    tim, n_native = sr.timing(s, sup, fus, tiny_sequence, "softmax", ["conv2"], 4, vocab_size=16)
-    assert tim.descriptor.tolist() == ["scnn softmax, RGB", "scnn early fusion", "scnn mid-level fusion at conv2",
+    tim, n_native = sr.timing(s, sup, fus, tiny_sequence, "multitask", ["conv2"], 4, vocab_size=16)
+    assert tim.descriptor.tolist() == ["scnn multitask, RGB", "scnn early fusion", "scnn mid-level fusion at conv2",
                                        "scnn late fusion", "sift_bovw (SIFT + 16-word quantisation)"]
     assert (tim.s_per_image_batched > 0).all() and (tim.s_per_image_one_at_a_time > 0).all() and n_native == 64
-    cmp, t2, t3 = sr.paper_vs_run(s, sup, fus, tim, ["softmax"], ["conv2"], "sum", tiny_sequence)
+    cmp, t2, t3 = sr.paper_vs_run(s, sup, fus, tim, ["multitask"], ["conv2"], "sum", tiny_sequence)
     run, notes = cmp.set_index("quantity")["this run"], cmp.set_index("quantity")["note"]
     for q in ("best supervision", "best mid-level layer (Table 2)"):      # one candidate is never "best"
         assert run[q] == sr.UNRESOLVED
@@ -203,11 +220,11 @@ def test_timing_paper_vs_run_conclusion_and_summary(setup, trained, tiny_sequenc
     best, text = sr.best_of(fsum, ["scnn early fusion", "scnn mid-level fusion at conv2", "scnn late fusion"])
     assert run["best fusion"] == (best or sr.UNRESOLVED) and text in notes["best fusion"]
     ssum = sr.seed_summary(sup.table).set_index("descriptor")
-    above = ssum.loc["scnn softmax, RGB", "AP_min"] > ssum.loc[["scnn untrained, RGB", "pixels (32x32 gray)"], "AP_max"].max()
+    above = ssum.loc["scnn multitask, RGB", "AP_min"] > ssum.loc[["scnn untrained, RGB", "pixels (32x32 gray)"], "AP_max"].max()
     assert run["each supervision above the untrained network and raw pixels"] == (
-        f"softmax: {'above both' if above else 'not separated'}")
-    first, last = (np.mean([sup.hists["softmax", k]["monitor"][e] for k in SEEDS]) for e in (0, -1))
-    assert run["held-out AP after the first -> the last epoch, per supervision (%)"].startswith(f"softmax {first:.2f} -> {last:.2f} (loss ")
+        f"multitask: {'above both' if above else 'not separated'}")
+    first, last = (np.mean([sup.hists["multitask", k]["monitor"][e] for k in SEEDS]) for e in (0, -1))
+    assert run["held-out AP after the first -> the last epoch, per supervision (%)"].startswith(f"multitask {first:.2f} -> {last:.2f} (loss ")
     p = [evaluate.precision_at_recall(fus.sims["late", k], s.GT, 0.82, s.exclude_steps, queries=s.held) for k in SEEDS]
     assert run["precision at 82 % recall, late fusion"] == f"{np.mean(p):.3f} [{min(p):.3f}, {max(p):.3f}]"
     mid = fus.table[fus.table.fusion == "mid"]["AP_%"]
@@ -220,27 +237,27 @@ def test_timing_paper_vs_run_conclusion_and_summary(setup, trained, tiny_sequenc
     (out / "summary.json").write_text(f'{{"chance_ap": {s.chance}}}')
     text = sr.conclusion(out)
     assert text.startswith("### Conclusion on res") and "Xu 2022, Fig. 8" in text and "Xu 2022, Fig. 9" in text
-    assert "softmax [" in text and ("every seed above both" in text) == above      # the supervision against the controls
+    assert "multitask [" in text and ("every seed above both" in text) == above      # the supervision against the controls
     assert "conv2 first (Table 2): not resolved" in text                           # one layer, 2 seeds: never an order
     assert f"{tim.s_per_image_one_at_a_time.iloc[0]:.5f}" in text and "not a ranking" in text
     summary = sr.summary(s, sup.table, fus.table, tim, STEP, sup.trained + fus.trained)
     assert summary["networks_trained"] == 4 * len(SEEDS) and summary["labelled_frames_near_heldout"] == 0
-    assert summary["last_train_frame"] < summary["first_heldout_frame"] and summary["frames"] == 100
+    assert summary["last_train_frame"] < summary["first_heldout_frame"] and summary["frames"] == 200
     assert summary["training_seconds_total"] == pytest.approx(sum(t[1] for t in sup.trained + fus.trained))
 
 
 def test_figures_draw_every_curve(setup, trained, tiny_sequence):
     s, (sup, fus) = setup, trained
-    fig = sr.figure_supervisions(s, sup, ["softmax"], tiny_sequence)
-    # every seed of softmax and of the untrained network, pixels, chance, the paper's point
+    fig = sr.figure_supervisions(s, sup, ["multitask"], tiny_sequence)
+    # every seed of multitask and of the untrained network, pixels, chance, the paper's point
     assert len(fig.axes[0].lines) == 2 * len(SEEDS) + 1 + 1 + 1
-    fig, name = sr.figure_fusions(s, fus, ["conv2"], "sum", "softmax", tiny_sequence)
+    fig, name = sr.figure_fusions(s, fus, ["conv2"], "sum", "multitask", tiny_sequence)
     # every seed of RGB only, the late depth stream, early, mid conv2 and late; chance and the paper's point
     assert name == "figure9_fusions" and len(fig.axes[0].lines) == 5 * len(SEEDS) + 1 + 1
     assert len(fig.axes[1].lines) == len(SEEDS) + 1
     k, n = sr.converged_networks(sr.ranked_fusions(fus.table, ["conv2"]))
     assert n == 3 * len(SEEDS) and fig._suptitle.get_text().startswith(f"early, mid-level at conv2 and late fusion: {k} of {n}")
-    assert sr.figure_fusions(s._replace(has_depth=False), fus, ["conv2"], "sum", "softmax", tiny_sequence)[1] == "figure9_skipped"
+    assert sr.figure_fusions(s._replace(has_depth=False), fus, ["conv2"], "sum", "multitask", tiny_sequence)[1] == "figure9_skipped"
     fig = sr.figure_convergence(sup, fus, ["conv2"], True)
     # per seed: the loss and the held-out AP of the supervision (+ untrained, pixels), and of 3 fusions
     assert [len(ax.lines) for ax in fig.axes] == [len(SEEDS), len(SEEDS) + 2, 3 * len(SEEDS)]

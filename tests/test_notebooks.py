@@ -12,6 +12,7 @@ import yaml
 from greenloop.experiments import siamese_rgbd
 from greenloop.methods.greenloop_seq import seqmatch
 from greenloop.cli import main as cli_main
+from conftest import execute_notebook
 
 ROOT = Path(__file__).resolve().parents[1]
 NOTEBOOKS = sorted((ROOT / "notebooks").glob("[0-9][0-9]_*.ipynb"))
@@ -70,17 +71,13 @@ def _run(notebook, dataset, results, monkeypatch, parameters=None) -> Path:
     """Execute one notebook on `dataset` into `results` (on TINY, or on `parameters` instead, with the
     notebook's OVERRIDES over either);
     check what every notebook must write."""
-    import papermill
-
     monkeypatch.setenv("PYTHONPATH", str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     monkeypatch.setenv("GREENLOOP_CACHE", str(results / "models"))
     monkeypatch.setenv("TF_CPP_MIN_LOG_LEVEL", "2")
     out = results / notebook.name
-    papermill.execute_notebook(str(notebook), str(out), kernel_name="greenloop", cwd=str(ROOT),
-                               parameters=dict(TINY if parameters is None else parameters,
-                                               **OVERRIDES.get(notebook.stem, {}),
-                                               dataset=str(dataset), results_dir=str(results)),
-                               execution_timeout=600, progress_bar=False)
+    execute_notebook(notebook, out, cwd=str(ROOT),
+                     parameters=dict(TINY if parameters is None else parameters, **OVERRIDES.get(notebook.stem, {}),
+                                     dataset=str(dataset), results_dir=str(results)))
     noise = _noise(out)
     assert not noise, f"progress bars or log lines in the executed notebook: {noise[:3]}"
     folder = results / notebook.stem
@@ -760,7 +757,7 @@ def test_notebook_runs_on_a_sequence_whose_only_revisit_is_at_its_end(notebook, 
 
 def _end_loop_08(folder):
     t = pd.read_csv(folder / "postprocessing.csv")
-    assert set(t.backbone) == set(TINY["backbones"]) - {"spot_cnn"}       # 08 skips spot_cnn
+    assert set(t.backbone) == set(END_LOOP_PARAMS["08"]["backbones"]) - {"spot_cnn"}       # 08 skips spot_cnn
     assert "AP_eval_%" in t.columns            # 20 revisit frames, gap 5: an honest split exists
     assert t.filter(like="AP_").stack().dropna().between(0, 100).all()
 
@@ -784,9 +781,15 @@ def _end_loop_10(folder):
 
 
 END_LOOP_CHECKS = {"08": _end_loop_08, "10": _end_loop_10, "12": _end_loop_12, "13": _end_loop_13}
-# 10's end-loop run checks the skipped fusions and the split, not the spread over seeds (its tiny run
-# does): one seed of each supervision there (about 18 s of the suite's CPU time)
-END_LOOP_PARAMS = {"10": dict(TINY, ranking_seeds=[0], siamese_seeds=[0])}
+# The runs on the other sequences check what those sequences change (the split, the exclusion, the missing
+# poses and depth), not the spread over seeds or every backbone (the tiny run checks those): one seed where
+# a notebook trains its spot CNN over seeds, and 08 on one network beside the descriptors without one.
+ONE_SEED = {"03": {"seeds": [0]}, "05": {"seeds": [0]}, "12": {"seeds": [0]}}
+# 10's end-loop run checks the skipped fusions and the split: one seed of each supervision; 13's checks the
+# split and the board's bounds: no Siamese row (10 trains that network; 13's tiny run has its row)
+END_LOOP_PARAMS = {"10": dict(TINY, ranking_seeds=[0], siamese_seeds=[0]),
+                   "08": dict(TINY, backbones=["mobilenetv3small", "sift_bovw", "pixels"]),
+                   "12": dict(TINY, **ONE_SEED["12"]), "13": dict(TINY, siamese_rows=[])}
 
 
 @pytest.fixture(scope="module")
@@ -818,7 +821,8 @@ def test_notebook_runs_on_a_sequence_whose_loops_lie_inside_the_default_window(
     implied = yaml.safe_load((near_loop_results / params.PARAMS_NAME).read_text())
     assert implied == {"exclude": 49, "first_traversal_end": 100}
     folder = _run(notebook, tiny_near_loop_sequence, near_loop_results, monkeypatch,
-                  parameters={**implied, **{k: v for k, v in TINY.items() if k != "exclude"}})
+                  parameters={**implied, **{k: v for k, v in TINY.items() if k != "exclude"},
+                              **ONE_SEED.get(notebook.stem[:2], {})})
     cells = json.loads((near_loop_results / notebook.name).read_text())["cells"]
     injected = [c for c in cells if "injected-parameters" in c["metadata"].get("tags", [])]
     assert "exclude = 49\n" in "".join(injected[0]["source"])
@@ -838,7 +842,7 @@ def test_notebook_runs_when_no_loop_lies_outside_its_exclusion_window(
     from greenloop import groundtruth
     assert not groundtruth.for_sequence(tiny_near_loop_sequence, exclude=150).any()
     _run(notebook, tiny_near_loop_sequence, no_counted_loop_results, monkeypatch,
-         parameters=dict(TINY, exclude=150))
+         parameters=dict(TINY, exclude=150, **ONE_SEED.get(notebook.stem[:2], {})))
 
 
 def test_the_relative_accuracy_check_fails_on_a_wrong_rate():

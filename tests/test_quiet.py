@@ -15,7 +15,7 @@ import yaml
 from greenloop.study import params, sweep
 from greenloop.util import devices
 from greenloop.cli import main as cli_main
-from conftest import write_frames
+from conftest import HANG_S, KERNEL_START_S, write_frames
 
 ROOT = Path(__file__).resolve().parents[1]
 NOTEBOOKS = sorted((ROOT / "notebooks").glob("[0-9][0-9]_*.ipynb"))
@@ -115,15 +115,17 @@ def test_tensorflow_is_kept_on_its_cpu_only_where_no_nvidia_gpu_is():
 def test_tensorflow_through_greenloop_prints_no_cuda_error_on_a_cpu_machine():
     """The pinned TensorFlow logs "failed call to cuInit: ... CUDA error" at its first op on a machine
     without a GPU, even with TF_CPP_MIN_LOG_LEVEL=2 (the Makefile's); imported after greenloop it
-    does not, and it still computes (on its CPU)."""
+    does not, and it still computes (on its CPU); and it prints no absl/oneDNN/CUDA notice on stderr
+    (one interpreter checks both: each TensorFlow start-up costs seconds)."""
     env = {k: v for k, v in os.environ.items() if k not in (devices.VARIABLE, devices.MARK)}
     env.update(PYTHONPATH=str(ROOT), TF_CPP_MIN_LOG_LEVEL="2", OMP_NUM_THREADS="1", TF_NUM_INTRAOP_THREADS="1")
     code = ("import {first}tensorflow as tf; print(float(tf.constant(1.0) + 1), "
             "[d.device_type for d in tf.config.list_physical_devices()])")
     runs = {k: subprocess.run([sys.executable, "-c", code.format(first=first)], env=env, capture_output=True,
-                              text=True, timeout=120) for k, first in (("plain", ""), ("greenloop", "greenloop, "))}
+                              text=True, timeout=HANG_S) for k, first in (("plain", ""), ("greenloop", "greenloop, "))}
     assert runs["greenloop"].returncode == 0 and runs["greenloop"].stdout.split() == ["2.0", "['CPU']"], runs["greenloop"]
     assert "cuInit" not in runs["greenloop"].stderr and "CUDA error" not in runs["greenloop"].stderr, runs["greenloop"].stderr
+    assert not devices.NOTICES.search(runs["greenloop"].stderr), runs["greenloop"].stderr
     assert "cuInit" in runs["plain"].stderr        # what it hides (else the setting is no longer needed)
 
 
@@ -133,7 +135,8 @@ def test_the_kernel_make_runs_prints_nothing_of_its_own(tmp_path):
     nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell("print('hello from the cell')")])
     nbformat.write(nb, tmp_path / "in.ipynb")
     r = subprocess.run([sys.executable, "-m", "papermill", str(tmp_path / "in.ipynb"), str(tmp_path / "out.ipynb"),
-                        "-k", "greenloop", "--no-progress-bar"], capture_output=True, text=True, timeout=120)
+                        "-k", "greenloop", "--no-progress-bar", "--start-timeout", str(KERNEL_START_S)],
+                       capture_output=True, text=True, timeout=HANG_S)
     assert r.returncode == 0, r.stderr
     assert "WARNING" not in r.stderr and "encryption" not in r.stderr, r.stderr
     assert "hello from the cell" in (tmp_path / "out.ipynb").read_text()
@@ -150,19 +153,7 @@ def test_backend_notices_are_dropped_and_every_other_line_kept():
             "    os.write(2, b'a real error from C\\n')\n"
             "    print('a python warning', file=sys.stderr)\n"
             "print('after', file=sys.stderr)\n")
-    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=HANG_S,
                        env=dict(os.environ, PYTHONPATH=str(ROOT)))
     assert r.returncode == 0, r.stderr
     assert r.stderr.splitlines() == ["a real error from C", "a python warning", "after"]
-
-
-def test_tensorflow_starts_quietly_after_import_greenloop():
-    """`import greenloop` then TensorFlow: no absl/oneDNN/CUDA notice on stderr, TensorFlow works,
-    and an error raised inside the quiet import would still reach the user (exceptions pass)."""
-    code = ("import greenloop, tensorflow as tf\n"
-            "assert int(tf.constant(2) + 1) == 3\n"
-            "print('ok')\n")
-    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
-                       env=dict(os.environ, PYTHONPATH=str(ROOT), TF_CPP_MIN_LOG_LEVEL="2"))
-    assert r.returncode == 0 and r.stdout == "ok\n", r.stderr
-    assert not devices.NOTICES.search(r.stderr), r.stderr

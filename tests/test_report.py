@@ -4,6 +4,7 @@ import os
 import pandas as pd
 import pytest
 
+from conftest import execute_notebook
 from greenloop import report
 from greenloop.cli import main as cli_main
 from greenloop.study import report as study_report
@@ -88,11 +89,9 @@ def test_manifest_of_a_papermill_run_holds_every_parameter(tmp_path, monkeypatch
     """papermill runs a notebook in tmp (its folder the kernel's working directory, not the checkout):
     the manifest holds every parameter of its cell, the injected value winning, and the derived value
     the notebook gave; where nothing is injected (the parameters cell first), the cell's defaults."""
-    import papermill
     monkeypatch.setenv("PYTHONPATH", str(report.ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     nb = _tiny_notebook(tmp_path / "tiny.ipynb", lead="import json" if injected else None)
-    papermill.execute_notebook(str(nb), str(tmp_path / "out.ipynb"), parameters=injected, kernel_name="greenloop",
-                               cwd=str(tmp_path), progress_bar=False, execution_timeout=120)
+    execute_notebook(nb, tmp_path / "out.ipynb", parameters=injected, cwd=str(tmp_path))
     m = json.loads((tmp_path / "res" / "manifest.json").read_text())
     assert m["parameters"] == {"out": "res", "epochs": 2 if injected else 200, "seeds": [0, 1, 2], "weights": None,
                                "tau_list": [40, 45], "seeds_used": [0]}

@@ -177,7 +177,7 @@ def test_cli_detect_by_method(tmp_path):
     folder = _revisit_folder(tmp_path / "run")
     cmd = ["detect", str(folder), "--method", "greenloop-seq", "--descriptor", "pixels-patchnorm", "--exclude", "10",
            "--seq-len", "3", "--contrast-window", "0", "--threshold", "0.8", "--window", "7"]
-    res = run_cli(cmd, process=True, timeout=120)
+    res = run_cli(cmd, process=True)
     assert res.returncode == 0, res.stderr
     rows = [line.split("\t") for line in res.stdout.splitlines() if line and line[0].isdigit()]
     assert rows and all(int(r[0]) >= 30 and int(r[1]) == int(r[0]) - 30 for r in rows)

@@ -119,7 +119,7 @@ def _drive(folder: Path, places) -> Path:
 
 
 def _detect(folder, *flags):
-    res = run_cli(["detect", folder, *flags], process=True, timeout=120)   # the named default
+    res = run_cli(["detect", folder, *flags], process=True)   # the named default
     assert res.returncode == 0, res.stderr
     return [line.split("\t") for line in res.stdout.splitlines() if line[:1].isdigit()]
 

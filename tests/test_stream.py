@@ -189,7 +189,7 @@ def test_cli_detect_on_jpg_folder(tmp_path, brightness_model):
     model = tmp_path / "m.keras"
     brightness_model.save(model)
     res = run_cli(["detect", folder, "--method", "dictionary", "--model", model, "--threshold", "3", "--window", "5",
-                   "--backend", "numpy"], process=True, timeout=120)
+                   "--backend", "numpy"], process=True)
     assert res.returncode == 0, res.stderr
     rows = [l.split("\t") for l in res.stdout.splitlines() if l and l[0].isdigit()]
     assert [(int(r[0]), int(r[1]), int(r[2])) for r in rows] == [(2, 0, 3), (6, 1, 3), (11, 3, 3)]

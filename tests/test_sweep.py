@@ -1,6 +1,11 @@
 """greenloop.study.sweep: grids and point names, a 2-point sweep of notebook 01 on a 2-worker Dask
 LocalCluster against the same points run one after another, and the faults: a point that raises,
-a rerun after an interruption, a worker killed mid-point."""
+a point that raises once, a rerun after an interruption, a worker killed mid-point.
+
+Every fault is planted by the notebook itself (a parameter, a marker file), never by a clock: each
+kernel gets KERNEL_START_S to answer and Dask's connections generous timeouts, so a slow machine
+cannot turn a kernel start into a failed attempt (papermill's default 60 s once made a point take
+2 attempts on a loaded 2-core machine)."""
 import json
 import os
 from pathlib import Path
@@ -10,6 +15,7 @@ import pandas as pd
 import pytest
 import yaml
 
+from conftest import KERNEL_START_S, execute_notebook
 from greenloop.study import sweep
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -89,14 +95,11 @@ def test_slurm_jobs_run_one_point_each_with_this_checkout():
 
 def _plain_loop(points, base, dataset, folder):
     """The points one after another, each a plain papermill run (no Dask), into folder/<point>/."""
-    import papermill
-
     for values in points:
         out = folder / sweep.point_name(values)
         out.mkdir(parents=True)
-        papermill.execute_notebook(str(NB01), str(out / "nb.ipynb"), kernel_name="greenloop", cwd=str(ROOT),
-                                   parameters=dict(base, **values, dataset=str(dataset), results_dir=str(out)),
-                                   progress_bar=False)
+        execute_notebook(NB01, out / "nb.ipynb", cwd=str(ROOT),
+                         parameters=dict(base, **values, dataset=str(dataset), results_dir=str(out)))
 
 
 @pytest.mark.notebook
@@ -115,7 +118,7 @@ def test_two_worker_sweep_matches_the_points_run_one_after_another(tiny_sequence
         looped = pool.submit(_plain_loop, points[1:], base, tiny_sequence, loop)
         table = sweep.run_sweep(NB01, grid, out, base=base, dataset=tiny_sequence, workers=2,
                                 cache=tmp_path / "cache-sweep", metrics=["table1.csv:acc_mean_%"],
-                                progress=False)
+                                progress=False, start_timeout=KERNEL_START_S)
         looped.result()
     assert (table.status == "ok").all() and len(table) == 2
     assert table.frames_per_spot_list.tolist() == ["[40]", "[50]"]
@@ -148,6 +151,10 @@ with open(Path(counter) / f"{x}.txt", "a") as fh:
     fh.write("run\\n")
 if x == fail_at:
     raise ValueError(f"x is {x}")
+once = Path(counter) / f"failed-once-{x}"
+if x == fail_once_at and not once.exists():
+    once.write_text("once")
+    raise ValueError(f"x is {x}, the first time")
 flag = Path(counter) / "killed"
 if x == kill_at and not flag.exists():
     flag.write_text("once")
@@ -159,12 +166,24 @@ out.mkdir(parents=True, exist_ok=True)
 '''
 
 
+@pytest.fixture(scope="module", autouse=True)
+def patient_dask():
+    """Dask's connect and comm timeouts far above any start-up on a loaded machine (hang guards:
+    a worker or scheduler slow to answer is not lost); the workers a LocalCluster starts inherit them."""
+    import dask
+
+    with dask.config.set({"distributed.comm.timeouts.connect": f"{KERNEL_START_S}s",
+                          "distributed.comm.timeouts.tcp": f"{KERNEL_START_S}s"}):
+        yield
+
+
 @pytest.fixture(scope="module")
 def tiny_nb(tmp_path_factory):
-    """A two-cell notebook: counts its runs in counter/<x>.txt, raises at x == fail_at, kills its
-    Dask worker once at x == kill_at, else writes tiny/summary.json."""
+    """A two-cell notebook: counts its runs in counter/<x>.txt, raises at x == fail_at, raises on its
+    first run only at x == fail_once_at (a marker file), kills its Dask worker once at x == kill_at,
+    else writes tiny/summary.json."""
     nb = nbformat.v4.new_notebook()
-    params = nbformat.v4.new_code_cell('x = 0\nfail_at = -1\nkill_at = -1\ncounter = ""\n'
+    params = nbformat.v4.new_code_cell('x = 0\nfail_at = -1\nfail_once_at = -1\nkill_at = -1\ncounter = ""\n'
                                        'dataset = ""\nresults_dir = "results"')
     params.metadata["tags"] = ["parameters"]
     nb.cells = [params, nbformat.v4.new_code_cell(TINY_NB)]
@@ -189,11 +208,12 @@ def _runs(counter: Path) -> dict:
 
 @pytest.fixture(scope="module")
 def failed_sweep(tiny_nb, cluster, tiny_sequence, tmp_path_factory):
-    """Where the x = 1..4 sweep with x = 2 raising runs (by address), and its arguments."""
+    """Where the x = 1..4 sweep with x = 2 raising and x = 3 raising once runs (by address), and its
+    arguments."""
     root = tmp_path_factory.mktemp("faults")
     (root / "counter").mkdir()
-    kw = dict(base={"counter": str(root / "counter"), "fail_at": 2}, dataset=tiny_sequence,
-              scheduler=cluster.scheduler_address, metrics=["y_mean"])
+    kw = dict(base={"counter": str(root / "counter"), "fail_at": 2, "fail_once_at": 3}, dataset=tiny_sequence,
+              scheduler=cluster.scheduler_address, metrics=["y_mean"], start_timeout=KERNEL_START_S)
     return root, kw
 
 
@@ -201,13 +221,17 @@ def test_a_failing_point_is_retried_once_and_recorded_while_the_others_finish(fa
     root, kw = failed_sweep
     table = sweep.run_sweep(tiny_nb, {"x": [1, 2, 3, 4]}, root / "out", **kw)
     err = capfd.readouterr().err
-    assert _runs(root / "counter") == {1: 1, 2: 2, 3: 1, 4: 1}         # x = 2 retried once, then given up
+    # x = 2 retried once, then given up; x = 3 failed once, then passed on its retry
+    assert _runs(root / "counter") == {1: 1, 2: 2, 3: 2, 4: 1}
     assert table.status.tolist() == ["ok", "failed", "ok", "ok"]
-    assert table.attempts.tolist() == [1, 2, 1, 1]
+    assert table.attempts.tolist() == [1, 2, 2, 1]
     assert table.y_mean.dropna().tolist() == [1, 9, 16] and table.y_std.dropna().tolist() == [0.5] * 3
     rec = json.loads((root / "out" / "x=2" / "point.json").read_text())
     assert rec["status"] == "failed" and rec["error"].startswith("ValueError: x is 2")
     assert len(rec["attempt_wall_s"]) == 2
+    again = json.loads((root / "out" / "x=3" / "point.json").read_text())
+    assert again["status"] == "ok" and again["error"] is None and len(again["attempt_wall_s"]) == 2
+    assert not (root / "out" / "x=3" / "tiny.failed.ipynb").exists()      # the retry cleared the failed run
     assert "ValueError: x is 2" in pd.read_csv(root / "out" / "sweep.csv").error[1]
     assert (root / "out" / "x=2" / "tiny.failed.ipynb").is_file()
     assert not (root / "out" / "x=2" / "tiny.ipynb").exists() and not list((root / "out").rglob(".tmp*"))
@@ -223,20 +247,21 @@ def test_a_rerun_skips_finished_points(failed_sweep, tiny_nb):
     out = root / "out"
     stamps = {x: (out / f"x={x}" / "point.json").stat().st_mtime_ns for x in (1, 3, 4)}
     table = sweep.run_sweep(tiny_nb, {"x": [1, 2, 3, 4]}, out, progress=False, **kw)
-    assert _runs(root / "counter") == {1: 1, 2: 4, 3: 1, 4: 1}         # only the failed point ran again
+    assert _runs(root / "counter") == {1: 1, 2: 4, 3: 2, 4: 1}         # only the failed point ran again
     assert {x: (out / f"x={x}" / "point.json").stat().st_mtime_ns for x in (1, 3, 4)} == stamps
     assert table.status.tolist() == ["ok", "failed", "ok", "ok"]
     # other base parameters make other points: every one runs again
     kw2 = dict(kw, base=dict(kw["base"], fail_at=-1))
     table = sweep.run_sweep(tiny_nb, {"x": [1, 3]}, out, progress=False, **kw2)
-    assert _runs(root / "counter") == {1: 2, 2: 4, 3: 2, 4: 1} and (table.status == "ok").all()
+    assert _runs(root / "counter") == {1: 2, 2: 4, 3: 3, 4: 1} and (table.status == "ok").all()
 
 
 def test_a_worker_killed_mid_point_loses_no_finished_point(tiny_nb, cluster, tiny_sequence, tmp_path):
     (tmp_path / "counter").mkdir()
     base = {"counter": str(tmp_path / "counter"), "kill_at": 3}
     table = sweep.run_sweep(tiny_nb, {"x": [1, 2, 3, 4]}, tmp_path / "out", base=base, dataset=tiny_sequence,
-                            scheduler=cluster.scheduler_address, metrics=["y_mean"], progress=False)
+                            scheduler=cluster.scheduler_address, metrics=["y_mean"], progress=False,
+                            start_timeout=KERNEL_START_S)
     assert (tmp_path / "counter" / "killed").is_file()
     assert (table.status == "ok").all() and table.y_mean.tolist() == [1, 4, 9, 16]
     assert _runs(tmp_path / "counter") == {1: 1, 2: 1, 3: 2, 4: 1}     # only the killed point ran twice

@@ -5,6 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from conftest import execute_notebook
 from greenloop.util import checks, files
 
 
@@ -57,13 +58,11 @@ def test_log_lines_go_to_the_terminal_not_the_notebook(tmp_path):
     """In a kernel (papermill), TensorFlow's log lines land on the kernel's own stderr once greenloop
     is imported, so the executed notebook has no output from them."""
     import nbformat
-    import papermill
     nb = nbformat.v4.new_notebook()
     nb.cells = [nbformat.v4.new_code_cell("import greenloop\nimport tensorflow as tf\n"
                                           "tf.get_logger().warning('a log line a reader must not scroll past')")]
     src, out = tmp_path / "a.ipynb", tmp_path / "b.ipynb"
     nbformat.write(nb, src)
-    papermill.execute_notebook(str(src), str(out), kernel_name="greenloop", progress_bar=False,
-                               cwd=str(Path(__file__).resolve().parents[1]))
+    execute_notebook(src, out, cwd=str(Path(__file__).resolve().parents[1]))
     outputs = nbformat.read(out, as_version=4).cells[0].outputs
     assert not any("must not scroll past" in str(o) for o in outputs), outputs

@@ -55,6 +55,7 @@ from greenloop.util.cache import CACHE_DIR, ROOT
 DEFAULT_DATASET = ROOT / "data" / "synthetic-greenhouse"
 TOPIC = "greenloop-sweep"            # Dask event topic: points report when they start and end
 JOBQUEUE = ("slurm", "pbs")
+START_TIMEOUT = 60                  # s for a point's kernel to answer (papermill's own default)
 _SAFE = re.compile(r"[^A-Za-z0-9._+\-=,\[\]]+")
 _METRIC = re.compile(r"^(?P<file>[^:\[\]]+\.csv)(?:\[(?P<key>[^=\]]+)=(?P<val>[^\]]*)\])?:(?P<col>.+)$")
 
@@ -249,10 +250,11 @@ def _kernel_manager(log: Path):
 
 
 def papermill_once(notebook, folder: Path, parameters: dict, env: dict, cwd, kernel: str,
-                   timeout: int) -> str | None:
+                   timeout: int, start_timeout: int = START_TIMEOUT) -> str | None:
     """Execute the notebook once into ``folder`` with papermill (its kernel is a process of its
-    own, started with the worker's environment updated by ``env``). Returns None on success
-    (``<stem>.ipynb`` in place), else the error text (``<stem>.failed.ipynb`` kept for reading)."""
+    own, started with the worker's environment updated by ``env``): ``timeout`` s per cell,
+    ``start_timeout`` s for the kernel to answer. Returns None on success (``<stem>.ipynb`` in
+    place), else the error text (``<stem>.failed.ipynb`` kept for reading)."""
     import papermill
 
     stem = Path(notebook).stem
@@ -260,7 +262,8 @@ def papermill_once(notebook, folder: Path, parameters: dict, env: dict, cwd, ker
     os.environ.update(env)  # every point of a sweep has the same env: no need to restore it
     try:
         papermill.execute_notebook(str(notebook), str(tmp), parameters=parameters, kernel_name=kernel,
-                                   cwd=str(cwd), execution_timeout=timeout, progress_bar=False,
+                                   cwd=str(cwd), execution_timeout=timeout, start_timeout=start_timeout,
+                                   progress_bar=False,
                                    kernel_manager_class=_kernel_manager(folder / "kernel.log"))
     except papermill.PapermillExecutionError as e:
         error = f"{e.ename}: {e.evalue} (cell In [{e.exec_count}])"
@@ -276,9 +279,10 @@ def papermill_once(notebook, folder: Path, parameters: dict, env: dict, cwd, ker
 
 def run_point(notebook, folder, values: dict, parameters: dict, env: dict, cwd=ROOT,
               kernel: str = "greenloop", timeout: int = 7200, retries: int = 1, force: bool = False,
-              run: str = "") -> dict:
+              run: str = "", start_timeout: int = START_TIMEOUT) -> dict:
     """Run one sweep point (a Dask task): clear its folder, execute the notebook, retry a failure
     ``retries`` times, then write ``point.json`` last, atomically. Returns that record.
+    A kernel that does not answer within ``start_timeout`` s is a failed attempt, retried too.
 
     A failing notebook never raises here: the record says ``"status": "failed"`` and the error.
     A point already complete is not run again unless ``force``, and never twice in one sweep
@@ -296,7 +300,7 @@ def run_point(notebook, folder, values: dict, parameters: dict, env: dict, cwd=R
             shutil.rmtree(folder)
         folder.mkdir(parents=True)
         t0 = time.perf_counter()
-        error = papermill_once(notebook, folder, parameters, env, cwd, kernel, timeout)
+        error = papermill_once(notebook, folder, parameters, env, cwd, kernel, timeout, start_timeout)
         walls.append(round(time.perf_counter() - t0, 2))
         if error is None:
             break
@@ -431,7 +435,8 @@ def _lost(point: dict, notebook, error: BaseException, run: str) -> dict:
 
 
 def drive(client, todo: list[dict], notebook, env: dict, *, resources=None, kernel="greenloop",
-          timeout=7200, retries=1, force=False, progress=True, every=30.0) -> dict[str, dict]:
+          timeout=7200, retries=1, force=False, progress=True, every=30.0,
+          start_timeout=START_TIMEOUT) -> dict[str, dict]:
     """Submit one ``run_point`` task per point in ``todo`` and wait for all of them, printing
     progress to stderr when a point starts or ends (and every ``every`` s). Returns {name: record}."""
     from distributed import wait
@@ -450,7 +455,7 @@ def drive(client, todo: list[dict], notebook, env: dict, *, resources=None, kern
 
     client.subscribe_topic(TOPIC, on_event)
     futures = {client.submit(run_point, str(notebook), str(p["folder"]), p["values"], p["parameters"],
-                             env, str(ROOT), kernel, timeout, retries, force, run,
+                             env, str(ROOT), kernel, timeout, retries, force, run, start_timeout,
                              resources=resources, pure=False,
                              key=f"sweep-point-{p['name']}-{uuid.uuid4().hex[:8]}"): p for p in todo}
     records, pending, last = {}, set(futures), 0.0
@@ -673,13 +678,15 @@ def write_outputs(points, table, out: Path, notebook, metric: str | None, x: str
 def run_sweep(notebook, grid: dict, out, *, base: dict | None = None, dataset=DEFAULT_DATASET,
               scheduler: str = "local", workers: int | None = None, cache=None, metrics=(),
               x: str | None = None, force: bool = False, timeout: int = 7200, kernel: str = "greenloop",
-              retries: int = 1, cluster_options: dict | None = None, progress: bool = True):
+              retries: int = 1, cluster_options: dict | None = None, progress: bool = True,
+              start_timeout: int = START_TIMEOUT):
     """Run every point of ``grid`` (see ``parse_grid``) over ``notebook`` into ``out`` on Dask,
     skipping complete points unless ``force``, then write sweep.csv/.md/.png.
 
     base: parameters for every point (e.g. read from params/tiny.yaml), only the names the notebook
     declares (``plan``); the grid's values win.
     metrics: ``read_metric`` specs; the first is the figure's y axis.
+    timeout: seconds per cell; start_timeout: seconds for each point's kernel to answer.
     Returns the table (pandas DataFrame, one row per point).
     """
     notebook = Path(notebook).resolve()
@@ -701,7 +708,7 @@ def run_sweep(notebook, grid: dict, out, *, base: dict | None = None, dataset=DE
         env = point_env(cache)
         with connect(scheduler, workers, cluster_options) as (client, resources):
             drive(client, todo, notebook, env, resources=resources, kernel=kernel, timeout=timeout,
-                  retries=retries, force=force, progress=progress)
+                  retries=retries, force=force, progress=progress, start_timeout=start_timeout)
     table = collect(points, notebook, metrics)
     md = write_outputs(points, table, out, notebook, metric_column(metrics[0]) if metrics else None, x)
     if progress:
