@@ -220,10 +220,6 @@ def shift(folder: Path):
     return text, value_verdict(92, med, conv)
 
 
-DICTIONARY_SEEDS = "05_dictionary_threshold/seeds_summary.csv"
-DICTIONARY_VARIANT = "paper (spots by frame index)"     # 05's variant on the paper's labels (its VARIANTS[0])
-
-
 def dictionary(folder: Path):
     """The dictionary at tau = L + Delta as a loop-closure detector: closure precision at least
     :data:`DICTIONARY_PRECISION` % (what the field asks of a loop-closure detector; the paper reports
@@ -232,7 +228,7 @@ def dictionary(folder: Path):
     "main paper" rows, one per CNN seed: their median judged). Its CNN is trained as 02's seeds (the
     same L and epochs, by the manifests): their convergence is its (:data:`CONVERGED`); where 13 and
     02 ran with other L or epochs, its convergence is not known and the row is not resolved."""
-    if (folder / DICTIONARY_SEEDS).is_file():
+    if (folder / summary.DICTIONARY_SEEDS).is_file():
         return dictionary_over_seeds(folder)
     t = _csv(folder, "13_leaderboard/leaderboard.csv")
     if t is None:
@@ -272,14 +268,10 @@ def dictionary_over_seeds(folder: Path):
     seed's [min, max] in the cell, the seeds counted converged by 05's own table (the spot CNN's rule,
     :data:`CONVERGED`); epochs taken from ``seeds.csv`` where present. A run where converged seeds
     flag no frame declares no closure: does not hold."""
-    t = _csv(folder, DICTIONARY_SEEDS)
-    rows = t[t.variant == DICTIONARY_VARIANT]
-    if not len(rows):
-        raise ValueError(f"{folder / DICTIONARY_SEEDS} has no row for the variant {DICTIONARY_VARIANT!r}: "
-                         "rerun notebook 05, which writes one per variant")
-    r = rows.iloc[0]
+    row = summary.dictionary_seeds_row(folder)
+    r = pd.to_numeric(pd.Series({k.replace("%", "pct"): v for k, v in row.items() if k != "variant"}), errors="coerce")
     per_seed = _csv(folder, "05_dictionary_threshold/seeds.csv")
-    taken = None if per_seed is None else per_seed[per_seed.variant == DICTIONARY_VARIANT].epochs
+    taken = None if per_seed is None else per_seed[per_seed.variant == summary.DICTIONARY_VARIANT].epochs
     training = training_text(folder, "05_dictionary_threshold",
                              *((taken.min(), taken.max()) if taken is not None and len(taken) else ()))
     conv = Convergence(int(r.converged_seeds), int(r.seeds), training)
