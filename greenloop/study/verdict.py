@@ -21,6 +21,13 @@ The verdicts (:data:`RULES`, printed under the table, written from the constants
   U of 0, p = 1/252; the rule is conservative: overlapping ranges can still differ by a rank test.
 * **not testable here**: the claim is about networks with no ImageNet weights here (random-init rows
   are never evidence for or against a paper's ranking), or needs data the folder lacks (depth).
+
+Where a folder holds them, newer tables are read instead of the older ones (folders written before
+them read as before): Zhang 2017's whitening, the ZCA median filter and Qi's depth from notebooks 08
+and 09's ``paired.csv`` (:func:`paired_verdict` on the AUC-PR difference over the same queries, the
+network with ImageNet weights); the dictionary from notebook 05's ``seeds_summary.csv`` (each seed's
+CNN, :func:`dictionary_over_seeds`); Xu 2022's networks counted by notebook 10's per-seed
+``converged`` column with the epochs taken (:func:`xu_networks`).
 """
 from __future__ import annotations
 
