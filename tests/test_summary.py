@@ -6,6 +6,8 @@ import csv
 import json
 from pathlib import Path
 
+import pytest
+
 from greenloop.cli import main as cli_main
 from greenloop.study import summary
 
@@ -179,3 +181,21 @@ def test_the_standing_shows_each_target_protocol_beside_the_leaderboard_and_word
     assert full[9] == "829.9 [820.1, 832.6]"
     goals = _rows(_section(summary.markdown([res]), 3), "leaderboard")
     assert [g[5] for g in goals] == ["no", "uninformative"]
+
+
+def test_section_2_shows_the_dictionary_over_seeds_where_notebook_05_wrote_them(tmp_path):
+    """05's seeds_summary.csv (the paper's variant; the loop-aware one left out) gives one row per folder
+    with its seeds, converged seeds, precision and recall median [min, max] and the converged median;
+    a folder without it adds nothing (the committed page stays as it is)."""
+    assert summary.dictionary_seeds([tmp_path]) == ""
+    (tmp_path / "05_dictionary_threshold").mkdir()
+    cols = "variant,seeds,converged_seeds,precision_median_%,precision_min_%,precision_max_%," \
+           "precision_median_converged_%,recall_median_%,recall_min_%,recall_max_%\n"
+    (tmp_path / summary.DICTIONARY_SEEDS).write_text(
+        cols + f"{summary.DICTIONARY_VARIANT},5,4,80.5,60,95,82.25,42,40,44\nloop-aware (spots by place),5,5,99,99,99,99,90,90,90\n")
+    text = summary.dictionary_seeds([tmp_path])
+    assert text.count("\n| `") == 1 and "| 5 | 4 | 80.5 [60, 95] | 82.25 | 42 [40, 44] |" in text
+    assert text in summary.paper_detector([tmp_path])
+    (tmp_path / summary.DICTIONARY_SEEDS).write_text(cols + "loop-aware (spots by place),5,5,99,99,99,99,90,90,90\n")
+    with pytest.raises(ValueError, match="no row for the variant"):
+        summary.dictionary_seeds([tmp_path])

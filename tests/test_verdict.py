@@ -203,3 +203,127 @@ def test_qi_claims_name_the_row_that_is_missing(tmp_path):
                   "AP_RGB-D_pct": [55.0]}).to_csv(tmp_path / "09_rgbd_features" / "rgbd.csv", index=False)
     assert verdict.qi_depth(tmp_path) == ("EfficientNet-Lite0 (ImageNet) AP 50 -> 55 %",
                                           verdict.UNRESOLVED + " (one AP each, no spread)")
+
+
+def paired_csv(folder: Path, notebook: str, rows, backbone="efficientnetlite0"):
+    """A planted <notebook>/paired.csv: (comparison, low, high) rows with ImageNet weights and AUC-PR
+    as the metric, plus a random-init row of each that must be ignored (its interval far from 0)."""
+    (folder / notebook).mkdir(parents=True, exist_ok=True)
+    out = []
+    for comparison, lo, hi in rows:
+        for weights, (l, h) in (("imagenet", (lo, hi)), ("random init", (50.0, 60.0))):
+            out.append({"backbone": backbone, "weights": weights, "label": f"{backbone} ({weights})",
+                        "comparison": comparison, "a": "a", "b": "b", "metric": "AUC-PR", "difference": (l + h) / 2,
+                        "low": l, "high": h, "queries": 91, "block": 10, "blocks": 10, "resolved": l > 0 or h < 0,
+                        "result": "x"})
+            out.append({**out[-1], "metric": "R@1", "low": 40.0, "high": 45.0})       # not the metric judged
+    pd.DataFrame(out).to_csv(folder / notebook / "paired.csv", index=False)
+
+
+def postprocessing_csv(folder: Path):
+    """08's postprocessing.csv for one ImageNet network: AP on the evaluation part per variant."""
+    (folder / "08_descriptor_postprocessing").mkdir(parents=True, exist_ok=True)
+    rows = [("raw", "none", 84.0), ("PCA-whitened, paper dim", "none", 33.72), ("PCA-whitened, tuned dim", "none", 80.0),
+            ("ZCA, tuned dim", "none", 70.0), ("ZCA, tuned dim", "median (tuned)", 71.0)]
+    pd.DataFrame([{"backbone": "efficientnetlite0", "weights": "imagenet", "label": "EfficientNet-Lite0 (imagenet)",
+                   "variant": v, "median_filter": m, "AP_eval_%": ap} for v, m, ap in rows]
+                 ).to_csv(folder / "08_descriptor_postprocessing" / "postprocessing.csv", index=False)
+
+
+def test_the_postprocessing_orders_are_judged_on_the_paired_interval(tmp_path):
+    """Zhang 2017 and the ZCA median filter from 08's paired.csv: a resolved order against the paper
+    (whitened below raw at both dimensions) does not hold, a tie is called a tie, and the cell gives
+    the difference, its interval and the queries; without paired.csv the old wording stands."""
+    postprocessing_csv(tmp_path)
+    assert verdict.zhang_whitening(tmp_path)[1] == verdict.UNRESOLVED + " (one split, no spread)"
+    paired_csv(tmp_path, "08_descriptor_postprocessing", [("PCA-whitened, paper dim minus raw", -55.1, -45.3),
+                                                          ("PCA-whitened, tuned dim minus raw", -6.0, -1.5),
+                                                          ("ZCA + median filter (tuned) minus ZCA", 0.0, 0.0)])
+    text, word = verdict.zhang_whitening(tmp_path)
+    assert word == verdict.FAILS and "AUC-PR -50.20 [-55.10, -45.30] points over 91 queries" in text
+    text, word = verdict.zca_median(tmp_path)
+    assert word == f"{verdict.UNRESOLVED} (tie)" and "[+0.00, +0.00] points over 91 queries" in text
+    paired_csv(tmp_path, "08_descriptor_postprocessing", [("PCA-whitened, paper dim minus raw", 1.0, 9.0),
+                                                          ("PCA-whitened, tuned dim minus raw", -6.0, -1.5)])
+    assert verdict.zhang_whitening(tmp_path)[1] == f"{verdict.UNRESOLVED} (the two dimensions disagree)"
+    paired_csv(tmp_path, "08_descriptor_postprocessing", [("PCA-whitened, paper dim minus raw", 1.0, 9.0),
+                                                          ("PCA-whitened, tuned dim minus raw", 0.5, 3.0)])
+    assert verdict.zhang_whitening(tmp_path)[1] == verdict.HOLDS
+    assert verdict.zca_median(tmp_path)[1] == verdict.UNRESOLVED + " (one split, no spread)"   # no such row
+
+
+def test_qi_depth_is_judged_on_the_paired_interval(tmp_path):
+    (tmp_path / "09_rgbd_features").mkdir()
+    pd.DataFrame({"backbone": ["efficientnetlite0"], "weights": ["imagenet"], "AP_RGB_pct": [50.0],
+                  "AP_RGB-D_pct": [55.0]}).to_csv(tmp_path / "09_rgbd_features" / "rgbd.csv", index=False)
+    paired_csv(tmp_path, "09_rgbd_features", [("RGB-D minus RGB", 1.74, 10.86)])
+    text, word = verdict.qi_depth(tmp_path)
+    assert word == verdict.HOLDS and "RGB-D minus RGB: AUC-PR +6.30 [+1.74, +10.86] points over 91 queries" in text
+    paired_csv(tmp_path, "09_rgbd_features", [("RGB-D minus RGB", -9.0, -0.5)])
+    assert verdict.qi_depth(tmp_path)[1] == verdict.FAILS
+    paired_csv(tmp_path, "09_rgbd_features", [("RGB-D minus RGB", 0.0, 0.0)])
+    assert verdict.qi_depth(tmp_path)[1] == f"{verdict.UNRESOLVED} (tie)"
+    paired_csv(tmp_path, "09_rgbd_features", [("RGB-D minus RGB", 1.0, 2.0)], backbone="ghostnet")
+    assert verdict.qi_depth(tmp_path)[1] == verdict.UNRESOLVED + " (one AP each, no spread)"   # not its network
+
+
+def dictionary_seeds(folder: Path, precision, converged=(True,) * 5):
+    """05's seeds.csv and seeds_summary.csv (as dictionary_threshold.seed_summary writes them) for the
+    paper's variant with these per-seed closure precisions (%), and a loop-aware variant that passes."""
+    from greenloop.experiments import dictionary_threshold as dt
+    out = folder / "05_dictionary_threshold"
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "manifest.json").write_text('{"parameters": {"stop_patience": 10, "stop_cap": 200}}')
+    (out / "summary.json").write_text('{"derived": {"tau": 70}}')
+    rows = [{"seed": k, "variant": v, "epochs": 20 + k, "final_train_acc_%": 99.0, "stopped_early": True,
+             "converged": c, "precision_%": p if v == dt.VARIANTS[0] else 99.0, "event_precision_%": p,
+             "recall_%": 40.0 + k} for v in dt.VARIANTS for k, (p, c) in enumerate(zip(precision, converged))]
+    per_seed = pd.DataFrame(rows)
+    per_seed.to_csv(out / "seeds.csv", index=False)
+    dt.seed_summary(per_seed).to_csv(out / "seeds_summary.csv", index=False)
+
+
+def test_a_dictionary_whose_best_seed_alone_passes_does_not_hold(tmp_path):
+    """5 seeds, all converged, only the best reaching 90 % precision: the median (80) is judged, the
+    spread is in the cell, and the seeds are counted by 05's own table (early stopping, epochs taken)."""
+    dictionary_seeds(tmp_path, [60.0, 70.0, 80.0, 85.0, 95.0])
+    text, word = verdict.dictionary(tmp_path)
+    assert word == verdict.FAILS
+    assert "tau = 70" in text and "median of the converged seeds 80 %, all seeds [60, 95] %" in text
+    assert "5 of 5 seeds converged (trained until the training accuracy stopped rising, at most 200 epochs, " \
+           "20-24 epochs taken)" in text and "recall median 42 % [40, 44]" in text
+    dictionary_seeds(tmp_path, [60.0, 70.0, 92.0, 95.0, 99.0])
+    assert verdict.dictionary(tmp_path)[1] == verdict.HOLDS
+    dictionary_seeds(tmp_path, [95.0, 96.0, 97.0, 60.0, 70.0], converged=(False, False, False, True, True))
+    text, word = verdict.dictionary(tmp_path)
+    assert word == verdict.BUDGET and "2 of 5 seeds converged" in text
+    dictionary_seeds(tmp_path, [float("nan")] * 5)                         # no seed flags a frame
+    assert verdict.dictionary(tmp_path)[1] == verdict.FAILS
+
+
+def siamese_tables(folder: Path, converged_per_arm: int, seeds=5, cap=60):
+    """10's supervisions.csv and supervisions_per_seed.csv (multi-task's seed range above the others')
+    with ``converged_per_arm`` of each arm's ``seeds`` networks converged by the per-seed column."""
+    out = folder / "10_siamese_rgbd"
+    out.mkdir(parents=True, exist_ok=True)
+    arms = {"softmax": (40, 50), "contrastive": (30, 45), "multitask": (60, 70)}
+    per_seed = pd.DataFrame([{"descriptor": f"scnn {x}, RGB", "seed": k, "supervision": x, "fusion": "none",
+                              "epochs": 12 + 10 * k if k < converged_per_arm else cap, "epoch_cap": cap,
+                              "converged": k < converged_per_arm, "AP_%": lo + (hi - lo) * k / (seeds - 1)}
+                             for x, (lo, hi) in arms.items() for k in range(seeds)])
+    per_seed.to_csv(out / "supervisions_per_seed.csv", index=False)
+    pd.DataFrame([{"descriptor": f"scnn {x}, RGB", "supervision": x, "seeds": seeds,
+                   "converged_seeds": converged_per_arm, "AP_min": lo, "AP_max": hi,
+                   "epochs_min": 12, "epochs_max": cap} for x, (lo, hi) in arms.items()]
+                 ).to_csv(out / "supervisions.csv", index=False)
+
+
+def test_siamese_networks_are_counted_by_their_converged_column_with_the_epochs_taken(tmp_path):
+    """3 of 5 networks per arm converged (9 of 15): not budget-limited, the seed ranges decide; 2 of 5
+    (6 of 15): budget-limited. The cell says how many converged and the epochs they took."""
+    siamese_tables(tmp_path, 3)
+    text, word = verdict.xu_supervision(tmp_path)
+    assert word == verdict.HOLDS and text.endswith("9 of 15 networks converged, 12-60 epochs taken (cap 60)")
+    siamese_tables(tmp_path, 2)
+    text, word = verdict.xu_supervision(tmp_path)
+    assert word == verdict.BUDGET and "6 of 15 networks converged" in text

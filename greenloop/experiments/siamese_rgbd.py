@@ -348,19 +348,40 @@ def label_budget(fig, *tables: pd.DataFrame):
     return report.label_figure(fig, budget_label(*tables))
 
 
+def _arms_budget(t: pd.DataFrame) -> str:
+    """"budget-limited: k of n networks converged" for the arms ``t`` (rows of :func:`seed_summary`)
+    where fewer than half of their networks converged (``verdict.budget_limited``, the rule the verdict
+    applies to Xu 2022's orders), else ""; "" for a single arm or a table without converged_seeds."""
+    if len(t) < 2 or "converged_seeds" not in t:
+        return ""
+    k, n = int(t.converged_seeds.sum()), int(t.seeds.sum())
+    return f"{verdict.BUDGET}: {k} of {n} networks converged" if verdict.budget_limited(k, n) else ""
+
+
 def best_of(summary: pd.DataFrame, names) -> tuple[str | None, str]:
-    """The descriptor among ``names`` (rows of :func:`seed_summary`) with the highest mean AP, if
-    every arm has at least ``verdict.MIN_SEEDS`` seeds and its lowest seed is above every other's
-    highest (the seed ranges separate: the verdict table's rule); else None.
-    Returns (name or None, text): text gives each mean and [min, max] over seeds."""
+    """The descriptor among ``names`` (rows of :func:`seed_summary`) with the highest mean AP, by the
+    verdict table's rule for Xu 2022's orders: at least half of the arms' networks converged
+    (:func:`_arms_budget`), every arm has at least ``verdict.MIN_SEEDS`` seeds and its lowest seed is
+    above every other's highest (the seed ranges separate); else None.
+    Returns (name or None, text): text gives each mean and [min, max] over seeds, and why none is named."""
     t = summary.set_index("descriptor").loc[list(names)]
     top = t.AP_mean.idxmax()
     others = t.drop(index=top)
     text = "; ".join(f"{d} {r.AP_mean:.2f} [{r.AP_min:.2f}, {r.AP_max:.2f}]" for d, r in t.iterrows())
+    if _arms_budget(t):
+        return None, text + f" ({_arms_budget(t)})"
     if t.seeds.min() < verdict.MIN_SEEDS:
         return None, text + f" (fewer than {verdict.MIN_SEEDS} seeds per arm)"
     separated = len(others) > 0 and t.loc[top, "AP_min"] > others.AP_max.max()
     return (top if separated else None), text
+
+
+def best_cell(summary: pd.DataFrame, names) -> tuple[str, str]:
+    """paper_vs_run's "best ..." cell for ``names`` and its note text (:func:`best_of`): the best
+    descriptor's name where the order is resolved, "budget-limited: k of n networks converged" where
+    fewer than half of the arms' networks converged (as the verdict words it), else :data:`UNRESOLVED`."""
+    best, text = best_of(summary, names)
+    return best or _arms_budget(summary.set_index("descriptor").loc[list(names)]) or UNRESOLVED, text
 
 
 def timing(s: Setup, sup: Runs, fus: Runs, dataset, fusion_supervision: str, mid_layers,
@@ -440,13 +461,13 @@ def _levelling(hists) -> str:
 def _supervision_rows(s: Setup, sup: Runs, supervisions) -> list:
     summ = seed_summary(sup.table).set_index("descriptor")
     names = [f"scnn {x}, RGB" for x in supervisions]
-    best, text = best_of(summ.reset_index(), names)
+    best, text = best_cell(summ.reset_index(), names)
     refs = summ.loc[["scnn untrained, RGB", "pixels (32x32 gray)"]]
     ceiling = refs.AP_max.max()
     beats = [f"{x}: {'above both' if summ.loc[n, 'AP_min'] > ceiling else 'not separated'}"
              for x, n in zip(supervisions, names)]
     seeds = int(summ.loc[names, "seeds"].min())
-    rows = [("best supervision", "multi-task (New College)", best or UNRESOLVED,
+    rows = [("best supervision", "multi-task (New College)", best,
              f"AP % over {seeds} seeds, mean [min, max]: {text}; held-out part"),
             ("each supervision above the untrained network and raw pixels", "(the paper pretrains; no such control)",
              "; ".join(beats), f"a supervision's lowest seed above the highest of untrained "
@@ -472,18 +493,18 @@ def _fusion_rows(s: Setup, fus: Runs, mid_layers, merge: str, dataset) -> tuple[
            f"mean of {int(by.loc[m, 'seeds'])} seeds, [min, max] = [{by.loc[m, 'AP_min'] / 100:.4f}, "
            f"{by.loc[m, 'AP_max'] / 100:.4f}]; {merge}; paper: NYU, Places-pretrained", 4)
           for layer, m in zip(mid_layers, mids)]
-    layer_best, layer_text = best_of(summ, mids)
+    layer_best, layer_text = best_cell(summ, mids)
     paper_mid = f"scnn mid-level fusion at {_paper_layer(mid_layers)}"
-    fusion_best, fusion_text = best_of(summ, ["scnn early fusion", paper_mid, "scnn late fusion"])
+    fusion_best, fusion_text = best_cell(summ, ["scnn early fusion", paper_mid, "scnn late fusion"])
     rgb = f"RGB only ({summ.supervision.iloc[0]})"
-    depth_best, depth_text = best_of(summ, [rgb, "scnn late fusion"]) if rgb in by.index else (None, "n/a")
+    depth_best, depth_text = best_cell(summ, [rgb, "scnn late fusion"]) if rgb in by.index else (UNRESOLVED, "n/a")
     cmp = [("best mid-level layer (Table 2)", "conv2 (AP 0.8111)",
-            layer_best.rsplit(" ", 1)[-1] if layer_best else UNRESOLVED, f"AP % mean [min, max]: {layer_text}"),
-           ("best fusion", "late", fusion_best or UNRESOLVED,
+            layer_best.rsplit(" ", 1)[-1] if layer_best in mids else layer_best, f"AP % mean [min, max]: {layer_text}"),
+           ("best fusion", "late", fusion_best,
             f"AP % mean [min, max]: {fusion_text} (mid-level at the paper's layer, fixed in advance)"),
            ("precision at 82 % recall, late fusion", 0.92, _precision_at(fus, "late", 0.82, s),
             "mean [min, max] over seeds; NYU vs the held-out part here"),
-           ("late fusion vs RGB only", "depth helps", depth_best or UNRESOLVED,
+           ("late fusion vs RGB only", "depth helps", depth_best,
             f"AP % mean [min, max]: {depth_text}; depth stream alone "
             f"{by.loc['scnn late fusion, depth stream alone', 'AP_mean']:.2f} %")]
     return cmp, t2
@@ -511,7 +532,8 @@ def paper_vs_run(s: Setup, sup: Runs, fus: Runs, tim: pd.DataFrame, supervisions
                  dataset) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame]:
     """The paper's numbers beside this run's: (paper_vs_run, Table 2, Table 3) as
     ``report.paper_vs_run`` tables. A supervision, layer or fusion is named best only where its
-    seed range lies above every other's (:func:`best_of`), else :data:`UNRESOLVED`; the means and
+    seed range lies above every other's and at least half of the arms' networks converged (the
+    verdict's rule, :func:`best_cell`), else budget-limited or :data:`UNRESOLVED`; the means and
     ranges stand beside it."""
     cmp, t2 = _fusion_rows(s, fus, mid_layers, merge, dataset)
     k, n = converged_networks(sup.table, fus.table)

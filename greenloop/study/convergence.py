@@ -58,7 +58,7 @@ def parameters(folder: Path, notebook: str) -> dict:
     return json.loads(path.read_text()).get("parameters", {}) if path.is_file() else {}
 
 
-def _epochs(folder: Path, notebook: str, lo=None, hi=None) -> str:
+def training_text(folder: Path, notebook: str, lo=None, hi=None) -> str:
     """How a notebook's spot CNN seeds were trained, from its manifest's parameters and, where the
     table gives them, the epochs taken (``lo``..``hi``)."""
     p = parameters(folder, notebook)
@@ -84,7 +84,7 @@ def spot_cnn_convergence(folder: Path, run: str, frames_per_spot=None) -> Conver
         if t is None or not (t.frames_per_spot == frames_per_spot).any():
             return None
         r = t[t.frames_per_spot == frames_per_spot].iloc[0]
-        training = _epochs(folder, run, r.get("epochs_min"), r.get("epochs_max"))
+        training = training_text(folder, run, r.get("epochs_min"), r.get("epochs_max"))
         low = r.get("final_train_acc_min_pct")
         return Convergence(int(r.converged_seeds), int(r.seeds),
                            training + ("" if low is None else f"; lowest final training accuracy {fmt(low)} %"))
@@ -94,7 +94,7 @@ def spot_cnn_convergence(folder: Path, run: str, frames_per_spot=None) -> Conver
     t = t[t.split == "random"]
     acc = t.final_train_acc_pct
     return Convergence(int(t.converged.sum()), len(t),
-                       f"{_epochs(folder, run)}; final training accuracy [{fmt(acc.min())}, {fmt(acc.max())}] %")
+                       f"{training_text(folder, run)}; final training accuracy [{fmt(acc.min())}, {fmt(acc.max())}] %")
 
 
 def converged_flags(folder: Path, seeds) -> pd.Series:

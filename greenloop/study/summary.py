@@ -366,7 +366,45 @@ def paper_detector(results_dirs) -> str:
             "and recall as in section 1; pair precision and recall: its scored_on note's, over pairs of "
             "frames). frames/s: `06_speed/paper_vs_run.csv`, this run. The row \"paper\": the paper's values "
             "as those tables give them.\n\n"
-            + table(head, rows) + ("\n" + notes if notes else ""))
+            + table(head, rows) + ("\n" + notes if notes else "") + dictionary_seeds(results_dirs))
+
+
+DICTIONARY_SEEDS = "05_dictionary_threshold/seeds_summary.csv"   # notebook 05's detector over each seed's CNN
+DICTIONARY_VARIANT = "paper (spots by frame index)"               # its row on the paper's labels (05's VARIANTS[0])
+
+
+def dictionary_seeds_row(folder: Path) -> dict | None:
+    """The paper variant's row of :data:`DICTIONARY_SEEDS` (as written), or None without the table.
+    Raises ValueError where the table has no such row."""
+    rows = read_csv(Path(folder) / DICTIONARY_SEEDS)
+    if rows is None:
+        return None
+    found = [r for r in rows if r.get("variant") == DICTIONARY_VARIANT]
+    if not found:
+        raise ValueError(f"{Path(folder) / DICTIONARY_SEEDS} has no row for the variant {DICTIONARY_VARIANT!r}: "
+                         "rerun notebook 05, which writes one per variant")
+    return found[0]
+
+
+def dictionary_seeds(results_dirs) -> str:
+    """Section 2's table of the dictionary over seeds, one row per folder with :data:`DICTIONARY_SEEDS`
+    (seeds, converged seeds, closure precision and recall in %: median [min, max] over seeds, and the
+    precision's median over the converged seeds, the statistic the verdict judges); "" where no folder has it."""
+    rows = []
+    for d in map(Path, results_dirs):
+        r = dictionary_seeds_row(d)
+        if r is not None:
+            rows.append([name(d), num(r.get("seeds")), num(r.get("converged_seeds")),
+                         interval(r.get("precision_median_%"), r.get("precision_min_%"), r.get("precision_max_%")),
+                         num(r.get("precision_median_converged_%")),
+                         interval(r.get("recall_median_%"), r.get("recall_min_%"), r.get("recall_max_%"))])
+    if not rows:
+        return ""
+    head = ["dataset", "seeds", "converged", "closure precision % median [min, max]",
+            "median of the converged seeds", "recall % median [min, max]"]
+    return (f"\nThe dictionary over each seed's CNN (`{DICTIONARY_SEEDS}`, the paper's labels at notebook 05's τ; "
+            "closure precision: true / flagged frames; the verdict judges the median of the converged seeds):\n\n"
+            + table(head, rows))
 
 
 def targets(results_dirs) -> str:

@@ -21,9 +21,17 @@ The verdicts (:data:`RULES`, printed under the table, written from the constants
   U of 0, p = 1/252; the rule is conservative: overlapping ranges can still differ by a rank test.
 * **not testable here**: the claim is about networks with no ImageNet weights here (random-init rows
   are never evidence for or against a paper's ranking), or needs data the folder lacks (depth).
+
+Where a folder holds them, newer tables are read instead of the older ones (folders written before
+them read as before): Zhang 2017's whitening, the ZCA median filter and Qi's depth from notebooks 08
+and 09's ``paired.csv`` (:func:`paired_verdict` on the AUC-PR difference over the same queries, the
+network with ImageNet weights); the dictionary from notebook 05's ``seeds_summary.csv`` (each seed's
+CNN, :func:`dictionary_over_seeds`); Xu 2022's networks counted by notebook 10's per-seed
+``converged`` column with the epochs taken (:func:`xu_networks`).
 """
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Callable, NamedTuple
 
@@ -32,7 +40,7 @@ import pandas as pd
 from greenloop.report import fill_block
 from greenloop.study import provenance, summary, targets
 from greenloop.study.convergence import (CONVERGED, CONVERGED_AT, Convergence, between, converged_flags,
-                                         spot_cnn_convergence)
+                                         spot_cnn_convergence, training_text)
 from greenloop.study.convergence import fmt as _g, parameters as _parameters, read_table as _csv
 from greenloop.util.files import write_atomic
 
@@ -111,6 +119,29 @@ def paired_verdict(lo: float, hi: float) -> str:
     if word == targets.RESOLVED:
         return HOLDS if lo > 0 else FAILS
     return f"{UNRESOLVED} ({'the paired interval holds 0' if word == targets.NOT_RESOLVED else word})"
+
+
+PAIRED_METRIC = "AUC-PR"       # the metric of paired.csv (notebooks 08, 09) the orders are judged on (per query, %)
+
+
+def paired_row(folder: Path, notebook: str, comparison: str, backbone: str | None = None):
+    """The :data:`PAIRED_METRIC` row of ``comparison`` in ``<notebook>/paired.csv`` (a minus b on the
+    same queries, points) for the first network with ImageNet weights (``weights == "imagenet"``; or
+    that ``backbone``), or None where the folder has no such table or row."""
+    t = _csv(folder, f"{notebook}/paired.csv")
+    if t is None:
+        return None
+    t = t[(t.weights == "imagenet") & (t.comparison == comparison) & (t.metric == PAIRED_METRIC)]
+    if backbone is not None:
+        t = t[t.backbone == backbone]
+    return t.iloc[0] if len(t) else None
+
+
+def paired_cell(r) -> str:
+    """One paired.csv row as a cell: the difference (points) with its interval, the queries it rests on
+    and :func:`paired_verdict`'s word in brackets."""
+    return (f"{PAIRED_METRIC} {r.difference:+.2f} [{r.low:+.2f}, {r.high:+.2f}] points over {int(r.queries)} queries "
+            f"({paired_verdict(r.low, r.high)})")
 
 
 def _seeds_range(n, lo, hi) -> str:
@@ -199,10 +230,13 @@ def shift(folder: Path):
 def dictionary(folder: Path):
     """The dictionary at tau = L + Delta as a loop-closure detector: closure precision at least
     :data:`DICTIONARY_PRECISION` % (what the field asks of a loop-closure detector; the paper reports
-    no precision) on the leaderboard's evaluation queries (``13_leaderboard/leaderboard.csv``, its
+    no precision). Read from notebook 05's seeds (:func:`dictionary_over_seeds`) where the folder has
+    them; else on the leaderboard's evaluation queries (``13_leaderboard/leaderboard.csv``, its
     "main paper" rows, one per CNN seed: their median judged). Its CNN is trained as 02's seeds (the
     same L and epochs, by the manifests): their convergence is its (:data:`CONVERGED`); where 13 and
     02 ran with other L or epochs, its convergence is not known and the row is not resolved."""
+    if (folder / summary.DICTIONARY_SEEDS).is_file():
+        return dictionary_over_seeds(folder)
     t = _csv(folder, "13_leaderboard/leaderboard.csv")
     if t is None:
         return None
@@ -226,6 +260,41 @@ def dictionary(folder: Path):
     text += f"; trained as 02's seeds: {family.text()}"
     median = float(pd.Series(precisions).median()) if precisions else None
     return text, value_verdict(DICTIONARY_PRECISION, median, conv)
+
+
+def _derived_tau(folder: Path):
+    """The tau notebook 05 derived (its summary.json's derived.tau, frames), or None."""
+    path = folder / "05_dictionary_threshold" / "summary.json"
+    return json.loads(path.read_text()).get("derived", {}).get("tau") if path.is_file() else None
+
+
+def dictionary_over_seeds(folder: Path):
+    """The dictionary's row from notebook 05's seeds (``seeds_summary.csv``, the paper's variant: its
+    closure precision = true / flagged frames at tau, %, over each seed's CNN): the median over the
+    converged seeds (``<stat>_median_converged``) judged against :data:`DICTIONARY_PRECISION`, every
+    seed's [min, max] in the cell, the seeds counted converged by 05's own table (the spot CNN's rule,
+    :data:`CONVERGED`); epochs taken from ``seeds.csv`` where present. A run where converged seeds
+    flag no frame declares no closure: does not hold."""
+    row = summary.dictionary_seeds_row(folder)
+    r = pd.to_numeric(pd.Series({k.replace("%", "pct"): v for k, v in row.items() if k != "variant"}), errors="coerce")
+    per_seed = _csv(folder, "05_dictionary_threshold/seeds.csv")
+    taken = None if per_seed is None else per_seed[per_seed.variant == summary.DICTIONARY_VARIANT].epochs
+    training = training_text(folder, "05_dictionary_threshold",
+                             *((taken.min(), taken.max()) if taken is not None and len(taken) else ()))
+    conv = Convergence(int(r.converged_seeds), int(r.seeds), training)
+    tau = _derived_tau(folder)
+    med = None if pd.isna(r.precision_median_converged_pct) else float(r.precision_median_converged_pct)
+    spread = (f"all seeds [{_g(r.precision_min_pct)}, {_g(r.precision_max_pct)}] %"
+              if pd.notna(r.precision_max_pct) else "no seed flagged a frame")
+    head = (f"median of the converged seeds {_g(med)} %" if med is not None else
+            "no converged seed flagged a frame" if conv.converged else "no converged seed")
+    recall = (f"; recall median {_g(r.recall_median_pct)} % [{_g(r.recall_min_pct)}, {_g(r.recall_max_pct)}]"
+              if pd.notna(r.recall_median_pct) else "")
+    text = (f"{'tau = ' + _g(tau) + ': ' if tau is not None else ''}closure precision (true / flagged frames): "
+            f"{head}, {spread}{recall}; {conv.text()}")
+    if med is None and not budget_limited(conv.converged, conv.seeds):
+        return text, FAILS
+    return text, value_verdict(DICTIONARY_PRECISION, med, conv)
 
 
 def speed(folder: Path):
@@ -265,8 +334,11 @@ def qi_depth(folder: Path):
     if "AP_RGB-D_pct" not in r or pd.isna(r.iloc[0]["AP_RGB-D_pct"]):
         return "no depth", UNTESTABLE
     r = r.iloc[0]
-    return (f"EfficientNet-Lite0 (ImageNet) AP {_g(r.AP_RGB_pct)} -> {_g(r['AP_RGB-D_pct'])} %",
-            UNRESOLVED + " (one AP each, no spread)")
+    text = f"EfficientNet-Lite0 (ImageNet) AP {_g(r.AP_RGB_pct)} -> {_g(r['AP_RGB-D_pct'])} %"
+    pair = paired_row(folder, "09_rgbd_features", "RGB-D minus RGB", "efficientnetlite0")
+    if pair is None:
+        return text, UNRESOLVED + " (one AP each, no spread)"
+    return f"{text}; paired, RGB-D minus RGB: {paired_cell(pair)}", paired_verdict(pair.low, pair.high)
 
 
 def qi_lsh(folder: Path):
@@ -312,8 +384,16 @@ def zhang_whitening(folder: Path):
         return None if t is None else NO_SPLIT
     raw, paper = _ap(t, "raw", "none"), _ap(t, "PCA-whitened, paper dim", "none")
     tuned = _ap(t, "PCA-whitened, tuned dim", "none")
-    return (f"{t.label.iloc[0]}: AP raw {_g(raw)}, whitened {_g(paper)} (paper's dim), {_g(tuned)} (tuned dim)",
-            UNRESOLVED + " (one split, no spread)")
+    text = f"{t.label.iloc[0]}: AP raw {_g(raw)}, whitened {_g(paper)} (paper's dim), {_g(tuned)} (tuned dim)"
+    pairs = {dim: paired_row(folder, "08_descriptor_postprocessing", f"PCA-whitened, {dim} dim minus raw")
+             for dim in ("paper", "tuned")}
+    pairs = {k: v for k, v in pairs.items() if v is not None}
+    if not pairs:
+        return text, UNRESOLVED + " (one split, no spread)"
+    words = {k: paired_verdict(v.low, v.high) for k, v in pairs.items()}
+    text += "; paired, whitened minus raw: " + ", ".join(f"{k}'s dim {paired_cell(v)}" for k, v in pairs.items())
+    agreed = set(words.values())
+    return text, agreed.pop() if len(agreed) == 1 else f"{UNRESOLVED} (the two dimensions disagree)"
 
 
 def zca_median(folder: Path):
@@ -322,19 +402,46 @@ def zca_median(folder: Path):
     if t is None or "AP_eval_pct" not in t:
         return None if t is None else NO_SPLIT
     before, after = _ap(t, "ZCA, tuned dim", "none"), _ap(t, "ZCA, tuned dim", "median (tuned)")
-    return f"{t.label.iloc[0]}: AP {_g(before)} -> {_g(after)}", UNRESOLVED + " (one split, no spread)"
+    text = f"{t.label.iloc[0]}: AP {_g(before)} -> {_g(after)}"
+    pair = paired_row(folder, "08_descriptor_postprocessing", "ZCA + median filter (tuned) minus ZCA")
+    if pair is None:
+        return text, UNRESOLVED + " (one split, no spread)"
+    return f"{text}; paired, filtered minus unfiltered: {paired_cell(pair)}", paired_verdict(pair.low, pair.high)
 
 
 def _arms(t: pd.DataFrame, key: str) -> dict[str, tuple[int, float, float]]:
     return {getattr(r, key): (r.seeds, r.AP_min, r.AP_max) for r in t.itertuples()}
 
 
-def _xu_order(t: pd.DataFrame, key: str, claimed: str):
+def xu_networks(folder: Path, table: str, descriptors) -> tuple[int, int, str] | None:
+    """(converged, networks, epochs) of notebook 10's networks behind ``descriptors`` (rows of
+    ``10_siamese_rgbd/<table>_per_seed.csv``, one per network and seed): how many converged by its
+    ``converged`` column (``siamese.converged``, :data:`CONVERGED`), how many there are, and the
+    epochs taken in words ("a-b epochs taken (cap C)"). None for a table written before it recorded
+    each network's epoch_cap (its epochs were a fixed budget)."""
+    t = _csv(folder, f"10_siamese_rgbd/{table}_per_seed.csv")
+    if t is None or "epoch_cap" not in t:
+        return None
+    t = t[t.descriptor.isin(list(descriptors))]
+    if not len(t):
+        return None
+    caps = "/".join(str(int(c)) for c in sorted(t.epoch_cap.unique()))
+    return (int(t.converged.eq(True).sum()), len(t),
+            f"{between(t.epochs.min(), t.epochs.max())} epochs taken (cap {caps})")
+
+
+def _xu_order(t: pd.DataFrame, key: str, claimed: str, nets: tuple[int, int, str] | None = None):
     """(text, verdict) of "``claimed`` ranks first" among the arms of notebook 10's summary rows ``t``
-    (AP % over seeds): budget-limited where fewer than half of the arms' networks converged (the
-    converged_seeds column; tables written before it was kept read as converged), else ``rank_verdict``."""
+    (AP % over seeds): budget-limited where fewer than half of the arms' networks converged, else
+    ``rank_verdict``. The networks are counted by ``nets`` (:func:`xu_networks`, the per-seed
+    converged column, the epochs taken said) where given, else by the summary's converged_seeds
+    (tables written before it was kept read as converged)."""
     arms = _arms(t, key)
     text = "; ".join(f"{k} {_seeds_range(*v)}" for k, v in arms.items())
+    if nets is not None:
+        k, n, epochs = nets
+        text += f"; {k} of {n} networks converged, {epochs}"
+        return text, BUDGET if budget_limited(k, n) else rank_verdict(claimed, arms)
     if "converged_seeds" in t and budget_limited(t.converged_seeds.sum(), t.seeds.sum()):
         return text + f", {int(t.converged_seeds.sum())} of {int(t.seeds.sum())} networks converged", BUDGET
     return text, rank_verdict(claimed, arms)
@@ -345,33 +452,38 @@ def xu_supervision(folder: Path):
     t = _csv(folder, "10_siamese_rgbd/supervisions.csv")
     if t is None:
         return None
-    return _xu_order(t[t.supervision.isin(["softmax", "contrastive", "multitask"])], "supervision", "multitask")
+    t = t[t.supervision.isin(["softmax", "contrastive", "multitask"])]
+    return _xu_order(t, "supervision", "multitask", xu_networks(folder, "supervisions", t.descriptor))
+
+
+def _fusion_rows(folder: Path, fusions) -> pd.DataFrame | None:
+    """10's fusions.csv rows whose fusion is in ``fusions`` (mid-level at the paper's layer, conv2,
+    for "mid"); None without the table; an empty frame without depth."""
+    t = _csv(folder, "10_siamese_rgbd/fusions.csv")
+    if t is None or "fusion" not in t:
+        return t if t is None else t.iloc[:0]
+    return t[t.fusion.isin([f for f in fusions if f != "mid"]) | ((t.fusion == "mid") & (t.layer == "conv2")
+                                                                  & ("mid" in fusions))]
 
 
 def xu_fusion(folder: Path):
     """Xu 2022: late fusion ranks above early and mid-level fusion at the paper's layer (conv2) (10)."""
-    t = _csv(folder, "10_siamese_rgbd/fusions.csv")
+    t = _fusion_rows(folder, ("early", "mid", "late"))
     if t is None:
         return None
-    if "fusion" not in t:
-        return "no depth", UNTESTABLE
-    t = t[(t.fusion.isin(["early", "late"])) | ((t.fusion == "mid") & (t.layer == "conv2"))]
     if not len(t):
         return "no depth", UNTESTABLE
-    return _xu_order(t, "fusion", "late")
+    return _xu_order(t, "fusion", "late", xu_networks(folder, "fusions", t.descriptor))
 
 
 def xu_depth(folder: Path):
     """Xu 2022: depth helps: late fusion above the same network on RGB only (10)."""
-    t = _csv(folder, "10_siamese_rgbd/fusions.csv")
+    t = _fusion_rows(folder, ("RGB only", "late"))
     if t is None:
         return None
-    if "fusion" not in t:
+    if not len(t) or (t.fusion == "late").sum() == 0:
         return "no depth", UNTESTABLE
-    t = t[t.fusion.isin(["RGB only", "late"])]
-    if (t.fusion == "late").sum() == 0:
-        return "no depth", UNTESTABLE
-    return _xu_order(t, "fusion", "late")
+    return _xu_order(t, "fusion", "late", xu_networks(folder, "fusions", t.descriptor))
 
 
 MAIN, QI, ZCA, ZHANG, XU = ("main paper", "Qi 2024", "ResNet/Inception/ZCA", "Zhang 2017", "Xu 2022")
