@@ -341,6 +341,8 @@ def _arm_sentence(per_seed: pd.DataFrame, table: pd.DataFrame, arm: str) -> str:
     per seed."""
     odo = per_seed[per_seed.arm == ODOMETRY].set_index("seed")["ate_m"]
     row = table[(table.arm == arm)].set_index("back_end")
+    if int(row.iloc[0].loop_factors) == 0:
+        return f"{arm}: no closure declared (its graph is the odometry's)."
     parts = []
     for b in BACK_ENDS:
         if b not in row.index:
