@@ -28,7 +28,7 @@ def study(tiny_sequence):
     """(poses, detected, arm loops, true flags, labelled closures, runs) on the tiny sequence, the
     named default and SeqSLAM as the detectors (the dictionary runs in the notebook's test)."""
     poses = sequence.open(tiny_sequence).poses()[1]
-    det = lc.detect(tiny_sequence, PARAMS, 1, 0.5, TINY["exclude"], 0.5, ["greenloop-seq-grad", "seqslam"])
+    det = lc.run_detectors(tiny_sequence, PARAMS, 1, 0.5, TINY["exclude"], 0.5, ["greenloop-seq-grad", "seqslam"])
     closures = pd.concat([lc.ground_truth_closures(poses, det.data.frames, det.data.GT), det.closures])
     names = [lc.GROUND_TRUTH] + det.arms
     arm_loops, true, labelled = lc.arms(closures, poses, 0.5, names)
