@@ -131,7 +131,7 @@ def _dictionary_events(dataset, decision: dict, frames_per_spot: int, exclude: i
 
 
 def run_detectors(dataset, params: dict, frame_step: int, loop_threshold: float, exclude: int, tune_fraction: float,
-           detectors=DETECTORS, registry=None) -> Detected:
+                  detectors=DETECTORS, registry=None) -> Detected:
     """Every closure the ``detectors`` (registry names) declare on the sequence (module doc).
 
     params: notebook 13's parameters the entries read (seq_lens, contrast_windows, velocities,
