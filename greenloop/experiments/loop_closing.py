@@ -373,6 +373,20 @@ def _curve_sentence(curve: pd.DataFrame, arm: str, upto: float = 0.3) -> str:
             f"loop factors false, GNC ended above the odometry's ATE on {above} of {seeds} seeds at worst; {first}.")
 
 
+def _own_false_sentence(curve: pd.DataFrame, table: pd.DataFrame, arm: str) -> str:
+    """The curve arm's true loop factors alone against its own closures, false ones included, under GNC
+    (mean ATE over seeds); "" for the ground-truth arm (it has no false one)."""
+    own = table[(table.arm == arm) & (table.back_end == "gnc")]
+    alone = curve[(curve.back_end == "gnc") & (curve.fraction == 0)]
+    if arm == GROUND_TRUTH or own.empty or alone.empty or int(own.iloc[0].loop_factors) == int(own.iloc[0].true_factors):
+        return ""
+    a, b = float(alone.iloc[0].ate_m_mean), float(own.iloc[0].ate_m_mean)
+    word = "higher than" if b > a else "no higher than"
+    return (f"GNC on {arm}'s true loop factors alone ends at {wording.num(a, 3)} m; with its own false closures it ends "
+            f"at {wording.num(b, 3)} m, {word} that" + (": its own false closures were harder for GNC to reject than "
+            "the injected ones (pairs far apart)." if b > a else "."))
+
+
 def conclusion(out_dir) -> str:
     """Notebook 14's last cell, in Markdown, from the tables it wrote under ``out_dir``
     (ate_table.csv, per_seed.csv, robustness.csv, summary.json): the odometry's ATE, each arm's
@@ -387,7 +401,8 @@ def conclusion(out_dir) -> str:
              f"end-point error {wording.num(odo.end_point_m_mean, 3)} m."]
     lines += [_arm_sentence(per_seed, table, a) for a in table.arm.unique() if a != ODOMETRY]
     if (out_dir / "robustness.csv").is_file():
-        lines.append(_curve_sentence(pd.read_csv(out_dir / "robustness.csv"), info["curve_arm"]))
+        curve = pd.read_csv(out_dir / "robustness.csv")
+        lines += [_curve_sentence(curve, info["curve_arm"]), _own_false_sentence(curve, table, info["curve_arm"])]
     lines.append("Every threshold but the named configurations' fixed ones, and SeqSLAM (tuned)'s knobs, were chosen "
                  "on the tuning part (notebook 13's budget), whose closures are among those counted here.")
     if not info.get("verify"):
