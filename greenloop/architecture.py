@@ -36,7 +36,7 @@ class Layer(NamedTuple):
 
 LAYERS: tuple[Layer, ...] = (
     Layer("base", ("__init__", "architecture", "util"),
-          "building blocks: checks, atomic writes, the cache, progress, threads, kernels; this contract"),
+          "building blocks: checks, atomic writes, the cache, progress, threads, the one clock, kernels; this contract"),
     Layer("recordings", ("datasets",),
           "the sequence-folder contract, other ground-truth formats and the builders that write a folder"),
     Layer("results", ("report",),

@@ -12,6 +12,15 @@ them) in windows.
 Units: ``step``, ``exclude`` and ``seq_len`` count streamed frames (every ``step``-th frame of
 the folder); an event is a dict with ``frame`` (streamed frame number) and the detector's
 ``event_columns`` (default ``match``, ``score``).
+
+Verification (``run(verifier=...)``, :class:`Checker`): each event the detector declares is a
+candidate; a geometric verifier ``(frame_q, frame_m, depth_q, depth_m) -> Verification-like``
+(fields accepted, inliers, model, R, t, metric) is applied to its two decoded frames (the match
+read from disk when it is older than the window; depth in metres from the folder's depth/ where it
+has one, else None). The rule, stated once (:meth:`Checker.check`): a candidate is declared when
+the verifier accepts it, and declared unverified (verified None) where it could not check it
+(accepted None, or model "too-small"); a rejected one is not declared. Each declared closure is an
+``interface.Closure`` (``Run.closures``) carrying the inlier count and the relative pose.
 """
 from __future__ import annotations
 
@@ -21,20 +30,23 @@ import sys
 from pathlib import Path
 from typing import NamedTuple
 
+import cv2
 import numpy as np
 
 from greenloop import exclusion
-from greenloop.datasets import recording
+from greenloop.datasets import recording, sequence
 from greenloop.datasets.sequence import DESCRIPTION_NAME
 from greenloop.methods import registry
-from greenloop.methods.greenloop_seq import seqmatch, seqstream
-from greenloop.methods.interface import Data
-from greenloop.methods.lsh import retrieval
-from greenloop.speed import timing
+from greenloop.methods.interface import Closure, Data
+from greenloop.util.clock import timed
 from greenloop.util.files import write_atomic
 from greenloop.util.progress import bar
 
 MATCH_COLUMNS = ("frame", "file", "match", "match_file", "score", "closure")
+# --matches' columns after MATCH_COLUMNS under a verifier: verified 1/0 (empty: unchecked), the inlier count,
+# the model, the rotation vector (rad) and translation of the relative pose, metric 1 (t in metres) / 0 (direction)
+VERIFY_COLUMNS = ("verified", "inliers", "model", "rx", "ry", "rz", "tx", "ty", "tz", "metric")
+UNCHECKED = dict(verified=None, inliers=0, model="none", R=None, t=None, metric=False)   # a closure not verified
 OVERRIDES = ("descriptor", "seq_len", "contrast_window", "model", "frames_per_spot", "margin", "backend")
 
 
@@ -107,7 +119,7 @@ def knobs_for(name: str, folder, tuned=None, variant=None, threshold=None, step=
     if threshold is None:
         raise ValueError(f"--method {name} needs a threshold chosen on your own data: pass --threshold T or --tuned "
                          f"<results>/13_leaderboard/summary.json (notebook 13 picks knobs and threshold on a tuning "
-                         f"part); --method {seqmatch.DEFAULT_NAME} (the default) has a fixed one")
+                         f"part); --method {registry.DEFAULT} (the default) has a fixed one")
     seq = recording.open_frames(folder).sequence
     own_step = seq.frame_step if seq is not None else None
     step_from = "--step" if step is not None else (DESCRIPTION_NAME if own_step else "default")
@@ -145,7 +157,7 @@ def exclusion_for(folder, n: int, step: int, exclude=None, tuned_exclude=None) -
     return frames, source, rule
 
 
-def plan(folder, name: str = seqmatch.DEFAULT_NAME, tuned=None, variant=None, threshold=None, step=None,
+def plan(folder, name: str = registry.DEFAULT, tuned=None, variant=None, threshold=None, step=None,
          exclude=None, topic=None, **flags) -> Plan:
     """Everything a detect run decides before its first frame (:func:`knobs_for`, :func:`exclusion_for`).
     folder: a recording (a sequence folder or a folder of images, a ROS bag, a video) or its
@@ -168,8 +180,8 @@ def header(p: Plan, folder, index=None, candidates: int = 20) -> str:
 
 def data_for(p: Plan, folder, index=None, candidates: int = 20) -> Data:
     """The ``Data`` a registry entry's ``stream`` and ``describer`` read on a user's recording: no
-    ground truth, no split; params: the default velocities, ImageNet weights, the index options."""
-    params = {"velocities": seqmatch.DEFAULT_VELOCITIES, "weights": "auto", "index": index, "candidates": candidates}
+    ground truth, no split; params: ``registry.user_params`` (default velocities, ImageNet weights, the index)."""
+    params = registry.user_params(index, candidates)
     return Data(str(folder), p.step, np.arange(len(p.frames)) * p.step, None, p.exclude, None, None, params, {}, {}, {})
 
 
@@ -177,11 +189,11 @@ class FrameStream:
     """A registered detector fed decoded frames: ``update_many(frames)`` -> closure events and
     ``decide_many(frames)`` -> one decision per frame ({'frame', 'match', 'score', 'closure'});
     a detector that takes frames itself is called directly, one fed descriptors through ``describe``
-    (the timed path, ``speed.timing.detector_method``)."""
+    (``update_descriptor(describe(frame))``, the path ``speed.timing`` times)."""
 
     def __init__(self, name: str, detector, describe):
         self.detector = detector
-        self._step = None if describe is None else timing.detector_method(name, detector, describe).step
+        self._step = None if describe is None else (lambda det, frame: det.update_descriptor(describe(frame)))
 
     def update_many(self, frames) -> list[dict]:
         if self._step is None:
@@ -194,7 +206,7 @@ class FrameStream:
         rows = []
         for f in frames:
             j, event = self.detector.frame_index, self._step(self.detector, f)
-            match, score = seqstream.best_candidate(self.detector)
+            match, score = registry.best_candidate(self.detector)
             rows.append(dict(event or {"frame": j, "match": match, "score": score}, closure=event is not None))
         return rows
 
@@ -211,9 +223,7 @@ def open_stream(p: Plan, folder, index=None, candidates: int = 20, state=None) -
                              f"and options, or delete the file to start over")
         det = saved["detector"]
     else:
-        if index is not None:
-            retrieval.one_thread()
-        det = registry.get(p.name).stream(p.knobs, p.threshold, data_for(p, folder, index, candidates))
+        det = registry.stream(p.name, p.knobs, p.threshold, data_for(p, folder, index, candidates))
     entry = registry.get(p.name)
     # a detector that describes frames with the record's own descriptor takes them in windows (one
     # batched pass); the others are fed the entry's describer's output, frame by frame
@@ -235,16 +245,17 @@ def save_state(stream: FrameStream, key: dict, path) -> None:
     write_atomic(path, dump)
 
 
-def matches_writer(path, names, append: bool):
+def matches_writer(path, names, append: bool, verified: bool = False):
     """A function taking a window's decisions (``FrameStream.decide_many``) and appending one CSV line
     per frame (MATCH_COLUMNS: frame and file, its best stored match and file, empty while none is a
-    candidate, the score, 1 where a closure was declared) to ``path``; a new file unless ``append``.
+    candidate, the score, 1 where a closure was declared; with ``verified``, VERIFY_COLUMNS, empty
+    where the frame was not checked) to ``path``; a new file unless ``append``.
     names: the streamed frames' names (a file name, or a bag's or video's time stamp)."""
     path = Path(path)
     if path.parent and not path.parent.is_dir():
         raise FileNotFoundError(f"--matches {path}: folder {path.parent} does not exist")
     if not append or not path.is_file():
-        path.write_text(",".join(MATCH_COLUMNS) + "\n")
+        path.write_text(",".join(MATCH_COLUMNS + (VERIFY_COLUMNS if verified else ())) + "\n")
 
     def write(rows):
         with open(path, "a") as f:
@@ -252,8 +263,73 @@ def matches_writer(path, names, append: bool):
                 m = r["match"]
                 f.write(f"{r['frame']},{names[r['frame']]},{m if m >= 0 else ''},"
                         f"{names[m] if m >= 0 else ''},{'' if m < 0 else format(r['score'], '.6g')},"
-                        f"{int(r['closure'])}\n")
+                        f"{int(r['closure'])}" + (("," + verification_fields(r)) if verified else "") + "\n")
     return write
+
+
+def verification_fields(r: dict) -> str:
+    """VERIFY_COLUMNS of one decision as CSV fields: verified 1/0, inliers, model, rotation vector
+    rx ry rz (rad, ``cv2.Rodrigues``), translation tx ty tz (metres where metric, else a unit
+    direction), metric 1/0; empty fields where the frame was not checked or has no pose."""
+    if r.get("model") is None:
+        return "," * (len(VERIFY_COLUMNS) - 1)
+    pose = ["", "", ""] * 2
+    if r["R"] is not None and r["t"] is not None:
+        pose = [format(v, ".6g") for v in (*rotation_vector(r["R"]), *np.asarray(r["t"], float).ravel())]
+    flag = "" if r["verified"] is None else str(int(r["verified"]))
+    return ",".join([flag, str(r["inliers"]), r["model"], *pose, str(int(r["metric"]))])
+
+
+def rotation_vector(R) -> np.ndarray:
+    """(3,) float64 rotation vector (axis times angle, rad) of a (3, 3) rotation matrix."""
+    return cv2.Rodrigues(np.asarray(R, dtype=np.float64))[0].ravel()
+
+
+def pose_text(e: dict) -> str:
+    """A verified closure's printed columns: verified (yes / no / unchecked), inliers, model, the
+    rotation as its angle in degrees about a unit axis, the translation with its unit (m, or dir
+    for a unit direction); '-' where there is no pose."""
+    flag = {True: "yes", False: "no", None: "unchecked"}[e["verified"]]
+    rot = trans = "-"
+    if e["R"] is not None and e["t"] is not None:
+        v = rotation_vector(e["R"])
+        angle = float(np.linalg.norm(v))
+        axis = v / angle if angle > 0 else np.array([0.0, 0.0, 1.0])
+        rot = f"{np.degrees(angle):.1f} deg about ({axis[0]:.2f},{axis[1]:.2f},{axis[2]:.2f})"
+        t = np.asarray(e["t"], float).ravel()
+        trans = f"({t[0]:.3f},{t[1]:.3f},{t[2]:.3f}) {'m' if e['metric'] else 'dir'}"
+    return "\t".join([flag, str(e["inliers"]), e["model"], rot, trans])
+
+
+class Checker:
+    """A run's geometric verification (module doc): the verifier, the streamed frames (a FrameSource) and
+    depth files (None without depth/), and how many candidates it checked and rejected."""
+
+    def __init__(self, verifier, frames, depth_paths=None):
+        self.verifier, self.frames, self.depth_paths = verifier, frames, depth_paths
+        self.checked = self.rejected = 0
+
+    def check(self, e: dict, frames, start: int) -> dict:
+        """Event ``e`` (a closure candidate: frame, match) with UNCHECKED's fields from the verifier
+        and ``closure`` False where it rejects. frames: the window's decoded frames, frames[0] is
+        streamed frame ``start``."""
+        q, m = int(e["frame"]), int(e["match"])
+        fm = frames[m - start] if m >= start else self.frames.read([m])[0]
+        dq, dm = ((None, None) if self.depth_paths is None else
+                  (sequence.read_depth(self.depth_paths[q]), sequence.read_depth(self.depth_paths[m])))
+        v = self.verifier(q, m, frames[q - start], fm, dq, dm)
+        verified = None if v.accepted is None or v.model == "too-small" else bool(v.accepted)
+        self.checked += 1
+        self.rejected += verified is False
+        as_array = lambda a: None if a is None else np.asarray(a, dtype=np.float64)
+        return dict(e, closure=verified is not False, verified=verified, inliers=int(v.inliers), model=str(v.model),
+                    R=as_array(v.R), t=as_array(v.t), metric=bool(v.metric))
+
+
+def closure(e: dict) -> Closure:
+    """The ``interface.Closure`` of a declared event (UNCHECKED's values where it was not verified)."""
+    return Closure(int(e["frame"]), int(e.get("match", -1)), float(e.get("score", np.nan)),
+                   *(e.get(k, v) for k, v in UNCHECKED.items()))
 
 
 def event_columns(detector) -> tuple[str, ...]:
@@ -269,10 +345,12 @@ def event_line(e: dict, columns, names) -> str:
 
 
 def run_windows(stream: FrameStream, frames, window: int, first: int = 0, stop=None, after=None, matches=None,
-                out=print, desc: str = "detect") -> float:
-    """Decode frames[first:stop] (a FrameSource) in windows of ``window`` frames, feed each to ``stream``, ``out`` one
-    line per closure (:func:`event_line`), ``matches(rows)`` per window when given, ``after()`` per
-    window (state saving); a progress bar on stderr. Returns the wall seconds (decoding included)."""
+                out=print, desc: str = "detect", checker: Checker | None = None, declared=None) -> float:
+    """Decode frames[first:stop] (a FrameSource) in windows of ``window`` frames, feed each to ``stream``, verify each
+    candidate with ``checker`` when given (:meth:`Checker.check`), ``out`` one line per declared closure
+    (:func:`event_line`, then :func:`pose_text` under a checker) and append its ``Closure`` to the list
+    ``declared`` when given, ``matches(rows)`` per window when given, ``after()`` per window (state
+    saving); a progress bar on stderr. Returns the wall seconds (decoding and verification included)."""
     stop = len(frames) if stop is None else stop
     columns, names = event_columns(stream.detector), frames.names
     progress = bar(total=len(frames), initial=first, desc=desc, unit="frame")
@@ -282,39 +360,70 @@ def run_windows(stream: FrameStream, frames, window: int, first: int = 0, stop=N
             chunk = frames[start:min(start + window, stop)]
             decoded = read_window(chunk)
             rows = stream.decide_many(decoded) if matches else stream.update_many(decoded)
+            if checker is not None:
+                rows = [checker.check(e, decoded, start) if e.get("closure", True) and e["match"] >= 0 else e
+                        for e in rows]
             for e in rows:
                 if e.get("closure", True):
-                    out(event_line(e, columns, names))
+                    out(event_line(e, columns, names) + ("" if checker is None else "\t" + pose_text(e)))
+                    if declared is not None:
+                        declared.append(closure(e))
             if matches is not None:
                 matches(rows)
             progress.update(len(chunk))
             if after is not None:
                 after()
     try:
-        return timing.timed(go)[1]
+        return timed(go)[1]
     finally:
         progress.close()
 
 
 class Run(NamedTuple):
     """A finished (or stopped) detect run: the stream, the first and next frame numbers, the wall
-    seconds (decoding included) and whether the recording was finished."""
+    seconds (decoding and verification included), whether the recording was finished, the closures
+    declared in this run (``interface.Closure``, in order) and the candidates verification rejected."""
     stream: FrameStream
     first: int
     next: int
     seconds: float
     finished: bool
+    closures: list = ()        # interface.Closure records (a list from run)
+    rejected: int = 0
+
+
+def checker_for(p: Plan, folder, verifier, columns) -> Checker | None:
+    """The run's :class:`Checker` (None without ``verifier``): the plan's frames and, where the folder
+    has depth/, its depth frames at the plan's step. ValueError for a detector that names no match."""
+    if verifier is None:
+        return None
+    if "match" not in columns:
+        raise ValueError(f"--verify needs a method that matches frames (--method {p.name} names no earlier "
+                         f"frame to verify against): pass --method {registry.DEFAULT} or --no-verify")
+    seq = p.frames.sequence
+    depths = None if seq is None else seq.depth_paths
+    return Checker(verifier, p.frames, None if depths is None else depths[::p.step])
+
+
+def verifier_for(folder):
+    """The registered geometric verifier for ``folder`` (``registry.verifier`` given its camera's
+    intrinsics, from camera.yaml, or None: a bag's or a video's), or None where none is registered."""
+    seq = recording.open_frames(folder).sequence
+    return registry.verifier(seq.camera() if seq is not None and seq.has_camera else None)
 
 
 def run(p: Plan, folder, window: int = 70, index=None, candidates: int = 20, state=None, save_every: int = 10000,
-        stop_after=None, matches=None, out=print) -> Run:
+        stop_after=None, matches=None, out=print, verifier=None) -> Run:
     """Stream the plan's frames (from where ``state`` stopped, if it exists) through its detector:
     closures to ``out`` as declared, every frame's decision to the ``matches`` CSV, the detector to
     ``state`` every ``save_every`` frames, on Ctrl-C (re-raised) and at the end; at most
-    ``stop_after`` frames in this run."""
+    ``stop_after`` frames in this run. verifier: None (every candidate the detector declares is a
+    closure, unverified) or a callable (frame_q, frame_m, depth_q, depth_m) -> a record with fields
+    accepted, inliers, model, R, t, metric applied to each candidate (module doc: the rule); its
+    fields follow each printed closure and fill --matches' VERIFY_COLUMNS."""
     if matches is not None and registry.get(p.name).describer is None:
         raise ValueError("--matches needs a method that matches frames (the dictionary counts spot labels): "
-                         f"pass --method {seqmatch.DEFAULT_NAME} (the default) or another registered one")
+                         f"pass --method {registry.DEFAULT} (the default) or another registered one")
     stream = open_stream(p, folder, index, candidates, state)
     key, first = state_key(p, folder, index, candidates), stream.detector.frame_index
     stop = len(p.frames) if stop_after is None else min(len(p.frames), first + stop_after)
@@ -324,16 +433,19 @@ def run(p: Plan, folder, window: int = 70, index=None, candidates: int = 20, sta
         if state and (force or stream.detector.frame_index - saved[0] >= save_every):
             save_state(stream, key, state)
             saved[0] = stream.detector.frame_index
-    write = None if matches is None else matches_writer(matches, p.frames.names, append=first > 0)
     columns = event_columns(stream.detector)
+    checker = checker_for(p, folder, verifier, columns)
+    write = None if matches is None else matches_writer(matches, p.frames.names, append=first > 0, verified=checker is not None)
     if first:
         out(f"# resumed at frame {first} (--state {state})")
-    out("\t".join(["frame", *columns, "file"] + (["match_file"] if "match" in columns else [])))
+    out("\t".join(["frame", *columns, "file"] + (["match_file"] if "match" in columns else [])
+                  + ([] if checker is None else ["verified", "inliers", "model", "rotation", "translation"])))
+    declared = []
     try:
-        seconds = run_windows(stream, p.frames, window, first, stop, save_now, write, out, p.name)
+        seconds = run_windows(stream, p.frames, window, first, stop, save_now, write, out, p.name, checker, declared)
     except KeyboardInterrupt:
         save_now(force=True)
         raise
     save_now(force=True)
     n = stream.detector.frame_index
-    return Run(stream, first, n, seconds, n == len(p.frames))
+    return Run(stream, first, n, seconds, n == len(p.frames), declared, 0 if checker is None else checker.rejected)

@@ -33,6 +33,36 @@ def test_the_reader_sees_every_form_of_import():
     assert architecture.unit("greenloop.speed.bench") == "speed" and architecture.unit("greenloop") == "__init__"
 
 
+DOORS = {"greenloop.methods.registry", "greenloop.methods.interface"}
+
+
+def _reached(start: str, edges: dict) -> set:
+    """Every module ``start`` imports, directly or through others (edges: {module: its targets})."""
+    seen, todo = set(), [start]
+    while todo:
+        for t in edges.get(todo.pop(), ()):
+            if t not in seen:
+                seen.add(t)
+                todo.append(t)
+    return seen
+
+
+def test_a_users_run_enters_methods_by_the_registry_only_and_never_runs_through_speed():
+    """Issue 64, point 5: detect.py and cli/ import from methods/ only the registry and the interface
+    (no method's internals), and a user's detect (greenloop.detect, greenloop.cli.detect) reaches
+    nothing of speed/ (the measuring layer), directly or through what it imports."""
+    found = architecture.imports(PACKAGE)
+    users = [i for i in found if i.module == "greenloop.detect" or i.module.startswith("greenloop.cli")]
+    inside = {(i.module, i.target) for i in users if i.target.startswith("greenloop.methods") and i.target not in DOORS}
+    assert inside == set()
+    assert {i.target for i in users if i.target.startswith("greenloop.methods")} == DOORS
+    edges = {}
+    for i in found:
+        edges.setdefault(i.module, set()).add(i.target)
+    for run in ("greenloop.detect", "greenloop.cli.detect"):
+        assert not {m for m in _reached(run, edges) if m.startswith("greenloop.speed")}, run
+
+
 def _package(tmp_path, files: dict) -> Path:
     root = tmp_path / "pkg"
     for name, text in {"__init__.py": "", "util/__init__.py": "", **files}.items():

@@ -155,6 +155,18 @@ def test_dictionary_threshold_reads_the_sweep_and_the_scores(tmp_path):
     assert "never declare a true closure event" in text and "no closure can be true" in text
 
 
+def test_dictionary_threshold_gives_the_spread_over_seeds_and_their_convergence(tmp_path):
+    summary = pd.DataFrame([{"variant": v, "seeds": 5, "converged_seeds": c, "precision_median_%": p, "precision_min_%": p - 10,
+                             "precision_max_%": p + 5, "recall_median_%": 20.0, "recall_min_%": 10.0, "recall_max_%": 30.0}
+                            for v, c, p in zip(dictionary_threshold.VARIANTS, (2, 5), (60.0, 90.0))])
+    out = _folder(tmp_path, "05_dictionary_threshold", {"summary.json": _scores(40), "tau_sweep.csv": _sweep([2, 2, 0]),
+                                                        "seeds_summary.csv": summary})
+    text = dictionary_threshold.conclusion(out)
+    assert "closure precision 60 % [50, 65] of the flagged frames, recall 20 % [10, 30] of the revisit frames " \
+           "(2 of 5 seeds converged, budget-limited)" in text
+    assert "precision 90 % [80, 95]" in text and "(5 of 5 seeds converged)" in text and "one seed" not in text
+
+
 def _speed(median_s, p95_s):
     return {"window_frames": 70, "median_window_s": median_s, "p95_window_s": p95_s, "frames_per_s": 70 / median_s,
             "median_ms_per_frame": 1e3 * median_s / 70, "p95_ms_per_frame": 1e3 * p95_s / 70, "repeats": 10,

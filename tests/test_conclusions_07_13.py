@@ -234,3 +234,38 @@ def test_every_conclusion_names_the_verdicts_of_its_notebook(tmp_path):
     assert wording.heading(out.parent, "12_revisit_protocol") == "### Conclusion on Nordland"
     head = wording.heading(out.parent, "10_siamese_rgbd")
     assert head.count("\n* Xu 2022") == sum(c.notebook == "10_siamese_rgbd" for c in verdict.CLAIMS)
+
+
+def _paired_rows(comparison, a, b, low, high, label="mobilenetv2 (imagenet)"):
+    """paired.csv rows (leaderboard.rows.paired_table's columns) of one comparison, both metrics alike."""
+    from greenloop.experiments.leaderboard import rows as lb
+    resolved = low > 0 or high < 0
+    result = lb.TIE if not resolved else f"{a} above {b}" if low > 0 else f"{b} above {a}"
+    return [{"backbone": label.split(" ")[0], "weights": "imagenet", "label": label, "comparison": comparison, "a": a,
+             "b": b, "metric": m, "difference": (low + high) / 2, "low": low, "high": high, "queries": 200, "block": 10,
+             "blocks": 20, "resolved": resolved, "result": result} for m in ("R@1", "AUC-PR")]
+
+
+def test_08_says_which_paired_comparisons_resolve_and_which_tie(tmp_path):
+    out = _postprocessing(tmp_path, 4.0)
+    rows = (_paired_rows("PCA-whitened, paper dim minus raw", "PCA-whitened, paper dim", "raw", -30.0, -10.0)
+            + _paired_rows("ZCA + median filter (tuned) minus ZCA", dp.MEDIAN_ARM, "ZCA, tuned dim", -2.0, 3.0))
+    pd.DataFrame(rows).to_csv(out / "paired.csv", index=False)
+    text = dp.conclusion(out)
+    assert "PCA-whitened, paper dim minus raw: AUC-PR -20.00 points [-30.00, -10.00]" in text
+    assert "over 200 queries in 20 blocks of 10), resolved: raw above PCA-whitened, paper dim" in text
+    assert "ZCA + median filter (tuned) minus ZCA: AUC-PR +0.50 points [-2.00, +3.00]" in text and "a tie" in text
+    assert "not resolved by the two splits" in text
+    _no_order_word(text)
+
+
+def test_09_says_whether_depth_adds_to_rgb_paired(tmp_path):
+    out = _folder(tmp_path, "09_rgbd_features", {"rgbd": {
+        "backbone": ["efficientnetlite0"], "weights": ["imagenet"], "label": ["efficientnetlite0 (imagenet)"],
+        "AP_RGB_%": [67.0], "AP_depth_%": [20.0], "AP_RGB-D_%": [70.0]}})
+    pd.DataFrame(_paired_rows("RGB-D minus RGB", "RGB-D", "RGB", 1.0, 5.0, "efficientnetlite0 (imagenet)")).to_csv(
+        out / "paired.csv", index=False)
+    text = rgbd_features.conclusion(out)
+    assert "efficientnetlite0 (imagenet): RGB-D minus RGB: AUC-PR +3.00 points [+1.00, +5.00]" in text
+    assert "resolved: RGB-D above RGB" in text
+    _no_order_word(text)

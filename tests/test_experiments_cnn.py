@@ -187,6 +187,16 @@ def test_table1_figure_names_its_budget_limited_rows():
     ax = fig.axes[0]
     assert "budget-limited at L = 50:" in ax.get_title() and "2 epochs" in ax.get_title()
     assert [a.get_text() for a in ax.texts] == ["budget-limited"] and ax.texts[0].xy == (50, 50.0)
+    # L = 50's seeds did not converge: hollow (white face), L = 60's did: filled; no line joins the means
+    import matplotlib.colors as mc
+    dots = [c for c in ax.collections if c.get_offsets().shape[0] and c.get_label() != "_nolegend_"
+            and c.get_offsets()[0][0] in (50 - 1.2, 60 - 1.2)]
+    face = {round(float(c.get_offsets()[0][0])): mc.to_hex(c.get_facecolor()[0]) for c in dots}
+    assert face == {49: "#ffffff", 59: mc.to_hex("tab:blue")}
+    assert {h.get_label() for h in ax.get_legend().legend_handles} >= {"one seed, converged",
+                                                                       "one seed, did not converge (hollow)"}
+    assert not [ln for ln in ax.lines if ln.get_linestyle() not in ("None", "")
+                and len(set(np.asarray(ln.get_xdata(), float))) > 1]
 
 
 def test_controls_by_grouping_runs_one_gap_per_grouping(monkeypatch):
@@ -282,21 +292,50 @@ def test_paper_scores_all_frames_and_test_only():
 def test_perturbation_grid_by_direction():
     X, y = _dots()
     grid = shift_robustness.perturbation_grid(_column, _runs()[1:], X, y, shifts=[1, 2], rotations=[180])  # test 0, 7
-    got = grid.set_index(["perturbation", "amount"])["accuracy_%"]
+    got = grid.set_index(["perturbation", "amount"])["heldout_%"]
     assert len(grid) == 4 * 2 + 2 and (grid.seed == 1).all()
     assert got["shift right", 1] == 0.0                  # 0 -> column 1, 7 falls off (blank: 0)
     assert got["shift left", 1] == 50.0                  # 0 falls off and reads as 0; 7 -> 6
     assert got["shift up", 2] == got["shift down", 1] == 100.0   # the column does not move
     assert got["rotation", 180] == got["rotation", -180] == 0.0  # column c -> 7 - c
+    every = grid.set_index(["perturbation", "amount"])["all_frames_%"]
+    assert every["shift left", 1] == 12.5 and every["shift up", 2] == 100.0     # of 8 frames, only frame 0 reads 0
+
+
+def _memoriser(model, X):
+    """A planted classifier that memorises its training frames: the label of the nearest training frame
+    (model: {"X": (M, H, W, 1), "y": (M,)}); it knows nothing of a frame it did not see."""
+    d = ((X[:, None] - model["X"][None]) ** 2).sum(axis=(2, 3, 4))
+    return model["y"][d.argmin(1)]
+
+
+def test_a_memorising_model_scores_high_on_all_frames_and_low_held_out():
+    yy, xx = np.mgrid[:32, :32]
+    centres = np.array([(6 + 6 * (k % 4), 8 + 8 * (k // 4)) for k in range(10)])[:, :, None, None]  # 6 px apart
+    X = np.exp(-((xx - centres[:, 0]) ** 2 + (yy - centres[:, 1]) ** 2) / 8.0)[..., None].astype(np.float32)  # one class each
+    y = np.arange(10)
+    train, test = np.arange(8), np.array([8, 9])
+    runs = [{"seed": 0, "model": {"X": X[train], "y": y[train]}, "split": {"train": train, "test": test}}]
+    grid = shift_robustness.perturbation_grid(_memoriser, runs, X, y, shifts=[1], rotations=[])
+    assert (grid["all_frames_%"] == 80.0).all() and (grid["heldout_%"] == 0.0).all()   # 8 of 10 remembered
+    s = shift_robustness.perturbation_summary(grid)
+    assert (s.all_frames_minus_heldout_points == 80.0).all() and (s.heldout_mean == 0.0).all()
+    table3 = shift_robustness.paper_scores(_memoriser, [dict(runs[0], test_accuracy=0.0)], shift.shift(X, dx=1), y)
+    cmp = shift_robustness.comparison(table3, 10, np.zeros(10), np.zeros(10), 256).set_index("quantity")
+    judged = cmp.loc["accuracy, held-out test frames shifted 1 px right (%)"]
+    assert judged["note"].startswith("judged") and judged.iloc[1].startswith("0.00")
+    assert cmp.loc["accuracy, all frames shifted 1 px right (%)"].iloc[1].startswith("80.00")
 
 
 def test_perturbation_summary_over_runs():
     X, y = _dots()
     s = shift_robustness.perturbation_summary(shift_robustness.perturbation_grid(_column, _runs(), X, y, [1], [180]))
-    assert list(s.columns) == ["perturbation", "amount", "mean", "std", "min"]
+    assert list(s.columns) == ["perturbation", "amount", "heldout_mean", "heldout_std", "heldout_min", "all_frames_mean",
+                               "all_frames_std", "all_frames_min", "all_frames_minus_heldout_points"]
     assert list(zip(s.perturbation, s.amount))[:2] == [("rotation", -180), ("rotation", 180)] and len(s) == 6
     left = s[(s.perturbation == "shift left") & (s.amount == 1)].iloc[0]      # seed 0: 0 %, seed 1: 50 %
-    assert (left["mean"], left["std"], left["min"]) == (25.0, np.std([0, 50], ddof=1), 0.0)
+    assert (left["heldout_mean"], left["heldout_std"], left["heldout_min"]) == (25.0, np.std([0, 50], ddof=1), 0.0)
+    assert left["all_frames_mean"] == 12.5 and left["all_frames_minus_heldout_points"] == -12.5
 
 
 def test_frame_set_scores_subtracts_the_same_runs_test_frames():
@@ -380,6 +419,29 @@ def test_variants_scores_events_and_sweep(monkeypatch):
     assert list(sw.columns)[0] == "variant" and len(sw) == 4
     direct = dictionary_threshold.tau_sweep(ref, ref, gt, [3, 12], 5)
     assert sw.iloc[:2, 1:6].to_dict("records") == [{k: r[k] for k in list(r)[:5]} for r in direct]
+
+
+def test_the_detector_over_seeds_gives_each_seeds_precision_recall_and_convergence(monkeypatch):
+    pred, ref, gt = revisit_example()               # the loop-aware model: pred; the paper's: its labels exactly
+    fit, short = {"accuracy": [0.5, 0.99]}, {"accuracy": [0.3, 0.6]}
+    monkeypatch.setattr(cnn, "run_seeds", lambda X, y, seeds, **kw: [
+        {"seed": seeds[0], "model": "aware", "history": fit if seeds[0] == 7 else short}])
+    monkeypatch.setattr(cnn, "predict", lambda model, X: pred if model == "aware" else ref)
+    runs = [{"seed": s, "model": "paper", "history": h} for s, h in ((7, fit), (8, short))]
+    per_seed, first = dictionary_threshold.over_seeds(np.zeros((40, 1, 1, 1)), gt, 10, runs, 12, exclude=5)
+    assert per_seed[["seed", "variant"]].values.tolist() == [[s, v] for s in (7, 8) for v in dictionary_threshold.VARIANTS]
+    assert per_seed.converged.tolist() == [True, True, False, False] and per_seed.epochs.tolist() == [2] * 4
+    direct = dictionary.score_closures(pred, spots.by_place(10, gt), gt, 12, 5)
+    aware = per_seed[per_seed.variant == dictionary_threshold.VARIANTS[1]].iloc[0]
+    assert aware["precision_%"] == 100 * direct["precision"] and aware["recall_%"] == 90.0    # 9 of 10 revisit frames
+    paper = per_seed[per_seed.variant == dictionary_threshold.VARIANTS[0]]
+    assert paper["precision_%"].isna().all() and (paper["recall_%"] == 0).all()   # spots by index: the revisit is new
+    assert first[dictionary_threshold.VARIANTS[1]][0] is pred
+    s = dictionary_threshold.seed_summary(per_seed.assign(**{"recall_%": [0.0, 90.0, 0.0, 50.0]})).set_index("variant")
+    row = s.loc[dictionary_threshold.VARIANTS[1]]
+    assert (row.seeds, row.converged_seeds) == (2, 1)
+    assert (row["recall_median_%"], row["recall_min_%"], row["recall_max_%"], row["recall_median_converged_%"]) == (
+        70.0, 50.0, 90.0, 90.0)
 
 
 # ------------------------------------------------------------ 00: the dataset

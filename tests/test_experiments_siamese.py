@@ -232,9 +232,14 @@ def test_timing_paper_vs_run_conclusion_and_summary(setup, trained, tiny_sequenc
 def test_figures_draw_every_curve(setup, trained, tiny_sequence):
     s, (sup, fus) = setup, trained
     fig = sr.figure_supervisions(s, sup, ["softmax"], tiny_sequence)
-    assert len(fig.axes[0].lines) == 1 + 2 + 1 + 1                  # softmax, untrained, pixels, chance, the paper's point
+    # every seed of softmax and of the untrained network, pixels, chance, the paper's point
+    assert len(fig.axes[0].lines) == 2 * len(SEEDS) + 1 + 1 + 1
     fig, name = sr.figure_fusions(s, fus, ["conv2"], "sum", "softmax", tiny_sequence)
-    assert name == "figure9_fusions" and len(fig.axes[0].lines) == 5 + 1 + 1 and len(fig.axes[1].lines) == 1 + 1
+    # every seed of RGB only, the late depth stream, early, mid conv2 and late; chance and the paper's point
+    assert name == "figure9_fusions" and len(fig.axes[0].lines) == 5 * len(SEEDS) + 1 + 1
+    assert len(fig.axes[1].lines) == len(SEEDS) + 1
+    k, n = sr.converged_networks(sr.ranked_fusions(fus.table, ["conv2"]))
+    assert n == 3 * len(SEEDS) and fig._suptitle.get_text().startswith(f"early, mid-level at conv2 and late fusion: {k} of {n}")
     assert sr.figure_fusions(s._replace(has_depth=False), fus, ["conv2"], "sum", "softmax", tiny_sequence)[1] == "figure9_skipped"
     fig = sr.figure_convergence(sup, fus, ["conv2"], True)
     # per seed: the loss and the held-out AP of the supervision (+ untrained, pixels), and of 3 fusions

@@ -388,3 +388,28 @@ def test_the_r1_bars_carry_each_rows_interval_and_its_colour():
     spans = [(round(s[0][0], 6), round(s[1][0], 6)) for s in segments]
     assert spans == [(75.0, 90.0), (70.0, 70.0), (50.0, 65.0), (1.0, 9.0)]
     assert len(set(colours.values())) == 4
+
+
+def test_the_r1_bars_hatch_every_bar_tied_with_the_top_by_its_paired_interval():
+    """Sorted bars suggest an order; the paired comparisons decide it: a bar whose paired R@1 interval
+    with the top bar holds 0 is hatched as tied, one never compared with it dotted, a resolved one plain."""
+    import matplotlib
+    matplotlib.use("Agg")
+    from matplotlib.container import BarContainer
+    from greenloop.experiments import leaderboard as exp
+    t = pd.DataFrame({"method": ["a", "b", "chance (random scores)", "c", "d"], "mode": ["loop closure"] * 5,
+                      "R@1_%": [60.0, 80.0, 5.0, 79.0, 50.0], "R@1_lo_%": np.nan, "R@1_hi_%": np.nan})
+    comp = pd.DataFrame([("b", "c", "R@1", 1.0, -2.0, 4.0, False, 50),       # b over c: a tie
+                         ("a", "b", "R@1", -20.0, -30.0, -10.0, True, 50),   # a below b: resolved
+                         ("b", "c", "AUC-PR", 9.0, 2.0, 12.0, True, 50)],    # another metric: not read
+                        columns=lb.COMPARISON_COLUMNS)
+    order = t[t["mode"] == "loop closure"].sort_values("R@1_%", ascending=False)
+    assert exp.ties_with_top(order, comp) == {"b": "top", "c": "tie", "a": "below", "d": "not compared",
+                                              "chance (random scores)": "not compared"}
+    ax = exp.figure_r1(t, comp).axes[0]
+    bars = next(c for c in ax.containers if isinstance(c, BarContainer))
+    assert [p.get_hatch() for p in bars.patches] == ["", "///", None, "..", ".."]      # b, c, a, d, chance
+    assert "1 of 4 bars tied with the top (b)" in ax.get_title()
+    assert [x.get_text() for x in ax.texts] == ["top bar", "tied with the top", "not compared with the top",
+                                                "not compared with the top"]
+    assert exp.ties_with_top(order, None)["c"] == "not compared"

@@ -27,6 +27,8 @@ OVERRIDES = {
     "13_leaderboard": {"layer_backbones": [], "frame_step": 4},
     # Table 1 under the early-stopping rule, capped at a few epochs
     "01_spot_grouping": {"stop_patience": 2, "stop_cap": 6},
+    # the dictionary over seeds with notebook 01's early stopping (Nordland's profile sets it for 02-05)
+    "05_dictionary_threshold": {"stop_patience": 1, "stop_cap": 3},
 }
 
 
@@ -239,6 +241,11 @@ def _check_04(folder):
     assert tf.n_frames.tolist()[0] == 200 and tf.shift1_vs_test_only_points.iloc[-1] == 0
     t3 = pd.read_csv(folder / "table3.csv")
     assert abs(tf["shift1_%"].iloc[0] - t3["shift1_all_frames_%"].mean()) < 0.01
+    p = pd.read_csv(folder / "perturbations.csv").set_index(["perturbation", "amount"])
+    assert abs(p.loc[("shift right", 1), "heldout_mean"] - t3["shift1_test_only_%"].mean()) < 0.01   # the same shift
+    assert abs(p.loc[("shift right", 1), "all_frames_mean"] - t3["shift1_all_frames_%"].mean()) < 0.01
+    cmp = pd.read_csv(folder / "paper_vs_run.csv").set_index("quantity")
+    assert cmp.loc["accuracy, held-out test frames shifted 1 px right (%)", "note"].startswith("judged")
     assert (folder / "shift_controls.png").is_file()
 
 
@@ -258,6 +265,15 @@ def _check_05(folder):
         assert (at.true_events, at.false_events, at.true_frames, at.false_frames) == (
             sc["true_events"], sc["false_events"], sc["true_frames"], sc["false_frames"]), variant
         assert at["revisit_recall_%"] == pytest.approx(100 * sc["revisits_detected"] / max(1, sc["revisit_frames"]), abs=0.06)
+    per_seed = pd.read_csv(folder / "seeds.csv")               # the detector with every seed's CNN
+    assert sorted(per_seed.seed.unique()) == TINY["seeds"] and len(per_seed) == 2 * len(TINY["seeds"])
+    summ = pd.read_csv(folder / "seeds_summary.csv").set_index("variant")
+    assert (summ.seeds == len(TINY["seeds"])).all()
+    assert summ.converged_seeds.tolist() == per_seed.groupby("variant", sort=False).converged.sum().tolist()
+    assert per_seed.epochs.between(2, OVERRIDES["05_dictionary_threshold"]["stop_cap"]).all()   # early stopping, capped
+    first = per_seed[per_seed.seed == TINY["seeds"][0]].set_index("variant")
+    for variant, sc in s["scores"].items():                  # the figures' seed is the table's first
+        assert first.loc[variant, "true_events"] == sc["true_events"], variant
         assert sc["revisits_detected"] <= sc["revisit_frames"]
 
 
@@ -397,6 +413,13 @@ def _check_08(folder):
     assert (tuning.knob == "pca dim").any() and tuning.knob.str.startswith("median size").any()
     m = json.loads((folder / "manifest.json").read_text())
     assert m["parameters"]["tune_frames"] > 0 and m["parameters"]["eval_frames"] > 0
+    p = pd.read_csv(folder / "paired.csv")                     # the papers' orders, paired over the same queries
+    assert sorted(p.backbone.unique()) == sorted(done) and len(p) == 3 * 2 * len(done)
+    assert (p.low <= p.difference).all() and (p.difference <= p.high).all() and (p.blocks >= 1).all()
+    assert (p.resolved == ((p.low > 0) | (p.high < 0))).all() and (p.result[~p.resolved] == "tie").all()
+    one = p[p.comparison == "ZCA + median filter (tuned) minus ZCA"].merge(
+        t[(t.variant == "ZCA, tuned dim") & (t.median_filter != "none")][["backbone", "size"]], on="backbone")
+    assert (one[one["size"] == 1].result == "tie").all()       # a median filter of size 1 changes nothing
 
 
 def _check_09(folder):
@@ -407,6 +430,9 @@ def _check_09(folder):
     for c in ("AP_RGB_%", "AP_depth_%", "AP_RGB-D_%"):
         assert t[c].between(0, 100).all()
     _assert_relative_accuracy(t.set_index("backbone"), "ghostnet", "AP_RGB-D_%")   # Tables 3/4: against GhostNet
+    p = pd.read_csv(folder / "paired.csv")                     # RGB-D minus RGB on the same queries
+    assert p.backbone.tolist() == [b for b in cnns for _ in range(2)] and set(p.comparison) == {"RGB-D minus RGB"}
+    assert (p.low <= p.difference).all() and (p.difference <= p.high).all()
     d = pd.read_csv(folder / "paper_vs_run.csv")
     assert len(d) > 0
 
@@ -491,6 +517,15 @@ def _check_10(folder):
     assert best["best mid-level layer (Table 2)"] == siamese_rgbd.UNRESOLVED        # one layer is never best
     assert best[siamese_rgbd.LEVELLING].startswith("n/a") and TINY["siamese_epochs"] < 3     # no thirds to compare
     assert (folder / "convergence.png").is_file()
+    # early stopping on, capped at one epoch: every network took its cap and none could stop before it
+    assert (trained.epochs == 1).all() and (trained.epoch_cap == TINY["siamese_epochs"]).all()
+    rule = pd.read_csv(folder / "paper_vs_run.csv").set_index("quantity").loc[siamese_rgbd.CONVERGED, "note"]
+    assert rule.startswith("siamese.converged: early stopping on a held-out loss") and \
+        f"of its best for {TINY['siamese_patience']} epochs" in rule
+    assert best["epochs taken per network, min - median - max"] == f"1 - 1 - 1 (cap {TINY['siamese_epochs']})"
+    ranked = siamese_rgbd.ranked_fusions(fus, TINY["mid_layers"])    # what Fig. 9's header and the verdict count
+    assert set(ranked.fusion) == {"early", "mid", "late"} and len(ranked) == 3 * len(seeds)
+    assert (sup.epochs_max.max(), sup.epochs_min.min()) == (1, 0)   # trained rows 1 epoch, the untrained 0
 
 
 def _check_12(folder):

@@ -188,3 +188,33 @@ def test_write_comparisons_writes_one_table_as_csv_and_markdown(tmp_path):
     t = _table([("a", "b", "R@1", 1.5, -0.5, 3.0, False)]).assign(protocol="leaderboard")
     csv, md = lb.write_comparisons(t, tmp_path, "the note")
     assert pd.read_csv(csv).equals(t) and "| a " in md.read_text() and md.read_text().rstrip().endswith("the note")
+
+
+def _loop_scores(n=120, seed=0):
+    """(GT, good, noise): n frames whose second half revisits the first (frame i + n/2 is frame i), a score
+    matrix that ranks every revisit's partner first, and one of pure noise (M, M), symmetric."""
+    rng = np.random.default_rng(seed)
+    h = n // 2
+    GT = np.zeros((n, n), bool)
+    GT[np.arange(h), np.arange(h) + h] = GT[np.arange(h) + h, np.arange(h)] = True
+    noise = rng.random((n, n))
+    noise = (noise + noise.T) / 2
+    return GT, np.where(GT, 2.0, noise), noise
+
+
+def test_paired_table_resolves_a_planted_gap_and_calls_identical_scores_a_tie():
+    GT, good, noise = _loop_scores()
+    S = {"good": good, "noise": noise, "copy": noise.copy()}
+    t = lb.paired_table(S, [("good minus noise", "good", "noise"), ("copy minus noise", "copy", "noise")], GT, 5, None, 10)
+    assert list(t.columns) == lb.PAIRED_COLUMNS and len(t) == 2 * len(lb.COMPARED)
+    gap = t[(t.comparison == "good minus noise") & (t.metric == "R@1")].iloc[0]
+    assert gap.resolved and gap.low > 0 and gap.result == "good above noise" and gap.difference > 50
+    assert gap.queries == 120 - 6 and gap.block == 10 and gap.blocks == 12      # queries with a candidate (j > 5)
+    tie = t[t.comparison == "copy minus noise"]
+    assert (tie.difference == 0).all() and (tie.low == 0).all() and (tie.high == 0).all()
+    assert (~tie.resolved).all() and (tie.result == lb.TIE).all()
+    back = lb.paired_table(S, [("noise minus good", "noise", "good")], GT, 5, None, 10)
+    assert back.result.iloc[0] == "good above noise" and back.high.iloc[0] < 0
+    assert "a tie (the interval holds 0)" in lb.paired_sentence(t, "copy minus noise")
+    assert "resolved: good above noise" in lb.paired_sentence(t, "good minus noise", "R@1")
+    assert lb.paired_sentence(t, "absent") == "" and lb.paired_table(S, [], GT, 5, None).empty

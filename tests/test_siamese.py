@@ -325,3 +325,32 @@ def test_a_loss_that_keeps_falling_has_not_plateaued_and_a_flat_one_has_at_any_s
     assert sm.plateaued(np.r_[falling[:12], falling[11] * 1.3, falling[11] * np.ones(12)])   # a rise is no fall
     assert not sm.plateaued([1.0])                               # one epoch: nothing to compare
 
+
+
+def test_early_stopping_stops_on_the_held_out_loss_and_never_trains_on_its_frames(tmp_path):
+    gt = _loop_gt()
+    train, held = evaluate.split_mask(120, 0.5, gt=gt, gap=5)
+    labels = sm.place_labels(train, gt, 20)
+    val = sm.validation_frames(labels)
+    assert not val[labels < 0].any() and all(val[labels == c].sum() >= 2 for c in np.unique(labels[labels >= 0]))
+    X = _frames(120, 3)                 # noise: what a network learns of some frames says nothing of others
+    kw = dict(supervision="multitask", epochs=40, n_pairs=40, batch_size=10, width=W, cache=tmp_path)
+    _, h, p = sm.train(X, labels, seed=0, stop_patience=2, **kw)
+    assert h["stopped"] and len(h["loss"]) == len(h["val_loss"]) < 40 and sm.converged(h)
+    assert not val[p["pairs"]].any() and len(p["pairs"]) == 40 * len(h["loss"])     # validation frames: never trained on
+    _, fixed, _ = sm.train(X, labels, seed=0, **dict(kw, epochs=3))                  # no patience: the whole budget
+    assert len(fixed["loss"]) == 3 and fixed["val_loss"] == [] and not fixed["stopped"]
+    with pytest.raises(ValueError, match="stop_patience"):
+        sm.train(X, labels, seed=0, stop_patience=-1, **kw)
+
+
+def test_converged_reads_the_held_out_loss_under_early_stopping_else_the_training_loss():
+    falling = list(6.0 * 0.95 ** np.arange(30))
+    assert sm.converged({"loss": falling, "val_loss": [1.0, 1.0], "stopped": True})
+    assert not sm.converged({"loss": falling[:5], "val_loss": falling[:5], "stopped": False})   # ended on its cap
+    assert not sm.converged({"loss": falling, "val_loss": []})                                   # fixed budget: plateaued
+    assert sm.converged({"loss": falling[:10] + [falling[9]] * 20})
+    short = sm.validation_frames(np.repeat(np.arange(4), 7))                       # 7 frames a place: every 3rd
+    assert short.reshape(4, 7).sum(1).tolist() == [2] * 4 and short[:7].tolist() == [0, 1, 0, 0, 1, 0, 0]
+    with pytest.raises(ValueError, match="two validation"):
+        sm.validation_frames(np.r_[np.zeros(3, int), np.ones(3, int), -np.ones(5, int)])

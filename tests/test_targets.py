@@ -88,7 +88,7 @@ def test_nordland_judges_every_seqslam_row_named():
 
 
 def _paired(rows):
-    """A comparisons table (study.leaderboard.comparisons' columns) of greenloop-seq against each b."""
+    """A comparisons table (experiments.leaderboard.rows.comparisons' columns) of greenloop-seq against each b."""
     return pd.DataFrame([{"a": "greenloop-seq", "b": b, "metric": m, "difference": d, "lo": lo, "hi": hi,
                           "resolved": lo > 0 or hi < 0, "queries": 100} for b, m, d, lo, hi in rows])
 

@@ -121,3 +121,32 @@ def test_a_short_gardens_point_cut_fires_and_is_right(gardenspoint_short):
     must also keep out: tools/calib_measure.py)."""
     revisits, declared, correct = _closures(gardenspoint_short)
     assert revisits == 62 and declared >= 6 and correct == declared, (revisits, declared, correct)
+
+
+def test_a_gps_only_survey_with_early_revisits_skips_or_runs_notebook_12(tmp_path, shared_cache, monkeypatch):
+    """A drone survey flown twice with a gps.csv only (156 frames, neighbouring strips within the GPS
+    radius: revisits 1..155 frames apart) revisits its start at frame 16: the first traversal holds one
+    spot of quick's L = 60 frames, and the CNN of one class stopped make in notebook 12 with
+    `n_classes must be >= 2`. make skips it with the reason and the fix; so it does where L = 8 makes 2
+    spots but the blocked split's gap of 5 frames leaves no training frame; with L = 8 and gap 1 it runs."""
+    from test_notebooks import _params, _run
+
+    f = user_folders.gps_survey(tmp_path / "survey")
+    e = exclusion.exclusion(f)
+    assert params.loop_distances(f) == (1, 155) and e.frames == 7
+    run, skipped = _make_params(f, "12_revisit_protocol", tmp_path / "r")
+    assert run is None and "frames 0..15" in skipped and "holds 1 spot of frames_per_spot=60" in skipped
+    assert "frames_per_spot <= 8" in skipped
+    for other in ("00_dataset", "01_spot_grouping", "02_training_over_seeds", "03_confusion_matrix",
+                  "04_shift_robustness", "05_dictionary_threshold", "13_leaderboard"):   # their spots: every frame's
+        assert _make_params(f, other, tmp_path / "r")[1] is None, other
+    nb = ROOT / "notebooks" / "12_revisit_protocol.ipynb"
+    reason = params.skip_reason(nb, f, dict(params.notebook_defaults(nb), frames_per_spot=8, exclude=e.frames))
+    assert "the blocked split leaves no training frame" in reason and "gap of 5" in reason
+    assert params.skip_reason(nb, f, dict(params.notebook_defaults(nb), frames_per_spot=8, gap=1, exclude=e.frames)) is None
+    results = tmp_path / "nb"
+    results.mkdir()
+    (results / "models").symlink_to(shared_cache, target_is_directory=True)
+    folder = _run(nb, f, results, monkeypatch, dict(_params(nb.stem), frames_per_spot=8, gap=1, exclude=e.frames))
+    summary = json.loads((folder / "summary.json").read_text())
+    assert summary["first_traversal_end"] == 16 and summary["spots"] == 2 and summary["revisit_frames"] > 0

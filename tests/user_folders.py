@@ -71,3 +71,25 @@ def no_revisit(out, synthetic_folder, n: int = 120) -> Path:
     comes back."""
     paths = sequence.list_frames(synthetic_folder)[:n]
     return _write(Path(out), [cv2.imread(str(p)) for p in paths])
+
+
+def gps_survey(out, strips: int = 6, strip_frames: int = 13, size=(64, 48), seed: int = 0) -> Path:
+    """A drone survey of a field flown twice, the second time in reverse, with a ``gps.csv``
+    (``frame,x,y`` in metres) and nothing else: ``strips`` lawnmower strips of ``strip_frames`` frames,
+    10 m between frames and 20 m between strips (within the 25 m GPS radius, so neighbouring strips
+    revisit each other early, as an overlapping survey does). 2 * strips * strip_frames frames (156 by
+    default), revisits 1..155 frames apart; each frame a ``size`` (W, H) crop of one smooth random
+    field at its position, so a place looks the same on both flights."""
+    out = Path(out)
+    xy = [(10.0 * (k if s % 2 == 0 else strip_frames - 1 - k), 20.0 * s)
+          for s in range(strips) for k in range(strip_frames)]
+    xy = np.asarray(xy + xy[::-1])
+    w, h = size
+    rng = np.random.default_rng(seed)
+    field = cv2.GaussianBlur(rng.integers(0, 256, (int(xy[:, 1].max()) + 2 * h, int(xy[:, 0].max()) + 2 * w, 3),
+                                          dtype=np.uint8), (0, 0), 3)
+    field = cv2.normalize(field, None, 0, 255, cv2.NORM_MINMAX)
+    _write(out, [field[int(y):int(y) + h, int(x):int(x) + w] for x, y in xy])
+    rows = "".join(f"{k},{x:.1f},{y:.1f}\n" for k, (x, y) in enumerate(xy))
+    (out / "gps.csv").write_text("frame,x,y\n" + rows)
+    return out

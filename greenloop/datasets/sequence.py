@@ -192,6 +192,11 @@ class Sequence:
     def frame_paths(self) -> list[Path]:
         return self._frames_of("rgb")
 
+    @property
+    def depth_paths(self) -> list[Path] | None:
+        """The depth frames' files (depth/, in stream order, one per frame), None without depth/."""
+        return self._frames_of("depth") if self.has_depth else None
+
     def _frames_of(self, subfolder: str) -> list[Path]:
         return self._once(("frames", subfolder), lambda: _list_frames(self, subfolder))
 
@@ -527,17 +532,19 @@ def load_depth(folder, size=None, limit: int | None = None, step: int = 1) -> np
     if not seq.has_depth:
         raise FileNotFoundError(f"{seq.path} has no depth/ folder: RGB-D experiments need depth/0.png, ...")
     paths = _select(seq._frames_of("depth"), limit, step)
-
-    def read(p):
-        d = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
-        if d is None:
-            raise ValueError(f"cannot read depth image {p}")
-        if size is not None and (d.shape[1], d.shape[0]) != tuple(size):
-            d = cv2.resize(d, tuple(size), interpolation=cv2.INTER_NEAREST)
-        return d.astype(np.float32) / DEPTH_SCALE
-
     with ThreadPoolExecutor(4) as pool:
-        return np.stack(list(pool.map(read, paths)))
+        return np.stack(list(pool.map(lambda p: read_depth(p, size), paths)))
+
+
+def read_depth(path, size=None) -> np.ndarray:
+    """One depth frame (a uint16 PNG, metres = value / DEPTH_SCALE) as (H, W) float32 metres, 0 = no
+    reading; resized (nearest) to ``size`` (W, H) when given. ValueError naming an unreadable file."""
+    d = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if d is None:
+        raise ValueError(f"cannot read depth image {path}: the file is missing, empty or not an image; replace or delete it")
+    if size is not None and (d.shape[1], d.shape[0]) != tuple(size):
+        d = cv2.resize(d, tuple(size), interpolation=cv2.INTER_NEAREST)
+    return d.astype(np.float32) / DEPTH_SCALE
 
 
 # ------------------------------------------------------------- poses, loop pairs, camera

@@ -23,10 +23,12 @@ from greenloop.study import verdict, wording
 from greenloop.evaluate import (average_precision, mean_per_class_accuracy, mpca_threshold,
                                 pr_curve, recall_at_100_precision)
 from greenloop import report
+from greenloop.experiments.leaderboard import rows as lb
 
 __all__ = [
     "DECIMALS", "NOT_AVAILABLE", "tune_then_score", "whitened_variants", "median_scores",
-    "swapped_split", "Scored", "postprocessing", "second_split", "split_spread", "paper_rows", "conclusion",
+    "swapped_split", "Scored", "postprocessing", "second_split", "split_spread", "PAIRED", "paired", "paper_rows",
+    "conclusion",
     "figure_tuning", "figure_ap_by_variant", "figure_pr_raw_vs_whitened", "figure_similarity",
 ]
 
@@ -212,6 +214,38 @@ def split_spread(swap: pd.DataFrame) -> pd.DataFrame:
     return t.assign(spread=t["max"] - t["min"]).reset_index()
 
 
+# the paired comparisons of paired.csv (each a minus b): Zhang 2017's whitening against raw, the ZCA paper's median
+# filter against the unfiltered ZCA matrix; the median-filtered ZCA arm is named MEDIAN_ARM
+MEDIAN_ARM = "ZCA, tuned dim + median (tuned)"
+PAIRED = {"PCA-whitened, paper dim minus raw": ("PCA-whitened, paper dim", "raw"),
+          "PCA-whitened, tuned dim minus raw": ("PCA-whitened, tuned dim", "raw"),
+          "ZCA + median filter (tuned) minus ZCA": (MEDIAN_ARM, "ZCA, tuned dim")}
+
+
+def paired(table: pd.DataFrame, variants: dict, GT, exclude: int, evaluate, block: int = 10) -> pd.DataFrame:
+    """Every backbone's comparisons of :data:`PAIRED` (those its variants hold: the tuned ones need a
+    split), by the leaderboard's paired block bootstrap over the same evaluation queries
+    (``leaderboard.rows.paired_table``: per-query R@1 and AUC-PR, loop closure).
+
+    table: :attr:`Scored.table` (each backbone's picked median size); variants: :attr:`Scored.variants`;
+    GT, exclude: as ``evaluate.pair_samples``; evaluate: (N,) bool evaluation queries, or None (every
+    query, no honest split); block: queries per bootstrap run. Returns a DataFrame: backbone, weights,
+    label, then ``leaderboard.rows.PAIRED_COLUMNS``."""
+    out = []
+    for b, v in variants.items():
+        S = {k: m for k, (m, _) in v.items()}
+        rows = table[(table.backbone == b) & (table.variant == "ZCA, tuned dim") & (table.median_filter != "none")]
+        if len(rows):
+            size = int(rows["size"].iloc[0])
+            S[MEDIAN_ARM] = similarity.median_candidates(S["ZCA, tuned dim"], [size])[size]
+        pairs = [(c, a, o) for c, (a, o) in PAIRED.items() if a in S and o in S]
+        first = table[table.backbone == b].iloc[0]
+        out.append(lb.paired_table(S, pairs, GT, exclude, evaluate, block).assign(
+            backbone=b, weights=first.weights, label=first.label))
+    t = pd.concat(out, ignore_index=True) if out else pd.DataFrame(columns=lb.PAIRED_COLUMNS + ["backbone"])
+    return t[["backbone", "weights", "label"] + lb.PAIRED_COLUMNS]
+
+
 # ---------------------------------------------------------------------- this run vs the papers
 def _backbone_rows(t: pd.DataFrame, b: str, label: str, split_ok: bool) -> list:
     AP = "AP_eval_%" if split_ok else "AP_all_%"
@@ -262,11 +296,11 @@ def _gap_text(name: str, diff: float, spread_row) -> str:
     """How a difference of ``diff`` points (one split) stands against the spread of its knob's pick over
     the two splits (a row of :func:`split_spread`, or None): never an order (two splits are no seed range)."""
     if spread_row is None:
-        return f"{name} {diff:+.2f} points (one split): not resolved"
+        return f"{name} {diff:+.2f} points (one split): not resolved by the split"
     within = abs(diff) <= spread_row["spread"]
     return (f"{name} {diff:+.2f} points, {'within' if within else 'beyond'} the {wording.num(spread_row['spread'])}-point "
             f"spread of its knob's pick over the two splits (AP {wording.span(spread_row['min'], spread_row['max'], unit=' %')})"
-            + ("" if within else ", but two splits are too few to call an order") + ": not resolved")
+            + ("" if within else ", but two splits are too few to call an order") + ": not resolved by the two splits")
 
 
 def _variant_sentence(t: pd.DataFrame, label: str, ap: str, dataset: str) -> str:
@@ -304,7 +338,21 @@ def conclusion(out_dir) -> str:
             knob("median size, L2")) + " (the filter size's spread is read on the L2 variant).")
     else:
         lines.append(f"No honest tuning/evaluation split here: {wording.NOT_A_RANKING}.")
-    return wording.heading(Path(out_dir).parent, "08_descriptor_postprocessing") + "\n\n" + " ".join(lines)
+    lines.append(_paired_sentence(out_dir, rows.backbone.iloc[0]))
+    return wording.heading(Path(out_dir).parent, "08_descriptor_postprocessing") + "\n\n" + " ".join(l for l in lines if l)
+
+
+def _paired_sentence(out_dir: Path, backbone: str) -> str:
+    """The paired comparisons of one backbone (paired.csv under ``out_dir``, :func:`paired`) in words,
+    per-query AUC-PR: what answers the papers' orders; "" where the folder has no paired.csv."""
+    path = out_dir / "paired.csv"
+    if not path.is_file():
+        return ""
+    t = pd.read_csv(path)
+    t = t[t.backbone == backbone]
+    parts = [lb.paired_sentence(t, c) for c in PAIRED]
+    parts = [p for p in parts if p]
+    return ("Paired over the same queries (per-query AUC-PR, a minus b): " + "; ".join(parts) + ".") if parts else ""
 
 
 # -------------------------------------------------------------------------------- figures

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from greenloop.experiments import training_over_seeds as tos
 from greenloop.groundtruth import DEFAULT_EXCLUDE
 from greenloop.methods.dictionary import cnn, dictionary, spots
 from greenloop.study import wording
@@ -21,20 +22,81 @@ PAPER_TAU = 70          # the paper's τ = L + Δ = 60 + 10 detections
 VARIANTS = ("paper (spots by frame index)", "loop-aware (spots by place)")
 
 
-def variant_predictions(X: np.ndarray, gt: np.ndarray, frames_per_spot: int, paper_run: dict,
-                        **train_kw) -> dict:
-    """Every frame's predicted spot under each of ``VARIANTS``.
+def variant_runs(X: np.ndarray, gt: np.ndarray, frames_per_spot: int, paper_run: dict, **train_kw) -> dict:
+    """The CNN run behind each of ``VARIANTS`` for one seed: {variant: (run, reference (N,) int64 the
+    labels the CNN was trained on)}.
 
     X: (N, H, W, C) frames; gt: (N, N) bool loop matrix; frames_per_spot: L; paper_run: one
     ``cnn.run_seeds`` dict trained on ``spots.group(N, L)`` (the paper's labels). The loop-aware
-    CNN is trained here on ``spots.by_place(L, gt)`` with paper_run's seed; train_kw go to
-    ``cnn.train`` (epochs, batch_size, ...). Returns {variant: (pred (N,) int64 predicted spots,
-    reference (N,) int64 the labels the CNN was trained on)}.
-    """
+    CNN is trained here (or loaded from the cache) on ``spots.by_place(L, gt)`` with paper_run's seed;
+    train_kw go to ``cnn.train`` (epochs, batch_size, stop_patience, ...)."""
     y, y_place = spots.group(len(X), frames_per_spot), spots.by_place(frames_per_spot, gt)
     aware = cnn.run_seeds(X, y_place, [paper_run["seed"]], **train_kw)[0]
-    return {VARIANTS[0]: (cnn.predict(paper_run["model"], X), y),
-            VARIANTS[1]: (cnn.predict(aware["model"], X), y_place)}
+    return {VARIANTS[0]: (paper_run, y), VARIANTS[1]: (aware, y_place)}
+
+
+def variant_predictions(X: np.ndarray, gt: np.ndarray, frames_per_spot: int, paper_run: dict,
+                        **train_kw) -> dict:
+    """Every frame's predicted spot under each of ``VARIANTS`` (:func:`variant_runs`' models):
+    {variant: (pred (N,) int64 predicted spots, reference (N,) int64 the labels the CNN was trained on)}."""
+    return {v: (cnn.predict(r["model"], X), ref)
+            for v, (r, ref) in variant_runs(X, gt, frames_per_spot, paper_run, **train_kw).items()}
+
+
+def _seed_row(variant: str, run: dict, s: dict, converged_at: float) -> dict:
+    """One seed and variant of :func:`over_seeds`: its training (epochs, final training accuracy,
+    converged by ``training_over_seeds.converged``) and ``dictionary.score_closures``' dict ``s``, in %."""
+    h = run["history"]
+    events = s["true_events"] + s["false_events"]
+    return {"seed": run["seed"], "variant": variant, "epochs": len(h["accuracy"]),
+            "final_train_acc_%": 100 * h["accuracy"][-1], "stopped_early": bool(h.get("stopped_early", False)),
+            "converged": tos.converged(h, converged_at), "flagged_frames": s["true_frames"] + s["false_frames"],
+            "true_frames": s["true_frames"], "events": events, "true_events": s["true_events"],
+            "precision_%": 100 * s["precision"],
+            "event_precision_%": 100 * s["true_events"] / events if events else np.nan,
+            "revisit_frames": s["revisit_frames"],
+            "recall_%": 100 * s["revisits_detected"] / s["revisit_frames"] if s["revisit_frames"] else np.nan}
+
+
+def over_seeds(X: np.ndarray, gt: np.ndarray, frames_per_spot: int, runs: list[dict], tau: int,
+               exclude: int = DEFAULT_EXCLUDE, converged_at: float = 0.95, **train_kw):
+    """The detector at τ with every seed's CNN, per variant: closure precision and recall with their
+    spread over seeds and each seed's convergence (the rule of notebooks 01/02, ``training_over_seeds.converged``).
+
+    X, gt, frames_per_spot: as :func:`variant_runs`; runs: ``cnn.run_seeds``' dicts on the paper's
+    labels, one per seed; tau: detections; exclude: frames; converged_at: a fraction; train_kw: the
+    loop-aware CNN's training (as the paper's). Returns (per_seed, first): per_seed a DataFrame, one
+    row per seed and variant: seed, variant, epochs, final_train_acc_%, stopped_early, converged,
+    flagged_frames, true_frames, events, true_events, precision_% (true / flagged frames),
+    event_precision_% (true / declared closure events; NaN where none), revisit_frames, recall_%
+    (revisit frames flagged true / revisit frames; NaN without revisits); first: the first seed's
+    :func:`variant_predictions` dict (the figures draw it)."""
+    rows, first = [], None
+    for run in runs:
+        both = variant_runs(X, gt, frames_per_spot, run, **train_kw)
+        preds = {v: (cnn.predict(r["model"], X), ref) for v, (r, ref) in both.items()}
+        first = first or preds
+        for v, (pred, ref) in preds.items():
+            rows.append(_seed_row(v, both[v][0], dictionary.score_closures(pred, ref, gt, tau, exclude), converged_at))
+    return pd.DataFrame(rows), first
+
+
+SEED_STATS = ("precision_%", "event_precision_%", "recall_%")
+
+
+def seed_summary(per_seed: pd.DataFrame) -> pd.DataFrame:
+    """:func:`over_seeds`' table per variant (in ``VARIANTS`` order): seeds, converged_seeds, then for
+    each of ``SEED_STATS`` its median, min and max over the seeds (``<stat>_median`` ...) and its median
+    over the converged seeds (``<stat>_median_converged``, NaN where none converged), in %."""
+    out = []
+    for v, d in per_seed.groupby("variant", sort=False):
+        row = {"variant": v, "seeds": len(d), "converged_seeds": int(d.converged.sum())}
+        for c in SEED_STATS:
+            k = c.removesuffix("_%")
+            row.update({f"{k}_median_%": d[c].median(), f"{k}_min_%": d[c].min(), f"{k}_max_%": d[c].max(),
+                        f"{k}_median_converged_%": d[d.converged][c].median() if d.converged.any() else np.nan})
+        out.append(row)
+    return pd.DataFrame(out)
 
 
 def variant_scores(variants: dict, gt: np.ndarray, tau: int, exclude: int = DEFAULT_EXCLUDE) -> dict:
@@ -184,6 +246,23 @@ def _at_tau(scores: dict, tau: int) -> str:
             f"scores them: an upper bound, not a detection result).")
 
 
+def _over_seed_sentence(summary: pd.DataFrame, tau: int) -> str:
+    """:func:`seed_summary`'s table in words: per variant the closure precision and recall at τ,
+    median [min, max] over seeds, and how many seeds converged (budget-limited where fewer than half)."""
+    def one(r):
+        conv = f"{int(r.converged_seeds)} of {wording.count(r.seeds, 'seed')} converged"
+        if wording.verdict.budget_limited(r.converged_seeds, r.seeds):
+            conv += ", budget-limited"
+        recall = (f"recall {wording.num(r['recall_median_%'], 1)} % {wording.span(r['recall_min_%'], r['recall_max_%'], 1)} "
+                  f"of the revisit frames" if pd.notna(r["recall_median_%"]) else "no revisit frame to recall")
+        precision = (f"closure precision {wording.num(r['precision_median_%'], 1)} % "
+                     f"{wording.span(r['precision_min_%'], r['precision_max_%'], 1)} of the flagged frames"
+                     if pd.notna(r["precision_max_%"]) else "no frame flagged")
+        return f"{LABELS.get(r.variant, r.variant)}: {precision}, {recall} ({conv})"
+    return (f"At τ = {tau}, median [min, max] over each seed's CNN: " + "; ".join(one(r) for _, r in summary.iterrows())
+            + " (the loop-aware labels come from the ground truth that scores them: an upper bound, not a detection result).")
+
+
 def _over_sweep(sweep: pd.DataFrame) -> str:
     """What the τ sweep of the paper's labels declares at its lowest and its highest τ, and at most."""
     g = sweep[sweep.variant == VARIANTS[0]].sort_values("tau")
@@ -206,8 +285,10 @@ def conclusion(out_dir) -> str:
     s = json.loads((out_dir / "summary.json").read_text())
     name = wording.verdict.dataset_name(out_dir.parent)
     tau = s["derived"]["tau"]
+    seeds = out_dir / "seeds_summary.csv"
+    at_tau = _over_seed_sentence(pd.read_csv(seeds), tau) if seeds.is_file() else _at_tau(s["scores"], tau)
     return wording.compose(out_dir.parent, "05_dictionary_threshold",
-                           [_threshold(s["derived"], name), _at_tau(s["scores"], tau),
+                           [_threshold(s["derived"], name), at_tau,
                             _over_sweep(pd.read_csv(out_dir / "tau_sweep.csv")),
                             "Whether the dictionary declares loop closures at the precision a detector needs is "
                             "concluded in notebook 13, on held-out evaluation queries."])

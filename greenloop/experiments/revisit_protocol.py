@@ -67,12 +67,12 @@ def first_traversal(dataset, frames_per_spot: int, loop_threshold: float, exclud
 
     dataset: a sequence folder; frames_per_spot: L (frames); loop_threshold, exclude: as
     ``groundtruth.for_sequence``; first_traversal_end: the first frame after the first traversal,
-    None for the ground truth's first revisit frame (``spots.first_revisit``).
+    None for the ground truth's first revisit frame (``spots.first_traversal``: ValueError naming the
+    fix where it holds fewer than 2 spots).
     """
     X = sequence.load_frames(dataset)
     GT = groundtruth.for_sequence(dataset, threshold=loop_threshold, exclude=exclude)
-    n_ref = spots.first_revisit(GT) if first_traversal_end is None else int(first_traversal_end)
-    y = spots.group(n_ref, frames_per_spot)
+    n_ref, y = spots.first_traversal(GT, frames_per_spot, first_traversal_end)
     queries, acceptable = spots.revisit_targets(y, GT, n_ref)
     text = (f"first traversal: frames 0..{n_ref - 1} ({int(y.max()) + 1} spots of {frames_per_spot}); "
             f"{len(queries)} revisit frames after it have a ground-truth partner in it")

@@ -15,15 +15,18 @@ import numpy as np
 import pandas as pd
 
 from greenloop import evaluate, features, report, similarity
+from greenloop.experiments.leaderboard import rows as lb
 from greenloop.study import verdict, wording
 
-__all__ = ["DECIMALS", "REFERENCE", "split_backbones", "rgbd_table", "skipped_table", "paper_rows", "conclusion",
+__all__ = ["DECIMALS", "REFERENCE", "PAIRED", "split_backbones", "rgbd_table", "skipped_table", "paired", "paper_rows",
+           "conclusion",
            "figure_pr_rgb_vs_rgbd", "figure_ap", "figure_similarity", "figure_skipped"]
 
 # decimals the notebook shows and writes each column with (pandas DataFrame.round)
 DECIMALS = {"AP_RGB_%": 2, "R@100P_RGB_%": 2, "AP_depth_%": 2, "R@100P_depth_%": 2, "AP_RGB-D_%": 2,
             "R@100P_RGB-D_%": 2, "extract_s_per_image_rgbd": 4, "R_a_%": 1, "R_t_%": 1}
 REFERENCE = "ghostnet"          # Tables 3/4 take their rates R_a, R_t relative to GhostNet (RGB-D)
+PAIRED = {"RGB-D minus RGB": ("RGB-D", "RGB")}      # paired.csv's comparisons (a minus b): Qi 2024's "depth adds to RGB"
 
 
 def split_backbones(backbones) -> tuple[list, list]:
@@ -66,6 +69,19 @@ def rgbd_table(dataset, backbones, GT, exclude: int, weights="auto", input_size=
         table["R_a_%"], table["R_t_%"] = evaluate.relative_rates(
             table["AP_RGB-D_%"], table["extract_s_per_image_rgbd"], ref["AP_RGB-D_%"], ref["extract_s_per_image_rgbd"])
     return table, S, infos
+
+
+def paired(table: pd.DataFrame, S: dict, GT, exclude: int, block: int = 10) -> pd.DataFrame:
+    """Each backbone's comparisons of :data:`PAIRED` by the leaderboard's paired block bootstrap over
+    the same queries (``leaderboard.rows.paired_table``: per-query R@1 and AUC-PR, loop closure,
+    every query). table: :func:`rgbd_table`'s table; S: its {backbone: {"RGB", "depth", "RGB-D": (M, M)}};
+    GT: (M, M) bool; exclude: steps; block: queries per bootstrap run. Returns a DataFrame: backbone,
+    weights, label, then ``leaderboard.rows.PAIRED_COLUMNS``."""
+    pairs = [(c, a, b) for c, (a, b) in PAIRED.items()]
+    out = [lb.paired_table(S[r.backbone], pairs, GT, exclude, None, block).assign(
+        backbone=r.backbone, weights=r.weights, label=r.label) for r in table.itertuples()]
+    t = pd.concat(out, ignore_index=True) if out else pd.DataFrame(columns=lb.PAIRED_COLUMNS + ["backbone", "weights", "label"])
+    return t[["backbone", "weights", "label"] + lb.PAIRED_COLUMNS]
 
 
 def skipped_table(backbones, weights="auto") -> pd.DataFrame:
@@ -113,7 +129,19 @@ def conclusion(out_dir) -> str:
                  f"(depth alone {wording.num(r['AP_depth_%'])})" for _, r in t.iterrows()]
         text = (f"On {name}, AP RGB -> RGB-D (%): " + "; ".join(parts) + f": one AP per descriptor over one "
                 f"sequence, {wording.NOT_A_RANKING}. Only rows with ImageNet weights bear on the paper's claim.")
+        text += _paired_text(out_dir)
     return wording.heading(Path(out_dir).parent, "09_rgbd_features") + "\n\n" + text
+
+
+def _paired_text(out_dir: Path) -> str:
+    """Each network's paired comparisons (paired.csv under ``out_dir``, :func:`paired`) in words,
+    per-query AUC-PR; "" where the folder has none."""
+    path = out_dir / "paired.csv"
+    if not path.is_file():
+        return ""
+    t = pd.read_csv(path)
+    parts = [f"{label}: {lb.paired_sentence(t[t.label == label], c)}" for label in dict.fromkeys(t.label) for c in PAIRED]
+    return " Paired over the same queries (per-query AUC-PR, a minus b), which orders the two: " + "; ".join(parts) + "."
 
 
 def figure_pr_rgb_vs_rgbd(S: dict, table: pd.DataFrame, infos: dict, GT, exclude: int, title: str):

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from greenloop import report
 from greenloop.methods.dictionary import shift as sh
 from greenloop.study import wording
 
@@ -51,33 +52,47 @@ def paper_scores(predict, runs: list[dict], X1: np.ndarray, labels: np.ndarray) 
                          for r in runs])
 
 
+def _scored(predict, r: dict, Xp: np.ndarray, labels: np.ndarray) -> dict:
+    """One run's accuracy (%) on perturbed frames Xp (N, H, W, C), labels (N,): on the held-out
+    test frames (``heldout_%``, judged) and on all N frames, training frames included (``all_frames_%``)."""
+    test = r["split"]["test"]
+    return {"heldout_%": accuracy(predict, r["model"], Xp[test], labels[test]),
+            "all_frames_%": accuracy(predict, r["model"], Xp, labels)}
+
+
 def perturbation_grid(predict, runs: list[dict], X: np.ndarray, labels: np.ndarray, shifts, rotations) -> pd.DataFrame:
-    """Each run's held-out test frames under every shift and rotation.
+    """Each run under every shift and rotation, scored on its held-out test frames and on all frames.
 
     predict: ``predict(model, X) -> labels``; runs: ``cnn.run_seeds``' dicts ('seed', 'model',
     'split' {'test'}); X: (N, H, W, C) the CNN's inputs, labels: (N,) spots; shifts: pixels,
     applied in each of ``DIRECTIONS`` (zero border); rotations: degrees, each both ways.
     Returns a DataFrame, one row per run and perturbation: seed, perturbation ("shift <direction>" or
-    "rotation"), amount (pixels, or signed degrees), accuracy_% of the perturbed test frames.
+    "rotation"), amount (pixels, or signed degrees), heldout_% (the perturbed held-out test frames:
+    the number to judge) and all_frames_% (all N frames, training frames included: the paper's protocol).
     """
     grid = []
     for r in runs:
-        test = r["split"]["test"]
         for name, (ux, uy) in sh.DIRECTIONS.items():
             for s in shifts:
                 grid.append({"seed": r["seed"], "perturbation": f"shift {name}", "amount": s,
-                             "accuracy_%": accuracy(predict, r["model"], sh.shift(X[test], dx=ux * s, dy=uy * s), labels[test])})
+                             **_scored(predict, r, sh.shift(X, dx=ux * s, dy=uy * s), labels)})
         for deg in rotations:
             for sign in (1, -1):
                 grid.append({"seed": r["seed"], "perturbation": "rotation", "amount": sign * deg,
-                             "accuracy_%": accuracy(predict, r["model"], sh.rotate(X[test], sign * deg), labels[test])})
+                             **_scored(predict, r, sh.rotate(X, sign * deg), labels)})
     return pd.DataFrame(grid)
 
 
 def perturbation_summary(grid):
     """:func:`perturbation_grid`'s rows (a DataFrame) summarised over runs: one row per
-    perturbation and amount (sorted), with the mean, std and min of accuracy_%."""
-    return grid.groupby(["perturbation", "amount"])["accuracy_%"].agg(["mean", "std", "min"]).reset_index()
+    perturbation and amount (sorted): heldout_mean, heldout_std, heldout_min of heldout_% (the
+    judged number) beside all_frames_mean, all_frames_std, all_frames_min of all_frames_%, and
+    all_frames_minus_heldout_points (the mean of the per-run differences, in points)."""
+    g = grid.assign(d=grid["all_frames_%"] - grid["heldout_%"]).groupby(["perturbation", "amount"])
+    out = pd.concat([g["heldout_%"].agg(["mean", "std", "min"]).add_prefix("heldout_"),
+                     g["all_frames_%"].agg(["mean", "std", "min"]).add_prefix("all_frames_"),
+                     g["d"].mean().rename("all_frames_minus_heldout_points")], axis=1)
+    return out.reset_index()
 
 
 def frame_set_scores(predict, runs: list[dict], X: np.ndarray, X1: np.ndarray, labels: np.ndarray):
@@ -183,34 +198,65 @@ def figure_examples(X: np.ndarray, k: int, degrees: float):
     return fig
 
 
+def _curve(ax, d: pd.DataFrame, color, label: str) -> None:
+    """One perturbation's accuracy against its amount on ax: held-out frames solid (mean ± std over
+    runs), all frames dashed with hollow markers (mean). d: :func:`perturbation_grid`'s rows of it."""
+    h = d.groupby("amount")["heldout_%"]
+    ax.errorbar(h.mean().index, h.mean(), yerr=h.std().fillna(0), marker="o", capsize=3, color=color,
+                label=f"{label}: held-out frames, mean ± std")
+    a = d.groupby("amount")["all_frames_%"].mean()
+    ax.plot(a.index, a.values, ls="--", marker="o", mfc="none", color=color, alpha=0.7,
+            label=f"{label}: all frames, training included (mean)")
+
+
 def figure_grid(grid: pd.DataFrame, no_shift: float, table3: pd.DataFrame | None = None):
-    """:func:`perturbation_grid`'s test accuracy (%, mean ± std over runs) against the shift per
-    direction (left) and the rotation (right); no_shift: the unshifted accuracy (%); the paper's 92 %
-    dashed, and beside it, from ``table3`` (:func:`paper_scores`, when given), this run's accuracy
-    under the paper's protocol (all frames, 1 px right: mean, whisker over the seeds' min-max)."""
+    """:func:`perturbation_grid`'s accuracy (%) against the shift per direction (left) and the
+    rotation (right): held-out test frames solid (mean ± std over runs), all frames dashed;
+    no_shift: the unshifted held-out accuracy (%); the paper's 92 % dashed red, and beside it, from
+    ``table3`` (:func:`paper_scores`, when given), this run's 1 px right on the held-out frames and on
+    all frames (mean, whisker over the seeds' min-max)."""
     import matplotlib.pyplot as plt
 
-    fig, (a, b) = plt.subplots(1, 2, figsize=(13, 4.6))
-    for name in sh.DIRECTIONS:
-        g = grid[grid.perturbation == f"shift {name}"].groupby("amount")["accuracy_%"]
-        a.errorbar(g.mean().index, g.mean(), yerr=g.std().fillna(0), marker="o", capsize=3,
-                   label=f"{name} (held-out frames, mean ± std)")
+    fig, (a, b) = plt.subplots(1, 2, figsize=(13, 5.2))
+    for k, name in enumerate(sh.DIRECTIONS):
+        _curve(a, grid[grid.perturbation == f"shift {name}"], f"C{k}", name)
     if table3 is not None:
-        v = table3["shift1_all_frames_%"]
-        a.errorbar([1], [v.mean()], yerr=[[v.mean() - v.min()], [v.max() - v.mean()]], fmt="k*", ms=11, capsize=4,
-                   label="1 px right, all frames (paper's protocol): mean, seed min-max")
+        for col, fmt, what in (("shift1_test_only_%", "k*", "held-out frames (judged)"),
+                               ("shift1_all_frames_%", "kP", "all frames (paper's protocol)")):
+            v = table3[col]
+            a.errorbar([0.85], [v.mean()], yerr=[[v.mean() - v.min()], [v.max() - v.mean()]], fmt=fmt, ms=10, capsize=4,
+                       label=f"1 px right, {what}: mean, seed min-max")
     a.axhline(PAPER_SHIFT1, color="r", ls="--", label=f"paper: {PAPER_SHIFT1} % (1 px right, all frames)")
     a.axhline(no_shift, color="k", ls=":", label="no shift (held-out frames)")
-    a.set_xscale("log", base=2); a.set_xlabel("shift (pixels at 32x32)"); a.set_ylabel("test accuracy (%)")
-    a.set_title("shifted"); a.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2)
-    g = grid[grid.perturbation == "rotation"].groupby("amount")["accuracy_%"]
-    b.errorbar(g.mean().index, g.mean(), yerr=g.std().fillna(0), marker="o", capsize=3,
-               label="held-out frames, mean ± std")
+    a.set_xscale("log", base=2); a.set_xlabel("shift (pixels at 32x32)"); a.set_ylabel("accuracy (%)")
+    a.set_title("shifted"); a.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2)
+    _curve(b, grid[grid.perturbation == "rotation"], "C0", "rotation")
     b.axhline(no_shift, color="k", ls=":", label="no shift (held-out frames)")
-    b.set_xlabel("rotation (degrees)"); b.set_ylabel("test accuracy (%)"); b.set_title("rotated")
-    b.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2)
+    b.set_xlabel("rotation (degrees)"); b.set_ylabel("accuracy (%)"); b.set_title("rotated")
+    b.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2)
     fig.tight_layout()
     return fig
+
+
+def comparison(table3: pd.DataFrame, n_frames: int, changed: np.ndarray, mean_abs: np.ndarray, pixels: int):
+    """Notebook 04's paper-vs-run table (``report.paper_vs_run``), the paper's 92 % set against the
+    held-out test frames (the frames the model never saw; the judged row) and shown beside all frames,
+    training frames included (the paper's protocol, not judged). table3: :func:`paper_scores`' table;
+    n_frames: frames in the experiment; changed, mean_abs: ``shift.pixel_change``'s (N,) arrays of a
+    1-px shift; pixels: pixels per CNN input."""
+    def stat(col):
+        v = table3[col]
+        return f"{v.mean():.2f} (seeds {v.min():.2f} to {v.max():.2f})"
+    return report.paper_vs_run([
+        ("accuracy, original test frames (%)", 98, f"{table3['original_test_%'].mean():.2f}", f"{len(table3)} seeds, mean"),
+        ("accuracy, held-out test frames shifted 1 px right (%)", PAPER_SHIFT1, stat("shift1_test_only_%"),
+         "judged: frames the model never saw"),
+        ("accuracy, all frames shifted 1 px right (%)", PAPER_SHIFT1, stat("shift1_all_frames_%"),
+         "paper protocol, training frames included: not judged"),
+        ("frames in the shift experiment", 2260, n_frames),
+        ("pixels changed per image by a 1-px shift", 32, f"{changed.mean():.0f} of {pixels}", "measured"),
+        ("mean absolute change per pixel, 1-px shift ([0, 1] intensity)", None, f"{mean_abs.mean():.4f}", "measured"),
+    ])
 
 
 def figure_controls(controls: pd.DataFrame, shifts, no_shift: float, input_shape):
@@ -249,13 +295,15 @@ def figure_controls(controls: pd.DataFrame, shifts, no_shift: float, input_shape
 
 
 def _paper_protocol(t3: pd.DataFrame, name: str) -> str:
-    """Table 3's accuracies (%) with their seed ranges: all frames shifted, test frames shifted, unshifted."""
+    """Table 3's accuracies (%) with their seed ranges: the held-out test frames shifted (judged
+    against the paper's 92 %), unshifted, and all frames shifted (the paper's protocol, shown)."""
     def one(col):
         v = t3[col]
         return f"{wording.num(v.mean())} % {wording.span(v.min(), v.max())}"
-    return (f"On {name}, every frame shifted 1 px right is classified at {one('shift1_all_frames_%')} over "
-            f"{wording.count(len(t3), 'seed')} (mean [seed min, max]; the paper: {PAPER_SHIFT1} %), the held-out test frames alone at "
-            f"{one('shift1_test_only_%')}, against {one('original_test_%')} unshifted.")
+    return (f"On {name}, the held-out test frames shifted 1 px right are classified at {one('shift1_test_only_%')} over "
+            f"{wording.count(len(t3), 'seed')} (mean [seed min, max]; the paper: {PAPER_SHIFT1} %, judged on these frames, "
+            f"which the model never saw), against {one('original_test_%')} unshifted; every frame shifted, training "
+            f"frames included (the paper's protocol), at {one('shift1_all_frames_%')}.")
 
 
 def _training_frames(t3: pd.DataFrame) -> str:

@@ -30,7 +30,7 @@ DECIMALS = {"AP_%": 2, "R@100P_%": 2, "AP_mean": 2, "AP_std": 2, "AP_min": 2, "A
             "s_per_image_batched": 5, "s_per_image_one_at_a_time": 5}
 UNRESOLVED = "not resolved: the seed ranges overlap"
 LEVELLING = "held-out AP gain, first -> second -> last third of the epochs"
-CONVERGED = "networks whose training loss stopped falling within their epochs"
+CONVERGED = "networks whose loss stopped falling before their epoch cap"
 # the paper's numbers, a reference column only: Table 2 (NYU, AP of mid-level fusion per layer)
 # and Table 3 (seconds per image: SCNN CPU and GPU, CNN CPU and GPU, GIST, BoVW)
 PAPER_T2 = dict(zip(siamese.LAYERS, [0.7444, 0.7644, 0.8111, 0.7778, 0.7222, 0.7444, 0.6667, 0.6333]))
@@ -123,13 +123,15 @@ def score_descriptors(F, GT, exclude: int, queries=None):
 
 
 def _row(descriptor, label, inf, ap, r100, supervision="none", fusion="none", layer="", train_pairs=0,
-         epochs=0, train_s=0.0, train_cpu_s=0.0, loaded_from_cache=False, seed=None, converged=None) -> dict:
-    """One row of notebook 10's tables (AP, R@100P in %; ms per image), unrounded; converged: the
-    network's training loss stopped falling within its epochs (``siamese.plateaued``), None when
-    nothing was trained."""
+         epochs=0, train_s=0.0, train_cpu_s=0.0, loaded_from_cache=False, seed=None, converged=None,
+         epoch_cap=0) -> dict:
+    """One row of notebook 10's tables (AP, R@100P in %; ms per image), unrounded; epochs: the epochs
+    the network took, epoch_cap: its most (``siamese_epochs``); converged: ``siamese.converged`` (its
+    held-out loss stopped falling within the cap under early stopping, else its training loss within
+    its epochs), None when nothing was trained."""
     return {"descriptor": descriptor, "seed": seed, "weights": inf.weights, "label": label, "dim": inf.dim,
             "supervision": supervision, "fusion": fusion, "layer": layer, "train_pairs": train_pairs,
-            "epochs": epochs, "converged": converged, "train_s": train_s, "train_cpu_s": train_cpu_s,
+            "epochs": epochs, "epoch_cap": epoch_cap, "converged": converged, "train_s": train_s, "train_cpu_s": train_cpu_s,
             "loaded_from_cache": loaded_from_cache, "AP_%": ap, "R@100P_%": r100,
             "extract_ms_per_image": 1e3 * inf.seconds_per_image}
 
@@ -153,8 +155,8 @@ def fit_and_score(name: str, X, labels, heldout, gap: int, GT, exclude: int, tra
     arguments (seed, epochs, hard_fraction, ...); kw: this network's (supervision, fusion,
     fusion_layer, merge). The held-out AP after every epoch is recorded (:func:`heldout_monitor`).
     Returns (row, S, model, history): row = one dict of notebook 10's tables (AP and R@100P on
-    the held-out queries, in %; training seconds; converged = ``siamese.plateaued`` on its training
-    loss; loaded_from_cache = the model came from the cache, ``util.cache.cached_model``), S (N, N)
+    the held-out queries, in %; training seconds; epochs taken and the cap; converged =
+    ``siamese.converged``; loaded_from_cache = the model came from the cache, ``util.cache.cached_model``), S (N, N)
     its similarity matrix, the descriptor model, history.
     """
     loaded = []
@@ -164,9 +166,9 @@ def fit_and_score(name: str, X, labels, heldout, gap: int, GT, exclude: int, tra
     F, inf = siamese.describe(model, X, return_info=True)
     S, ap, r100 = score_descriptors(F, GT, exclude, heldout)
     row = _row(name, f"{name} ({inf.weights})", inf, ap, r100, kw.get("supervision", "multitask"),
-               kw.get("fusion", "none"), kw.get("fusion_layer") or "", len(pairs["pairs"]), train_kw["epochs"],
+               kw.get("fusion", "none"), kw.get("fusion_layer") or "", len(pairs["pairs"]), len(hist["loss"]),
                hist["seconds"], hist.get("cpu_seconds", float("nan")), loaded[0], train_kw.get("seed"),
-               siamese.plateaued(hist["loss"]))
+               siamese.converged(hist), train_kw["epochs"])
     return row, S, model, hist
 
 
@@ -280,25 +282,50 @@ def fusions(s: Setup, sup: Runs, fusion_supervision: str, mid_layers, merge: str
 
 def seed_summary(table: pd.DataFrame) -> pd.DataFrame:
     """One row per descriptor of a per-seed table (:func:`supervisions` or :func:`fusions`), in
-    order: descriptor, supervision, fusion, layer, seeds, converged_seeds (networks whose training
-    loss stopped falling within the budget; 0 for untrained rows), and the mean, standard deviation (ddof 1;
+    order: descriptor, supervision, fusion, layer, seeds, converged_seeds (``siamese.converged``; 0 for
+    untrained rows), and the mean, standard deviation (ddof 1;
     NaN for one run), min and max over seeds of AP_% and R@100P_% (AP_mean, AP_std, AP_min,
-    AP_max, R100P_mean, R100P_min, R100P_max), and the mean train_s. A skipped table (no depth:
+    AP_max, R100P_mean, R100P_min, R100P_max), the mean train_s, and the fewest and most epochs a
+    seed took (epochs_min, epochs_max; 0 for untrained rows). A skipped table (no depth:
     nothing trained) is returned as it is."""
     if "AP_%" not in table:
         return table
-    g = table.assign(converged=table["converged"].eq(True) if "converged" in table else False).groupby("descriptor", sort=False)
+    g = table.assign(converged=table["converged"].eq(True) if "converged" in table else False,
+                     epochs=table["epochs"] if "epochs" in table else 0).groupby("descriptor", sort=False)
     return g.agg(supervision=("supervision", "first"), fusion=("fusion", "first"), layer=("layer", "first"),
                  seeds=("AP_%", "size"), converged_seeds=("converged", "sum"), AP_mean=("AP_%", "mean"), AP_std=("AP_%", "std"), AP_min=("AP_%", "min"),
                  AP_max=("AP_%", "max"), R100P_mean=("R@100P_%", "mean"), R100P_min=("R@100P_%", "min"),
-                 R100P_max=("R@100P_%", "max"), train_s_mean=("train_s", "mean")).reset_index()
+                 R100P_max=("R@100P_%", "max"), train_s_mean=("train_s", "mean"),
+                 epochs_min=("epochs", "min"), epochs_max=("epochs", "max")).reset_index()
+
+
+def convergence_rule(hists) -> str:
+    """The convergence rule the networks of ``hists`` (histories) were judged by, in words
+    (``siamese.converged``): the held-out loss under early stopping, else the training loss."""
+    if any(h.get("val_loss") for h in hists):
+        patience = "/".join(sorted({str(h.get("stop_patience", "?")) for h in hists if h.get("val_loss")}))
+        return (f"siamese.converged: early stopping on a held-out loss (pairs of every {siamese.VALIDATION_EVERY}th "
+                f"training frame of a place, never trained on) that fell by less than {100 * siamese.STOP_MIN_DELTA:g} % "
+                f"of its best for {patience} epochs before the epoch cap")
+    return (f"siamese.converged: the training loss fell by less than {100 * siamese.STOP_MIN_DELTA:g} % of its best "
+            f"for {siamese.STOP_PATIENCE} epochs before the budget's last epoch (a fixed budget, no early stopping)")
+
+
+RANKED_FUSIONS = ("early", "late")        # with the paper's mid-level layer: the fusions the verdict orders
+
+
+def ranked_fusions(table: pd.DataFrame, mid_layers) -> pd.DataFrame:
+    """The rows of a fusion table (:func:`fusions`' per-seed table or :func:`seed_summary`'s) whose
+    networks the verdict's "late fusion first" counts: early, mid-level at the paper's layer, late."""
+    if "fusion" not in table:
+        return table
+    return table[table.fusion.isin(RANKED_FUSIONS) | ((table.fusion == "mid") & (table.layer == _paper_layer(mid_layers)))]
 
 
 def converged_networks(*tables: pd.DataFrame) -> tuple[int, int]:
     """(k, n): n networks trained for the per-seed tables given (:func:`supervisions`, :func:`fusions`;
     rows with epochs > 0, each network once: the fusion table's "RGB only" rows and the late
-    networks' single-stream rows are networks of other rows), k of them converged (their training
-    loss stopped falling within their epochs, ``siamese.plateaued``)."""
+    networks' single-stream rows are networks of other rows), k of them converged (``siamese.converged``)."""
     kept = [x for x in tables if "converged" in x]           # a skipped fusion table trained nothing
     if not kept:
         return 0, 0
@@ -385,12 +412,14 @@ def _precision_at(runs: Runs, key, recall: float, s: Setup) -> str:
 
 def _learning(runs: Runs, keys) -> str:
     """'key a -> b (loss c -> d)' per key: the held-out AP after the first and the last epoch and the
-    training loss of the first and the last epoch, each a mean over the seeds of runs.hists."""
+    training loss of the first and the last epoch, each a mean over the seeds of runs.hists (each seed's
+    last epoch its own: under early stopping the seeds stop apart)."""
     out = []
     for key in keys:
         hs = [h for (k, _), h in runs.hists.items() if k == key]
-        m, loss = np.array([h["monitor"] for h in hs]), np.array([h["loss"] for h in hs])
-        out.append(f"{key} {m[:, 0].mean():.2f} -> {m[:, -1].mean():.2f} (loss {loss[:, 0].mean():.3g} -> {loss[:, -1].mean():.3g})")
+        m0, m1 = np.mean([h["monitor"][0] for h in hs]), np.mean([h["monitor"][-1] for h in hs])
+        l0, l1 = np.mean([h["loss"][0] for h in hs]), np.mean([h["loss"][-1] for h in hs])
+        out.append(f"{key} {m0:.2f} -> {m1:.2f} (loss {l0:.3g} -> {l1:.3g})")
     return "; ".join(out)
 
 
@@ -490,10 +519,21 @@ def paper_vs_run(s: Setup, sup: Runs, fus: Runs, tim: pd.DataFrame, supervisions
               "every network trained here, its held-out AP averaged per third of its epochs (convergence figure)"),
              (CONVERGED, "trained until the validation accuracy stalls for 10 epochs",
               f"{k} of {n}" + (f" ({budget_label(sup.table, fus.table)})" if budget_label(sup.table, fus.table) else ""),
-              f"siamese.plateaued: the training loss fell by less than {100 * siamese.STOP_MIN_DELTA:g} % of its best "
-              f"for {siamese.STOP_PATIENCE} epochs before the budget's last epoch")]
+              convergence_rule(list(sup.hists.values()) + list(fus.hists.values()))),
+             ("epochs taken per network, min - median - max", None, _epochs(sup.table, fus.table), "of each one's cap")]
     return (report.paper_vs_run(_supervision_rows(s, sup, supervisions) + level + cmp), report.paper_vs_run(t2),
             report.paper_vs_run(_timing_rows(tim)))
+
+
+def _epochs(*tables: pd.DataFrame) -> str:
+    """The epochs the networks of the per-seed tables took (each network once, as
+    :func:`converged_networks` counts them), 'min - median - max (cap C)'."""
+    t = pd.concat([x for x in tables if "epochs" in x], ignore_index=True)
+    t = t[(t.epochs > 0) & ~t.fusion.isin(["RGB only", "late (rgb stream)", "late (depth stream)"])]
+    if not len(t):
+        return "n/a"
+    caps = "/".join(str(int(c)) for c in sorted(t.epoch_cap.unique())) if "epoch_cap" in t else "?"
+    return f"{int(t.epochs.min())} - {t.epochs.median():g} - {int(t.epochs.max())} (cap {caps})"
 
 
 def _supervision_sentence(sup: pd.DataFrame, chance: float, dataset: str) -> str:
@@ -525,8 +565,10 @@ def _budget_sentence(run: pd.Series) -> str:
     """The budget label where fewer than half of the networks converged, how far the budget levels off
     and the precision at the paper's recall (paper_vs_run.csv's cells)."""
     m = re.search(r"budget-limited: \d+ of \d+ networks converged", str(run.get(CONVERGED, "")))
-    text = (f"**{m[0][0].upper() + m[0][1:]}** (their training loss still fell within their last "
-            f"{siamese.STOP_PATIENCE} epochs), so every AP and order here is the budget's. " if m else "")
+    text = (f"**{m[0][0].upper() + m[0][1:]}** (the others' loss still fell when they reached their epoch cap), "
+            f"so every AP and order here is the budget's. " if m else "")
+    if "epochs taken per network, min - median - max" in run.index:
+        text += f"Epochs taken per network, min - median - max: {run['epochs taken per network, min - median - max']}. "
     text += f"Held-out AP gained from the first to the second third of the epochs, then to the last: {run[LEVELLING]}."
     p83 = "precision at 83 % recall, multi-task"
     if p83 in run.index:
@@ -607,14 +649,9 @@ def _pr_axes(ax, chance, label=None, paper=None):
     ax.set_xlabel("recall"); ax.set_ylabel("precision"); ax.set_xlim(0, 1); ax.set_ylim(0, 1.02); ax.grid(alpha=0.3)
 
 
-def _first_seed(runs: Runs, key):
-    """(seed, S) of the first seed of ``key`` in runs.sims (pixels: seed None)."""
-    return next((seed, S) for (k, seed), S in runs.sims.items() if k == key)
-
-
 def figure_supervisions(s: Setup, sup: Runs, supervisions, dataset):
-    """Figure 8's layout: PR curves of each supervision (first seed), the untrained network and
-    pixels; the legend gives each one's AP over seeds as mean [min, max]."""
+    """Figure 8's layout: PR curves of each supervision and the untrained network (every seed, the first
+    thicker) and pixels; the legend gives each one's AP over seeds as mean [min, max]."""
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(9, 5.5))
@@ -622,21 +659,36 @@ def figure_supervisions(s: Setup, sup: Runs, supervisions, dataset):
     curves = [(x, f"scnn {x}, RGB", "-", SUPERVISION_COLOURS.get(x, f"C{k + 4}"), 1.6) for k, x in enumerate(supervisions)]
     curves += [("untrained", "scnn untrained, RGB", "-", "0.5", 1), ("pixels", "pixels (32x32 gray)", "-", "C2", 1)]
     for key, name, ls, colour, lw in curves:
-        seed, S = _first_seed(sup, key)
-        p, r, _ = evaluate.pr_curve(S, s.GT, s.exclude_steps, queries=s.held)
         r_ = summ.loc[name]
         spread = f" [{r_.AP_min:.1f}, {r_.AP_max:.1f}] over {int(r_.seeds)} seeds" if r_.seeds > 1 else ""
-        ax.plot(r, p, ls, color=colour, lw=lw, label=f"{name}: AP {r_.AP_mean:.1f} %{spread}")
+        _seed_curves(ax, s, sup, key, colour, ls, lw, f"{name}: AP {r_.AP_mean:.1f} %{spread}")
     _pr_axes(ax, s.chance, f"chance ({100 * s.chance:.1f} %)", PAPER_POINT_SUPERVISION)
     ax.set_title(f"Figure 8 layout: supervisions, RGB, held-out part of {Path(dataset).name} "
-                 f"({int(s.held.sum())} query frames; curves of the first seed)", fontsize=10)
+                 f"({int(s.held.sum())} query frames; every seed's curve)", fontsize=10)
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0)
     return fig
 
 
+def _seed_curves(ax, s: Setup, runs: Runs, key, colour, ls, lw, label) -> None:
+    """Every seed's PR curve of ``key`` in runs.sims on ax, the first labelled, the others thinner."""
+    for n, ((k, seed), S) in enumerate((x for x in runs.sims.items() if x[0][0] == key)):
+        p, r, _ = evaluate.pr_curve(S, s.GT, s.exclude_steps, queries=s.held)
+        ax.plot(r, p, ls, color=colour, lw=lw if n == 0 else 0.7 * lw, alpha=1 if n == 0 else 0.45,
+                label=label if n == 0 else None)
+
+
+def fusion_header(fus: Runs, mid_layers) -> str:
+    """Figure 9's count: how many of the networks the verdict's "late fusion first" counts (early,
+    mid-level at the paper's layer, late: :func:`ranked_fusions`) converged (``siamese.converged``)."""
+    k, n = converged_networks(ranked_fusions(fus.table, mid_layers))
+    return (f"early, mid-level at {_paper_layer(mid_layers)} and late fusion: {k} of {n} networks converged"
+            + (" (budget-limited)" if n and verdict.budget_limited(k, n) else ""))
+
+
 def figure_fusions(s: Setup, fus: Runs, mid_layers, merge: str, fusion_supervision: str, dataset):
-    """Figure 9's layout (left) and mid-level fusion at each layer (right), first seed's curves,
-    AP over seeds in the legends; a note without depth. Returns (figure, file stem):
+    """Figure 9's layout (left) and mid-level fusion at each layer (right): every seed's PR curve
+    (the first labelled and drawn thicker), AP over seeds in the legends, and above them
+    :func:`fusion_header`; a note without depth. Returns (figure, file stem):
     "figure9_fusions" or "figure9_skipped"."""
     import matplotlib.pyplot as plt
 
@@ -644,28 +696,27 @@ def figure_fusions(s: Setup, fus: Runs, mid_layers, merge: str, fusion_supervisi
         fig, ax = plt.subplots(figsize=(6, 1.5)); ax.axis("off")
         ax.text(0.5, 0.5, f"RGB-D fusion skipped:\n{dataset} has no depth/ folder", ha="center", va="center")
         return fig, "figure9_skipped"
-    fig, axes = plt.subplots(1, 2, figsize=(14, 5.2))
+    fig, axes = plt.subplots(1, 2, figsize=(14, 5.6))
     summ = seed_summary(fus.table)
     row = {r.fusion if r.fusion != "mid" else f"mid {r.layer}": r for r in summ.itertuples()}
     show = [("RGB only", "C0", ":"), ("late (depth stream)", "C2", ":"), ("early", "C1", "--"),
             (f"mid {_paper_layer(mid_layers)}", "C4", "-."), ("late", "C3", "-")]
     for key, colour, ls in [x for x in show if x[0] in row]:
-        p, r, _ = evaluate.pr_curve(_first_seed(fus, key)[1], s.GT, s.exclude_steps, queries=s.held)
         x = row[key]
-        axes[0].plot(r, p, ls, color=colour, lw=1.6,
-                     label=f"{x.descriptor}: AP {x.AP_mean:.1f} % [{x.AP_min:.1f}, {x.AP_max:.1f}]")
-    axes[0].set_title(f"Figure 9 layout: fusions ({fusion_supervision}), held-out part, first seed's curves", fontsize=10)
+        _seed_curves(axes[0], s, fus, key, colour, ls, 1.6,
+                     f"{x.descriptor}: AP {x.AP_mean:.1f} % [{x.AP_min:.1f}, {x.AP_max:.1f}], {int(x.seeds)} seeds")
+    axes[0].set_title(f"Figure 9 layout: fusions ({fusion_supervision}), held-out part, every seed's curve", fontsize=10)
     cmap = plt.get_cmap("viridis")
     for k, layer in enumerate(mid_layers):
-        p, r, _ = evaluate.pr_curve(_first_seed(fus, f"mid {layer}")[1], s.GT, s.exclude_steps, queries=s.held)
         x = row[f"mid {layer}"]
-        axes[1].plot(r, p, color=cmap(k / max(1, len(mid_layers) - 1)), lw=1.2,
-                     label=f"at {layer}: AP {x.AP_mean:.1f} % [{x.AP_min:.1f}, {x.AP_max:.1f}]")
-    axes[1].set_title(f"mid-level fusion at each layer ({merge}), held-out part", fontsize=10)
-    axes[1].legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=4, borderaxespad=0)
+        _seed_curves(axes[1], s, fus, f"mid {layer}", cmap(k / max(1, len(mid_layers) - 1)), "-", 1.2,
+                     f"at {layer}: AP {x.AP_mean:.1f} % [{x.AP_min:.1f}, {x.AP_max:.1f}], {int(x.seeds)} seeds")
+    axes[1].set_title(f"mid-level fusion at each layer ({merge}), held-out part, every seed's curve", fontsize=10)
+    axes[1].legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=3, borderaxespad=0)
     _pr_axes(axes[0], s.chance, paper=PAPER_POINT_FUSION)
     _pr_axes(axes[1], s.chance)
     axes[0].legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=1, borderaxespad=0)
+    fig.suptitle(fusion_header(fus, mid_layers), fontsize=11)
     fig.tight_layout()
     return fig, "figure9_fusions"
 
@@ -684,6 +735,9 @@ def figure_convergence(sup: Runs, fus: Runs, mid_layers, has_depth: bool):
         ep = np.arange(1, len(h["loss"]) + 1)
         label = key if seed == next(sd for k, sd in sup.hists if k == key) else None
         axes[0].plot(ep, h["loss"], color=c, lw=1, label=label)
+        if h.get("val_loss"):                   # early stopping's held-out loss, dashed
+            axes[0].plot(ep[:len(h["val_loss"])], h["val_loss"], color=c, lw=0.8, ls="--",
+                         label=f"{key}, held-out loss" if label else None)
         axes[1].plot(ep, h["monitor"], color=c, lw=1, label=label)
     t = sup.table.set_index("descriptor")
     axes[1].axhline(t.loc[["scnn untrained, RGB"], "AP_%"].max(), color="0.5", ls="--", lw=1, label="untrained (best seed)")
@@ -693,7 +747,7 @@ def figure_convergence(sup: Runs, fus: Runs, mid_layers, has_depth: bool):
         for n, ((kk, seed), h) in enumerate((x for x in fus.hists.items() if x[0][0] == key)):
             axes[2].plot(np.arange(1, len(h["monitor"]) + 1), h["monitor"], color=f"C{k + 3}", lw=1,
                          label=key if n == 0 else None)
-    titles = ["training loss (each supervision's own units)", "held-out AP % per epoch, RGB",
+    titles = ["training loss, held-out loss dashed where it stops training", "held-out AP % per epoch, RGB",
               "held-out AP % per epoch, RGB-D" if has_depth else "RGB-D: skipped (no depth/)"]
     for ax, title, ylabel in zip(axes, titles, ["training loss (log scale)", "held-out AP (%)", "held-out AP (%)"]):
         ax.set_title(title + " (one line per seed)" * bool(ax.lines), fontsize=10)

@@ -93,23 +93,29 @@ def controls_by_grouping(X: np.ndarray, frames_per_spot_list, seeds, gap: int, c
 
 
 def figure_table1(runs: dict, table1: pd.DataFrame, converged_at: float):
-    """Table 1 as a figure: every seed's test accuracy (%) per L (hollow: not converged), the median,
-    the mean ± std with a whisker over the seeds' min-max, the paper's value per L as a dashed
-    segment, and "budget-limited" written beside the lowest seed of every L whose row says so
+    """Table 1 as a figure: every seed's test accuracy (%) per L (filled: converged, hollow: not, by
+    ``training_over_seeds.converged``), the median, the mean ± std beside them (no line joins the L
+    values: their order is the seed ranges' to resolve), the paper's value per L as a dashed segment, and "budget-limited" written beside the lowest seed of every L whose row says so
     (and on a second title line).
     Returns the figure."""
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(7.5, 4))
-    first = next(iter(runs))
-    for L, rs in runs.items():
-        acc = [r["test_accuracy"] * 100 for r in rs]
-        conv = [training_over_seeds.converged(r["history"], converged_at) for r in rs]
-        ax.scatter([L] * len(acc), acc, facecolors=["tab:blue" if c else "none" for c in conv], edgecolors="tab:blue",
-                   alpha=0.7, label="one seed (hollow: did not converge)" if L == first else None)
-        ax.hlines(np.median(acc), L - 2, L + 2, color="tab:orange", lw=2, label="median" if L == first else None)
-    ax.errorbar(table1.frames_per_spot, table1["acc_mean_%"], yerr=table1["acc_std_%"], color="k", capsize=4,
-                label="this run: mean ± std")
+    first, shown = next(iter(runs)), set()
+    for L, rs in runs.items():       # the seeds left of L, the mean and std right of it: no marker hides another
+        acc = np.array([r["test_accuracy"] * 100 for r in rs])
+        conv = np.array([training_over_seeds.converged(r["history"], converged_at) for r in rs])
+        for c, style in ((True, dict(color="tab:blue", label="one seed, converged")),
+                         (False, dict(facecolors="white", edgecolors="tab:blue", linewidths=1.5,
+                                      label="one seed, did not converge (hollow)"))):
+            if (conv == c).any():
+                ax.scatter(np.full((conv == c).sum(), L - 1.2), acc[conv == c], s=30, zorder=3,
+                           **dict(style, label=None if c in shown else style["label"]))
+                shown.add(c)
+        ax.hlines(np.median(acc), L - 2.5, L + 0.2, color="tab:orange", lw=2, label="median" if L == first else None)
+    # no line joins the L values: an order of L is for the seed ranges (the conclusion) to resolve, not for a line to draw
+    ax.errorbar(table1.frames_per_spot + 1.2, table1["acc_mean_%"], yerr=table1["acc_std_%"], color="k", capsize=4,
+                fmt="o", ms=4, ls="none", label="this run: mean ± std")
     paper = [L for L in runs if L in PAPER_ACC]
     for k, L in enumerate(paper):
         ax.hlines(PAPER_ACC[L], L - 3, L + 3, color="r", ls="--", lw=1.5,

@@ -87,6 +87,40 @@ class Entry(NamedTuple):
     decide: Callable | None = None
 
 
+class IndexOptions(NamedTuple):
+    """The candidate index a streaming detector may search instead of every stored frame
+    (``detect --index``). kinds: the index names (``methods.lsh.retrieval``); dim: the dims the
+    index holds (a PCA of the stored descriptors); fit: the candidate frames that PCA is fitted on;
+    null_sample: the stored frames sampled for the calibration's null in candidate mode."""
+    kinds: tuple
+    dim: int
+    fit: int
+    null_sample: int
+
+
+class Closure(NamedTuple):
+    """One declared loop closure, as ``greenloop.detect.run`` returns it (``Run.closures``).
+
+    query, match: streamed frame numbers (match -1 for a detector that names no frame, the
+    dictionary); score: the detector's score (NaN where it has none). verified: True where the
+    geometric verifier accepted the pair, None where it was not checked (no verifier, or frames too
+    small for local features: model "too-small"); a rejected candidate is never a Closure.
+    inliers: the verifier's inlier count (0 unchecked); model: "essential", "homography", "pnp",
+    "too-small" or "none" (unchecked). R: (3, 3) float rotation of the match's camera relative to
+    the query's, None without a pose; t: (3,) float translation, in metres where ``metric`` (a pose
+    from depth, PnP) else a unit direction; None without a pose.
+    """
+    query: int
+    match: int
+    score: float
+    verified: bool | None
+    inliers: int
+    model: str
+    R: np.ndarray | None
+    t: np.ndarray | None
+    metric: bool
+
+
 def no_descriptors(data: Data) -> tuple[dict, dict]:
     """``describe`` of a family that needs no descriptor beyond those already in ``data``."""
     return {}, {}

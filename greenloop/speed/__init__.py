@@ -1,4 +1,5 @@
-"""The speed study and the home of streaming code: the paper's streaming loop-closure detector
-(``stream``: raw frames in, closure events out), greenloop-seq's and SeqSLAM's (``seqstream``,
-``seqslam_stream``, with the score matrices computed by streaming them), the one timing definition
-(``timing``), and the benchmarks (``bench``, ``make bench``; ``scale``, ``make bench-scale``)."""
+"""Measuring only, above ``methods`` (whose streaming detectors it times, never defines): the one
+timing definition, decoded frame -> decision, for every method alike (``timing``; its clock is
+``greenloop.util.clock``), the speed benchmark of notebook 06 and ``make bench`` (``bench``), the
+scaling benchmark of ``make bench-scale`` (``scale``) and the long-stream measurement of a
+``detect`` run on a long recording (``long_stream``). A user's ``detect`` never runs through here."""

@@ -22,9 +22,10 @@ What is timed, for every method alike (:func:`time_methods`)
 One more quantity, not per frame: the wall time of one whole computation (notebook 07's M x M
 cosine matrix), the best of ``repeats`` calls (:func:`best_of`).
 
-Every time greenloop reports under ``speed/`` is read by one clock, :func:`timed` (one call, wall
-seconds on ``time.perf_counter``): this module's functions, notebook 06's paper windows and stream
-comparison (``speed.bench``) and the scaling benchmark (``speed.scale``) all call it.
+Every time greenloop reports is read by one clock, ``timed`` (``greenloop.util.clock``: one call,
+wall seconds on ``time.perf_counter``; re-exported here): this module's functions, notebook 06's
+paper windows and stream comparison (``speed.bench``), the scaling benchmark (``speed.scale``) and
+a user's ``detect`` run all call it.
 
 A method is a :class:`Method`: ``start(preload)`` builds its database from the preloaded data
 (untimed) and returns a state, ``step(state, frame)`` is the timed path. :func:`detector_method`
@@ -34,7 +35,6 @@ the main paper's ``methods.dictionary.stream.Detector`` (its database is its spo
 """
 from __future__ import annotations
 
-import time
 from typing import Callable, NamedTuple
 
 import numpy as np
@@ -42,16 +42,9 @@ import numpy as np
 from greenloop import report
 from greenloop.datasets import sequence
 from greenloop.util.checks import positive_int
+from greenloop.util.clock import timed   # the one clock (greenloop.util.clock), re-exported for speed/
 
 __all__ = ["Method", "timed", "detector_method", "dictionary_method", "time_methods", "decode_ms", "best_of"]
-
-
-def timed(fn, *args):
-    """One call ``fn(*args)`` on the wall clock (``time.perf_counter``).
-    Returns (its result, seconds)."""
-    t0 = time.perf_counter()
-    out = fn(*args)
-    return out, time.perf_counter() - t0
 
 
 class Method(NamedTuple):

@@ -32,6 +32,7 @@ import yaml
 
 from greenloop import exclusion, groundtruth, report
 from greenloop.datasets import sequence
+from greenloop.methods.dictionary import cnn, spots
 from greenloop.util.files import write_atomic
 
 DEFAULT_EXCLUDE = exclusion.DEFAULT_EXCLUDE   # every notebook's default exclusion window, frames
@@ -189,7 +190,8 @@ def skip_reason(notebook, folder, params: dict) -> str | None:
     """Why ``notebook`` cannot run on ``folder`` with ``params`` (one sentence), or None: a
     LOOP_NOTEBOOKS notebook needs at least one ground-truth loop pair at its exclude, at its
     frame_step or a finer one (:func:`loop_step`); a GROUND_TRUTH_NOTEBOOKS one (05 counts its
-    closure events against the ground truth) needs a ground truth."""
+    closure events against the ground truth) needs a ground truth; notebook 12 needs 2 spots in its
+    first traversal (:func:`first_traversal_reason`)."""
     stem = Path(notebook).stem
     if stem[:2] not in GROUND_TRUTH_NOTEBOOKS:
         return None
@@ -199,7 +201,7 @@ def skip_reason(notebook, folder, params: dict) -> str | None:
                 f"CameraTrajectory.txt or `ground_truth: aligned` in sequence.yaml, or run "
                 f"`python -m greenloop import-gt FILE`)")
     if stem[:2] not in LOOP_NOTEBOOKS or loop_step(seq, params) is not None:
-        return None
+        return first_traversal_reason(stem, seq, params) if stem[:2] == "12" else None
     exclude = int(params.get("exclude", DEFAULT_EXCLUDE))
     dist = loop_distances(seq)
     closest = (f"its closest loop is {dist[0]} frames apart and its farthest {dist[1]}"
@@ -213,6 +215,22 @@ def skip_reason(notebook, folder, params: dict) -> str | None:
         fix = f"write `exclude: {dist[0] // 2}` in {yaml_file} or run make with PARAMS='-p exclude {dist[0] // 2}'"
     return (f"{stem} scores loop closures, and the ground truth of {folder} has no loop pair more than "
             f"exclude={exclude} frames apart, even among all frames ({closest}): skipped; to run it, {fix}")
+
+
+def first_traversal_reason(stem: str, folder, params: dict) -> str | None:
+    """Why notebook 12 cannot learn places on ``folder``'s first traversal (``spots.first_traversal``:
+    fewer than 2 spots of ``frames_per_spot`` frames before the first revisit at ``params``' exclude
+    and loop_threshold, or before first_traversal_end; or its blocked split with ``gap`` leaves no
+    training frame, ``cnn.split_indices``), or None."""
+    seq = sequence.open(folder)
+    gt = groundtruth.for_sequence(seq, threshold=params.get("loop_threshold", 0.5),
+                                  exclude=int(params.get("exclude", DEFAULT_EXCLUDE)))
+    try:
+        _, y = spots.first_traversal(gt, params.get("frames_per_spot", 60), params.get("first_traversal_end"))
+        cnn.split_indices(y, 0, split="blocked", gap=params.get("gap", 5))
+    except ValueError as e:
+        return f"{stem} trains a classifier of the places of the first traversal, and on {folder} {e}: skipped"
+    return None
 
 
 def write_skipped(notebook, out, folder, results_dir, reason: str, params: dict) -> Path:

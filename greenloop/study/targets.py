@@ -18,7 +18,7 @@ the builders of Nordland and Gardens Point write it), and one that names none ge
     every set     >= 920 frames/s (slowest repeat); closure precision >= 90 % at the threshold used
 
 "Above" and "not below" are judged from the paired comparisons where they are given (``comparisons``: the
-table ``study.leaderboard.comparisons`` writes, notebook 13's comparisons.csv; :func:`paired_ahead`): met
+table ``experiments.leaderboard.rows.comparisons`` writes, notebook 13's comparisons.csv; :func:`paired_ahead`): met
 only where every paired difference (the method minus each other row, on the same queries) is resolved
 above 0. Rows alone (no comparisons, e.g. a leaderboard.csv read back) compare their 95 % intervals
 (``R@1_lo_%`` / ``R@1_hi_%``, the same for AUC-PR; :func:`separated`): met only where the method's
@@ -131,7 +131,7 @@ def paired_ahead(comparisons, method: str, others, key: str):
     them is resolved with ``method`` ahead (its ``resolved`` True and its interval above 0), None
     where that lowest low end is exactly 0: uninformative, :func:`paired_word`), read
     from ``comparisons`` (rows or a DataFrame with a, b, metric, lo, resolved, as
-    ``study.leaderboard.comparisons`` writes them). (None, False) where ``others`` is empty or the
+    ``experiments.leaderboard.rows.comparisons`` writes them). (None, False) where ``others`` is empty or the
     table lacks one of them."""
     pairs = _pairs(comparisons, method, others, key, "lo")
     if pairs is None:

@@ -79,11 +79,11 @@ class Timed(NamedTuple):
 
 
 class Board(NamedTuple):
-    """board: the leaderboard (``rows.COLUMNS``, unrounded; ``leaderboard.rounded`` is
-    its written form); target: ``leaderboard.targets``; targets: the targets table; statement:
+    """board: the leaderboard (``rows.COLUMNS``, unrounded; ``rows.rounded`` is
+    its written form); target: ``rows.targets``; targets: the targets table; statement:
     the printed sentences (these three judge the written, rounded numbers, and read "above",
     "higher" and "highest" from comparisons only); comparisons: the paired comparisons as written
-    (``leaderboard.comparisons``: each greenloop-seq row against every other scored row, loop closure)."""
+    (``rows.comparisons``: each greenloop-seq row against every other scored row, loop closure)."""
     board: pd.DataFrame
     target: dict
     targets: pd.DataFrame
@@ -458,19 +458,53 @@ def figure_pr(data: Data, tuned: Tuned, board: pd.DataFrame):
     return fig
 
 
-def figure_r1(table: pd.DataFrame):
+def ties_with_top(order: pd.DataFrame, comparisons: pd.DataFrame | None, metric: str = "R@1") -> dict:
+    """{method: "top" | "tie" | "below" | "above" | "not compared"}: each row of ``order`` (the bars, best
+    first) against the first by their paired comparison of ``metric`` (``lb.comparisons``' table, either
+    direction): "tie" where its interval holds 0, "not compared" where the table has no such pair (or no
+    table is given)."""
+    top = order.method.iloc[0]
+    out = {top: "top"}
+    c = pd.DataFrame(columns=lb.COMPARISON_COLUMNS) if comparisons is None else comparisons
+    c = c[c.metric == metric]
+    for m in order.method.iloc[1:]:
+        rows = c[((c.a == top) & (c.b == m)) | ((c.a == m) & (c.b == top))]
+        if not len(rows):
+            out[m] = "not compared"
+            continue
+        r = rows.iloc[0]
+        lead = r.difference if r.a == top else -r.difference          # top minus m
+        out[m] = "tie" if not r.resolved else ("below" if lead > 0 else "above")
+    return out
+
+
+def figure_r1(table: pd.DataFrame, comparisons: pd.DataFrame | None = None):
     """R@1 of every scored loop-closure row, best first, each bar with its 95 % interval over the
     evaluation queries (``R@1_lo_%``..``R@1_hi_%``; none drawn where the table has none) and
-    chance's R@1 as a line; colours as in :func:`figure_pr`: a Figure."""
+    chance's R@1 as a line; colours as in :func:`figure_pr`. The sorted order is not a ranking: every
+    bar whose paired R@1 difference with the top bar (``comparisons``, :func:`ties_with_top`) holds 0
+    is hatched and marked "tied with the top", one never compared with it dotted, so only an
+    unhatched bar below the top is resolved below it. Returns a Figure."""
     order = table[(table["mode"] == "loop closure")].dropna(subset=["R@1_%"]).sort_values("R@1_%", ascending=False)
     chance_r1 = table[(table.method == "chance (random scores)") & (table["mode"] == "loop closure")]["R@1_%"].iloc[0]
     colours = method_colours(table.method)
     r1 = order["R@1_%"].to_numpy(float)
     err = np.nan_to_num(np.vstack([r1 - order["R@1_lo_%"].to_numpy(float), order["R@1_hi_%"].to_numpy(float) - r1]))
     fig, ax = plt.subplots(figsize=(9, 4.8))
-    ax.barh(order.method, r1, color=[colours[m] for m in order.method],
-            xerr=err, error_kw=dict(ecolor="k", lw=1, capsize=2), label="R@1, whisker: 95 % interval")
+    bars = ax.barh(order.method, r1, color=[colours[m] for m in order.method],
+                   xerr=err, error_kw=dict(ecolor="k", lw=1, capsize=2), label="R@1, whisker: 95 % interval")
+    status = ties_with_top(order, comparisons)
+    marks = {"top": ("", "top bar"), "tie": ("///", "tied with the top (paired R@1 interval holds 0)"),
+             "not compared": ("..", "not compared with the top (no paired comparison)")}
+    for bar, m in zip(bars.patches, order.method):
+        if status[m] in marks:
+            bar.set_hatch(marks[status[m]][0]); bar.set_edgecolor("k")
+            ax.annotate(marks[status[m]][1].split(" (")[0], (bar.get_width(), bar.get_y() + bar.get_height() / 2),
+                        xytext=(4, 0), textcoords="offset points", va="center", fontsize=6)
     ax.axvline(chance_r1, color="C3", ls="--", lw=1, label=f"chance R@1 {chance_r1:.2f} %")
+    n_tie = sum(v == "tie" for v in status.values())
+    ax.set_title(f"sorted by R@1, not ranked: {n_tie} of {len(order) - 1} bars tied with the top "
+                 f"({order.method.iloc[0]}) by their paired interval", fontsize=8)
     ax.invert_yaxis(); ax.set_xlabel("R@1 on the evaluation queries (%), loop closure")
     ax.set_xlim(0, 100); ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1))
     ax.tick_params(axis="y", labelsize=7)
@@ -585,6 +619,6 @@ def _false_sentence(path: Path, name: str) -> str:
 
 def manifest_extra(data: Data, tuned: Tuned) -> dict:
     """The manifest's run-dependent entries: the knobs used, the CPU and the weights of each
-    single-frame descriptor (``detectors.single_frame.specs``)."""
+    single-frame descriptor (``methods.single_frame.entry.specs``)."""
     return {"knobs": tuned.knobs, "cpu": report.cpu_model(),
             "weights_used": {b: data.infos[b].weights for b in single_frame.specs(data.params)}}

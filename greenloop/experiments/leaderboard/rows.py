@@ -196,6 +196,48 @@ def comparisons(S: dict, pairs, GT, exclude: int, queries, block: int = 10, n_bo
     return pd.DataFrame(rows, columns=COMPARISON_COLUMNS)
 
 
+PAIRED_COLUMNS = ["comparison", "a", "b", "metric", "difference", "low", "high", "queries", "block", "blocks",
+                  "resolved", "result"]
+TIE = "tie"                                  # a paired interval that holds 0 (:func:`paired_table`'s result)
+
+
+def paired_table(S: dict, named_pairs, GT, exclude: int, queries, block: int = 10, n_boot: int = N_BOOT,
+                 seed: int = SEED) -> pd.DataFrame:
+    """Named paired comparisons of score matrices on the same queries, as notebooks 08 and 09 write
+    them (``paired.csv``): :func:`comparisons` (the paired block bootstrap of the leaderboard, loop
+    closure) with a name per pair and its verdict in words.
+
+    S: {name: (M, M) score matrix}; named_pairs: [(comparison, a, b)], each a minus b; GT, exclude,
+    queries, block, n_boot, seed: as :func:`spread` (queries None: every query). Returns a DataFrame
+    of :data:`PAIRED_COLUMNS`, one row per pair and metric of :data:`COMPARED`: difference, low, high
+    (a minus b and its 95 % interval, percentage points, to 0.01), queries (Q scored), block (queries
+    per bootstrap run) and blocks (runs, ceil(Q / block)), resolved ([low, high] excludes 0) and
+    result ("a above b", "b above a" with the arms' names, or :data:`TIE`)."""
+    named_pairs = list(named_pairs)
+    if not named_pairs:
+        return pd.DataFrame(columns=PAIRED_COLUMNS)
+    names = {(a, b): c for c, a, b in named_pairs}
+    t = comparisons(S, list(names), GT, exclude, queries, block, n_boot, seed).rename(columns={"lo": "low", "hi": "high"})
+    t["comparison"] = [names[(a, b)] for a, b in zip(t.a, t.b)]
+    t["block"], t["blocks"] = int(block), -(-t["queries"] // int(block))
+    t["result"] = [TIE if not r else f"{a} above {b}" if lo > 0 else f"{b} above {a}"
+                   for a, b, lo, r in zip(t.a, t.b, t.low, t.resolved)]
+    return t[PAIRED_COLUMNS]
+
+
+def paired_sentence(t: pd.DataFrame, comparison: str, metric: str = "AUC-PR") -> str:
+    """One comparison of :func:`paired_table` (read back from paired.csv) in words: the difference
+    in points with its paired interval, the queries and blocks, and "resolved: ..." or "a tie"; ""
+    where the table lacks it."""
+    rows = t[(t.comparison == comparison) & (t.metric == metric)]
+    if not len(rows):
+        return ""
+    r = rows.iloc[0]
+    tail = f"resolved: {r.result}" if r.resolved else "a tie (the interval holds 0)"
+    return (f"{comparison}: {metric} {r.difference:+.2f} points [{r.low:+.2f}, {r.high:+.2f}] (paired bootstrap over "
+            f"{int(r.queries)} queries in {int(r.blocks)} blocks of {int(r.block)}), {tail}")
+
+
 def chance_rows(GT, exclude: int, queries, reference=None, scored_on: str = "") -> list[dict]:
     """The chance row(s): ``evaluate.query_chance`` per mode (pair AP: ``evaluate.chance_level``),
     on the same queries as the methods (``scored_on`` says which)."""

@@ -112,6 +112,10 @@ def _blocked(y, rng, test_size: float, gap: int, block: str):
         a = s + offset
         is_test[a:a + k] = True
         dropped[max(0, a - gap):min(n, a + k + gap)] = True
+    if dropped.all():
+        raise ValueError(f"the blocked split leaves no training frame: each spot's test block and its gap of {gap} "
+                         f"frames on either side cover all {n} frames (spots of {int((ends - starts).max())} frames "
+                         f"at most); pass a smaller gap or longer spots (frames_per_spot)")
     return np.flatnonzero(~dropped), np.flatnonzero(is_test)
 
 

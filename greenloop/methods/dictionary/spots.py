@@ -66,6 +66,28 @@ def first_revisit(gt: np.ndarray) -> int:
     return int(later[0])
 
 
+def first_traversal(gt: np.ndarray, frames_per_spot: int, end: int | None = None) -> tuple[int, np.ndarray]:
+    """The first traversal a classifier learns its places from: (n_ref, labels (n_ref,) int64).
+
+    gt: (N, N) bool loop matrix (neighbours excluded). end: the first frame after the first
+    traversal, None for :func:`first_revisit`. frames_per_spot: L; the traversal's frames form
+    ``group(n_ref, L)``'s spots. Raises ValueError naming the fix where the traversal holds fewer
+    than 2 spots (a classifier of one class learns nothing) or ``end`` leaves no frame after it.
+    """
+    n = len(gt)
+    n_ref = first_revisit(gt) if end is None else int(end)
+    if not 0 < n_ref < n:
+        raise ValueError(f"first_traversal_end={n_ref} must lie in 1..{n - 1} (the sequence has {n} frames)")
+    L = positive_int("frames_per_spot", frames_per_spot, whole_floats=True)
+    if n_ref <= L:
+        where = "before the first revisit" if end is None else "before first_traversal_end"
+        raise ValueError(f"the first traversal (frames 0..{n_ref - 1}, {where}) holds 1 spot of frames_per_spot={L} "
+                         f"frames: a classifier needs at least 2 places to tell apart; to run it, pass frames_per_spot "
+                         f"<= {max(n_ref // 2, 1)} (PARAMS='-p frames_per_spot {max(n_ref // 2, 1)}') or a later "
+                         f"first_traversal_end")
+    return n_ref, group(n_ref, L)
+
+
 def revisit_targets(labels: np.ndarray, gt: np.ndarray, n_reference: int):
     """Which spots a revisiting frame may be named: the spots of its loop partners.
 

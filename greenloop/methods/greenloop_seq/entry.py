@@ -46,8 +46,8 @@ def projection(k: dict, data: Data):
     proj = data.cache.get("projections", {}).get(k["descriptor"], {})
     if k["whitening"] not in proj:
         raise ValueError(f"no whitening {k['whitening']!r} fitted for descriptor {k['descriptor']!r} in this run: a "
-                         f"projection is fitted on the tuning frames of a leaderboard run (detectors.single_frame."
-                         f"projections) and is not saved in summary.json; stream a row whose whitening is 'none'")
+                         f"projection is fitted on the tuning frames of a leaderboard run (methods.single_frame."
+                         f"entry.projections) and is not saved in summary.json; stream a row whose whitening is 'none'")
     return proj[k["whitening"]]
 
 

@@ -97,14 +97,14 @@ class Detector(CandidateMode):
         where it may differ from the reference.
     index_dim: candidate mode: the index holds the stored rows (the centred, normalised descriptor
         the detector compares) reduced to index_dim dims by a PCA fitted on the first ``index_fit``
-        candidate rows (``speed.candidates.IndexSpace``; causal: until that many rows are
+        candidate rows (``candidates.IndexSpace``; causal: until that many rows are
         candidates the stored rows are scanned exactly, and the PCA never changes afterwards);
         None: the rows as they are. The sequence scores always use the full stored rows. Bytes
         per stored frame in candidate mode (``bytes_per_frame``): the stored row, D x itemsize (the
         named default: two centred 256-d parts joined, 512 float32 = 2048 B), plus the index's copy
         (index_dim float32 and what the kind adds: IVF's list ids, HNSW's links); no column buffer.
     null_sample: candidate mode with calibrate: the size of the sample of stored rows scored as
-        the calibration's null beside the retrieved ones (``speed.candidates.reservoir``, seeded);
+        the calibration's null beside the retrieved ones (``candidates.reservoir``, seeded);
         with cell_shift also what the mean of a shifted column (a point outside the stored frames)
         is estimated from.
     Options (off by default, the behaviour before them):

@@ -24,7 +24,7 @@ table).
 
 The exclusion window (query t never sees frames t - exclude .. t) is handled by the caller
 delaying insertion: frame i is added just before query i + exclude + 1 (:func:`stream_search`,
-and ``greenloop.seqstream.Detector`` with ``index=``).
+and ``greenloop.methods.greenloop_seq.seqstream.Detector`` with ``index=``).
 
 Rows are L2-normalised in float32 on the way in (queries too), so every score is a cosine.
 Searches run one query at a time on one thread in the streaming callers; call

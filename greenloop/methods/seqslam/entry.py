@@ -44,13 +44,13 @@ def tune(data: Data) -> tuple[list, dict, dict]:
 
 
 def score(k: dict, data: Data) -> np.ndarray:
-    """(M, M) float32 ``speed.seqslam_stream.score_matrix`` of a knob record."""
+    """(M, M) float32 ``seqslam_stream.score_matrix`` of a knob record."""
     return seqslam_stream.score_matrix(data.descriptors["seqslam"], data.exclude, k["seq_len"] - 1, k["contrast_window"],
                                        S0=_similarity(data))
 
 
 def stream(k: dict, threshold, data: Data) -> seqslam_stream.Detector:
-    """The streaming ``speed.seqslam_stream.Detector`` of a knob record (threshold None or NaN: scores only)."""
+    """The streaming ``seqslam_stream.Detector`` of a knob record (threshold None or NaN: scores only)."""
     t = None if threshold is None or not np.isfinite(threshold) else float(threshold)
     return seqslam_stream.Detector(t, data.exclude, k["seq_len"] - 1, k["contrast_window"])
 

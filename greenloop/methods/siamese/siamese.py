@@ -58,9 +58,13 @@ a negative pair is one it calls no loop (two frames on either side of a spot bor
 place), and a ``hard_fraction`` of each epoch's negatives are hard ones (``hard_negatives``:
 frames of other places the network being trained finds closest, re-mined every epoch). Each
 training image can be moved and relit at random (``augment``), so that a network cannot learn the
-few hundred frames of a training part by heart. The paper trains until the validation accuracy stalls for 10 epochs; a fixed
-budget is what fits ``make all`` here, and ``monitor`` records the held-out AP per epoch to show
-whether it levelled off (watched, never used to stop).
+few hundred frames of a training part by heart. The paper trains until the validation accuracy stalls for 10 epochs;
+``stop_patience`` P > 0 does the same on a held-out loss: every ``VALIDATION_EVERY``-th labelled frame of each place, or
+more where places are short (``validation_frames``) is kept out of every training pair, a fixed set of pairs among those frames is scored after each
+epoch (no augmentation, no hard negatives), and training stops once that loss has not fallen by ``STOP_MIN_DELTA`` of
+its best for P epochs (``util.stopping.stops_here`` on -log(loss)), at most ``epochs`` epochs (the cap). P = 0 trains
+every one of ``epochs`` epochs. ``converged`` is the one rule the tables read. ``monitor`` records the scored
+held-out AP per epoch to show whether it levelled off (watched, never used to stop).
 
 RGB-D fusion (``FUSIONS``; RGB-D input is one (N, H, W, 4) array: RGB, then depth, in [0, 1])
 ------------------------------------------------------------------------------------------
@@ -110,6 +114,7 @@ WEIGHT_DECAY = 5e-4            # Eq. 4's squared-norm terms (AlexNet's value)
 CACHE_VERSION = 2              # bump when training changes in a way the parameters do not show
 STOP_PATIENCE = 10             # epochs: Xu 2022 stops once its validation accuracy stalls for 10 epochs
 STOP_MIN_DELTA = 0.01          # a fall of the training loss by less than about 1 % of its best is none
+VALIDATION_EVERY = 5           # early stopping: every 5th labelled frame of a place is a validation frame
 
 # (name, kind, filters, kernel, stride) of the trunk at width=1; then fc6 and fc7
 _TRUNK = (("conv1", "conv", 16, 5, 2), ("pool1", "pool", None, 3, 2),
@@ -598,9 +603,44 @@ def _epoch_pairs(labels, n, rng, positive_fraction, gt, hard_fraction, hard_k, d
     return pairs, same
 
 
+def validation_frames(labels, every: int = VALIDATION_EVERY) -> np.ndarray:
+    """Early stopping's validation frames: (N,) bool, every k-th labelled frame of each place in frame
+    order, from its (k // 2)-th, with k = ``every``, or fewer where the places are short (half the median
+    place's frames, at least 2) so that a place keeps two of them; they never enter a training pair.
+    labels: (N,) int, -1 = unlabelled. Raises ValueError where no place keeps two (no positive pair)."""
+    labels = np.asarray(labels, dtype=np.int64)
+    places, counts = np.unique(labels[labels >= 0], return_counts=True)
+    k = int(max(2, min(every, np.median(counts) // 2))) if len(counts) else every
+    val = np.zeros(len(labels), bool)
+    for c in places:
+        idx = np.flatnonzero(labels == c)
+        val[idx[k // 2::k]] = True
+    if not len(counts) or not np.any(np.bincount(labels[val]) >= 2):
+        raise ValueError(f"early stopping needs a place with at least 4 labelled frames (two validation frames): "
+                         f"use longer places (frames_per_spot) or stop_patience=0")
+    return val
+
+
+def _batches(siamese, descriptor, X, labels, pairs, same, keys, batch_size, rng=None, shift=0.0, light=0.0, train=True):
+    """One pass over ``pairs`` (P, 2) / ``same`` (P,) in batches: trained on (``train``, augmented by
+    shift, light with rng) or only scored. Returns the mean loss (float)."""
+    losses = []
+    for s in range(0, len(pairs), batch_size):
+        i, j = pairs[s:s + batch_size, 0], pairs[s:s + batch_size, 1]
+        target = {"distance": same[s:s + batch_size].astype(np.float32),
+                  "logits_a": labels[i].astype(np.int32), "logits_b": labels[j].astype(np.int32)}
+        y = {k: target[k.split("_", 1)[1] if k.startswith(("rgb_", "depth_")) else k] for k in keys}
+        Xa, Xb = X[i], X[j]
+        if train and (shift or light):
+            Xa, Xb = augment(Xa, rng, shift, light), augment(Xb, rng, shift, light)
+        step = siamese.train_on_batch if train else siamese.test_on_batch
+        losses.append(float(step(_inputs(descriptor, Xa) + _inputs(descriptor, Xb), y, return_dict=True)["loss"]))
+    return float(np.mean(losses))
+
+
 def _fit(X, labels, progress, gt=None, monitor=None, *, seed, supervision, fusion, fusion_layer, epochs,
          n_pairs, batch_size, positive_fraction, hard_fraction, hard_k, augment_shift, augment_light, margin, lam,
-         width, merge, optimizer, learning_rate, weight_decay, **_):
+         width, merge, optimizer, learning_rate, weight_decay, stop_patience=0, **_):
     import keras
 
     keras.utils.set_random_seed(seed)
@@ -610,7 +650,14 @@ def _fit(X, labels, progress, gt=None, monitor=None, *, seed, supervision, fusio
     keys = _output_keys(supervision, fusion)
     rng = np.random.default_rng(seed)
     steps = -(-int(n_pairs) // batch_size)
-    history = {"loss": [], "epoch_seconds": [], "monitor": []}
+    history = {"loss": [], "val_loss": [], "epoch_seconds": [], "monitor": [], "stopped": False,
+               "stop_patience": int(stop_patience)}
+    full = labels
+    if stop_patience:                           # validation frames out of every training pair, fixed pairs among them
+        val = validation_frames(full)
+        val_pairs = make_pairs(np.where(val, full, -1), max(batch_size, steps * batch_size // 4), seed + 1,
+                               positive_fraction, gt)
+        labels = np.where(val, -1, full)
     all_pairs, all_same = [], []
     t0, c0 = time.perf_counter(), time.process_time()
     for _ in tqdm(range(epochs), desc=descriptor.name, unit="epoch", leave=False, disable=not progress):
@@ -619,21 +666,16 @@ def _fit(X, labels, progress, gt=None, monitor=None, *, seed, supervision, fusio
                                    descriptor, X)
         all_pairs.append(pairs)
         all_same.append(same)
-        losses = []
-        for s in range(0, len(pairs), batch_size):
-            i, j = pairs[s:s + batch_size, 0], pairs[s:s + batch_size, 1]
-            target = {"distance": same[s:s + batch_size].astype(np.float32),
-                      "logits_a": labels[i].astype(np.int32), "logits_b": labels[j].astype(np.int32)}
-            y = {k: target[k.split("_", 1)[1] if k.startswith(("rgb_", "depth_")) else k] for k in keys}
-            Xa, Xb = X[i], X[j]
-            if augment_shift or augment_light:
-                Xa, Xb = (augment(Xa, rng, augment_shift, augment_light), augment(Xb, rng, augment_shift, augment_light))
-            logs = siamese.train_on_batch(_inputs(descriptor, Xa) + _inputs(descriptor, Xb), y, return_dict=True)
-            losses.append(float(logs["loss"]))
-        history["loss"].append(float(np.mean(losses)))
+        history["loss"].append(_batches(siamese, descriptor, X, labels, pairs, same, keys, batch_size, rng,
+                                        augment_shift, augment_light))
         history["epoch_seconds"].append(time.perf_counter() - t_epoch)
-        if monitor is not None:                 # watched, never acted on: the budget is fixed
+        if monitor is not None:                 # watched, never acted on
             history["monitor"].append(float(monitor(descriptor)))
+        if stop_patience:
+            history["val_loss"].append(_batches(siamese, descriptor, X, full, *val_pairs, keys, batch_size, train=False))
+            if stops_here(-np.log(np.maximum(history["val_loss"], 1e-12)), stop_patience, STOP_MIN_DELTA):
+                history["stopped"] = True      # the held-out loss stopped falling within the cap
+                break
     history["seconds"] = time.perf_counter() - t0
     history["cpu_seconds"] = time.process_time() - c0     # all threads of this process
     history["n_classes"] = n_classes
@@ -652,13 +694,24 @@ def plateaued(loss, patience: int = STOP_PATIENCE, min_delta: float = STOP_MIN_D
     return any(stops_here(r[:e], patience, min_delta) for e in range(2, len(r) + 1))
 
 
+def converged(history: dict) -> bool:
+    """The one convergence rule of a Siamese network: under early stopping (``history["val_loss"]``
+    recorded, ``stop_patience`` > 0) its held-out loss stopped falling within the epoch cap
+    (``history["stopped"]``); with a fixed budget its training loss stopped falling within its
+    epochs (:func:`plateaued`). False: it ended on its budget while its loss still fell."""
+    if history.get("val_loss"):
+        return bool(history.get("stopped", False))
+    return plateaued(history["loss"])
+
+
 def train(X, labels, seed: int = 0, supervision: str = "multitask", fusion: str = "none",
           fusion_layer: str | None = None, epochs: int = 10, n_pairs: int = 1000,
           batch_size: int = 100, positive_fraction: float = 0.5, margin: float = MARGIN,
           lam: float = LAMBDA, width: float = 1.0, merge: str = "sum",
           optimizer: str = "adam", learning_rate: float | None = None,
           weight_decay: float = WEIGHT_DECAY, gt=None, hard_fraction: float = 0.0, hard_k: int = 10,
-          augment_shift: float = 0.0, augment_light: float = 0.0, monitor=None, cache=True, progress: bool = False, was_cached=None):
+          augment_shift: float = 0.0, augment_light: float = 0.0, monitor=None, cache=True, progress: bool = False, was_cached=None,
+          stop_patience: int = 0):
     """Train a Siamese network on pairs of the labelled frames (cached on disk).
 
     X: (N, H, W, C) float32 in [0, 1], every frame of the sequence (C = 3 RGB, 1 depth, 4 RGB-D).
@@ -671,6 +724,9 @@ def train(X, labels, seed: int = 0, supervision: str = "multitask", fusion: str 
     ``hard_k`` nearest such frames by the network as it stands (``hard_negatives``; needs gt).
     augment_shift, augment_light: ``augment``'s shift and photometric range for every training
     image (0, 0: the frames as they are).
+    stop_patience: 0 trains every one of ``epochs`` epochs; P > 0 stops once the held-out loss (pairs
+    of ``validation_frames``, kept out of training) has not fallen by ``STOP_MIN_DELTA`` of its best for
+    P epochs, ``epochs`` then being the cap (:func:`converged` reads it).
     monitor: optional (key, fn): fn(descriptor model) -> float is recorded after every epoch in
     history["monitor"] (e.g. the held-out AP, watched and never used to stop or choose); key (a
     string) names what fn measures in the cache key. cache: as ``greenloop.methods.dictionary.cnn.train``
@@ -678,7 +734,8 @@ def train(X, labels, seed: int = 0, supervision: str = "multitask", fusion: str 
     ground truth and every parameter). progress: a tqdm bar on stderr. was_cached: optional list;
     True is appended when the network is read from the cache, False when it is trained here.
     Returns (descriptor, history, pairs): the descriptor model (frames -> (N, DESCRIPTOR_DIM));
-    history with per-epoch 'loss', 'epoch_seconds' and 'monitor', 'seconds' (training wall time),
+    history with per-epoch 'loss', 'val_loss' (under early stopping, else empty), 'epoch_seconds' and
+    'monitor', 'stopped' (the held-out loss stopped falling within the cap), 'seconds' (training wall time),
     'cpu_seconds' (CPU time of all threads), 'n_classes', 'n_train_frames'; pairs =
     {'pairs': (epochs*P, 2) int64, 'same': bool}, every pair trained on.
     """
@@ -688,6 +745,8 @@ def train(X, labels, seed: int = 0, supervision: str = "multitask", fusion: str 
         raise ValueError(f"X must be (N, H, W, C) and labels (N,), got {X.shape} and {labels.shape}")
     positive_int("epochs", epochs, whole_floats=True)
     positive_int("batch_size", batch_size, whole_floats=True)
+    if int(stop_patience) < 0:
+        raise ValueError(f"stop_patience must be 0 (a fixed budget) or a positive number of epochs, got {stop_patience}")
     _check(supervision, fusion, fusion_layer, merge, X.shape[-1])
     if not 0 <= hard_fraction <= 1 or (hard_fraction and gt is None):
         raise ValueError(f"hard_fraction must be in [0, 1] and needs gt, got {hard_fraction} (gt given: {gt is not None})")
@@ -701,7 +760,8 @@ def train(X, labels, seed: int = 0, supervision: str = "multitask", fusion: str 
                   hard_fraction=float(hard_fraction), hard_k=int(hard_k), augment_shift=float(augment_shift),
                   augment_light=float(augment_light),
                   gt_key=None if gt is None else cache_key(gt, labels),
-                  monitor_key=None if monitor is None else monitor[0])
+                  monitor_key=None if monitor is None else monitor[0],
+                  **({"stop_patience": int(stop_patience), "validation_every": VALIDATION_EVERY} if stop_patience else {}))
     key = cache_key(X, labels, **params)
     if was_cached is not None:
         was_cached.append(is_cached(key, cache))
