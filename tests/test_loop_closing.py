@@ -48,8 +48,31 @@ def test_the_detectors_closures_come_through_the_registry_and_are_labelled_by_th
     (loop,) = lc.loops(det.closures.iloc[:1], poses)                              # unverified: the identity
     assert np.array_equal(loop.T, np.eye(4)) and (loop.i, loop.j) == tuple(det.closures.iloc[0][["query", "match"]])
     assert np.allclose(arm_loops[lc.GROUND_TRUTH][0].T, tj.relative(poses[gt.iloc[0]["query"]], poses[gt.iloc[0]["match"]]))
-    with pytest.raises(ValueError, match="verification"):
-        lc.loops(det.closures, poses, verify=True)
+
+
+def test_a_verified_closures_pose_becomes_its_loop_factor_in_the_graphs_convention(study):
+    """verification's R, t are T_match^-1 T_query; the loop factor is T_query^-1 T_match; a row without
+    a pose (too small to check) stays the identity."""
+    poses = study[0]
+    q, m = 150, 30
+    T_mq = tj.relative(poses[m], poses[q])
+    rows = pd.DataFrame([("x (verified)", q, m, 1.0, T_mq[:3, :3], T_mq[:3, 3], True, True),
+                         ("x (verified)", q, m, 1.0, None, None, False, False)],
+                        columns=["arm", "query", "match", "score", "R", "t", "metric", "verified"])
+    posed, bare = lc.loops(rows, poses)
+    assert np.allclose(posed.T, tj.relative(poses[q], poses[m])) and posed.metric
+    assert np.array_equal(bare.T, np.eye(4))
+
+
+def test_verification_keeps_a_subset_of_each_detectors_closures(study, tiny_sequence):
+    """On the tiny sequence (160x120, below verification's 240 px) every closure the stage declares is
+    one of the detector's and unverified (no pose); the arm is named '<detector> (verified)'."""
+    det = study[1]
+    grad = det.closures[det.closures.arm == "greenloop-seq-grad"]
+    v = lc.verified(tiny_sequence, grad)
+    assert set(v.arm) <= {"greenloop-seq-grad (verified)"}
+    assert set(zip(v["query"], v["match"])) <= set(zip(grad["query"], grad["match"]))
+    assert not v["verified"].any() and v["R"].isna().all()
 
 
 def test_true_closures_with_gnc_lower_the_ate_below_odometry_alone(study):
@@ -95,7 +118,7 @@ def test_the_draft_notebook_writes_its_tables_and_conclusion(tiny_sequence, tmp_
     notebook = ROOT / "notebooks" / "drafts" / "14_loop_closing.ipynb"
     (tmp_path / "models").mkdir()
     params = dict(TINY, frame_step=1, odometry_seeds=[0, 1], seq_descriptors=["pixels"],
-                  fast_descriptors=["pixels"], false_min_distance_m=3.0)
+                  fast_descriptors=["pixels"], false_min_distance_m=3.0, verify=True)
     folder = _run(notebook, tiny_sequence, tmp_path, monkeypatch, params)
     table = pd.read_csv(folder / "ate_table.csv").set_index(["arm", "back_end"])
     odometry = table.loc[(lc.ODOMETRY, "none"), "ate_m_mean"]
@@ -106,7 +129,8 @@ def test_the_draft_notebook_writes_its_tables_and_conclusion(tiny_sequence, tmp_
     curve = pd.read_csv(folder / "robustness.csv")
     assert sorted(curve.fraction.unique()) == pytest.approx([0.0, 0.1, 0.2, 0.3, 0.4, 0.5])
     info = json.loads((folder / "summary.json").read_text())
-    assert info["verify"] is False and info["curve_arm"] in info["arms"]
+    assert info["verify"] is True and info["curve_arm"] in info["arms"] and "greenloop-seq-grad (verified)" in info["arms"]
     text = lc.conclusion(folder)
-    assert "Odometry alone" in text and "unverified" in text and wording.num(odometry, 3) in text
+    assert "Odometry alone" in text and "Unverified arms" in text and wording.num(odometry, 3) in text
+    assert "Issue 66's target (GNC with greenloop-seq-grad (verified)'s closures" in text
     assert (folder / "trajectories_gnc.png").is_file() and (folder / "robustness.png").is_file()
