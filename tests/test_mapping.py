@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from greenloop.cli import main as cli_main
-from greenloop.datasets import sequence
+from greenloop.datasets import odometry, sequence
 from greenloop.mapping import metrics, posegraph, slam
 from greenloop.mapping import trajectory as tj
 
@@ -14,10 +14,11 @@ SIDE, STEP = 10.0, 0.1
 
 @pytest.fixture(scope="module")
 def square():
-    """(ground truth, odometry, the true loop, a false loop) on a 10 m square walked once."""
+    """(ground truth, odometry, the true loop, a false loop) on a 10 m square walked once; the heading
+    bias doubled (0.01 rad/m) so that 40 m of route drift well beyond the loop's sigmas."""
     gt = tj.rectangle_route(SIDE, SIDE, STEP)
     n = len(gt)
-    odo = tj.simulate_odometry(gt, seed=1)
+    odo = tj.drift_poses(gt, seed=1, heading_bias=0.01)
     true = posegraph.loops_from_poses(gt, [(n - 3, 2)])
     false = posegraph.Loop(n // 2, 20, true[0].T.copy())      # opposite corners, a true loop's pose
     return gt, odo, true, false
@@ -121,7 +122,7 @@ def test_gnc_holds_the_true_loops_result_over_the_robustness_curve():
     LM ends worse than the odometry at every fraction."""
     gt = tj.rectangle_route(10, 10, 0.1, laps=2)
     n, lap = len(gt), len(gt) // 2
-    odo = tj.simulate_odometry(gt, seed=2)
+    odo = tj.drift_poses(gt, seed=2)
     true = posegraph.loops_from_poses(gt, [(lap + k, k) for k in range(20, lap - 20, 50)])
     assert len(true) == 8
     alone = metrics.ate(gt, posegraph.optimize(odo, true, "gnc").poses)
@@ -209,38 +210,32 @@ def test_associate_matches_nearest_stamps_within_max_diff():
         metrics.associate(a, b + 100)
 
 
-def test_simulate_odometry_is_seeded_and_its_drift_grows_with_distance():
+def test_drift_poses_is_the_datasets_model_lifted_to_se3():
+    """mapping's odometry is datasets.odometry's drift model on the floor plane: seeded, the truth with
+    no drift, the planar model's poses on the floor, the truth's height, pitch and roll kept."""
     gt = tj.rectangle_route(20, 20, 0.1)
-    a, b = tj.simulate_odometry(gt, seed=4), tj.simulate_odometry(gt, seed=4)
-    assert np.array_equal(a, b) and not np.allclose(a, tj.simulate_odometry(gt, seed=5))
-    assert np.array_equal(a[0], gt[0])
-    line = tj.integrate(np.eye(4), [tj.make_poses([[0, 0, 0]], [[0, 0, 0.1]])[0]] * 200)   # 20 m straight
-    biased = tj.simulate_odometry(line, seed=0, slip=0.0, heading_bias_deg_per_m=0.5, noise=0.0)
-    heading_error = np.degrees(tj.rotation_angle(tj.relative(line, biased)))
-    assert np.allclose(heading_error, 0.5 * tj.distances(line), atol=1e-9)       # degrees per metre, exactly
-    lateral = np.linalg.norm(biased[:, :3, 3] - line[:, :3, 3], axis=1)
-    assert lateral[200] > 3.5 * lateral[100]                                    # position drift ~ distance^2
-    ends = [[metrics.end_point_error(line[:k + 1], tj.simulate_odometry(line, s, heading_bias_deg_per_m=0.0)[:k + 1])
-             for k in (50, 200)] for s in range(8)]
-    assert np.mean(ends, axis=0)[1] > np.mean(ends, axis=0)[0]                  # slip and noise: a random walk
-    with pytest.raises(ValueError, match="slip"):
-        tj.simulate_odometry(line, 0, slip=-1)
+    gt = gt @ tj.make_poses([[0.2, 0, 0]], [[0, 0, 0]])[0]                        # a pitched camera
+    gt[:, 1, 3] = -0.8                                                            # at a height (y down)
+    a = tj.drift_poses(gt, seed=4)
+    assert np.array_equal(a, tj.drift_poses(gt, seed=4)) and not np.allclose(a, tj.drift_poses(gt, seed=5))
+    assert np.allclose(a[0], gt[0])
+    assert np.allclose(tj.drift_poses(gt, 4, scale_error=0, slip=0, heading_bias=0, heading_noise=0), gt)
+    planar = odometry.simulate_odometry(tj.to_planar(gt, tj.FLOOR), seed=4)
+    floor = tj.to_planar(a, tj.FLOOR)                                             # the one model, on the floor
+    assert np.allclose(floor[:, :2], planar[:, :2]) and np.allclose(np.exp(1j * floor[:, 2]), np.exp(1j * planar[:, 2]))
+    assert np.allclose(a[:, 1, 3], -0.8)                                          # height kept
+    assert np.allclose(tj.rotation_angle(tj.relative(gt, a)), np.abs(np.angle(np.exp(1j * (planar[:, 2] -
+                       tj.to_planar(gt, tj.FLOOR)[:, 2])))), atol=1e-9)           # only the yaw drifts
+    assert metrics.ate(gt, a) > 0.3
 
 
-def test_trajectory_files_round_trip(tmp_path):
+def test_write_tum_reads_back_through_read_odometry(tmp_path):
     poses = _random_poses(12, 7)
     out = tj.write_tum(tmp_path / "t.tum", np.arange(12), poses)
-    stamps, back = tj.read_poses(out)
+    stamps, back = odometry.read_odometry(out)
     assert np.array_equal(stamps, np.arange(12)) and np.allclose(back, poses, atol=1e-8)
-    kitti = tmp_path / "poses.txt"
-    kitti.write_text("\n".join(" ".join(f"{v:.12g}" for v in p[:3].ravel()) for p in poses) + "\n")
-    stamps, back = tj.read_poses(kitti)
-    assert np.array_equal(stamps, np.arange(12)) and np.allclose(back, poses, atol=1e-9)
-    (tmp_path / "bad.txt").write_text("1 2 3\n")
-    with pytest.raises(ValueError, match="8 .*or 12"):
-        tj.read_poses(tmp_path / "bad.txt")
-    with pytest.raises(FileNotFoundError):
-        tj.read_poses(tmp_path / "none.txt")
+    with pytest.raises(ValueError, match="one stamp per pose"):
+        tj.write_tum(tmp_path / "u.tum", np.arange(3), poses)
 
 
 def test_read_closures_takes_detects_columns_and_skips_rows_without_a_pose(tmp_path):
@@ -274,7 +269,7 @@ def test_slam_command_writes_a_trajectory_that_reads_back(tmp_path, square, caps
                      str(tmp_path / "closures.csv"), "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "1 of 2 loop factors kept" in printed and "ATE" in printed
-    stamps, poses = tj.read_poses(out)
+    stamps, poses = odometry.read_odometry(out)
     assert len(poses) == len(gt) and np.array_equal(stamps, np.arange(len(gt)))
     assert metrics.ate(gt, poses) < 0.15 * metrics.ate(gt, odo)
     weights = (out.parent / "traj_loops.csv").read_text().splitlines()
@@ -292,3 +287,41 @@ def test_plot_draws_every_trajectory_and_loop(square):
     assert ax.lines[4].get_color()[0] > 0.6 > ax.lines[4].get_color()[1]      # the rejected loop: red
     import matplotlib.pyplot as plt
     plt.close(fig)
+
+
+def test_slam_on_a_bag_takes_the_odometry_topic_at_each_frames_time(tmp_path, capsys):
+    """A ROS 1 bag with a camera topic and two Odometry topics: each frame gets the odometry pose at its
+    time (interpolated), the corrected trajectory is stamped with the frames' times."""
+    from tests.test_recording import CAM, ODOM, _frames, write_bag
+    ostamps = 10.0 + 0.5 * np.arange(9)
+    opos = tj.integrate(np.eye(4), [tj.make_poses([[0, 0, 0]], [[0, 0, 1.0]])[0]] * 8)   # 1 m per 0.5 s
+    fstamps = 10.05 + 0.5 * np.arange(7)                                         # 0.05 s after each
+    bag = write_bag(tmp_path / "rec.bag", True, _frames(7), fstamps, (), (opos, ostamps))
+    stamps, poses = slam.frame_odometry(bag, bag, topic=ODOM, camera_topic=CAM)
+    assert np.allclose(stamps, fstamps) and np.allclose(poses[:, 2, 3], 0.1 + np.arange(7))
+    out = tmp_path / "traj.tum"
+    assert cli_main(["slam", str(bag), "--odometry", str(bag), "--odometry-topic", ODOM, "--topic", CAM,
+                     "--out", str(out)]) == 0
+    back_stamps, back = odometry.read_odometry(out)
+    assert np.allclose(back_stamps, fstamps, atol=1e-6) and np.allclose(back[:, 2, 3], 0.1 + np.arange(7), atol=1e-6)
+    with pytest.raises(ValueError, match="no odometry pose within"):
+        slam.frame_odometry(bag, bag, topic=ODOM, camera_topic=CAM, max_dt=0.01)
+    kitti = tmp_path / "odo.txt"
+    kitti.write_text("\n".join(" ".join(f"{v:.12g}" for v in p[:3].ravel()) for p in opos) + "\n")
+    with pytest.raises(ValueError, match="KITTI file .no times"):
+        slam.frame_odometry(bag, kitti, camera_topic=CAM)
+
+
+def test_a_folders_frames_take_the_pose_stamped_with_their_number(tmp_path, tiny_sequence):
+    """A sequence folder's frame k takes the KITTI file's line k (no times: the folder's convention);
+    too short a file leaves frames without a pose, a ValueError counting them."""
+    n = len(sequence.list_frames(tiny_sequence))
+    poses = _random_poses(n, 3)
+    kitti = tmp_path / "odo.txt"
+    kitti.write_text("\n".join(" ".join(f"{v:.12g}" for v in p[:3].ravel()) for p in poses[::-1]) + "\n")
+    stamps, got = slam.frame_odometry(tiny_sequence, kitti)
+    assert np.array_equal(stamps, np.arange(n)) and np.allclose(got, poses[::-1], atol=1e-9)
+    short = tmp_path / "short.txt"
+    short.write_text("\n".join(kitti.read_text().splitlines()[: n // 2]) + "\n")
+    with pytest.raises(ValueError, match=f"{n - n // 2} of {n} frames"):
+        slam.frame_odometry(tiny_sequence, short)

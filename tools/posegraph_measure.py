@@ -2,7 +2,7 @@
 frames within 2 minutes on 2 cores, memory stated).
 
 A 10,000-pose route (laps around a rectangle, ``trajectory.rectangle_route``), its odometry drifted
-by ``trajectory.simulate_odometry``, ~200 true loops between laps (pairs of poses within 0.5 m
+by ``trajectory.drift_poses`` (datasets.odometry's model, heading bias 0.001 rad/m), ~200 true loops between laps (pairs of poses within 0.5 m
 and more than one lap's 80 % apart, ``posegraph.loops_from_poses``), optionally with false loops
 (``posegraph.inject_false_loops``). Each back end runs in its own process (so that its peak
 resident memory is its own): the seconds to build and optimise, the peak RSS, the ATE before and
@@ -36,7 +36,7 @@ def problem(n_poses: int, n_loops: int, false: float, seed: int = 0):
     laps = 5
     step = 2 * (40 + 10) * laps / n_poses
     gt = trajectory.rectangle_route(10, 40, step, laps)
-    odo = trajectory.simulate_odometry(gt, seed, heading_bias_deg_per_m=0.05)
+    odo = trajectory.drift_poses(gt, seed, heading_bias=0.001)
     lap = len(gt) // laps
     pairs = cKDTree(gt[:, :3, 3]).query_pairs(0.5, output_type="ndarray")
     pairs = pairs[np.abs(pairs[:, 0] - pairs[:, 1]) > 0.8 * lap]

@@ -12,8 +12,16 @@ def add_parser(sub) -> None:
                                    "closures, optimise it (GTSAM; default GNC with the odometry as known "
                                    "inliers), write the corrected trajectory (TUM) and each loop factor's "
                                    "final weight (CSV); print the ATE when the folder has CameraTrajectory.txt.")
-    s.add_argument("recording", metavar="RECORDING", help="the sequence folder (its CameraTrajectory.txt is the ground truth)")
-    s.add_argument("--odometry", required=True, metavar="FILE", help="odometry poses, TUM or KITTI, one per frame")
+    s.add_argument("recording", metavar="RECORDING",
+                   help="the sequence folder (its CameraTrajectory.txt is the ground truth), a ROS bag or a video")
+    s.add_argument("--odometry", required=True, metavar="FILE",
+                   help="odometry: a bag with a nav_msgs/Odometry topic (the recording itself for a bag), or a TUM or "
+                        "KITTI file; a folder's frames take the pose stamped with their frame number, a bag's or "
+                        "video's the pose at their time (interpolated)")
+    s.add_argument("--odometry-topic", default=None, metavar="TOPIC", help="the bag's Odometry topic (when it has several)")
+    s.add_argument("--topic", default=None, metavar="TOPIC", help="the bag recording's camera topic (when it has several)")
+    s.add_argument("--max-dt", type=float, default=0.1, metavar="S",
+                   help="seconds: the farthest a frame's nearest odometry message may be (bags and videos; default 0.1)")
     s.add_argument("--closures", default=None, metavar="CSV",
                    help="loop closures: query (or frame), match, rx ry rz (rotation vector, rad), tx ty tz (m) of "
                         "inv(T_query) T_match, metric (1: metric translation, 0: direction only); detect's "
@@ -32,7 +40,7 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     """Correct, then say what was written and, with ground truth, the errors before and after."""
     c = slam.correct(args.recording, args.odometry, args.out, args.closures, args.weights, args.back_end,
-                     planar=args.planar)
+                     planar=args.planar, topic=args.odometry_topic, camera_topic=args.topic, max_dt=args.max_dt)
     kept = int((c.result.weights > slam.KEPT).sum())
     skipped = f" ({c.skipped} rows of {args.closures} without a verified pose skipped)" if c.skipped else ""
     print(f"wrote {len(c.odometry)} corrected poses to {c.out} (back end {args.back_end}: {kept} of "

@@ -63,8 +63,7 @@ def read_odometry(path, topic: str | None = None, fmt: str = "auto") -> tuple[np
         raise FileNotFoundError(f"odometry {path} does not exist: give a bag with a nav_msgs/Odometry topic, "
                                 f"or a TUM (`t tx ty tz qx qy qz qw`) or KITTI (12 numbers a line) file")
     if fmt == "auto":
-        fmt = "bag" if path.is_dir() or path.suffix.lower() in recording.BAG_SUFFIXES + recording.ROS2_FILES \
-            else _text_format(path)
+        fmt = format_of(path)
     if fmt not in FORMATS:
         raise ValueError(f"odometry format {fmt!r} unknown: give one of {', '.join(FORMATS)} or 'auto'")
     if topic is not None and fmt != "bag":
@@ -72,6 +71,15 @@ def read_odometry(path, topic: str | None = None, fmt: str = "auto") -> tuple[np
     if fmt == "bag":
         return _bag_odometry(path, topic)
     return sequence.read_tum(path) if fmt == "tum" else _read_kitti(path)
+
+
+def format_of(path) -> str:
+    """"bag" (a ROS 1 .bag, a ROS 2 bag folder or its storage file), else "tum" or "kitti" by the
+    count of numbers on a text file's first data line; ValueError for another count."""
+    path = Path(path)
+    if path.is_dir() or path.suffix.lower() in recording.BAG_SUFFIXES + recording.ROS2_FILES:
+        return "bag"
+    return _text_format(path)
 
 
 def _data_lines(path: Path) -> list[tuple[int, str]]:

@@ -6,7 +6,18 @@ Closures come from a CSV with a header (``read_closures``): ``query`` (or detect
 direction when ``metric`` is 0) of ``T = inv(T_w_query) @ T_w_match`` (the match camera's pose in
 the query camera's frame: ``posegraph.Loop``), and ``metric`` (1 or 0; default 1). Rows whose
 ``closure`` column (detect's ``--matches``) is 0, or whose match or pose is empty, are skipped and
-counted. Odometry: one pose per frame, pose k = frame k (a TUM or KITTI file).
+counted.
+
+Odometry (``datasets.odometry.read_odometry``): a bag's ``nav_msgs/Odometry`` topic, a TUM or a
+KITTI file, given each frame's pose by ``datasets.odometry.associate`` (:func:`frame_odometry`):
+
+* a bag or a video recording: its frames' times (``datasets.recording.open_frames``: header
+  stamps, or frame k / rate) against the odometry's times in seconds, interpolated, a frame
+  without a message within ``max_dt`` seconds being a ValueError; a KITTI file (no times) is
+  refused for these;
+* a sequence folder: the folder's convention, a trajectory's t is the frame number (its
+  CameraTrajectory.txt, the days' odometry.txt; a KITTI file's line k is frame k), so frame k
+  takes the odometry's pose stamped k; a folder without frames takes every pose the file holds.
 """
 from __future__ import annotations
 
@@ -16,6 +27,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from greenloop.datasets import odometry as odometry_io
+from greenloop.datasets import recording as recordings
 from greenloop.datasets import sequence
 from greenloop.mapping import metrics, posegraph
 from greenloop.mapping import trajectory as tj
@@ -102,29 +115,64 @@ def _errors(recording: Path, stamps, odometry, corrected) -> dict | None:
     return out
 
 
+def frame_odometry(recording, odometry, topic: str | None = None, camera_topic: str | None = None,
+                   max_dt: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
+    """Each frame's odometry pose (module doc: times for a bag or video, frame numbers for a folder).
+
+    recording: a sequence folder, a bag or a video. odometry: a bag (``topic``: its Odometry topic)
+    or a TUM / KITTI file. camera_topic: the bag recording's image topic. max_dt: seconds, the
+    farthest a frame's nearest odometry message may be. Returns (stamps (N,) float64: frame times
+    in seconds, or frame numbers for a folder; poses (N, 4, 4) float64), one per frame.
+    """
+    o_stamps, o_poses = odometry_io.read_odometry(odometry, topic)
+    order = np.argsort(o_stamps, kind="stable")
+    o_stamps, o_poses = o_stamps[order], o_poses[order]
+    kind = recordings.kind_of(recording)
+    if kind == "folder" and odometry_io.format_of(odometry) == "bag":
+        raise ValueError(f"{recording} is an image folder (frame numbers) and {odometry} a bag (seconds): give "
+                         f"the folder's odometry as a frame-numbered TUM or KITTI file, or the bag as the recording")
+    if kind == "folder":
+        if not (Path(recording) / "rgb").is_dir():
+            return o_stamps, o_poses
+        n = len(sequence.list_frames(recording))
+        stamps = np.arange(n, dtype=np.float64)
+        poses, ok = odometry_io.associate(stamps, o_stamps, o_poses, max_dt=0.5)     # frame numbers
+    else:
+        if odometry_io.format_of(odometry) == "kitti":
+            raise ValueError(f"{odometry} is a KITTI file (no times) and {recording} a {kind} timed in seconds: "
+                             f"give the odometry as a bag topic or a TUM file with times")
+        stamps = recordings.open_frames(recording, camera_topic).stamps
+        if stamps is None:
+            raise ValueError(f"{recording} has no frame times: give its odometry as a sequence folder's "
+                             f"frame-numbered file, or a recording with times")
+        poses, ok = odometry_io.associate(stamps, o_stamps, o_poses, max_dt)
+    if not ok.all():
+        raise ValueError(f"{int((~ok).sum())} of {len(ok)} frames of {recording} have no odometry pose within "
+                         f"{max_dt} (odometry {odometry}: {len(o_stamps)} poses, stamps {o_stamps[0]:g}.."
+                         f"{o_stamps[-1]:g}): give odometry covering the recording, or a larger max_dt")
+    return stamps, poses
+
+
 def correct(recording, odometry, out, closures=None, weights_out=None, method: str = "gnc",
-            noise: posegraph.Noise = posegraph.Noise(), planar: bool = False) -> Corrected:
+            noise: posegraph.Noise = posegraph.Noise(), planar: bool = False, topic: str | None = None,
+            camera_topic: str | None = None, max_dt: float = 0.1) -> Corrected:
     """Optimise the recording's pose graph and write it.
 
-    recording: the sequence folder (its CameraTrajectory.txt, if any, is the ground truth; its frame
-    count, if it holds frames, must equal the odometry's poses). odometry: a TUM or KITTI file, one
-    pose per frame. closures: a closures CSV (module doc) or None (odometry alone). out: the TUM
-    file to write (the odometry's stamps). weights_out: the loop weights' CSV (default: ``out`` with
-    ``_loops.csv``). method: a back end of posegraph.METHODS. planar: Pose2 (posegraph's module doc).
-    Returns :class:`Corrected`.
+    recording: a sequence folder (its CameraTrajectory.txt, if any, is the ground truth), a bag or a
+    video. odometry: a bag (``topic``: its Odometry topic) or a TUM / KITTI file, given to each frame
+    by :func:`frame_odometry` (camera_topic, max_dt seconds: as there). closures: a closures CSV
+    (module doc) or None (odometry alone). out: the TUM file to write (the frames' stamps).
+    weights_out: the loop weights' CSV (default: ``out`` with ``_loops.csv``). method: a back end
+    of posegraph.METHODS. planar: Pose2 (posegraph's module doc). Returns :class:`Corrected`.
     """
     recording = Path(recording)
-    if not recording.is_dir():
-        raise FileNotFoundError(f"recording folder {recording} not found: give the sequence folder")
-    stamps, odo = tj.read_poses(odometry)
-    frames = sequence.list_frames(recording) if (recording / "rgb").is_dir() else []
-    if frames and len(frames) != len(odo):
-        raise ValueError(f"{odometry} holds {len(odo)} poses but {recording} has {len(frames)} frames: "
-                         f"give one odometry pose per frame")
+    if not recording.exists():
+        raise FileNotFoundError(f"recording {recording} not found: give the sequence folder, bag or video")
+    stamps, odo = frame_odometry(recording, odometry, topic, camera_topic, max_dt)
     loops, skipped = read_closures(closures) if closures is not None else ([], 0)
     result = posegraph.optimize(odo, loops, method, noise, planar)
     out = tj.write_tum(out, stamps, result.poses)
     weights_out = Path(weights_out) if weights_out else out.with_name(out.stem + "_loops.csv")
     write_weights(weights_out, posegraph.check_loops(loops, len(odo)), result.weights)
-    return Corrected(result, odo, stamps, loops, skipped, out, weights_out,
-                     _errors(recording, stamps, odo, result.poses))
+    errors = _errors(recording, stamps, odo, result.poses) if recording.is_dir() else None
+    return Corrected(result, odo, stamps, loops, skipped, out, weights_out, errors)

@@ -1,13 +1,13 @@
-"""SE(3) poses as (N, 4, 4) float64 arrays, trajectory files, and a wheel-odometry drift model.
+"""SE(3) poses as (N, 4, 4) float64 arrays, writing a TUM file, and the wheel-odometry drift of
+``datasets.odometry`` on SE(3) poses.
 
 A pose T is a homogeneous camera-to-world (body-to-world) matrix: ``T[:3, :3]`` rotation,
 ``T[:3, 3]`` position in metres. The relative motion from pose a to pose b is ``inv(T_a) @ T_b``
 (b expressed in a's frame; GTSAM's ``between`` and evo's ``relative_se3``).
 
-Files: TUM (``t tx ty tz qx qy qz qw``) is read by ``greenloop.datasets.sequence.read_trajectory``
-(the one TUM parser) and written atomically here; KITTI (12 numbers a line, the row-major 3x4
-matrix, line k = pose k) is read here. A TUM file's ``t`` comes back rounded to an integer frame
-number (the sequence folder's convention); odometry is taken one pose per frame, in frame order.
+Files: odometry (a bag's topic, TUM or KITTI) is read by ``datasets.odometry.read_odometry``, a
+sequence folder's CameraTrajectory.txt by ``datasets.sequence.read_trajectory``; a TUM file is
+written atomically here (:func:`write_tum`).
 """
 from __future__ import annotations
 
@@ -16,11 +16,8 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from greenloop.datasets import sequence
+from greenloop.datasets import odometry, sequence
 from greenloop.util.files import write_atomic
-
-OPENCV_UP = (0.0, -1.0, 0.0)      # "up" in a camera's frame with OpenCV axes (x right, y down, z forward)
-
 
 def check_poses(poses, name: str = "poses") -> np.ndarray:
     """``poses`` as (N, 4, 4) float64 (N >= 1), finite, last row (0, 0, 0, 1); ValueError otherwise."""
@@ -133,38 +130,27 @@ def _axis_rotations(axis, angles) -> np.ndarray:
     return Rotation.from_rotvec(np.outer(angles, axis / n)).as_matrix()
 
 
-def simulate_odometry(poses, seed: int, slip: float = 0.02, heading_bias_deg_per_m: float = 0.5,
-                      noise=(0.002, 0.05), up=OPENCV_UP) -> np.ndarray:
-    """Wheel-odometry-like poses that drift away from the true ``poses`` (N, 4, 4), seeded.
+FLOOR = (0, 2)     # the floor plane's axes in a camera's frame with OpenCV axes (x right, y down, z forward)
 
-    Each true step ``M_k = inv(T_k) T_{k+1}`` (translation t_k, length d_k metres, in the body frame)
-    is measured as: translation ``(1 + slip * n_k) t_k`` (n_k ~ N(0, 1): wheel slip, a fraction of
-    the step), plus Gaussian noise of ``noise[0]`` metres per axis; rotation ``R_k`` followed by a
-    turn of ``heading_bias_deg_per_m * d_k`` degrees about ``up`` (the body frame's up axis; default
-    OpenCV camera axes, y down, as CameraTrajectory.txt holds poses), then a Gaussian rotation of
-    ``noise[1]`` degrees per axis. The measured steps are chained from the true first pose.
 
-    The drift, as stated: the heading error grows in proportion to the distance travelled
-    (``heading_bias_deg_per_m`` degrees per metre, exactly so for planar motion about ``up`` with no
-    slip and no noise), so the position error grows with the square of the distance; slip and
-    noise add random walks (growing with the square root of the steps). Models a generic wheeled
-    robot; it knows nothing of greenhouse rows. Returns (N, 4, 4) float64.
+def drift_poses(poses, seed: int = 0, floor: tuple[int, int] = FLOOR, **drift) -> np.ndarray:
+    """Wheel odometry of a robot that drove the true ``poses`` (N, 4, 4): the ONE drift model,
+    ``datasets.odometry.simulate_odometry`` (seeded; scale error, slip, heading bias and noise, its
+    module doc), applied to SE(3) poses.
+
+    The poses are projected on the floor plane ``floor`` (two axis indices; default FLOOR, the x-z
+    plane of OpenCV camera axes with y down, as CameraTrajectory.txt holds poses): position on those
+    axes and yaw about their normal (:func:`to_planar`). The planar model drifts them; each true
+    pose is then moved by its planar error (in-plane shift and yaw, :func:`from_planar`), so its
+    height, pitch and roll stay the truth's: wheels measure the floor only. The model depends on
+    the yaw only through its changes, so the yaw's zero (here the angle of the pose's first axis)
+    does not matter. drift: keyword arguments of ``simulate_odometry`` (scale_error, slip,
+    heading_bias, heading_noise). Returns (N, 4, 4) float64, the true first pose at index 0.
     """
     p = check_poses(poses)
-    noise = tuple(float(v) for v in np.broadcast_to(np.asarray(noise, dtype=np.float64), (2,)))
-    if slip < 0 or min(noise) < 0:
-        raise ValueError(f"slip and noise must be >= 0, got slip={slip}, noise={noise}")
-    rng = np.random.default_rng(seed)
-    m = steps(p) if len(p) > 1 else np.zeros((0, 4, 4))
-    d = np.linalg.norm(m[:, :3, 3], axis=1)
-    scale = 1.0 + slip * rng.standard_normal(len(m))
-    t_noise = noise[0] * rng.standard_normal((len(m), 3))
-    r_noise = Rotation.from_rotvec(np.radians(noise[1]) * rng.standard_normal((len(m), 3))).as_matrix()
-    bias = _axis_rotations(up, np.radians(heading_bias_deg_per_m) * d)
-    measured = m.copy()
-    measured[:, :3, 3] = scale[:, None] * m[:, :3, 3] + t_noise
-    measured[:, :3, :3] = m[:, :3, :3] @ bias @ r_noise
-    return integrate(p[0], measured)
+    planar = to_planar(p, floor)
+    moved = odometry.simulate_odometry(planar, seed, **drift)
+    return from_planar(moved, floor) @ inverse(from_planar(planar, floor)) @ p
 
 
 def rectangle_route(width_m: float, length_m: float, step_m: float, laps: int = 1) -> np.ndarray:
@@ -180,48 +166,6 @@ def rectangle_route(width_m: float, length_m: float, step_m: float, laps: int = 
     side = lambda metres: [fwd] * int(round(metres / step_m)) + [turn]
     lap = side(length_m) + side(width_m) + side(length_m) + side(width_m)
     return integrate(np.eye(4), (lap * int(laps))[:-1])
-
-
-def read_kitti(path) -> np.ndarray:
-    """A KITTI pose file (12 numbers a line: the row-major 3x4 matrix [R | t]; line k = pose k) ->
-    (N, 4, 4) float64. ValueError naming the line of a malformed row."""
-    path = Path(path)
-    rows = []
-    for lineno, line in enumerate(path.read_text().splitlines(), 1):
-        if not line.strip() or line.lstrip().startswith("#"):
-            continue
-        try:
-            vals = [float(v) for v in line.replace(",", " ").split()]
-        except ValueError:
-            vals = []
-        if len(vals) != 12 or not np.all(np.isfinite(vals)):
-            raise ValueError(f"{path}:{lineno}: expected 12 numbers (KITTI: the 3x4 pose, row-major), "
-                             f"got {line[:80]!r}; fix or remove that line")
-        rows.append(vals)
-    if not rows:
-        raise ValueError(f"{path} holds no poses")
-    out = np.tile(np.eye(4), (len(rows), 1, 1))
-    out[:, :3, :] = np.asarray(rows).reshape(-1, 3, 4)
-    return out
-
-
-def read_poses(path) -> tuple[np.ndarray, np.ndarray]:
-    """A trajectory file, TUM or KITTI by its first data line's count (8 or 12 numbers) ->
-    (stamps (N,) float64: TUM's t as an integer frame number, KITTI's line index; poses (N, 4, 4)).
-    TUM goes through ``datasets.sequence.read_trajectory``."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"trajectory file {path} not found: give a TUM or KITTI pose file")
-    first = next((ln for ln in path.read_text().splitlines() if ln.strip() and not ln.lstrip().startswith("#")), "")
-    n = len(first.replace(",", " ").split())
-    if n == 12:
-        poses = read_kitti(path)
-        return np.arange(len(poses), dtype=np.float64), poses
-    if n == 8:
-        ids, poses = sequence.read_trajectory(path)
-        return ids.astype(np.float64), poses
-    raise ValueError(f"{path}: its first line has {n} numbers; expected 8 (TUM `t tx ty tz qx qy qz qw`) "
-                     f"or 12 (KITTI, the 3x4 pose row-major)")
 
 
 def write_tum(path, stamps, poses) -> Path:

@@ -213,6 +213,17 @@ def decide(data: Data, registry=None) -> list[dict]:
     return [e.decide(data) for e in reg.values() if e.score is None]
 
 
+def streams(data: Data, tuned: Tuned, registry=None) -> tuple[dict, dict]:
+    """Each tuned method's threshold, picked on the tuning queries by ``params["threshold_rule"]``
+    (a record's ``fixed_threshold`` kept; NaN without a tuning part), and its streaming detector at
+    it: ({method: threshold}, {method: detector}); what :func:`stream_and_time` checks and times and
+    ``experiments.loop_closing`` streams for its closures."""
+    reg = REGISTRY if registry is None else registry
+    fixed = {m: k["fixed_threshold"] for m, k in tuned.knobs.items() if "fixed_threshold" in k}
+    thr = lb.thresholds(tuned.S, data.GT, data.exclude, data.tune, data.params["threshold_rule"], fixed)
+    return thr, {m: reg[tuned.owner[m]].stream(k, thr.get(m), data) for m, k in tuned.knobs.items()}
+
+
 def stream_and_time(data: Data, tuned: Tuned, decisions=(), registry=None, only=None) -> Timed:
     """Thresholds on the tuning queries (rule ``params["threshold_rule"]``; a record's
     ``fixed_threshold`` kept), each method's streaming detector, the stream-vs-matrix check of the
@@ -220,9 +231,7 @@ def stream_and_time(data: Data, tuned: Tuned, decisions=(), registry=None, only=
     over the timed window, every method (the decisions' too) interleaved. only: the methods to
     check and time where given (the others get no timing row); None: every method."""
     reg, p = (REGISTRY if registry is None else registry), data.params
-    fixed = {m: k["fixed_threshold"] for m, k in tuned.knobs.items() if "fixed_threshold" in k}
-    thr = lb.thresholds(tuned.S, data.GT, data.exclude, data.tune, p["threshold_rule"], fixed)
-    dets = {m: reg[tuned.owner[m]].stream(k, thr.get(m), data) for m, k in tuned.knobs.items()}
+    thr, dets = streams(data, tuned, reg)
     checked = [m for m in tuned.knobs if reg[tuned.owner[m]].checked and (only is None or m in only)]
     agree = lb.stream_checks(checked, dets, tuned.knobs, data.descriptors, tuned.S, data.GT)
     describers = {m: reg[tuned.owner[m]].describer(k, data) for m, k in tuned.knobs.items()}
