@@ -247,7 +247,8 @@ def test_read_closures_takes_detects_columns_and_skips_rows_without_a_pose(tmp_p
                  "8,8.png,3,3.png,2.9,1,0,0,0,0,0,1,0\n")
     loops, skipped = slam.read_closures(f)
     assert skipped == 2 and [(lp.i, lp.j, lp.metric) for lp in loops] == [(5, 1, True), (8, 3, False)]
-    assert np.allclose(loops[0].T, tj.make_poses([[0, 0.1, 0]], [[0.5, 0, 0]])[0])
+    # detect's columns are T_match_query; the loop factor holds T_query_match, its inverse
+    assert np.allclose(loops[0].T, tj.inverse(tj.make_poses([[0, 0.1, 0]], [[0.5, 0, 0]]))[0])
     (tmp_path / "bad.csv").write_text("query,match,rx\n1,2,0\n")
     with pytest.raises(ValueError, match="lacks ry"):
         slam.read_closures(tmp_path / "bad.csv")
@@ -260,8 +261,9 @@ def test_slam_command_writes_a_trajectory_that_reads_back(tmp_path, square, caps
     sequence.write_trajectory(folder / "CameraTrajectory.txt", np.arange(len(gt)), gt)
     tj.write_tum(tmp_path / "odo.tum", np.arange(len(odo)), odo)
     rows = ["query,match,rx,ry,rz,tx,ty,tz,metric"]
-    for lp in (true[0], false):
-        rv, t = tj.rotvecs(lp.T[None])[0], lp.T[:3, 3]
+    for lp in (true[0], false):                       # written as detect writes them: T_match_query
+        back = tj.inverse(lp.T[None])[0]
+        rv, t = tj.rotvecs(back[None])[0], back[:3, 3]
         rows.append(f"{lp.i},{lp.j}," + ",".join(f"{v:.12g}" for v in (*rv, *t)) + ",1")
     (tmp_path / "closures.csv").write_text("\n".join(rows) + "\n")
     out = tmp_path / "out" / "traj.tum"
@@ -325,3 +327,14 @@ def test_a_folders_frames_take_the_pose_stamped_with_their_number(tmp_path, tiny
     short.write_text("\n".join(kitti.read_text().splitlines()[: n // 2]) + "\n")
     with pytest.raises(ValueError, match=f"{n - n // 2} of {n} frames"):
         slam.frame_odometry(tiny_sequence, short)
+
+
+def test_a_verified_closures_pose_becomes_the_loop_factor_of_the_true_poses():
+    """verification and detect's --matches give T_match_query = inv(T_w_match) T_w_query; the loop factor
+    of the same pair built from true poses holds T_query_match: loop_from_closure turns one into the other."""
+    poses = _random_poses(6, 3)
+    T_mq = tj.inverse(poses[4][None])[0] @ poses[1]
+    loop = posegraph.loop_from_closure(1, 4, T_mq[:3, :3], T_mq[:3, 3], True)
+    truth = posegraph.loops_from_poses(poses, [(1, 4)])[0]
+    assert (loop.i, loop.j, loop.metric) == (1, 4, True) and np.allclose(loop.T, truth.T)
+    assert not np.allclose(loop.T, T_mq)                      # the convention matters for a non-trivial pair

@@ -206,9 +206,7 @@ def loops(closures: pd.DataFrame, poses) -> list:
         if row.arm == GROUND_TRUTH:
             out += posegraph.loops_from_poses(poses, [(i, j)])
         elif isinstance(R, np.ndarray):
-            T = np.eye(4)
-            T[:3, :3], T[:3, 3] = R, row.t
-            out.append(posegraph.Loop(i, j, tj.inverse(T), bool(row.metric)))
+            out.append(posegraph.loop_from_closure(i, j, R, row.t, row.metric))
         else:
             out.append(posegraph.Loop(i, j, np.eye(4)))
     return out

@@ -255,6 +255,15 @@ def optimize(odometry, loops, method: str = "gnc", noise: Noise = Noise(), plana
     return Result(_space(odo, planar).poses(result, odo), weights, method)
 
 
+def loop_from_closure(query: int, match: int, R, t, metric: bool) -> Loop:
+    """The loop factor of a verified closure: R (3, 3), t (3,) its pose T_match_query (X_match = R X_query
+    + t, the convention of ``methods.verification`` and of detect's --matches columns), t in metres where
+    ``metric`` else a unit direction. The Loop holds the inverse, T_query_match = inv(T_w_query) T_w_match."""
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = np.asarray(R, dtype=np.float64), np.asarray(t, dtype=np.float64)
+    return Loop(int(query), int(match), tj.inverse(T), bool(metric))
+
+
 def loops_from_poses(poses, pairs, metric: bool = True) -> list[Loop]:
     """True loops from known poses (N, 4, 4) at index pairs (P, 2) (query i, match j): T_ij =
     ``inv(T_i) @ T_j``; with ``metric=False`` its translation is kept as a unit direction."""

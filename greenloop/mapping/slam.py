@@ -3,8 +3,9 @@ greenloop slam``): read, optimise, write, and measure against the folder's groun
 
 Closures come from a CSV with a header (``read_closures``): ``query`` (or detect's ``frame``),
 ``match``, the relative pose ``rx ry rz`` (rotation vector, radians) ``tx ty tz`` (metres, or a
-direction when ``metric`` is 0) of ``T = inv(T_w_query) @ T_w_match`` (the match camera's pose in
-the query camera's frame: ``posegraph.Loop``), and ``metric`` (1 or 0; default 1). Rows whose
+direction when ``metric`` is 0) of T_match_query = inv(T_w_match) @ T_w_query (the query camera's pose
+in the match camera's frame, as detect's ``--matches`` and ``methods.verification`` give it; the loop
+factor holds its inverse: ``posegraph.loop_from_closure``), and ``metric`` (1 or 0; default 1). Rows whose
 ``closure`` column (detect's ``--matches``) is 0, or whose match or pose is empty, are skipped and
 counted.
 
@@ -67,7 +68,8 @@ def _row_loop(row: dict, where: str) -> posegraph.Loop | None:
     except ValueError:
         raise ValueError(f"{where}: expected integer frames and numbers for {', '.join(POSE_COLUMNS)}, "
                          f"got {row}; fix or remove that line") from None
-    return posegraph.Loop(i, j, tj.make_poses([pose[:3]], [pose[3:]])[0], metric)
+    T = tj.make_poses([pose[:3]], [pose[3:]])[0]
+    return posegraph.loop_from_closure(i, j, T[:3, :3], T[:3, 3], metric)
 
 
 def read_closures(path) -> tuple[list[posegraph.Loop], int]:
