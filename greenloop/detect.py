@@ -449,3 +449,13 @@ def run(p: Plan, folder, window: int = 70, index=None, candidates: int = 20, sta
     save_now(force=True)
     n = stream.detector.frame_index
     return Run(stream, first, n, seconds, n == len(p.frames), declared, 0 if checker is None else checker.rejected)
+
+
+def closures_of(recording, topic=None, out=None) -> list[Closure]:
+    """The closures ``python -m greenloop detect RECORDING`` declares (the named default, verified where
+    a verifier is registered), as ``Closure`` records numbered by the recording's frames (the plan's
+    step applied), for a consumer such as ``slam``. out: where detect's lines go (default: nowhere)."""
+    p = plan(recording, topic=topic)
+    r = run(p, recording, verifier=verifier_for(p.frames), out=out or (lambda line: None))
+    return [c._replace(query=c.query * p.step, match=c.match * p.step) for c in r.closures]
+

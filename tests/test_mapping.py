@@ -4,10 +4,12 @@ known answers; the drift model's determinism and growth; ``python -m greenloop s
 import numpy as np
 import pytest
 
+from greenloop import detect
 from greenloop.cli import main as cli_main
 from greenloop.datasets import odometry, sequence
 from greenloop.mapping import metrics, posegraph, slam
 from greenloop.mapping import trajectory as tj
+from greenloop.methods.interface import Closure
 
 SIDE, STEP = 10.0, 0.1
 
@@ -338,3 +340,26 @@ def test_a_verified_closures_pose_becomes_the_loop_factor_of_the_true_poses():
     truth = posegraph.loops_from_poses(poses, [(1, 4)])[0]
     assert (loop.i, loop.j, loop.metric) == (1, 4, True) and np.allclose(loop.T, truth.T)
     assert not np.allclose(loop.T, T_mq)                      # the convention matters for a non-trivial pair
+
+
+def test_slam_without_a_closures_file_uses_detects_closures(tmp_path, square, capsys, monkeypatch):
+    """With no --closures, slam takes the closures detect declares on the recording (detect.closures_of):
+    a verified closure (its T_match_query from the true poses) becomes a loop factor that corrects the
+    drift; an unverified one (no pose) is left out and counted."""
+    gt, odo, true, _ = square
+    folder = tmp_path / "rec"
+    folder.mkdir()
+    sequence.write_trajectory(folder / "CameraTrajectory.txt", np.arange(len(gt)), gt)
+    tj.write_tum(tmp_path / "odo.tum", np.arange(len(odo)), odo)
+    q, m = true[0].i, true[0].j
+    T_mq = tj.inverse(gt[m][None])[0] @ gt[q]
+    planted = [Closure(q, m, 5.0, True, 120, "pnp", T_mq[:3, :3], T_mq[:3, 3], True),
+               Closure(q - 1, m - 1, 4.0, None, 0, "too-small", None, None, False)]
+    asked = []
+    monkeypatch.setattr(detect, "closures_of", lambda rec, topic=None: asked.append((rec, topic)) or planted)
+    out = tmp_path / "traj.tum"
+    assert cli_main(["slam", str(folder), "--odometry", str(tmp_path / "odo.tum"), "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert asked == [(str(folder), None)] and "# detect: 2 closures, 1 with a verified pose" in printed
+    assert "1 of 1 loop factors kept (1 of detect's closures without a verified pose left out)" in printed
+    assert metrics.ate(gt, odometry.read_odometry(out)[1]) < 0.15 * metrics.ate(gt, odo)

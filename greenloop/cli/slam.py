@@ -2,6 +2,7 @@
 is ``greenloop.mapping.slam.correct``."""
 from __future__ import annotations
 
+from greenloop import detect
 from greenloop.mapping import posegraph, slam
 
 
@@ -24,8 +25,9 @@ def add_parser(sub) -> None:
                    help="seconds: the farthest a frame's nearest odometry message may be (bags and videos; default 0.1)")
     s.add_argument("--closures", default=None, metavar="CSV",
                    help="loop closures: query (or frame), match, rx ry rz (rotation vector, rad), tx ty tz (m) of "
-                        "inv(T_query) T_match, metric (1: metric translation, 0: direction only); detect's "
-                        "--matches file with these columns (rows with closure 0 are skipped)")
+                        "T_match_query, metric (1: metric translation, 0: direction only): detect's --matches file "
+                        "(rows with closure 0 or no pose are skipped); default: run detect on the recording (the "
+                        "named default, verified) and use its closures with a pose")
     s.add_argument("--out", required=True, metavar="TRAJ.tum", help="the corrected trajectory to write (TUM)")
     s.add_argument("--weights", default=None, metavar="CSV",
                    help="each loop factor's final weight (default: beside --out, *_loops.csv)")
@@ -39,10 +41,16 @@ def add_parser(sub) -> None:
 
 def run(args) -> int:
     """Correct, then say what was written and, with ground truth, the errors before and after."""
-    c = slam.correct(args.recording, args.odometry, args.out, args.closures, args.weights, args.back_end,
+    closures = args.closures
+    if closures is None:
+        closures = detect.closures_of(args.recording, args.topic)
+        print(f"# detect: {len(closures)} closures, {sum(c.R is not None for c in closures)} with a verified pose",
+              flush=True)
+    c = slam.correct(args.recording, args.odometry, args.out, closures, args.weights, args.back_end,
                      planar=args.planar, topic=args.odometry_topic, camera_topic=args.topic, max_dt=args.max_dt)
     kept = int((c.result.weights > slam.KEPT).sum())
-    skipped = f" ({c.skipped} rows of {args.closures} without a verified pose skipped)" if c.skipped else ""
+    source = args.closures or "detect's closures"
+    skipped = f" ({c.skipped} of {source} without a verified pose left out)" if c.skipped else ""
     print(f"wrote {len(c.odometry)} corrected poses to {c.out} (back end {args.back_end}: {kept} of "
           f"{len(c.loops)} loop factors kept{skipped}); loop weights to {c.weights_out}")
     if c.errors:

@@ -155,6 +155,12 @@ def frame_odometry(recording, odometry, topic: str | None = None, camera_topic: 
     return stamps, poses
 
 
+def closure_loops(closures) -> list[posegraph.Loop]:
+    """The loop factors of ``interface.Closure``-like records (query, match, R, t as T_match_query,
+    metric): one per closure with a pose (``posegraph.loop_from_closure``); unverified ones are left out."""
+    return [posegraph.loop_from_closure(c.query, c.match, c.R, c.t, c.metric) for c in closures if c.R is not None]
+
+
 def correct(recording, odometry, out, closures=None, weights_out=None, method: str = "gnc",
             noise: posegraph.Noise = posegraph.Noise(), planar: bool = False, topic: str | None = None,
             camera_topic: str | None = None, max_dt: float = 0.1) -> Corrected:
@@ -163,7 +169,8 @@ def correct(recording, odometry, out, closures=None, weights_out=None, method: s
     recording: a sequence folder (its CameraTrajectory.txt, if any, is the ground truth), a bag or a
     video. odometry: a bag (``topic``: its Odometry topic) or a TUM / KITTI file, given to each frame
     by :func:`frame_odometry` (camera_topic, max_dt seconds: as there). closures: a closures CSV
-    (module doc) or None (odometry alone). out: the TUM file to write (the frames' stamps).
+    (module doc), a list of ``interface.Closure``-like records (:func:`closure_loops`), or None
+    (odometry alone). out: the TUM file to write (the frames' stamps).
     weights_out: the loop weights' CSV (default: ``out`` with ``_loops.csv``). method: a back end
     of posegraph.METHODS. planar: Pose2 (posegraph's module doc). Returns :class:`Corrected`.
     """
@@ -171,7 +178,11 @@ def correct(recording, odometry, out, closures=None, weights_out=None, method: s
     if not recording.exists():
         raise FileNotFoundError(f"recording {recording} not found: give the sequence folder, bag or video")
     stamps, odo = frame_odometry(recording, odometry, topic, camera_topic, max_dt)
-    loops, skipped = read_closures(closures) if closures is not None else ([], 0)
+    if closures is None or isinstance(closures, (str, Path)):
+        loops, skipped = read_closures(closures) if closures is not None else ([], 0)
+    else:
+        loops = closure_loops(closures)
+        skipped = len(closures) - len(loops)
     result = posegraph.optimize(odo, loops, method, noise, planar)
     out = tj.write_tum(out, stamps, result.poses)
     weights_out = Path(weights_out) if weights_out else out.with_name(out.stem + "_loops.csv")
