@@ -392,10 +392,11 @@ class Run(NamedTuple):
     rejected: int = 0
 
 
-def checker_for(p: Plan, folder, verifier, columns) -> Checker | None:
+def checker_for(p: Plan, folder, verifier, columns, strict: bool = True) -> Checker | None:
     """The run's :class:`Checker` (None without ``verifier``): the plan's frames and, where the folder
-    has depth/, its depth frames at the plan's step. ValueError for a detector that names no match."""
-    if verifier is None:
+    has depth/, its depth frames at the plan's step. A detector that names no match (the dictionary's
+    spots): ValueError where ``strict`` (verification was asked for), else None (it runs unverified)."""
+    if verifier is None or ("match" not in columns and not strict):
         return None
     if "match" not in columns:
         raise ValueError(f"--verify needs a method that matches frames (--method {p.name} names no earlier "
@@ -413,14 +414,15 @@ def verifier_for(folder):
 
 
 def run(p: Plan, folder, window: int = 70, index=None, candidates: int = 20, state=None, save_every: int = 10000,
-        stop_after=None, matches=None, out=print, verifier=None) -> Run:
+        stop_after=None, matches=None, out=print, verifier=None, verify_strict: bool = True) -> Run:
     """Stream the plan's frames (from where ``state`` stopped, if it exists) through its detector:
     closures to ``out`` as declared, every frame's decision to the ``matches`` CSV, the detector to
     ``state`` every ``save_every`` frames, on Ctrl-C (re-raised) and at the end; at most
     ``stop_after`` frames in this run. verifier: None (every candidate the detector declares is a
-    closure, unverified) or a callable (frame_q, frame_m, depth_q, depth_m) -> a record with fields
-    accepted, inliers, model, R, t, metric applied to each candidate (module doc: the rule); its
-    fields follow each printed closure and fill --matches' VERIFY_COLUMNS."""
+    closure, unverified) or a callable (query, match, frame_q, frame_m, depth_q, depth_m) -> a record with
+    fields accepted, inliers, model, R, t, metric applied to each candidate (module doc: the rule); its
+    fields follow each printed closure and fill --matches' VERIFY_COLUMNS. verify_strict: a detector that
+    names no match (the dictionary) with a verifier is an error (True) or runs unverified (False)."""
     if matches is not None and registry.get(p.name).describer is None:
         raise ValueError("--matches needs a method that matches frames (the dictionary counts spot labels): "
                          f"pass --method {registry.DEFAULT} (the default) or another registered one")
@@ -434,7 +436,7 @@ def run(p: Plan, folder, window: int = 70, index=None, candidates: int = 20, sta
             save_state(stream, key, state)
             saved[0] = stream.detector.frame_index
     columns = event_columns(stream.detector)
-    checker = checker_for(p, folder, verifier, columns)
+    checker = checker_for(p, folder, verifier, columns, verify_strict)
     write = None if matches is None else matches_writer(matches, p.frames.names, append=first > 0, verified=checker is not None)
     if first:
         out(f"# resumed at frame {first} (--state {state})")
@@ -456,6 +458,6 @@ def closures_of(recording, topic=None, out=None) -> list[Closure]:
     a verifier is registered), as ``Closure`` records numbered by the recording's frames (the plan's
     step applied), for a consumer such as ``slam``. out: where detect's lines go (default: nowhere)."""
     p = plan(recording, topic=topic)
-    r = run(p, recording, verifier=verifier_for(p.frames), out=out or (lambda line: None))
+    r = run(p, recording, verifier=verifier_for(p.frames), out=out or (lambda line: None), verify_strict=False)
     return [c._replace(query=c.query * p.step, match=c.match * p.step) for c in r.closures]
 

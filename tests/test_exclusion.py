@@ -113,7 +113,8 @@ def test_detect_with_no_flags_matches_csv_and_the_warning(tmp_path):
     closures = [line.split("\t")[:3] for line in r.stdout.splitlines() if line[:1].isdigit()]
     assert len(closures) >= 15 and all(int(m) == int(q) - 60 for q, m, _ in closures)
     rows = [line.split(",") for line in out.read_text().splitlines()]
-    assert tuple(rows[0]) == ("frame", "file", "match", "match_file", "score", "closure")
+    assert tuple(rows[0]) == ("frame", "file", "match", "match_file", "score", "closure", "verified", "inliers",
+                              "model", "rx", "ry", "rz", "tx", "ty", "tz", "metric")     # detect verifies by default
     rows = rows[1:]
     assert [int(r_[0]) for r_ in rows] == list(range(90)) and rows[5][1] == "5.png"
     assert all(r_[2] == "" and r_[5] == "0" for r_ in rows[:21])            # frames 0..20: no candidate yet

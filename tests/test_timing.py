@@ -8,6 +8,7 @@ import pytest
 from greenloop.methods.dictionary.dictionary import LoopDetector
 from greenloop.methods.greenloop_seq import seqstream
 from greenloop.speed import timing
+from greenloop.util import clock as clockmod
 
 
 class _Clock:
@@ -42,7 +43,7 @@ def _sleeper(name, log, ms=2.0, start_ms=150.0, clock=None):
 
 def test_times_only_the_steps_interleaved(monkeypatch):
     log, clock = [], _Clock()
-    monkeypatch.setattr(timing, "time", clock)
+    monkeypatch.setattr(clockmod, "time", clock)            # the one clock, greenloop.util.clock
     methods = [_sleeper("a", log, clock=clock), _sleeper("b", log, ms=4.0, clock=clock)]
     frames = [np.zeros((4, 4, 3), np.uint8)] * 10
     rows = timing.time_methods(methods, frames, {"a": np.zeros((7, 2)), "b": np.zeros((3, 2))}, repeats=3)

@@ -135,7 +135,8 @@ def run(args) -> int:
     print(detect.header(p, args.folder, args.index, args.candidates), flush=True)
     try:
         r = detect.run(p, args.folder, args.window, args.index, args.candidates, args.state, args.save_every,
-                       args.stop_after, args.matches, out=lambda line: print(line, flush=True), verifier=verifier)
+                       args.stop_after, args.matches, out=lambda line: print(line, flush=True), verifier=verifier,
+                       verify_strict=args.verify is True)
     except KeyboardInterrupt:
         print("detect: interrupted" + (f"; state saved in {args.state}: run the same command again to continue"
                                        if args.state else ""), file=sys.stderr)

@@ -99,6 +99,14 @@ def seed_summary(per_seed: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(out)
 
 
+def spread_text(summary: pd.DataFrame, variant: str, stat: str) -> str:
+    """One cell of :func:`seed_summary`'s table: "median [min, max] (k of n seeds converged)" of ``stat``
+    (a SEED_STATS name without _%: 'precision', 'event_precision', 'recall') for ``variant``."""
+    r = summary.set_index("variant").loc[variant]
+    return (f"{r[stat + '_median_%']:.1f} [{r[stat + '_min_%']:.1f}, {r[stat + '_max_%']:.1f}]"
+            f" ({r['converged_seeds']} of {r['seeds']} seeds converged)")
+
+
 def variant_scores(variants: dict, gt: np.ndarray, tau: int, exclude: int = DEFAULT_EXCLUDE) -> dict:
     """``dictionary.score_closures`` of each variant at τ: {variant: its dict}; variants:
     :func:`variant_predictions`' dict, gt: (N, N) bool, tau: detections, exclude: frames."""
