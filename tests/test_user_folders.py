@@ -32,8 +32,8 @@ def _make_params(folder, stem, results):
     return (yaml.safe_load(run.read_text()) if run.exists() else None), skipped
 
 
-def _detect(folder):
-    r = run_cli(["detect", folder], process=True)
+def _detect(folder, *flags):
+    r = run_cli(["detect", folder, *flags], process=True)
     assert r.returncode == 0, r.stderr
     return r
 
@@ -90,13 +90,13 @@ def test_a_drive_that_never_comes_back(tmp_path, tiny_sequence):
     assert "# exclude 20 (fraction)" in r.stdout and "summary: 100 frames, 0 closures" in r.stdout
 
 
-def _closures(folder):
-    """`detect` with no flags on a folder with ground truth: (revisit frames, closures declared, closures
-    whose match is a ground-truth partner), revisit frames as the stream sees them (a partner among
-    the candidates, exclusion.exclusion's band)."""
+def _closures(folder, *flags):
+    """`detect` with no flags (or ``flags``) on a folder with ground truth: (revisit frames, closures
+    declared, closures whose match is a ground-truth partner), revisit frames as the stream sees them (a
+    partner among the candidates, exclusion.exclusion's band)."""
     e = exclusion.exclusion(folder).frames
     G = groundtruth.for_sequence(folder, exclude=e)
-    rows = [line.split("\t") for line in _detect(folder).stdout.splitlines() if line[:1].isdigit()]
+    rows = [line.split("\t") for line in _detect(folder, *flags).stdout.splitlines() if line[:1].isdigit()]
     return int(evaluate.revisit_queries(G, e).sum()), len(rows), sum(bool(G[int(r[1]), int(r[0])]) for r in rows)
 
 
@@ -115,12 +115,16 @@ def test_a_short_nordland_cut_closes_half_its_revisit(tmp_path, n, start):
 
 
 def test_a_short_gardens_point_cut_fires_and_is_right(gardenspoint_short):
-    """Gardens Point day then night (60 + 60 frames): the named default declares closures and every one
-    is right, where it used to stay silent; it does not reach half the revisit frames (the night
-    matches stand lower over the null than the synthetic sequence's aliased places, which one threshold
-    must also keep out: tools/calib_measure.py)."""
-    revisits, declared, correct = _closures(gardenspoint_short)
+    """Gardens Point day then night (60 + 60 frames): the named default's appearance matches
+    (--no-verify) are closures and every one is right; it does not reach half the revisit frames (the
+    night matches stand lower over the null than the synthetic sequence's aliased places, which one
+    threshold must also keep out: tools/calib_measure.py). Verified (the default), the night pairs do not
+    hold by geometry (results/verification/summary.md: 1 % of night loop pairs accepted), so it declares
+    nothing false and nothing at all: the recall the verification issue still has to win back."""
+    revisits, declared, correct = _closures(gardenspoint_short, "--no-verify")
     assert revisits == 62 and declared >= 6 and correct == declared, (revisits, declared, correct)
+    revisits, declared, correct = _closures(gardenspoint_short)
+    assert correct == declared <= 2, (revisits, declared, correct)
 
 
 def test_a_gps_only_survey_with_early_revisits_skips_or_runs_notebook_12(tmp_path, shared_cache, monkeypatch):
