@@ -62,9 +62,10 @@ def score(k: dict, data: Data) -> np.ndarray:
 
 def _weights(k: dict, data: Data):
     """The CNN weights of a knob record's descriptor: the run's ``weights`` parameter, except for
-    "gradients+efficientnetlite0", whose ImageNet weights are part of the named CNN configuration
-    (it refuses a random-init network, ``features.resolve``)."""
-    return "auto" if k["descriptor"] == seqmatch.CNN_KNOBS["descriptor"] else data.params.get("weights", "auto")
+    "gradients+efficientnetlite0" and its int8 form (``features.FUSED_INT8``), whose ImageNet weights are
+    part of the named CNN configuration (they refuse a random-init network, ``features.resolve``)."""
+    fused = (seqmatch.CNN_KNOBS["descriptor"], features.FUSED_INT8)
+    return "auto" if k["descriptor"] in fused else data.params.get("weights", "auto")
 
 
 def stream(k: dict, threshold, data: Data) -> seqstream.Detector:
