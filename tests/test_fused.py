@@ -12,7 +12,7 @@ from greenloop.features import layers
 from greenloop.methods.greenloop_seq import seqmatch, seqstream
 from greenloop.similarity import l2_normalise
 
-from conftest import run_cli
+from conftest import run_cli, write_frames
 from test_seqspeed import _drive, make_route, recall_at_1  # noqa: E402  (the drives of the target-5 and CLI tests)
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -40,11 +40,11 @@ def test_the_fused_descriptor_is_its_two_parts_each_normalised(frames):
     np.testing.assert_allclose(bgr, X, atol=1e-6)                     # the stream's decoded frames give the same
 
 
-def test_the_int8_backend_keeps_the_gradients_and_the_float_cnn_part_to_a_cosine_of_099(frames):
+def test_the_int8_backend_keeps_the_gradients_and_the_float_cnn_part_to_a_cosine_of_099(frames, tmp_path):
     """features.FUSED_INT8: the gradients part bit for bit, the CNN part from the full-integer int8
     graph (calibrated on cnn.int8_calibration_frames, which the frames here are not) within a cosine
     of 0.99 of the float graph's on each frame, yet not the float graph's; the calibration set is
-    fixed (the same array on every call), and a network that runs no TFLite graph refuses int8."""
+    fixed (the same array on every call) and keys the cached descriptors, and a network that runs no TFLite graph refuses int8."""
     from greenloop.datasets.synthetic import build_scene, render_frame, route_world
     scene, (poses, _) = build_scene(1), route_world(200, 1)       # another seed's frames than the calibration's
     rendered = np.stack([cv2.resize(render_frame(scene, poses[i], (160, 120))[0], (64, 32), interpolation=cv2.INTER_AREA)
@@ -58,6 +58,9 @@ def test_the_int8_backend_keeps_the_gradients_and_the_float_cnn_part_to_a_cosine
     calib = cnn.int8_calibration_frames()
     assert calib.shape == (5 * cnn.CALIBRATION_VIEWS, 120, 160, 3) and calib.dtype == np.uint8
     assert cnn.int8_calibration_frames() is calib and calib[:cnn.CALIBRATION_VIEWS].std() > 10
+    folder = write_frames(tmp_path / "seq", 3, size=(64, 32))
+    m8, m = (features.get(d)._key_meta(folder, 1) for d in (features.FUSED_INT8, FUSED))
+    assert m8["int8_calibration"] == cnn.CALIBRATION_KEY and "int8_calibration" not in m   # cached descriptors keyed by it
     with pytest.raises(ValueError, match="no int8 TFLite graph"):
         cnn.predictor(features.get_backbone("vgg19"), None, calibration=calib)   # a Keras application: no graph
 

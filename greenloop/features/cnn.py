@@ -134,6 +134,9 @@ _LITE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 # and washed-out real frames without any data of the user's (frames of Nordland and Gardens Point
 # calibrated the graph no better on either; the synthetic frames alone left a few real ones clipped).
 CALIBRATION_VIEWS, CALIBRATION_SIZE, CALIBRATION_GAMMAS, CALIBRATION_CONTRAST = 24, (160, 120), (0.5, 2.0), 1.8
+# what a cached int8 descriptor's key records of its calibration set (features.descriptor)
+CALIBRATION_KEY = (f"synthetic seed 0, {CALIBRATION_VIEWS} views at {CALIBRATION_SIZE}, gammas {CALIBRATION_GAMMAS}, "
+                   f"contrast {CALIBRATION_CONTRAST}, mirrored")
 # the int8 graph's outputs must keep this cosine with the float model's on the calibration frames
 INT8_MIN_COSINE = 0.9
 # backbone kinds whose Keras networks run as TFLite graphs (keras_predict): the EfficientNet-Lite port,
