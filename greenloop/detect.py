@@ -35,7 +35,7 @@ from greenloop.util.files import write_atomic
 from greenloop.util.progress import bar
 
 MATCH_COLUMNS = ("frame", "file", "match", "match_file", "score", "closure")
-OVERRIDES = ("descriptor", "seq_len", "contrast_window", "model", "frames_per_spot", "margin", "backend")
+OVERRIDES = ("descriptor", "seq_len", "contrast_window", "store_dtype", "model", "frames_per_spot", "margin", "backend")
 
 
 class Plan(NamedTuple):
