@@ -56,7 +56,7 @@ def test_the_int8_backend_keeps_the_gradients_and_the_float_cnn_part_to_a_cosine
         assert np.all(cos >= 0.99) and not np.allclose(X8[:, 256:], X[:, 256:], atol=1e-4), cos
     from greenloop.features import cnn
     calib = cnn.int8_calibration_frames()
-    assert calib.shape == (5 * cnn.CALIBRATION_VIEWS, 120, 160, 3) and calib.dtype == np.uint8
+    assert calib.shape == (7 * cnn.CALIBRATION_VIEWS, 120, 160, 3) and calib.dtype == np.uint8
     assert cnn.int8_calibration_frames() is calib and calib[:cnn.CALIBRATION_VIEWS].std() > 10
     folder = write_frames(tmp_path / "seq", 3, size=(64, 32))
     m8, m = (features.get(d)._key_meta(folder, 1) for d in (features.FUSED_INT8, FUSED))
