@@ -54,6 +54,10 @@ def test_the_int8_backend_keeps_the_gradients_and_the_float_cnn_part_to_a_cosine
         assert X8.shape == X.shape and np.array_equal(X8[:, :256], X[:, :256])
         cos = (X[:, 256:] * X8[:, 256:]).sum(1)                       # both parts L2-normalised
         assert np.all(cos >= 0.99) and not np.allclose(X8[:, 256:], X[:, 256:], atol=1e-4), cos
+    hits = layers._int8_runner.cache_info().hits
+    for f in frames[:2]:                                              # a stream's one frame per call
+        features.extract(f[None], features.FUSED_INT8, progress=False)
+    assert layers._int8_runner.cache_info().hits == hits + 2         # the graph and its calibration made once
     from greenloop.features import cnn
     calib = cnn.int8_calibration_frames()
     assert calib.shape == (7 * cnn.CALIBRATION_VIEWS, 120, 160, 3) and calib.dtype == np.uint8

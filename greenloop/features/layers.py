@@ -179,12 +179,21 @@ def _predictor(b, key, size, tflite: bool, names, poolings, color: str = "rgb", 
             return _pooled([out[n] for n in names], poolings)
         return predict, lambda a: rgb_batch(a, size, color), ("tflite", b.name, key)
     model, pre = _keras_layers(b.name, key, size, tuple(names)), _preprocess_fn(b)
-    run = predictor(b, model, pre(rgb_batch(int8_calibration_frames(), size)) if int8 else None)
+    run = _int8_runner(b.name, key, size, tuple(names)) if int8 else predictor(b, model)
 
     def predict(x):
         maps = run(x)
         return _pooled([np.asarray(m) for m in (maps if isinstance(maps, (list, tuple)) else [maps])], poolings)
     return predict, lambda a: pre(rgb_batch(a, size, color)), ("keras", id(model), int8)
+
+
+@functools.lru_cache(maxsize=4)
+def _int8_runner(name: str, key, size: tuple[int, int], layers: tuple[str, ...]):
+    """``cnn.predictor`` of :func:`_keras_layers`' model as its int8 graph, calibrated on
+    ``cnn.int8_calibration_frames`` at ``size``: made once per model, so that a stream describing one
+    frame per call neither prepares nor hashes the calibration set again."""
+    b = BACKBONES[name]
+    return predictor(b, _keras_layers(name, key, size, layers), _preprocess_fn(b)(rgb_batch(int8_calibration_frames(), size)))
 
 
 def _channels(name, key, size, tflite: bool, names) -> list[int]:
