@@ -47,7 +47,7 @@ MATCH_COLUMNS = ("frame", "file", "match", "match_file", "score", "closure")
 # the model, the rotation vector (rad) and translation of the relative pose, metric 1 (t in metres) / 0 (direction)
 VERIFY_COLUMNS = ("verified", "inliers", "model", "rx", "ry", "rz", "tx", "ty", "tz", "metric")
 UNCHECKED = dict(verified=None, inliers=0, model="none", R=None, t=None, metric=False)   # a closure not verified
-OVERRIDES = ("descriptor", "seq_len", "contrast_window", "model", "frames_per_spot", "margin", "backend")
+OVERRIDES = ("descriptor", "seq_len", "contrast_window", "store_dtype", "model", "frames_per_spot", "margin", "backend")
 
 
 class Plan(NamedTuple):

@@ -194,6 +194,39 @@ def test_every_registered_stream_declares_what_its_matrix_does(entry, revisit):
         assert not seqstream.stream_check(entry.stream(k, thr, d), d.descriptors[k["descriptor"]], shifted, GT)["equal"]
 
 
+def test_the_cnn_configuration_with_int8_rows_streams_what_its_matrix_declares(revisit):
+    """The CNN configuration's record with store_dtype "int8" (rows as int8 and a scale each): its
+    matrix compares with the stored int8 values, so the stream declares what the thresholded matrix
+    does (stream_check, at a threshold no score lies within float rounding of) and its last column
+    is the stream's scores to 1e-4; the float32 record's matrix differs from it."""
+    X, GT = revisit
+    entry = greenloop_seq.CNN_ENTRY
+    d, knobs = _records(entry, X, GT)
+    k = dict(knobs[entry.name], store_dtype="int8")
+    S = entry.score(k, d)
+    assert not np.array_equal(S, entry.score(dict(k, store_dtype="float32"), d))
+    det = entry.stream(k, _clear_threshold(S, EX, N0), d)
+    assert det.store_dtype == np.int8
+    c = seqstream.stream_check(det, d.descriptors[k["descriptor"]], S, GT)
+    assert c["equal"] and c["events"] > 0 and c["correct_events"] > 0, c
+    assert np.allclose(det.last_scores, S[:len(X) - 1 - EX, -1], atol=1e-4)
+
+
+def test_detect_takes_the_cnn_configurations_store_from_a_flag(tmp_path):
+    """--store-dtype sets the CNN configuration's store_dtype knob (float32 by default, said in the
+    header); the named default has no such knob and refuses it, naming the method that takes it."""
+    from greenloop import detect
+    from conftest import write_frames
+    folder = write_frames(tmp_path / "seq", 3)
+    knobs, _, _, lines, _ = detect.knobs_for(seqmatch.CNN_NAME, folder, store_dtype=None)
+    assert knobs["store_dtype"] == "float32" and f"# store_dtype float32 (default {seqmatch.CNN_NAME})" in lines
+    knobs, _, _, lines, _ = detect.knobs_for(seqmatch.CNN_NAME, folder, store_dtype="int8")
+    assert knobs["store_dtype"] == "int8" and "# store_dtype int8 (--store-dtype)" in lines
+    assert greenloop_seq.CNN_ENTRY.stream(knobs, knobs["fixed_threshold"], _data({}, np.zeros((2, 2), bool))).store_dtype == np.int8
+    with pytest.raises(ValueError, match=f"--store-dtype does not apply.*{seqmatch.CNN_NAME}"):
+        detect.knobs_for(seqmatch.DEFAULT_NAME, folder, store_dtype="int8")
+
+
 def _example(monkeypatch):
     """The 'Adding a descriptor' blocks of docs/ARCHITECTURE.md, run: the module block becomes the
     module it names (greenloop.features.hue) and the registry line a line of features.BACKBONES

@@ -77,7 +77,7 @@ def write_sequence(folder, rgb, depth_m=None):
 
 def test_backbone_table():
     assert set(F.BACKBONES) == set(DIMS) | {"sift_bovw", "pixels", "spot_cnn", "pixels-patchnorm",
-                                            "gradients", "gradients+efficientnetlite0"}
+                                            "gradients", "gradients+efficientnetlite0", F.FUSED_INT8}
     for name, d in DIMS.items():
         assert F.BACKBONES[name].dim == d
         assert F.BACKBONES[name].input_size == (224, 224)
@@ -85,6 +85,7 @@ def test_backbone_table():
     assert F.BACKBONES["pixels"].dim == F.BACKBONES["pixels-patchnorm"].dim == 1024
     assert F.BACKBONES["gradients"].dim == (128 // 16) * (64 // 16) * 8 == 256
     assert F.BACKBONES["gradients+efficientnetlite0"].dim == 256 + 4 * 112    # block 10: 112 channels, 2 x 2 cells
+    assert F.BACKBONES[F.FUSED_INT8].dim == F.FUSED_DIM and F.BACKBONES[F.FUSED_INT8].kind == "fused"   # its int8 graph
 
 
 def test_unknown_backbone_lists_valid_names(frames):
@@ -422,7 +423,8 @@ def test_sequence_descriptors_are_registry_entries():
     extractor, and seqmatch's tuple is that same object (no second list)."""
     from greenloop.methods.greenloop_seq import seqmatch
     assert seqmatch.DESCRIPTORS is F.SEQUENCE_DESCRIPTORS
-    assert seqmatch.DESCRIPTORS == ("pixels", "pixels-patchnorm", "mobilenetv2", "gradients", "gradients+efficientnetlite0")
+    assert seqmatch.DESCRIPTORS == ("pixels", "pixels-patchnorm", "mobilenetv2", "gradients", "gradients+efficientnetlite0",
+                                    "gradients+efficientnetlite0-int8")
     for name in seqmatch.DESCRIPTORS:
         assert F.BACKBONES[name].kind in F.EXTRACTORS
     assert set(F.EXTRACTORS) == {b.kind for b in F.BACKBONES.values()} | {"function"}   # no function registered yet

@@ -12,7 +12,7 @@ from greenloop.features import layers
 from greenloop.methods.greenloop_seq import seqmatch, seqstream
 from greenloop.similarity import l2_normalise
 
-from conftest import run_cli
+from conftest import run_cli, write_frames
 from test_seqspeed import _drive, make_route, recall_at_1  # noqa: E402  (the drives of the target-5 and CLI tests)
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -38,6 +38,35 @@ def test_the_fused_descriptor_is_its_two_parts_each_normalised(frames):
     np.testing.assert_allclose(np.linalg.norm(X[:, 256:], axis=1), 1, rtol=1e-5)
     bgr = features.extract(frames[..., ::-1].copy(), FUSED, progress=False, color="bgr")
     np.testing.assert_allclose(bgr, X, atol=1e-6)                     # the stream's decoded frames give the same
+
+
+def test_the_int8_backend_keeps_the_gradients_and_the_float_cnn_part_to_a_cosine_of_099(frames, tmp_path):
+    """features.FUSED_INT8: the gradients part bit for bit, the CNN part from the full-integer int8
+    graph (calibrated on cnn.int8_calibration_frames, which the frames here are not) within a cosine
+    of 0.99 of the float graph's on each frame, yet not the float graph's; the calibration set is
+    fixed (the same array on every call) and keys the cached descriptors, and a network that runs no TFLite graph refuses int8."""
+    from greenloop.datasets.synthetic import build_scene, render_frame, route_world
+    scene, (poses, _) = build_scene(1), route_world(200, 1)       # another seed's frames than the calibration's
+    rendered = np.stack([cv2.resize(render_frame(scene, poses[i], (160, 120))[0], (64, 32), interpolation=cv2.INTER_AREA)
+                         for i in (13, 77, 140)])
+    for F in (frames, rendered):
+        X, X8 = (features.extract(F, d, progress=False) for d in (FUSED, features.FUSED_INT8))
+        assert X8.shape == X.shape and np.array_equal(X8[:, :256], X[:, :256])
+        cos = (X[:, 256:] * X8[:, 256:]).sum(1)                       # both parts L2-normalised
+        assert np.all(cos >= 0.99) and not np.allclose(X8[:, 256:], X[:, 256:], atol=1e-4), cos
+    hits = layers._int8_runner.cache_info().hits
+    for f in frames[:2]:                                              # a stream's one frame per call
+        features.extract(f[None], features.FUSED_INT8, progress=False)
+    assert layers._int8_runner.cache_info().hits == hits + 2         # the graph and its calibration made once
+    from greenloop.features import cnn
+    calib = cnn.int8_calibration_frames()
+    assert calib.shape == (7 * cnn.CALIBRATION_VIEWS, 120, 160, 3) and calib.dtype == np.uint8
+    assert cnn.int8_calibration_frames() is calib and calib[:cnn.CALIBRATION_VIEWS].std() > 10
+    folder = write_frames(tmp_path / "seq", 3, size=(64, 32))
+    m8, m = (features.get(d)._key_meta(folder, 1) for d in (features.FUSED_INT8, FUSED))
+    assert m8["int8_calibration"] == cnn.CALIBRATION_KEY and "int8_calibration" not in m   # cached descriptors keyed by it
+    with pytest.raises(ValueError, match="no int8 TFLite graph"):
+        cnn.predictor(features.get_backbone("vgg19"), None, calibration=calib)   # a Keras application: no graph
 
 
 def test_the_fused_descriptor_refuses_a_random_network(frames, monkeypatch):

@@ -261,6 +261,24 @@ def test_max_dot_equals_the_best_of_the_products():
         assert (np.argmax(A @ Q.T, 1) == np.argmax(A.astype(np.float64) @ Q.T.astype(np.float64), 1)).mean() > 0.99
 
 
+def test_scaled_max_dot_is_the_best_product_of_the_dequantised_rows():
+    """scaled_max_dot's compiled passes (one and three queries) and its fallback (any other count)
+    give scale[i] * max_s <A[i], Q[s]> of int8 rows, to float rounding; a zero scale gives 0."""
+    rng = np.random.default_rng(7)
+    A = rng.integers(-127, 128, size=(1003, 300)).astype(np.int8)
+    scale = rng.uniform(0, 1e-2, 1003).astype(np.float32)
+    scale[:3] = 0
+    for m in (1, 3, 4):
+        Q = rng.normal(size=(m, 300)).astype(np.float32)
+        ref = ((A.astype(np.float64) * scale[:, None].astype(np.float64)) @ Q.T.astype(np.float64)).max(1)
+        out = kernels.scaled_max_dot(A, scale, Q)
+        assert out.shape == (1003,) and out.dtype == np.float32
+        np.testing.assert_allclose(out, ref, rtol=1e-4, atol=1e-4)
+        assert not out[:3].any()
+    with pytest.raises(ValueError, match="must agree"):
+        kernels.scaled_max_dot(A, scale[:-1], Q)
+
+
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 def test_ring_best_is_the_numpy_trajectory_search_bit_for_bit(dtype):
     from greenloop.methods.greenloop_seq import seqstream

@@ -70,7 +70,9 @@ def test_sequence_beats_single_frames(revisit):
 
 
 @pytest.mark.parametrize("kw", [dict(contrast_window=10), dict(contrast_window=0, store_dtype="float16"),
-                                dict(contrast_window=6, velocities=(1.0,), seq_len=3)])
+                                dict(contrast_window=6, velocities=(1.0,), seq_len=3),
+                                dict(contrast_window=0, store_dtype="int8"),
+                                dict(contrast_window=0, store_dtype="int8", center_window=[3, 15], calibrate="neighbourhood")])
 def test_stream_equals_score_matrix(revisit, kw):
     X, _ = revisit
     X = X[::2]
@@ -84,7 +86,35 @@ def test_stream_equals_score_matrix(revisit, kw):
         assert np.all(S[c:, j] <= S[:, :].max())
     filled = S[evaluate.pair_mask(len(X), 20)]
     assert np.all(S[~evaluate.pair_mask(len(X), 20)] <= filled.min())
-    assert det.bytes_per_frame == D * np.dtype(kw.get("store_dtype", "float32")).itemsize + 4 * opts["seq_len"]
+    dims = D * len(kw.get("center_window", [0]))
+    scale = 4 * (kw.get("store_dtype") == "int8")
+    assert det.bytes_per_frame == dims * np.dtype(kw.get("store_dtype", "float32")).itemsize + scale + 4 * opts["seq_len"]
+
+
+def test_int8_rows_hold_each_row_within_half_a_level_and_its_matrix_uses_them(revisit):
+    """quantise_rows: each entry within half its row's level, the largest at +-127, a zero row
+    zero; the int8 stream's stored values are stored_values' (so its matrix is not the float32
+    one), a preloaded int8 stream scores as the streamed one, and candidate mode refuses int8."""
+    X, _ = revisit
+    Y = seqmatch.normalise(X[:50])
+    Y[3] = 0
+    q, scale = seqmatch.quantise_rows(Y)
+    assert q.dtype == np.int8 and scale.dtype == np.float32 and scale[3] == 0 and not q[3].any()
+    assert np.all(np.abs(q).max(1)[scale > 0] == seqmatch.INT8_LEVELS)
+    assert np.all(np.abs(q * scale[:, None] - Y) <= scale[:, None] / 2 + 1e-7)
+    assert np.array_equal(seqmatch.stored_values(Y, "int8"), q.astype(np.float32) * scale[:, None])
+    opts = dict(seq_len=5, exclude=20, contrast_window=0, center_window=[3, 15])
+    S8, S32 = (seqstream.score_matrix(X, store_dtype=t, **opts) for t in ("int8", "float32"))
+    assert not np.array_equal(S8, S32) and np.allclose(S8, S32, atol=0.05)
+    streamed, preloaded = Detector(None, store_dtype="int8", **opts), Detector(None, store_dtype="int8", **opts)
+    for x in X:
+        streamed.update_descriptor(x)
+    preloaded.preload(X[:-1])
+    preloaded.update_descriptor(X[-1])
+    assert np.allclose(preloaded.last_scores, streamed.last_scores, atol=1e-5)
+    assert np.allclose(streamed.last_scores, S8[:len(X) - 21, -1], atol=1e-4)
+    with pytest.raises(ValueError, match="int8.*index=None"):
+        Detector(None, store_dtype="int8", index="scan")
 
 
 def test_projection_and_metrics(revisit):

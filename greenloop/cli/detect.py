@@ -65,6 +65,9 @@ def _knob_options(d) -> None:
     g.add_argument("--seq-len", type=int, default=None, help="frames per matched sequence (default: " + _defaults("seq_len") + ")")
     g.add_argument("--contrast-window", type=int, default=None,
                    help="local contrast window in frames, 0 = off (default: " + _defaults("contrast_window") + ")")
+    g.add_argument("--store-dtype", default=None, choices=registry.STORE_DTYPES,
+                   help="the stored descriptors' type (default: " + _defaults("store_dtype") + "); int8: each row as int8 "
+                        "with a scale, a quarter of float32's bytes read per stored frame (not with --index)")
     g.add_argument("--model", default=None, help="dictionary: the trained CNN, a .keras or .tflite file (needed)")
     g.add_argument("--frames-per-spot", type=int, default=None, metavar="L",
                    help=f"dictionary: frames per spot the model was trained with (default "

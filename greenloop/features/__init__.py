@@ -113,7 +113,7 @@ from greenloop.features.extraction import (clear_cache, extract, extract_all, ex
 from greenloop.features.frames import depth_to_uint8, stack_frames
 from greenloop.features.pixels import gradient_histograms, patch_normalise
 from greenloop.features.registry import (BACKBONES, CNN_BACKBONES, CNN_KINDS, DEFAULT_VOCAB_SIZE, DEPTH_MAX_M, DEPTHS,
-                                         FUSED_CNN, FUSED_DIM, FUSED_WIDTH, GRADIENT_BINS, GRADIENT_CELL, GRADIENT_DIM,
+                                         FUSED_CNN, FUSED_DIM, FUSED_INT8, FUSED_WIDTH, GRADIENT_BINS, GRADIENT_CELL, GRADIENT_DIM,
                                          GRADIENT_SIZE, PATCH, PIXELS_SIZE, POOLINGS, RANDOM_INIT_SEED,
                                          SEQUENCE_DESCRIPTORS, Backbone, ExtractInfo, Name, Options, get_backbone,
                                          layer_name, names, parse, split_spec)
@@ -124,7 +124,7 @@ from greenloop.features.weights import (TFLITE_LABEL, WEIGHTS_ENV, Resolved, Wei
                                         weights_used)
 
 __all__ = ["BACKBONES", "CNN_BACKBONES", "CNN_KINDS", "DEFAULT_VOCAB_SIZE", "DEPTHS", "DEPTH_MAX_M", "EXTRACTORS",
-           "FUSED_CNN", "FUSED_DIM", "FUSED_WIDTH", "GRADIENT_BINS", "GRADIENT_CELL", "GRADIENT_DIM", "GRADIENT_SIZE",
+           "FUSED_CNN", "FUSED_DIM", "FUSED_INT8", "FUSED_WIDTH", "GRADIENT_BINS", "GRADIENT_CELL", "GRADIENT_DIM", "GRADIENT_SIZE",
            "PATCH", "PIXELS_SIZE", "POOLINGS", "RANDOM_INIT_SEED", "SEQUENCE_DESCRIPTORS", "TFLITE_LABEL",
            "WEIGHTS_ENV", "Backbone", "Descriptor", "ExtractInfo", "Name", "Options", "Resolved",
            "WeightsNotFoundError", "clear_cache", "clear_models", "depth_to_uint8", "extract", "extract_all",

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import hashlib
 import importlib
 import io
 import random
@@ -18,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from greenloop.datasets.synthetic import build_scene, render_frame, route_world
 from greenloop.backbones import efficientnet_lite as _lite, ghostnet as _ghostnet, mobilenet_tflite as _tflite, shufflenet as _shufflenet
 from greenloop.features.frames import load, rgb_batch
 from greenloop.features.registry import Backbone, BACKBONES, Options, RANDOM_INIT_SEED
@@ -124,34 +126,76 @@ def _progress(total, desc, progress):
     return tqdm(total=total, desc=desc, unit="img", disable=not progress)
 
 
-# Keras model -> its TFLite interpreter (keras_predict), forgotten with the model
+# Keras model -> {calibration key (None: float32): its TFLite interpreter} (keras_predict), forgotten with the model
 _LITE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+# The int8 graphs' fixed calibration set (int8_calibration_frames): CALIBRATION_VIEWS frames of the synthetic
+# generator (seed 0, evenly along its route, CALIBRATION_SIZE pixels), each also under the photometric changes
+# of CALIBRATION_GAMMAS, CALIBRATION_DIM (brightness scaled) and CALIBRATION_CONTRAST and mirrored, so that its
+# activation ranges cover bright, dark and washed-out real frames without any data of the user's. Chosen on
+# R@1 of Nordland's and Gardens Point's target streams against sets without the dark views and sets of those
+# datasets' own frames (issue 68's report): none kept every night-time query of Gardens Point.
+CALIBRATION_VIEWS, CALIBRATION_SIZE, CALIBRATION_GAMMAS, CALIBRATION_DIM, CALIBRATION_CONTRAST = \
+    24, (160, 120), (0.5, 2.0, 3.0), 0.3, 1.8
+# what a cached int8 descriptor's key records of its calibration set (features.descriptor)
+CALIBRATION_KEY = (f"synthetic seed 0, {CALIBRATION_VIEWS} views at {CALIBRATION_SIZE}, gammas {CALIBRATION_GAMMAS}, "
+                   f"dimmed {CALIBRATION_DIM}, contrast {CALIBRATION_CONTRAST}, mirrored")
+# the int8 graph's outputs must keep this cosine with the float model's on the calibration frames
+INT8_MIN_COSINE = 0.9
 # backbone kinds whose Keras networks run as TFLite graphs (keras_predict): the EfficientNet-Lite port,
 # a family made for that runtime. The converter's graphs of Keras applications (VGG19, MobileNet v3)
 # gave inf / nan here, so those keep predict_on_batch.
 LITE_KINDS = ("efficientnet_lite",)
 
 
-def predictor(b: Backbone, model):
+def predictor(b: Backbone, model, calibration=None):
     """The predict function of backbone ``b``'s Keras ``model``: :func:`keras_predict` for
-    ``LITE_KINDS``, ``model.predict_on_batch`` for the others."""
-    return keras_predict(model) if b.kind in LITE_KINDS else model.predict_on_batch
+    ``LITE_KINDS`` (with ``calibration``: its full-integer int8 graph), ``model.predict_on_batch``
+    for the others (which refuse a calibration: ValueError)."""
+    if b.kind in LITE_KINDS:
+        return keras_predict(model, calibration)
+    if calibration is not None:
+        raise ValueError(f"{b.name} has no int8 TFLite graph: only {LITE_KINDS} networks run as TFLite graphs here")
+    return model.predict_on_batch
 
 
-def keras_predict(model):
+@functools.lru_cache(maxsize=1)
+def int8_calibration_frames() -> np.ndarray:
+    """The fixed calibration set of every int8 graph (:func:`keras_predict`): (7 * CALIBRATION_VIEWS,
+    h, w, 3) uint8 RGB, CALIBRATION_SIZE (w, h): the synthetic generator's frames (seed 0, noiseless
+    renders evenly along a 200-frame route), then the same under gamma 0.5, 2 and 3, dimmed to 0.3,
+    contrast x1.8 about mid-grey and mirrored. The same bytes on every machine, and no data of the user's."""
+    scene, (poses, _) = build_scene(0), route_world(200, 0)
+    F = np.stack([render_frame(scene, poses[i], CALIBRATION_SIZE)[0]
+                  for i in np.linspace(0, len(poses) - 1, CALIBRATION_VIEWS).round().astype(int)]).astype(np.float32)
+    views = [F] + [255 * (F / 255) ** np.float32(g) for g in CALIBRATION_GAMMAS] + [F * np.float32(CALIBRATION_DIM)]
+    views += [np.clip((F - 128) * np.float32(CALIBRATION_CONTRAST) + 128, 0, 255), F[:, :, ::-1]]
+    return np.rint(np.concatenate(views)).astype(np.uint8)
+
+
+def keras_predict(model, calibration=None):
     """``predict(x)`` of a Keras model: x (N, h, w, c) float32, its preprocessed input -> the model's
     outputs as ``model.predict_on_batch`` gives them (an array, or a list in the model's output order).
 
     With the tensorflow backend the model runs as a float32 TFLite graph converted from it once per
     model (XNNPACK kernels, one thread per core: the runtime of the ImageNet MobileNet graphs), checked
     on a probe batch to give the Keras model's outputs to float32 rounding. With another backend
-    (jax on a GPU) it is ``predict_on_batch``. Raises RuntimeError when the graph's outputs differ."""
+    (jax on a GPU) it is ``predict_on_batch``. Raises RuntimeError when the graph's outputs differ.
+    calibration: None, or (K, h, w, c) float32 preprocessed inputs: the model runs as a full-integer
+    int8 graph (post-training quantisation, every activation range measured on them; float32 in and
+    out), converted once per model and calibration set (``util.cache.cached_graph``) and checked to
+    keep INT8_MIN_COSINE with the model's outputs on the first of them; needs the tensorflow
+    backend (ValueError otherwise)."""
     import keras
     if keras.backend.backend() != "tensorflow":
+        if calibration is not None:
+            raise ValueError("an int8 TFLite graph needs Keras's tensorflow backend (KERAS_BACKEND=tensorflow)")
         return model.predict_on_batch
-    if model not in _LITE:
-        _LITE[model] = _lite_graph(model)
-    interp, inp, outs = _LITE[model]
+    calib = None if calibration is None else np.ascontiguousarray(calibration, dtype=np.float32)
+    ckey = None if calib is None else hashlib.sha1(calib.view(np.uint8)).hexdigest()[:16]
+    graphs = _LITE.setdefault(model, {})
+    if ckey not in graphs:
+        graphs[ckey] = _lite_graph(model, calib, ckey)
+    interp, inp, outs = graphs[ckey]
 
     def predict(x):
         x = np.ascontiguousarray(x, dtype=np.float32)
@@ -165,26 +209,38 @@ def keras_predict(model):
     return predict
 
 
-def _lite_graph(model):
+def _lite_graph(model, calib=None, ckey=None):
     """(interpreter, input index, output indices in the model's order) of a Keras model converted to a
-    float32 TFLite graph with a free batch dimension (once per network: util.cache.cached_graph),
-    after a probe batch gave the model's outputs."""
+    TFLite graph with a free batch dimension (once per network: util.cache.cached_graph): float32, after
+    a probe batch gave the model's outputs; or, with calib (K, h, w, c) float32 inputs (ckey: their
+    hash), full-integer int8 calibrated on them (:func:`_check_int8`)."""
     import tensorflow as tf
     # the model's own tf.function: from_keras_model (dictionary.stream's converter) fails on the Lite port's
     # several-output models under Keras 3
     def convert() -> bytes:
         spec = tf.TensorSpec((None, *model.inputs[0].shape[1:]), tf.float32)
         fn = tf.function(lambda x: model(x, training=False), input_signature=[spec])
-        with contextlib.redirect_stdout(io.StringIO()), devices.without_backend_notices():
-            return tf.lite.TFLiteConverter.from_concrete_functions([fn.get_concrete_function()], model).convert()
+        conv = tf.lite.TFLiteConverter.from_concrete_functions([fn.get_concrete_function()], model)
+        if calib is not None:   # post-training full-integer: int8 weights and activations, float32 in and out
+            conv.optimizations = [tf.lite.Optimize.DEFAULT]
+            conv.representative_dataset = lambda: ([x[None]] for x in calib)
+            conv.target_spec.supported_ops = [tf.lite.OpsSet.TFLITE_BUILTINS_INT8]
+        with contextlib.redirect_stdout(io.StringIO()), devices.without_backend_notices(), warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message=r"Statistics for quantized inputs")
+            return conv.convert()
 
-    flat = cache.cached_graph(cache.model_key(model, converter=f"from_concrete_functions {tf.__version__}"), convert)
+    settings = dict(converter=f"from_concrete_functions {tf.__version__}")
+    if calib is not None:
+        settings.update(quantisation="full-integer int8", calibration=ckey)
+    flat = cache.cached_graph(cache.model_key(model, **settings), convert)
     with warnings.catch_warnings():  # the interpreter's deprecation notice
         warnings.filterwarnings("ignore", message=r"(?s).*deprecated", category=UserWarning)
         interp = tf.lite.Interpreter(model_content=flat, num_threads=_tflite._threads())
     # outputs are named Identity, Identity_1, ... in the order the function returns them
     details = sorted(interp.get_output_details(),
                      key=lambda d: int((re.findall(r"_(\d+)$", d["name"]) or [0])[0]))
+    if calib is not None:
+        return _check_int8(model, interp, details, calib[:4])
     probe = np.random.default_rng(0).uniform(-1, 1, (2, *model.inputs[0].shape[1:])).astype(np.float32)
     interp.resize_tensor_input(interp.get_input_details()[0]["index"], probe.shape)
     interp.allocate_tensors()
@@ -195,6 +251,24 @@ def _lite_graph(model):
         w, got = np.asarray(w), interp.get_tensor(d["index"])
         if got.shape != w.shape or not np.allclose(got, w, rtol=1e-3, atol=1e-4 * max(np.abs(w).max(), 1e-12)):
             raise RuntimeError(f"the TFLite graph of {model.name} does not give its outputs on a probe batch")
+    return interp, interp.get_input_details()[0]["index"], [d["index"] for d in details]
+
+
+def _check_int8(model, interp, details, probe):
+    """(interpreter, input index, output indices) of an int8 graph whose every output keeps
+    INT8_MIN_COSINE (per frame, flattened) with the model's on probe (k, h, w, c) float32 inputs;
+    RuntimeError otherwise (a graph quantised out of its calibration's range)."""
+    interp.resize_tensor_input(interp.get_input_details()[0]["index"], probe.shape)
+    interp.allocate_tensors()
+    interp.set_tensor(interp.get_input_details()[0]["index"], probe)
+    interp.invoke()
+    want = model.predict_on_batch(probe)
+    for d, w in zip(details, want if isinstance(want, (list, tuple)) else [want]):
+        w, got = np.asarray(w).reshape(len(probe), -1), interp.get_tensor(d["index"]).reshape(len(probe), -1)
+        cos = (w * got).sum(1) / np.maximum(np.linalg.norm(w, axis=1) * np.linalg.norm(got, axis=1), 1e-12)
+        if got.shape != w.shape or not np.all(cos >= INT8_MIN_COSINE):
+            raise RuntimeError(f"the int8 TFLite graph of {model.name} does not keep a cosine of {INT8_MIN_COSINE} "
+                               f"with its float outputs on its calibration frames")
     return interp, interp.get_input_details()[0]["index"], [d["index"] for d in details]
 
 

@@ -23,10 +23,10 @@ import numpy as np
 
 from greenloop.datasets import sequence
 from greenloop.features import layers
-from greenloop.features.cnn import extract_cnn
+from greenloop.features.cnn import CALIBRATION_KEY, extract_cnn
 from greenloop.features.function import code_digest, extract_function
 from greenloop.features.pixels import extract_gradients, extract_patchnorm, extract_pixels
-from greenloop.features.registry import (BACKBONES, CNN_KINDS, DEFAULT_VOCAB_SIZE, GRADIENT_BINS, GRADIENT_CELL,
+from greenloop.features.registry import (BACKBONES, CNN_KINDS, DEFAULT_VOCAB_SIZE, FUSED_INT8, GRADIENT_BINS, GRADIENT_CELL,
                                          LAYER_CHANNELS, WEIGHT_TAGS, Backbone, ExtractInfo, Name, Options,
                                          input_size_of, layer_name, parse)
 from greenloop.features.sift import extract_sift
@@ -160,8 +160,8 @@ class Descriptor:
 
     def _key_meta(self, folder, step: int) -> dict:
         """The settings a cache key hashes: those keys always held, and only where a setting differs
-        from what they always described, the size of a non-CNN, the SIFT vocabulary or seed and a
-        registered function's code (so existing keys stay as they were)."""
+        from what they always described, the size of a non-CNN, the SIFT vocabulary or seed, a
+        registered function's code and the int8 graph's calibration set (so existing keys stay as they were)."""
         b = self.backbone
         meta = _legacy_meta(b, self.resolved.source, self.key_size, step, self.vocab_size, folder)
         if b.kind not in CNN_KINDS and self.input_size != b.input_size:
@@ -172,6 +172,8 @@ class Descriptor:
             meta["seed"] = int(self.seed)
         if b.kind == "function":
             meta["code"] = code_digest(b.fn)
+        if b.name == FUSED_INT8:
+            meta["int8_calibration"] = CALIBRATION_KEY
         return meta
 
 

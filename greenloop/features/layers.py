@@ -41,10 +41,10 @@ import numpy as np
 
 from greenloop.backbones import mobilenet_tflite as _tflite
 from greenloop.datasets import sequence
-from greenloop.features.cnn import _cnn_model, _preprocess_fn, _tflite_interpreter, predictor, run_model
+from greenloop.features.cnn import _cnn_model, _preprocess_fn, _tflite_interpreter, int8_calibration_frames, predictor, run_model
 from greenloop.features.frames import load, rgb_batch
 from greenloop.features.pixels import extract_gradients
-from greenloop.features.registry import (BACKBONES, DEPTHS, FUSED_CNN, FUSED_WIDTH, GRADIENT_SIZE, POOLINGS, Options,
+from greenloop.features.registry import (BACKBONES, DEPTHS, FUSED_CNN, FUSED_INT8, FUSED_WIDTH, GRADIENT_SIZE, POOLINGS, Options,
                                          get_backbone, layer_name, parse)
 from greenloop.features.weights import resolve, Resolved, source_key
 from greenloop.similarity import l2_normalise
@@ -117,7 +117,8 @@ def _pooled(maps: list, poolings) -> np.ndarray:
 
 def extract_layers(frames_or_folder, backbone: str, weights="auto", depths=DEPTHS, poolings=POOLINGS,
                    aspect: bool = True, batch_size: int = 32, progress: bool = True, step: int = 1,
-                   limit: int | None = None, resolved=None, width: int = 224, color: str = "rgb") -> tuple[dict, dict]:
+                   limit: int | None = None, resolved=None, width: int = 224, color: str = "rgb",
+                   int8: bool = False) -> tuple[dict, dict]:
     """Descriptors of every frame at several depths of one network, one forward pass.
 
     frames_or_folder: a sequence folder or (N, H, W, 3) RGB frames (as ``Descriptor.extract``).
@@ -125,7 +126,9 @@ def extract_layers(frames_or_folder, backbone: str, weights="auto", depths=DEPTH
     ImageNet MobileNets, their Keras architecture with weights=None). depths: keys of
     LAYERS[backbone]; poolings: of ``POOLINGS``. aspect: keep the frames' aspect ratio where the
     network allows it (:func:`aspect_size`, ``width`` pixels wide). step, limit, resolved, color (of a
-    frame array: "rgb", or "bgr" as ``cv2.imread`` decodes): as ``Descriptor.extract``.
+    frame array: "rgb", or "bgr" as ``cv2.imread`` decodes): as ``Descriptor.extract``. int8: run a
+    Keras-built network (EfficientNet-Lite0) as its full-integer int8 TFLite graph, calibrated on
+    ``cnn.int8_calibration_frames`` (``cnn.keras_predict``); ValueError for the TFLite MobileNets.
     Returns (feats, info): feats {(depth, pooling): (N, D) float32}; info {'weights': label,
     'input': 'WxH', 'layers': {depth: layer name}, 'seconds_per_image': wall s per frame of the
     whole forward pass and pooling}.
@@ -149,7 +152,9 @@ def extract_layers(frames_or_folder, backbone: str, weights="auto", depths=DEPTH
         size = aspect_size(w, h, width)
     frames = load(frames_or_folder, size, gray=False, limit=limit, step=step)
     names = [LAYERS[backbone][d][0 if tflite else 1] for d in depths]
-    predict, batch_fn, warm_key = _predictor(b, key, size, tflite, names, poolings, color)
+    if int8 and tflite:
+        raise ValueError(f"int8 runs a Keras-built network as an int8 graph; {b.name}'s ImageNet graph is a uint8 TFLite file already")
+    predict, batch_fn, warm_key = _predictor(b, key, size, tflite, names, poolings, color, int8)
     X, spi = run_model(predict, frames, batch_fn, batch_size, progress, f"{b.name} layers", warm_key)
     feats, at = {}, 0
     for d, c in zip(depths, _channels(b.name, key, size, tflite, names)):
@@ -161,10 +166,11 @@ def extract_layers(frames_or_folder, backbone: str, weights="auto", depths=DEPTH
                    "layers": dict(zip(depths, names))}
 
 
-def _predictor(b, key, size, tflite: bool, names, poolings, color: str = "rgb"):
+def _predictor(b, key, size, tflite: bool, names, poolings, color: str = "rgb", int8: bool = False):
     """(predict, batch_fn, warm_key) for ``cnn.run_model``: a batch of frames -> every named map pooled
     every way, concatenated (N, sum of D); the TFLite graph's interpreter or the Keras model's outputs
-    (``cnn.predictor``: EfficientNet-Lite's runs as a TFLite graph converted from it);
+    (``cnn.predictor``: EfficientNet-Lite's runs as a TFLite graph converted from it, int8: its full-integer
+    int8 graph calibrated on ``cnn.int8_calibration_frames`` at this input size);
     warm_key names the traced graph (run_model warms each batch length of it up once)."""
     if tflite:
         def predict(rgb):
@@ -173,12 +179,21 @@ def _predictor(b, key, size, tflite: bool, names, poolings, color: str = "rgb"):
             return _pooled([out[n] for n in names], poolings)
         return predict, lambda a: rgb_batch(a, size, color), ("tflite", b.name, key)
     model, pre = _keras_layers(b.name, key, size, tuple(names)), _preprocess_fn(b)
-    run = predictor(b, model)
+    run = _int8_runner(b.name, key, size, tuple(names)) if int8 else predictor(b, model)
 
     def predict(x):
         maps = run(x)
         return _pooled([np.asarray(m) for m in (maps if isinstance(maps, (list, tuple)) else [maps])], poolings)
-    return predict, lambda a: pre(rgb_batch(a, size, color)), ("keras", id(model))
+    return predict, lambda a: pre(rgb_batch(a, size, color)), ("keras", id(model), int8)
+
+
+@functools.lru_cache(maxsize=4)
+def _int8_runner(name: str, key, size: tuple[int, int], layers: tuple[str, ...]):
+    """``cnn.predictor`` of :func:`_keras_layers`' model as its int8 graph, calibrated on
+    ``cnn.int8_calibration_frames`` at ``size``: made once per model, so that a stream describing one
+    frame per call neither prepares nor hashes the calibration set again."""
+    b = BACKBONES[name]
+    return predictor(b, _keras_layers(name, key, size, layers), _preprocess_fn(b)(rgb_batch(int8_calibration_frames(), size)))
 
 
 def _channels(name, key, size, tflite: bool, names) -> list[int]:
@@ -190,7 +205,8 @@ def _channels(name, key, size, tflite: bool, names) -> list[int]:
 
 
 def extract_fused(b, frames_or_folder, source, size, opt: Options):
-    """'gradients+efficientnetlite0' (the extractor protocol, ``registry.Options``): each frame's
+    """'gradients+efficientnetlite0' and its int8 form ``FUSED_INT8`` (the CNN part from the full-integer
+    int8 graph, ``extract_layers(int8=True)``) (the extractor protocol, ``registry.Options``): each frame's
     gradients (``pixels.gradient_histograms``, 256-d) beside EfficientNet-Lite0's block-10 map pooled
     over 2 x 2 cells (:func:`extract_layers` at ``FUSED_WIDTH`` pixels wide, aspect kept, 448-d),
     each part L2-normalised: (N, 704) float32, so that the cosine of two frames weighs both parts
@@ -204,6 +220,7 @@ def extract_fused(b, frames_or_folder, source, size, opt: Options):
     backbone, depth, pooling = FUSED_CNN
     feats, _ = extract_layers(frames_or_folder, backbone, depths=(depth,), poolings=(pooling,), batch_size=opt.batch_size,
                               progress=opt.progress, step=opt.step, limit=opt.limit,
-                              resolved=Resolved("imagenet", source), width=FUSED_WIDTH, color=opt.color)
+                              resolved=Resolved("imagenet", source), width=FUSED_WIDTH, color=opt.color,
+                              int8=b.name == FUSED_INT8)
     X = np.hstack([l2_normalise(G), l2_normalise(feats[(depth, pooling)])]).astype(np.float32)
     return X, (time.perf_counter() - t0) / max(len(X), 1), {}

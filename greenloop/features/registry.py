@@ -32,6 +32,10 @@ GRADIENT_DIM = (GRADIENT_SIZE[0] // GRADIENT_CELL) * (GRADIENT_SIZE[1] // GRADIE
 FUSED_CNN = ("efficientnetlite0", "mid", "grid2")
 FUSED_WIDTH = 128
 FUSED_DIM = GRADIENT_DIM + 4 * 112
+# the same descriptor with its CNN part run as a full-integer int8 TFLite graph (post-training quantisation,
+# calibrated on the fixed synthetic set features.cnn.int8_calibration_frames): the CNN configuration's
+# cheaper backend (``--descriptor gradients+efficientnetlite0-int8``)
+FUSED_INT8 = "gradients+efficientnetlite0-int8"
 # layer descriptors "backbone@depth-pooling" (greenloop.features.layers): the channels C of each depth's map
 # (a descriptor is C long, 4 C for grid2), the same for the ImageNet graph and the random-init control
 DEPTHS = ("early", "mid", "last")
@@ -134,11 +138,14 @@ BACKBONES: dict[str, Backbone] = {b.name: b for b in (
     Backbone("gradients+efficientnetlite0", "fused", FUSED_DIM, None,
              f"[gradients | efficientnetlite0@mid-grid2 at {FUSED_WIDTH} pixels wide, aspect kept], each part "
              f"L2-normalised; ImageNet weights only"),
+    Backbone(FUSED_INT8, "fused", FUSED_DIM, None,
+             "gradients+efficientnetlite0 with its CNN part a full-integer int8 TFLite graph (post-training, "
+             "calibrated on a fixed set of synthetic frames); ImageNet weights only"),
 )}
 CNN_KINDS = ("keras", "ghostnet", "efficientnet_lite", "tflite", "shufflenet")
 CNN_BACKBONES = tuple(n for n, b in BACKBONES.items() if b.kind in CNN_KINDS)
 # greenloop-seq's per-frame descriptors (seqmatch.DESCRIPTORS), in its order; each a BACKBONES key
-SEQUENCE_DESCRIPTORS = ("pixels", "pixels-patchnorm", "mobilenetv2", "gradients", "gradients+efficientnetlite0")
+SEQUENCE_DESCRIPTORS = ("pixels", "pixels-patchnorm", "mobilenetv2", "gradients", "gradients+efficientnetlite0", FUSED_INT8)
 
 
 @dataclass

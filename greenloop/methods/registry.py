@@ -44,6 +44,7 @@ def get(name: str, registry=None):
 
 DEFAULT = greenloop_seq.DEFAULT_ENTRY.name     # ``detect`` with no --method: the named default
 INDEX = IndexOptions(retrieval.KINDS, seqstream.INDEX_DIM, seqstream.INDEX_FIT, seqstream.NULL_SAMPLE)
+STORE_DTYPES = seqmatch.STORE_DTYPES      # the sequence matcher's stored-row types (detect --store-dtype)
 
 
 def named() -> dict:

@@ -20,6 +20,8 @@
 * ``ring_best``: greenloop-seq's search over straight trajectories in its ring of columns.
 * ``max_dot``: greenloop-seq's similarity under a cell shift (``seqmatch.shift_cells``): each
   stored row's best cosine with the query's shifted copies, reading the stored rows once.
+* ``scaled_max_dot``: the same for rows stored as int8 with a float32 scale per row
+  (``seqmatch.quantise_rows``): a quarter of the bytes read per stored row.
 
 Each kernel is checked against the library it replaces in tests/test_kernels.py. numba is imported
 lazily; ``available()`` says whether it is installed, and callers fall back to plain
@@ -52,7 +54,7 @@ def _compiled():
     """The numba kernels, compiled (or loaded from numba's disk cache) once per process.
 
     Returns {'conv3_relu', 'conv3_grad', 'adam1d', 'area_u8', 'cand_rows', 'cand_scores', 'pair_scores',
-    'max_dot3', 'ring_best'}:
+    'max_dot3', 'scaled_dot1', 'scaled_dot3', 'ring_best'}:
     serial kernels that release the
     GIL; ``run_slices`` spreads them over the cores, so numba's own thread pool is never started
     (its spinning workers would compete with the BLAS calls on the other cores).
@@ -69,7 +71,8 @@ def _compiled():
     return {"conv3_relu": _compile_conv_relu(njit, opts), "conv3_grad": _compile_conv_grad(njit, opts),
             "adam1d": _compile_adam(njit, opts), "area_u8": _compile_area(njit),
             **_compile_candidates(njit), "pair_scores": _compile_pair_scores(njit, opts),
-            "max_dot3": _compile_max_dot3(njit, opts), "ring_best": _compile_ring_best(njit)}
+            "max_dot3": _compile_max_dot3(njit, opts), **_compile_scaled_dot(njit, opts),
+            "ring_best": _compile_ring_best(njit)}
 
 
 def _compile_ring_best(njit):
@@ -177,6 +180,36 @@ def _compile_max_dot3(njit, opts: dict):
             out[i] = max(t0, max(t1, t2))
         return out
     return max_dot3
+
+
+def _compile_scaled_dot(njit, opts: dict) -> dict:
+    """{'scaled_dot1', 'scaled_dot3'}: out[i] = scale[i] * max over the 1 or 3 rows q of Q of
+    <float32(A[i]), q>, A int8, one pass over A (the int8 -> float32 conversion vectorises)."""
+    @njit(**opts)
+    def scaled_dot1(A, scale, Q, out):
+        q0 = Q[0]
+        for i in range(A.shape[0]):
+            a = A[i]
+            t0 = np.float32(0.0)
+            for k in range(A.shape[1]):
+                t0 += np.float32(a[k]) * q0[k]
+            out[i] = scale[i] * t0
+        return out
+
+    @njit(**opts)
+    def scaled_dot3(A, scale, Q, out):
+        q0, q1, q2 = Q[0], Q[1], Q[2]
+        for i in range(A.shape[0]):
+            a = A[i]
+            t0, t1, t2 = np.float32(0.0), np.float32(0.0), np.float32(0.0)
+            for k in range(A.shape[1]):
+                x = np.float32(a[k])
+                t0 += x * q0[k]
+                t1 += x * q1[k]
+                t2 += x * q2[k]
+            out[i] = scale[i] * max(t0, max(t1, t2))
+        return out
+    return {"scaled_dot1": scaled_dot1, "scaled_dot3": scaled_dot3}
 
 
 def _compile_conv_relu(njit, opts: dict):
@@ -377,6 +410,23 @@ def max_dot(A: np.ndarray, Q: np.ndarray) -> np.ndarray:
     for q in Q[1:]:
         np.maximum(out, A @ q, out=out)
     return out
+
+
+def scaled_max_dot(A: np.ndarray, scale: np.ndarray, Q: np.ndarray) -> np.ndarray:
+    """:func:`max_dot` of rows stored as int8 with a scale each: (C,) float32,
+    out[i] = scale[i] * max_s <A[i], Q[s]> (scale >= 0, so the maximum of the scaled products).
+
+    A: (C, D) int8 stored rows (C-contiguous); scale: (C,) float32 >= 0; Q: (m, D) float32
+    queries. m = 1 or 3 run one compiled pass over A (needs numba); any other m, or without numba,
+    converts A to float32 and takes :func:`max_dot`. Sums may be reordered as any BLAS does.
+    """
+    A, Q = np.ascontiguousarray(A, dtype=np.int8), np.ascontiguousarray(Q, dtype=np.float32)
+    scale = np.ascontiguousarray(scale, dtype=np.float32)
+    if A.shape[0] != scale.shape[0] or Q.ndim != 2 or A.shape[1] != Q.shape[1]:
+        raise ValueError(f"A (C, D), scale (C,) and Q (m, D) must agree, got {A.shape}, {scale.shape}, {Q.shape}")
+    if len(Q) in (1, 3) and available() and len(A):
+        return _compiled()[f"scaled_dot{len(Q)}"](A, scale, Q, np.empty(len(A), np.float32))
+    return (max_dot(A.astype(np.float32), Q) * scale).astype(np.float32)
 
 
 def candidate_rows(ids: np.ndarray, before: int, after: int, limit: int) -> tuple[np.ndarray, np.ndarray]:

@@ -5,7 +5,8 @@ configuration) and the CNN one (``seqmatch.CNN_NAME``).
 Also the seqmatch-based pieces the single-frame matchers share (a single-frame matcher is
 greenloop-seq's search at seq_len 1): :func:`score`, :func:`stream`, :func:`frame_describer`,
 :func:`knob_text`. Knob records: descriptor, whitening (label, "none"), seq_len, contrast_window
-and optionally velocities, center_window, calibrate, repeat_cos, cell_shift, fixed_threshold.
+and optionally velocities, center_window, calibrate, repeat_cos, cell_shift, store_dtype (the
+stream's stored rows, ``seqmatch.STORE_DTYPES``; float32 without it), fixed_threshold.
 
 params read (``Data.params``): seq_descriptors, fast_descriptors, seq_lens, contrast_windows,
 velocities, weights, input_size.
@@ -35,7 +36,8 @@ def named_default(name: str = seqmatch.DEFAULT_NAME) -> dict:
 def _extra(k: dict, velocities) -> dict:
     """The seqmatch keyword arguments of a knob record beyond descriptor/seq_len/contrast window."""
     return dict(velocities=tuple(k.get("velocities", velocities)), center_window=k.get("center_window", 0),
-                calibrate=k.get("calibrate", False), repeat_cos=k.get("repeat_cos"), cell_shift=k.get("cell_shift", 0))
+                calibrate=k.get("calibrate", False), repeat_cos=k.get("repeat_cos"), cell_shift=k.get("cell_shift", 0),
+                store_dtype=k.get("store_dtype", "float32"))
 
 
 def projection(k: dict, data: Data):
@@ -60,9 +62,10 @@ def score(k: dict, data: Data) -> np.ndarray:
 
 def _weights(k: dict, data: Data):
     """The CNN weights of a knob record's descriptor: the run's ``weights`` parameter, except for
-    "gradients+efficientnetlite0", whose ImageNet weights are part of the named CNN configuration
-    (it refuses a random-init network, ``features.resolve``)."""
-    return "auto" if k["descriptor"] == seqmatch.CNN_KNOBS["descriptor"] else data.params.get("weights", "auto")
+    "gradients+efficientnetlite0" and its int8 form (``features.FUSED_INT8``), whose ImageNet weights are
+    part of the named CNN configuration (they refuse a random-init network, ``features.resolve``)."""
+    fused = (seqmatch.CNN_KNOBS["descriptor"], features.FUSED_INT8)
+    return "auto" if k["descriptor"] in fused else data.params.get("weights", "auto")
 
 
 def stream(k: dict, threshold, data: Data) -> seqstream.Detector:
@@ -100,7 +103,7 @@ def knob_text(k: dict) -> str:
     text = f"{k['descriptor']}, whitening {k['whitening']}, contrast window {k['contrast_window']}{seq}"
     if "fixed_threshold" in k:
         text += (f", centring {k['center_window']}, cell shift {k.get('cell_shift', 0)}, velocities {k['velocities']}, "
-                 f"repeat gate {k['repeat_cos']}, "
+                 f"repeat gate {k['repeat_cos']}, store {k.get('store_dtype', 'float32')}, "
                  f"calibrated ({seqmatch.check_calibration(k.get('calibrate', False))}), fixed threshold {k['fixed_threshold']} "
                  f"(the CLI default, untuned)")
     return text

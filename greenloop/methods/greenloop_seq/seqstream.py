@@ -20,6 +20,7 @@ import numpy as np
 from greenloop import evaluate, features
 from greenloop.methods.lsh import retrieval
 from greenloop.methods.greenloop_seq.seqmatch import (COLORS, DEFAULT_VELOCITIES, STORE_DTYPES, _check_descriptor, _join,
+                                quantise_rows, stored_values,
                                 SHIFTABLE_DIMS, calibrate_scores, cell_shifts, check_calibration, center, center_stored, center_windows,
                                 columns_to_scores, contrast_normalise, matrix_events, normalise,
                                 shift_cells, threshold_range)
@@ -87,7 +88,10 @@ class Detector(CandidateMode):
         per query frame along a trajectory (SeqSLAM's V_min..V_max). exclude: only stored frames
         i with j - i > exclude are candidates. contrast_window: SeqSLAM R_window (0 = off).
     projection: optional ``similarity.Projection`` (see :func:`fit_projection`).
-    store_dtype: "float32" or "float16" for the stored descriptors. color: "bgr" or "rgb".
+    store_dtype: "float32", "float16" or "int8" for the stored descriptors (int8: each row as int8 with
+        a float32 scale, ``seqmatch.quantise_rows``, compared by ``numba_kernels.scaled_max_dot``: a
+        quarter of float32's bytes read per frame; not in candidate mode). :func:`score_matrix`
+        compares with the stored values, so the stream equals its matrix to float rounding. color: "bgr" or "rgb".
     index: None (the reference: every stored frame is scored) or a ``greenloop.methods.lsh.retrieval`` kind
         ("scan", "flat", "ivf", "hnsw", "swp", "qdp"): candidate mode, the sequence score is
         computed only for the ``k`` stored frames the index retrieves for the newest query (for
@@ -137,6 +141,8 @@ class Detector(CandidateMode):
     mode the rows scored, ``last_candidates`` (C,) int64, ascending), ``bytes_per_frame``.
     """
 
+    _scale = None   # int8 store: (capacity,) float32 scale of each row (a class default for states saved before it)
+
     def __init__(self, threshold=None, descriptor: str = "pixels", seq_len: int = 10,
                  velocities=DEFAULT_VELOCITIES, exclude: int = DEFAULT_EXCLUDE, contrast_window: int = 10,
                  projection=None, store_dtype: str = "float32", color: str = "bgr", weights="auto",
@@ -169,6 +175,9 @@ class Detector(CandidateMode):
             raise ValueError(f"velocities must be non-zero numbers (negative: reverse revisits), got {velocities!r}")
         if store_dtype not in STORE_DTYPES:
             raise ValueError(f"store_dtype must be one of {STORE_DTYPES}, got {store_dtype!r}")
+        if store_dtype == "int8" and index is not None:
+            raise ValueError("store_dtype 'int8' is for the scan of every stored frame (index=None): candidate mode "
+                             "reads the stored rows as float; store 'float32' or 'float16' with an index")
         if color not in COLORS:
             raise ValueError(f"color must be one of {COLORS}, got {color!r}")
         self._space = candidates.IndexSpace(None if index_dim is None else positive_int("index_dim", index_dim, 1),
@@ -185,6 +194,7 @@ class Detector(CandidateMode):
     def reset(self) -> None:
         """Forget every stored frame and event."""
         self._db = None                       # (capacity, D) stored descriptors
+        self._scale = None
         L = self.seq_len
         self._right = max(int(self._base.max()) - self._margin, 0)    # room for negative offsets
         self._ring = np.zeros((L, self._margin + self._right + 256), np.float32)   # see _ring_scores
@@ -224,17 +234,40 @@ class Detector(CandidateMode):
         if self.index_kind is not None:
             index = self._index.bytes_per_frame() if self._index is not None else 0
             return int(self._db.shape[1] * self.store_dtype.itemsize + index)
-        return int(self._db.shape[1] * self.store_dtype.itemsize + 4 * self.seq_len)
+        return int(self._db.shape[1] * self.store_dtype.itemsize + 4 * (self._scale is not None) + 4 * self.seq_len)
 
     def _store(self, y: np.ndarray) -> None:
         j = self.frame_index
         if self._db is None:
-            self._db = np.empty((256, y.size), self.store_dtype)
+            self._allocate(256, y.size)
         elif y.size != self._db.shape[1]:
             raise ValueError(f"descriptor {j} has {y.size} dims, the stream's first had {self._db.shape[1]}")
         if j == len(self._db):
             self._db = np.concatenate([self._db, np.empty_like(self._db)])
-        self._db[j] = y
+            if self._scale is not None:
+                self._scale = np.concatenate([self._scale, np.zeros_like(self._scale)])
+        self._put(j, y[None])
+
+    def _allocate(self, rows: int, dims: int) -> None:
+        """An empty store of ``rows`` rows of ``dims`` dims (and their scales for int8)."""
+        self._db = np.empty((rows, dims), self.store_dtype)
+        self._scale = np.zeros(rows, np.float32) if self.store_dtype == np.int8 else None
+
+    def _put(self, a: int, Y: np.ndarray) -> None:
+        """Store the normalised rows Y (n, D) float32 as rows a..a+n-1, in ``store_dtype``."""
+        if self._scale is None:
+            self._db[a:a + len(Y)] = Y
+        else:
+            self._db[a:a + len(Y)], self._scale[a:a + len(Y)] = quantise_rows(Y)
+
+    def _products(self, c: int, Q: np.ndarray) -> np.ndarray:
+        """(c,) float32: each stored row i < c's best product with the queries Q (m, D) (their cell
+        shifts; m = 1 without), as the stored values give it (``seqmatch.stored_values``)."""
+        if self._scale is not None:
+            return numba_kernels.scaled_max_dot(self._db[:c], self._scale[:c], Q)
+        if len(Q) > 1:
+            return numba_kernels.max_dot(self._db[:c].astype(np.float32, copy=False), Q)
+        return self._db[:c].astype(np.float32, copy=False) @ Q[0]
 
     def _ensure_width(self, c: int) -> None:
         """Grow the ring (doubling, new room filled with each column's mean) to hold c rows."""
@@ -282,10 +315,7 @@ class Detector(CandidateMode):
         if not c:
             return self._match(y, np.zeros(0, np.float32), gate)
         with one_blas_thread():   # a 2-thread gemv stalls on a loaded 2-core machine
-            if self.cell_shift:
-                s = numba_kernels.max_dot(self._db[:c].astype(np.float32, copy=False), Q)
-            else:
-                s = self._db[:c].astype(np.float32, copy=False) @ y
+            s = self._products(c, Q if self.cell_shift else y[None])
         return self._match(y, s, gate)
 
     def _check_shiftable(self, dims: int) -> None:
@@ -331,7 +361,7 @@ class Detector(CandidateMode):
         if not W or not 0 < j < W or self._db is None:
             return
         raw = self._recent[W - self._n_recent:]           # frames 0..j, oldest first
-        self._db[:j] = normalise(center_stored(raw, self.center_window), self.projection)[:j]
+        self._put(0, normalise(center_stored(raw, self.center_window), self.projection)[:j])
         if self._seen:
             self._index, self._space.mean, self._space.components = None, None, None
             self._sum = self._db[:self._seen].astype(np.float32).sum(0, dtype=np.float64)
@@ -430,8 +460,8 @@ class Detector(CandidateMode):
             else:
                 Y = normalise(center(X[a - W + 1:b], self.center_window), self.projection)[W - 1:]
             if self._db is None:
-                self._db = np.empty((256 * 2 ** max(math.ceil(math.log2(n / 256)), 0), Y.shape[1]), self.store_dtype)
-            self._db[a:b] = Y
+                self._allocate(256 * 2 ** max(math.ceil(math.log2(n / 256)), 0), Y.shape[1])
+            self._put(a, Y)
         self.frame_index = t0
         if self.index_kind is not None:
             self._grow_index(max(t0 - 1 - self.exclude, 0))     # the rows indexed before query t0 - 1
@@ -540,16 +570,16 @@ def score_matrix(X, exclude: int = DEFAULT_EXCLUDE, seq_len: int = 10, velocitie
     if not np.all(np.isfinite(X)):
         raise ValueError("X has NaN or inf values")
     det._check_shiftable(X.shape[1])
-    W, cw, f32 = det._W, det.center_window, np.float32
+    W, cw = det._W, det.center_window
     Ys = [normalise(center(shift_cells(X, t, X.shape[1]) if t else X, cw), projection) for t in det._shifts]   # the queries
     stored = normalise(center_stored(X, cw), projection) if W else Ys[0]
-    stored = stored.astype(det.store_dtype).astype(f32)
+    stored = stored_values(stored, store_dtype)
     G = stored @ Ys[0].T                                     # stored rows x queries, one product per shift
     for Y in Ys[1:]:
         np.maximum(G, stored @ Y.T, out=G)
     for j in range(det.exclude + 1, min(W - 1, n)):           # the window still filling: rows centred on 0..j
         c = j - det.exclude
-        rows = normalise(center_stored(X[:j + 1], cw), projection)[:c].astype(det.store_dtype).astype(f32)
+        rows = stored_values(normalise(center_stored(X[:j + 1], cw), projection)[:c], store_dtype)
         G[:c, j] = np.max([rows @ Y[j] for Y in Ys], axis=0)
     return columns_to_scores(det, Ys[0], G, normalise(X) if det.repeat_cos is not None else None)
 
