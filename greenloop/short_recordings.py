@@ -13,8 +13,9 @@ a short drive without revisit the paper's 150 frames and leave it no candidate t
 
 Which cuts a dataset gives (:func:`cuts_for`):
 
-* a folder with traversals (Gardens Point, Nordland): the same ``n`` places of its first traversal
-  then of each other traversal ("revisit", day-time unless a traversal's name says night);
+* a folder with traversals (Gardens Point's layout, Nordland's protocol stream): the same ``n`` places
+  of each traversal then of the next ("revisit", day-time unless a traversal's name says night or winter: issue 64 states the recall of
+  night pairs and of Nordland's seasons but sets no target for it);
 * a folder with poses (the synthetic greenhouse): the first revisit, both visits ("revisit");
   the longest stretch without any loop ("no-revisit"); the two most alike straight legs that are
   no loop, driven one after the other ("neighbour": the neighbouring aisle); and the legs that do
@@ -31,6 +32,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import tempfile
 from pathlib import Path
 from typing import NamedTuple
 
@@ -47,6 +49,7 @@ MIN_PRECISION = 0.99       # of declared closures, on every cut
 MIN_RECALL = 0.5           # of revisit frames, on cuts with a day-time revisit
 CUT_FRAMES = (60, 300)     # a short recording's length, frames
 LEG_TURN_DEG = 20.0        # a straight leg: heading within this of its first frame's
+STATED_ONLY = ("night", "winter")   # a traversal pair so named: its recall is stated, not a target (issue 64)
 MIN_LEG = 20               # frames: shorter straight runs are corners, not legs
 
 
@@ -191,14 +194,23 @@ def _far_loops(seq: sequence.Sequence) -> np.ndarray:
     return groundtruth.for_sequence(seq, exclude=exclusion.MIN_EXCLUDE)
 
 
-def _traversal_cuts(seq: sequence.Sequence, n: int) -> list[Cut]:
+def _walks(seq: sequence.Sequence) -> tuple:
+    """The traversals (sequence.Traversal) of a folder: its layout's, else those its protocol's first
+    target stream names (Nordland's summer and winter in one rgb/ folder), else its one traversal."""
+    if len(seq.traversals) < 2 and seq.protocol.streams:
+        return tuple(seq.protocol.streams[0].traversals)
+    return tuple(seq.traversals)
+
+
+def _traversal_cuts(t: tuple, n: int) -> list[Cut]:
     """Each traversal's middle ``n`` places after the previous traversal's same places ('revisit',
-    night where either name says so), and the first traversal's middle 2n frames ('no-revisit')."""
-    t, cuts = seq.traversals, []
+    not day-time where either name holds a STATED_ONLY word), and the first traversal's middle 2n frames ('no-revisit').
+    t: (T,) sequence.Traversal in stream order."""
+    cuts = []
     for a, b in zip(t[:-1], t[1:]):
         k = min(n, a.stop - a.start, b.stop - b.start)
         s = (min(a.stop - a.start, b.stop - b.start) - k) // 2
-        night = "night" in (a.name + b.name).lower()
+        night = any(w in (a.name + b.name).lower() for w in STATED_ONLY)
         cuts.append(Cut(f"{a.name}-{b.name}", ((a.start + s, a.start + s + k), (b.start + s, b.start + s + k)),
                         "revisit", not night))
     k = min(2 * n, t[0].stop - t[0].start)
@@ -283,8 +295,9 @@ def cuts_for(dataset, n: int = 100) -> list[Cut]:
     """The short recordings a sequence folder gives (module doc), each visit at most ``n`` frames:
     traversal cuts where it has traversals, else pose cuts where it has poses, else none."""
     seq = sequence.open(dataset)
-    if len(seq.traversals) >= 2:
-        return _traversal_cuts(seq, n)
+    walks = _walks(seq)
+    if len(walks) >= 2:
+        return _traversal_cuts(walks, n)
     if seq.ground_truth is None or seq.ground_truth.kind != "poses":
         return []
     loops, poses = _far_loops(seq), seq.poses()[1]
@@ -315,23 +328,27 @@ def targets(table: pd.DataFrame) -> pd.DataFrame:
 
 
 def short_recordings(dataset, out_dir, configurations=CONFIGURATIONS, verify=(False, True), n: int = 100,
-                     cuts=None) -> pd.DataFrame | None:
-    """Build the dataset's cuts (:func:`cuts_for`, or ``cuts``) under ``out_dir``/cuts, run every
-    configuration with and without verification on each (:func:`run_cut`) and write
-    ``out_dir``/short_recordings.{csv,md} (one row per cut x configuration x verify, with the counts
-    behind each rate) and ``out_dir``/short_targets.{csv,md} (:func:`targets`). Returns the table, or
-    None where the dataset gives no cut (no traversals, no poses): notebook 13 then skips it."""
+                     cuts=None, cut_dir=None) -> pd.DataFrame | None:
+    """Build the dataset's cuts (:func:`cuts_for` with ``n`` frames a visit, or ``cuts``) under ``cut_dir``
+    (None: a temporary folder, removed after), run every configuration with and without verification on
+    each (:func:`run_cut`) and write ``out_dir``/short_recordings.{csv,md} (one row per cut x
+    configuration x verify, with the counts behind each rate) and ``out_dir``/short_targets.{csv,md}
+    (:func:`targets`). Returns the table, or None where the dataset gives no cut (no traversals, no
+    poses): notebook 13 then skips it."""
     cuts = cuts_for(dataset, n) if cuts is None else cuts
     if not cuts:
         return None
-    out_dir, rows = Path(out_dir), []
+    if cut_dir is None:
+        with tempfile.TemporaryDirectory(prefix="short-recordings-") as tmp:
+            return short_recordings(dataset, out_dir, configurations, verify, n, cuts, tmp)
+    rows = []
     for cut in cuts:
-        folder = build_cut(dataset, cut, out_dir / "cuts")
+        folder = build_cut(dataset, cut, cut_dir)
         for name in configurations:
             for v in verify:
                 rows.append(dict(cut=cut.name, kind=cut.kind, day=cut.day, frames=len(cut.frames), configuration=name,
                                  verify=bool(v), **run_cut(folder, name, bool(v))))
-    table = pd.DataFrame(rows)
+    table, out_dir = pd.DataFrame(rows), Path(out_dir)
     note = (f"A closure is right when its frames are a loop of the cut's ground truth (any distance in time) or its "
             f"relative pose is within {POSE_TARGETS} (cuts with poses); recall: revisit frames (a loop farther back "
             f"than the run's exclusion) a right closure declares. Cuts of {sequence.open(dataset).path}.")

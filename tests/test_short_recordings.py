@@ -120,3 +120,22 @@ def test_short_recordings_writes_one_row_per_cut_configuration_and_verification(
     assert (table["verified"] + table["unverified"] == table["closures"]).all()
     assert (out / "short_recordings.md").is_file() and (out / "short_targets.csv").is_file()
     assert sr.short_recordings(tiny_end_loop_sequence, out / "none") is None
+
+
+def test_traversal_cuts_pair_the_same_places_of_consecutive_walks(tiny_near_loop_sequence, tmp_path):
+    """A two-traversal folder (first, second; frame k of each one place +- 1): the middle 30 places of
+    each, then the first walk's middle 60 frames alone; in the revisit cut frame 30 + k revisits k."""
+    revisit, once = sr.cuts_for(tiny_near_loop_sequence, 30)
+    assert revisit == sr.Cut("first-second", ((35, 65), (135, 165)), "revisit", True)
+    assert once.kind == "no-revisit" and once.ranges == ((20, 80),)
+    gt = groundtruth.for_sequence(sr.build_cut(tiny_near_loop_sequence, revisit, tmp_path), exclude=0)
+    k = np.arange(30)
+    assert gt[30 + k, k].all() and gt[31, 0] and not gt[40, 0] and not gt[:30, :30].any()
+    assert not groundtruth.for_sequence(sr.build_cut(tiny_near_loop_sequence, once, tmp_path), exclude=0).any()
+
+
+def test_a_cut_outside_its_source_or_out_of_order_is_refused(tiny_end_loop_sequence, tmp_path):
+    with pytest.raises(ValueError, match="not within"):
+        sr.build_cut(tiny_end_loop_sequence, sr.Cut("bad", ((150, 250),), "revisit"), tmp_path)
+    with pytest.raises(ValueError, match="increasing and disjoint"):
+        sr.build_cut(tiny_end_loop_sequence, sr.Cut("bad", ((100, 150), (0, 50)), "revisit"), tmp_path)
