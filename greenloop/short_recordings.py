@@ -55,8 +55,9 @@ MIN_LEG = 20               # frames: shorter straight runs are corners, not legs
 
 class Cut(NamedTuple):
     """A short recording: name (a folder name), ranges ((start, stop) source frames, increasing and
-    disjoint, in stream order), kind ('revisit', 'no-revisit', 'neighbour', 'aisles once') and day
-    (False for a night revisit: the recall target applies to day-time revisits only)."""
+    disjoint, in stream order), kind ('revisit', 'no-revisit' or 'neighbour': two legs side by side,
+    no revisit, where a closure is right by its relative pose) and day (False for a night or a winter
+    revisit: the recall target applies to day-time revisits only, :data:`STATED_ONLY`)."""
     name: str
     ranges: tuple
     kind: str
@@ -288,23 +289,27 @@ def _aisles_once(runs: list, loops: np.ndarray, n: int) -> Cut | None:
     for r in runs:
         if all(not _linked(loops, c, r) for c in chosen) and sum(b - a for a, b in chosen) + r[1] - r[0] <= 2 * n:
             chosen.append(r)
-    return Cut("aisles-once", tuple(chosen), "no-revisit") if len(chosen) >= 2 else None
+    return Cut("aisles-once", tuple(chosen), "no-revisit") if len(chosen) >= 2 else None   # kind: no revisit
 
 
 def cuts_for(dataset, n: int = 100) -> list[Cut]:
-    """The short recordings a sequence folder gives (module doc), each visit at most ``n`` frames:
-    traversal cuts where it has traversals, else pose cuts where it has poses, else none."""
+    """The short recordings a sequence folder gives (module doc), each visit at most ``n`` frames (so a
+    cut at most 2n <= CUT_FRAMES[1]): traversal cuts where it has traversals, else pose cuts where it
+    has poses, else none; a cut shorter than CUT_FRAMES[0] frames is left out."""
+    if not 0 < 2 * n <= CUT_FRAMES[1]:
+        raise ValueError(f"n must be 1..{CUT_FRAMES[1] // 2} frames a visit (a cut holds two), got {n}")
     seq = sequence.open(dataset)
     walks = _walks(seq)
     if len(walks) >= 2:
-        return _traversal_cuts(walks, n)
-    if seq.ground_truth is None or seq.ground_truth.kind != "poses":
-        return []
-    loops, poses = _far_loops(seq), seq.poses()[1]
-    runs = legs(poses)
-    found = [_first_revisit(loops, n), _no_revisit(loops, n), _neighbour(poses, runs, loops, n),
-             _aisles_once(runs, loops, n)]
-    return [c for c in found if c is not None]
+        found = _traversal_cuts(walks, n)
+    elif seq.ground_truth is None or seq.ground_truth.kind != "poses":
+        found = []
+    else:
+        loops, poses = _far_loops(seq), seq.poses()[1]
+        runs = legs(poses)
+        found = [_first_revisit(loops, n), _no_revisit(loops, n), _neighbour(poses, runs, loops, n),
+                 _aisles_once(runs, loops, n)]
+    return [c for c in found if c is not None and len(c.frames) >= CUT_FRAMES[0]]
 
 
 def targets(table: pd.DataFrame) -> pd.DataFrame:

@@ -139,3 +139,11 @@ def test_a_cut_outside_its_source_or_out_of_order_is_refused(tiny_end_loop_seque
         sr.build_cut(tiny_end_loop_sequence, sr.Cut("bad", ((150, 250),), "revisit"), tmp_path)
     with pytest.raises(ValueError, match="increasing and disjoint"):
         sr.build_cut(tiny_end_loop_sequence, sr.Cut("bad", ((100, 150), (0, 50)), "revisit"), tmp_path)
+
+
+def test_cuts_are_short_recordings(tiny_near_loop_sequence):
+    """Every cut holds CUT_FRAMES[0]..CUT_FRAMES[1] frames: a visit of 20 frames gives none, and more than
+    150 frames a visit is refused."""
+    assert sr.cuts_for(tiny_near_loop_sequence, 20) == []
+    with pytest.raises(ValueError, match="frames a visit"):
+        sr.cuts_for(tiny_near_loop_sequence, 151)
