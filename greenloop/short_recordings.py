@@ -50,6 +50,7 @@ MIN_RECALL = 0.5           # of revisit frames, on cuts with a day-time revisit
 CUT_FRAMES = (60, 300)     # a short recording's length, frames
 LEG_TURN_DEG = 20.0        # a straight leg: heading within this of its first frame's
 STATED_ONLY = ("night", "winter")   # a traversal pair so named: its recall is stated, not a target (issue 64)
+NEIGHBOUR_MIN_M = 0.5      # metres across the heading: a neighbouring line, not the same aisle's next stretch
 MIN_LEG = 20               # frames: shorter straight runs are corners, not legs
 
 
@@ -264,17 +265,19 @@ def _linked(loops: np.ndarray, a: tuple, b: tuple) -> bool:
 
 def _neighbour(poses, runs: list, loops: np.ndarray, n: int) -> Cut | None:
     """The two legs driven the same way that pass closest side by side (their mean positions'
-    distance across the heading) and are no loop of each other: up to n frames of each."""
+    distance across the heading, at least NEIGHBOUR_MIN_M: another line, not the same aisle's next
+    stretch), more than MIN_EXCLUDE frames apart and no loop of each other: up to n frames of each."""
     t, z = np.asarray(poses)[:, :3, 3], np.asarray(poses)[:, :3, 2]
     best = None
     for k, a in enumerate(runs):
         for b in runs[k + 1:]:
             da, db = z[a[0]:a[1]].mean(0), z[b[0]:b[1]].mean(0)
-            if da @ db < np.cos(np.radians(LEG_TURN_DEG)) * np.linalg.norm(da) * np.linalg.norm(db) or _linked(loops, a, b):
+            if (da @ db < np.cos(np.radians(LEG_TURN_DEG)) * np.linalg.norm(da) * np.linalg.norm(db)
+                    or b[0] - a[1] <= exclusion.MIN_EXCLUDE or _linked(loops, a, b)):
                 continue
             d = t[b[0]:b[1]].mean(0) - t[a[0]:a[1]].mean(0)
             across = float(np.linalg.norm(d - (d @ da) * da / (da @ da)))
-            if best is None or across < best[0]:
+            if across >= NEIGHBOUR_MIN_M and (best is None or across < best[0]):
                 best = (across, a, b)
     if best is None:
         return None
@@ -283,13 +286,17 @@ def _neighbour(poses, runs: list, loops: np.ndarray, n: int) -> Cut | None:
 
 
 def _aisles_once(runs: list, loops: np.ndarray, n: int) -> Cut | None:
-    """The legs that revisit none of the legs before them, in driving order, concatenated (at most
-    2n frames; two legs at least): a repetitive recording without a true revisit."""
+    """The legs that revisit none of the legs before them, in driving order, the middle 2n / L frames of
+    each of the L (two at least) concatenated: a repetitive recording without a true revisit."""
     chosen = []
     for r in runs:
-        if all(not _linked(loops, c, r) for c in chosen) and sum(b - a for a, b in chosen) + r[1] - r[0] <= 2 * n:
+        if all(not _linked(loops, c, r) for c in chosen):
             chosen.append(r)
-    return Cut("aisles-once", tuple(chosen), "no-revisit") if len(chosen) >= 2 else None   # kind: no revisit
+    if len(chosen) < 2:
+        return None
+    share = 2 * n // len(chosen)
+    mid = [((a + b - min(share, b - a)) // 2, (a + b - min(share, b - a)) // 2 + min(share, b - a)) for a, b in chosen]
+    return Cut("aisles-once", tuple(mid), "no-revisit")
 
 
 def cuts_for(dataset, n: int = 100) -> list[Cut]:
