@@ -57,8 +57,9 @@ LAYERS: tuple[Layer, ...] = (
           "leaderboard rows, provenance, verify"),
     Layer("experiments", ("experiments",),
           "one module per notebook's study, and default_choice"),
-    Layer("run", ("detect",),
-          "a user's recording streamed through a registered detector: knobs, exclusion, windows, state"),
+    Layer("run", ("detect", "short_recordings"),
+          "a user's recording streamed through a registered detector: knobs, exclusion, windows, state; "
+          "short recordings cut from a dataset and scored on that path"),
     Layer("entry", ("cli", "__main__"),
           "the command line: one module per command, argument parsing and printing only"),
 )

@@ -620,6 +620,17 @@ def _check_13_comparisons(folder, lc):
         assert abs(r.difference - want) <= 0.011, (r.b, r.metric, r.difference, want)
 
 
+def _check_13_short(folder):
+    """short_recordings.csv (the tiny sequence's cuts, greenloop.short_recordings): every cut with both
+    named configurations, verified and not, counts that add up, and its targets beside it."""
+    from greenloop import short_recordings
+    short, targets = pd.read_csv(folder / "short_recordings.csv"), pd.read_csv(folder / "short_targets.csv")
+    assert {"revisit", "no-revisit"} <= set(short.kind) and len(short) == 4 * short.cut.nunique() == len(targets)
+    assert set(short.configuration) == set(short_recordings.CONFIGURATIONS) and set(short.verify) == {True, False}
+    assert (short.right + short.wrong == short.closures).all() and (short.found <= short.revisits).all()
+    assert (targets.silent.dropna() == (short.closures[targets.silent.notna()] == 0)).all()
+
+
 def _check_13(folder):
     from greenloop.experiments.leaderboard import rows as leaderboard
     csv = folder / "leaderboard.csv"
@@ -652,6 +663,7 @@ def _check_13(folder):
     assert t.scored_on.str.startswith("evaluation queries").all()
     _check_13_counts(folder, t)
     _check_13_comparisons(folder, lc)
+    _check_13_short(folder)
     s = json.loads((folder / "summary.json").read_text())
     start = s["timing_window"][0]
     assert start > 0 and s["dictionary_trained_on_frames"] < 200                  # trained before the evaluation part
