@@ -117,6 +117,8 @@ def test_splits_count_the_planted_queries(three_days):
     assert c.loc[("all", "evaluation queries"), ["closures_declared", "closures_false"]].tolist() == [4, 2]
     # the same direction cell holds revisit queries on an aisle: j1, j2 (hits), j3 (miss)
     assert c.loc[("direction", "same direction"), "hits"] == 2
+    counts = board.cell_queries(gt, ex, evalq, places).set_index(["split", "cell"]).queries
+    assert (counts == c.queries.reindex(counts.index)).all()       # the counts without scoring anything
     n = t[t.method == "no threshold"]
     assert n.closures_declared.isna().all() and n.threshold.isna().all()
     assert (n["R@1_%"].fillna(-1).values == c["R@1_%"].fillna(-1).values).all()

@@ -80,35 +80,42 @@ def frames(dataset, described) -> Frames:
                   poses[:, :3, 3], poses[:, :3, 2])
 
 
-def reverse_partners(places: Frames, m: evaluate.Matches, cand: np.ndarray, radius: float = REVERSE_M) -> np.ndarray:
-    """(Q,) bool: whether each matched query (``m.query``) has a candidate (``cand`` (M, M) bool,
-    [i, j]: i a candidate of j) whose camera stands within ``radius`` metres and whose optical axis
-    points more than 90 degrees away from the query's."""
-    out = np.zeros(len(m.query), dtype=bool)
-    for s in range(0, len(m.query), 512):          # (M, 512) blocks: no (M, M) float matrix
-        q = m.query[s:s + 512]
+def reverse_partners(places: Frames, queries: np.ndarray, cand: np.ndarray, radius: float = REVERSE_M) -> np.ndarray:
+    """(Q,) bool: whether each query frame (``queries`` (Q,) indices) has a candidate (``cand`` (M, M)
+    bool, [i, j]: i a candidate of j) whose camera stands within ``radius`` metres and whose optical
+    axis points more than 90 degrees away from the query's."""
+    out = np.zeros(len(queries), dtype=bool)
+    for s in range(0, len(queries), 512):          # (M, 512) blocks: no (M, M) float matrix
+        q = queries[s:s + 512]
         near = np.linalg.norm(places.t[:, None, :] - places.t[None, q, :], axis=2) < radius
         away = places.axis @ places.axis[q].T < 0
         out[s:s + 512] = (near & away & cand[:, q]).any(0)
     return out
 
 
-def cells(places: Frames, GT, m: evaluate.Matches, cand: np.ndarray) -> dict:
-    """{(split, cell): (Q,) bool over ``m.query``} (module doc), and the opposite-direction cell's
-    position-rule hits under the key "reverse_hit". GT, cand: (M, M) bool ground truth and
-    candidate mask (``evaluate.candidate_mask``) of the matches."""
-    q, rev = m.query, m.has_partner
-    G = np.asarray(GT, dtype=bool)
-    earlier = ((G & cand)[:, q] & (places.day[:, None] != places.day[q][None, :])).any(0)
+def cells(places: Frames, GT, cand: np.ndarray) -> tuple[np.ndarray, dict]:
+    """The queries and their cells (module doc). GT, cand: (M, M) bool ground truth and candidate mask
+    (``evaluate.candidate_mask``: the leaderboard's evaluation queries and exclusion). Returns (queries
+    (Q,) the frames with a candidate, as ``evaluate.best_matches`` orders them; {(split, cell): (Q,) bool})."""
+    q = np.flatnonzero(cand.any(0))
+    partners = (np.asarray(GT, dtype=bool) & cand)[:, q]
+    rev = partners.any(0)
+    earlier = (partners & (places.day[:, None] != places.day[q][None, :])).any(0)
     on_aisle = places.aisle[q] >= 0
     out = {("all", "revisit queries"): rev, ("day", "within a day"): rev & ~earlier,
            ("day", "across days"): rev & earlier, ("direction", "same direction"): rev & on_aisle,
-           ("direction", "opposite direction"): on_aisle & ~rev & reverse_partners(places, m, cand)}
+           ("direction", "opposite direction"): on_aisle & ~rev & reverse_partners(places, q, cand)}
     out.update({("light", light): rev & (places.light[q] == light) for light in LIGHTS
                 if (places.light == light).any()})
     out[("all", "evaluation queries")] = np.ones(len(q), dtype=bool)
-    out["reverse_hit"] = np.linalg.norm(places.t[m.match] - places.t[q], axis=1) < REVERSE_M
-    return out
+    return q, out
+
+
+def cell_queries(GT, exclude: int, evalq, places: Frames) -> pd.DataFrame:
+    """How many queries each cell holds (split, cell, queries), whatever the method: the counts
+    behind ``splits.csv`` without scoring anything. Arguments as :func:`splits`."""
+    _, split = cells(places, GT, evaluate.candidate_mask(len(GT), exclude, evalq))
+    return pd.DataFrame([{"split": k[0], "cell": k[1], "queries": int(v.sum())} for k, v in split.items()])
 
 
 def next_aisle(places: Frames, m: evaluate.Matches) -> np.ndarray:
@@ -117,17 +124,17 @@ def next_aisle(places: Frames, m: evaluate.Matches) -> np.ndarray:
     return (a >= 0) & (b >= 0) & (np.abs(a - b) == 1)
 
 
-def method_rows(name: str, m: evaluate.Matches, split: dict, beside: np.ndarray, threshold) -> list[dict]:
-    """One method's rows of ``splits.csv``: ``split`` from :func:`cells`, ``beside`` from
-    :func:`next_aisle`, threshold its closure threshold (NaN or None: no closure columns)."""
+def method_rows(name: str, m: evaluate.Matches, split: dict, reverse_hit: np.ndarray, beside: np.ndarray,
+                threshold) -> list[dict]:
+    """One method's rows of ``splits.csv``: ``split`` from :func:`cells` (over ``m.query``), reverse_hit
+    (Q,) bool: its best match within REVERSE_M metres (the opposite-direction cell's hits), ``beside``
+    from :func:`next_aisle`, threshold its closure threshold (NaN or None: no closure columns)."""
     has_thr = threshold is not None and np.isfinite(threshold)
     declared = m.score >= threshold if has_thr else np.zeros(len(m.query), dtype=bool)
     false = declared & ~m.correct
     rows = []
     for key, mask in split.items():
-        if key == "reverse_hit":
-            continue
-        hit = split["reverse_hit"] if key == ("direction", "opposite direction") else m.correct
+        hit = reverse_hit if key == ("direction", "opposite direction") else m.correct
         n, h = int(mask.sum()), int((hit & mask).sum())
         scored = key != ("all", "evaluation queries")
         rows.append({"method": name, "split": key[0], "cell": key[1], "queries": n, "hits": h if scored else None,
@@ -144,13 +151,12 @@ def splits(S: dict, GT, exclude: int, evalq, places: Frames, thresholds: dict) -
     """``splits.csv``: every method's rows (:func:`method_rows`), in ``S``'s order. S: {method: (M, M)
     score matrix}; GT: (M, M) bool; exclude: steps; evalq: (M,) bool evaluation queries; thresholds:
     {method: closure threshold, NaN where none}. The cells are the same for every method."""
-    M = len(GT)
-    cand = evaluate.candidate_mask(M, exclude, evalq)
-    rows, split = [], None
+    _, split = cells(places, GT, evaluate.candidate_mask(len(GT), exclude, evalq))
+    rows = []
     for name, s in S.items():
         m = evaluate.best_matches(s, GT, exclude, queries=evalq, k=1)
-        split = cells(places, GT, m, cand) if split is None else split     # same queries for every method
-        rows += method_rows(name, m, split, next_aisle(places, m), thresholds.get(name))
+        near = np.linalg.norm(places.t[m.match] - places.t[m.query], axis=1) < REVERSE_M
+        rows += method_rows(name, m, split, near, next_aisle(places, m), thresholds.get(name))
     counts = ["queries", "hits", "wrong_next_aisle", "closures_declared", "closures_false", "false_next_aisle"]
     return pd.DataFrame(rows, columns=COLUMNS).astype({c: "Int64" for c in counts})
 
