@@ -105,6 +105,7 @@ def test_splits_count_the_planted_queries(three_days):
     assert (c.loc[("day", "across days"), "queries"] + c.loc[("day", "within a day"), "queries"]) == rev
     assert c.loc[("light", "overcast"), "hits"] == 1 and c.loc[("light", "night"), "hits"] == 1
     assert c.loc[("light", "sun"), "queries"] == 0            # day-00 revisits nothing before it
+    assert [c.loc[("query day", d), "hits"] for d in ("day-00", "day-01", "day-02")] == [0, 1, 1]
     nights = int((places.light[np.flatnonzero(gt.any(0))] == "night").sum())
     assert c.loc[("light", "night"), "queries"] <= nights and c.loc[("light", "night"), "queries"] > 0
     # j3's match stood in the neighbouring aisle: a wrong best match and a false closure there, the only ones
@@ -132,7 +133,7 @@ def test_day_splits_only_on_a_days_render(tiny_sequence, three_days, tmp_path):
     t = board.day_splits(data, SimpleNamespace(S={"planted": S}), SimpleNamespace(thresholds={"planted": 0.5}))
     md = board.write_splits(t, tmp_path)
     assert md.name == "splits.md" and "20.4 degrees" in md.read_text()
-    assert (tmp_path / "splits.csv").read_text().count("planted") == len(t) == 9
+    assert (tmp_path / "splits.csv").read_text().count("planted") == len(t) == 12
     assert board.figure_splits(t) is not None
 
 

@@ -200,7 +200,8 @@ def _check_days_13(folder):
         day = c.loc["day"]
         assert day.queries.sum() == lc.loc[name, "revisit_queries"] and day.hits.sum() == c.loc[("all", "revisit queries"), "hits"]
         assert c.loc[("day", "across days"), "queries"] > 0 and c.loc[("all", "evaluation queries"), "queries"] == lc.loc[name, "queries"]
-        assert set(g.split) == {"all", "day", "direction", "light"} and set(c.loc["light"].index) == {"sun", "overcast"}
+        assert set(g.split) == {"all", "day", "direction", "light", "query day"} and set(c.loc["light"].index) == {"sun", "overcast"}
+        assert c.loc["query day"].queries.sum() == lc.loc[name, "revisit_queries"]
 
 
 DAYS_CHECKS = {"00_dataset": _check_days_00, "13_leaderboard": _check_days_13}

@@ -18,6 +18,8 @@ The cells (rows of ``splits.csv``, loop closure, the leaderboard's evaluation qu
                                      whatever its heading; every closure declared there is a false closure by
                                      the pose rule (they are counted in closures_false as well)
     light / <light>                  revisit queries taken on a day of that light (sun, overcast, night)
+    query day / <day>                revisit queries taken on that day (the honest split's evaluation part
+                                     is the later revisits, so the earlier days may hold none)
     all / evaluation queries         every evaluation query with a candidate, partner or not: where the
                                      false closures are counted
 
@@ -55,17 +57,19 @@ NOTE = ("leaderboard.days (module doc): loop closure on the leaderboard's evalua
         "looking more than 90 degrees away, scored by position only (a hit: best match within "
         f"{REVERSE_M:g} m, any heading), its declared closures false by the pose rule; light: the query's day; "
         "wrong_next_aisle: best match no hit and in the aisle beside the query's; closures at each method's "
-        "threshold (the leaderboard's), false_next_aisle: false closures in the neighbouring aisle.")
+        "threshold (the leaderboard's), false_next_aisle: false closures in the neighbouring aisle; query day: the "
+        "revisit queries of each day (the evaluation part is the later revisits: earlier days may hold none).")
 
 
 class Frames(NamedTuple):
     """The described frames' places, (M,) arrays: day (index into lights), aisle (-1 outside),
-    direction (+1 / -1, 0 outside), light (str per frame), t (M, 3) camera centres and axis (M, 3)
-    optical axes, world frame, metres."""
+    direction (+1 / -1, 0 outside), light (str per frame), name (the day's name per frame), t (M, 3)
+    camera centres and axis (M, 3) optical axes, world frame, metres."""
     day: np.ndarray
     aisle: np.ndarray
     direction: np.ndarray
     light: np.ndarray
+    name: np.ndarray
     t: np.ndarray
     axis: np.ndarray
 
@@ -77,7 +81,7 @@ def frames(dataset, described) -> Frames:
     poses = sequence.open(dataset).poses()[1][described]
     f = np.asarray(described)
     return Frames(p.day[f], p.aisle[f], p.direction[f], np.asarray(p.lights, dtype=object)[p.day[f]],
-                  poses[:, :3, 3], poses[:, :3, 2])
+                  np.asarray(p.names, dtype=object)[p.day[f]], poses[:, :3, 3], poses[:, :3, 2])
 
 
 def reverse_partners(places: Frames, queries: np.ndarray, cand: np.ndarray, radius: float = REVERSE_M) -> np.ndarray:
@@ -107,6 +111,7 @@ def cells(places: Frames, GT, cand: np.ndarray) -> tuple[np.ndarray, dict]:
            ("direction", "opposite direction"): on_aisle & ~rev & reverse_partners(places, q, cand)}
     out.update({("light", light): rev & (places.light[q] == light) for light in LIGHTS
                 if (places.light == light).any()})
+    out.update({("query day", name): rev & (places.name[q] == name) for name in dict.fromkeys(places.name)})
     out[("all", "evaluation queries")] = np.ones(len(q), dtype=bool)
     return q, out
 
