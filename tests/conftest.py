@@ -103,6 +103,15 @@ def tiny_sequence(tmp_path_factory):
     return synthetic.make_greenhouse(folder, n_frames=200, size=(160, 120), seed=0, progress=False)
 
 
+@pytest.fixture(scope="session")
+def tiny_days_sequence(tmp_path_factory):
+    """The greenhouse over two days on tiny parameters (``--tiny --days 2``: two aisles, 160x120 every
+    0.25 m; day-00 sun, day-01 overcast, aisle 1 driven the other way on day-01): 178 frames."""
+    from greenloop.datasets.synthetic import daysmake
+    folder = tmp_path_factory.mktemp("seq") / "tiny-days"
+    return daysmake.make_greenhouse_days(folder, n_days=2, tiny=True, workers=1, progress=False)
+
+
 def pose_loops_as_pairs(poses, threshold=0.5, exclude=10) -> np.ndarray:
     """The Eq. 5 loops of some poses as ground_truth.csv rows (i, j, tolerance), i < j: each run
     of consecutive partners j of a frame i becomes one row (its centre, half its length), so the

@@ -100,7 +100,7 @@ def _run(notebook, dataset, results, monkeypatch, parameters=None) -> Path:
 # split); near_loop: tiny_near_loop_sequence with make's implied exclude; no_counted_loop: the same
 # sequence at exclude = 150 (no loop left, for the notebooks make never skips).
 RUNS = {
-    "00_dataset": ("tiny", "pairs", "near_loop", "no_counted_loop"),   # plots poses/depth when present; exclude
+    "00_dataset": ("tiny", "pairs", "near_loop", "no_counted_loop", "days"),   # poses/depth when present; exclude; the days
     "01_spot_grouping": ("tiny",),                                     # labels by frame index only
     "02_training_over_seeds": ("tiny",),                               # labels by frame index only
     "03_confusion_matrix": ("tiny", "pairs", "near_loop", "no_counted_loop"),   # same-place errors from the ground truth
@@ -113,9 +113,11 @@ RUNS = {
     "10_siamese_rgbd": ("tiny", "end_loop"),                           # end_loop: no depth/ (fusions skipped); splits
     "11_lsh_matching": ("tiny", "pairs"),                              # pose ground truth or pairs
     "12_revisit_protocol": ("tiny", "end_loop", "near_loop"),          # first traversal / revisit split
-    "13_leaderboard": ("tiny", "end_loop"),                            # tuning/evaluation split
+    "13_leaderboard": ("tiny", "end_loop", "days"),                    # tuning/evaluation split; the days' splits
 }
-SEQUENCES = {"tiny", "pairs", "end_loop", "near_loop", "no_counted_loop"}
+SEQUENCES = {"tiny", "pairs", "end_loop", "near_loop", "no_counted_loop", "days"}
+# days: tiny_days_sequence, the greenhouse over two days (--tiny --days 2): 00 shows each day's frames and
+# what the renderer models, 13 splits its rows by day, direction and light (splits.csv)
 # near_loop (a traversals/ folder whose loops lie inside the default window, exclude implied by
 # study.params): 07, 08, 09, 10 and 11 read that folder's loop pairs as their pairs run reads
 # ground_truth.csv, and hand exclude to their experiment functions unchanged, so it would repeat
@@ -156,6 +158,52 @@ def test_notebook_runs_without_poses_or_depth(notebook, tiny_pairs_sequence, pai
                   parameters=dict(TINY, layer_backbones=[]) if notebook.stem.startswith("07") else None)
     assert json.loads((folder / "manifest.json").read_text())["dataset_ground_truth"] == "pairs"
     {**CHECKS, **PAIR_CHECKS}.get(notebook.stem, lambda f: None)(folder)
+
+
+@pytest.fixture(scope="module")
+def days_results(tmp_path_factory, shared_cache):
+    return _results_folder(tmp_path_factory, shared_cache, "results-days")
+
+
+@pytest.mark.notebook
+@pytest.mark.parametrize("notebook", _on("days"), ids=[p.stem for p in _on("days")])
+def test_notebook_runs_on_the_greenhouse_days(notebook, tiny_days_sequence, days_results, monkeypatch):
+    """00 and 13 on the tiny two-day render, at the exclude its sequence.yaml states (as make passes it)."""
+    from greenloop.datasets import sequence
+    folder = _run(notebook, tiny_days_sequence, days_results, monkeypatch,
+                  parameters=dict(TINY, exclude=sequence.open(tiny_days_sequence).exclude))
+    DAYS_CHECKS[notebook.stem](folder)
+
+
+def _check_days_00(folder):
+    """Every day's frames of each place side by side, and the renderer's scope printed from its constants."""
+    from greenloop.datasets.synthetic import dayscene
+    t = pd.read_csv(folder / "days_frames.csv")
+    assert t.day.tolist() == ["day-00", "day-01"] * 2 and t.place.tolist() == ["aisle 0"] * 2 + ["aisle 1"] * 2
+    assert t.same_direction.tolist() == [True, True, True, False] and (folder / "days.png").is_file()
+    text = (folder.parent / "00_dataset.ipynb").read_text()
+    assert all(json.dumps(x)[1:-1] in text for x in dayscene.NOT_MODELLED)
+
+
+def _check_days_13(folder):
+    """splits.csv: every scored loop-closure row's R@1 over all revisit queries is the leaderboard's, on
+    the same queries; within + across days is every revisit query; the figure is saved."""
+    t = pd.read_csv(folder / "leaderboard.csv")
+    lc = t[(t["mode"] == "loop closure")].dropna(subset=["R@1_%"]).set_index("method").drop(index="chance (random scores)")
+    s = pd.read_csv(folder / "splits.csv")
+    assert set(s.method) == set(lc.index) and (folder / "splits.png").is_file() and (folder / "splits.md").is_file()
+    for name, g in s.groupby("method"):
+        c = g.set_index(["split", "cell"])
+        assert c.loc[("all", "revisit queries"), "queries"] == lc.loc[name, "revisit_queries"], name
+        assert abs(c.loc[("all", "revisit queries"), "R@1_%"] - lc.loc[name, "R@1_%"]) <= 0.011, name
+        day = c.loc["day"]
+        assert day.queries.sum() == lc.loc[name, "revisit_queries"] and day.hits.sum() == c.loc[("all", "revisit queries"), "hits"]
+        assert c.loc[("day", "across days"), "queries"] > 0 and c.loc[("all", "evaluation queries"), "queries"] == lc.loc[name, "queries"]
+        assert set(g.split) == {"all", "day", "direction", "light", "query day"} and set(c.loc["light"].index) == {"sun", "overcast"}
+        assert c.loc["query day"].queries.sum() == lc.loc[name, "revisit_queries"]
+
+
+DAYS_CHECKS = {"00_dataset": _check_days_00, "13_leaderboard": _check_days_13}
 
 
 def _check_01(folder):

@@ -12,6 +12,7 @@ import pandas as pd
 
 from greenloop import groundtruth
 from greenloop.datasets import groundtruth_formats, sequence
+from greenloop.datasets.synthetic import daysmake, dayscene
 from greenloop.groundtruth import DEFAULT_EXCLUDE
 from greenloop.methods.dictionary import spots
 from greenloop.study import wording
@@ -160,6 +161,69 @@ def figure_reference(poses, pairs):
     ax.set_aspect("equal"); ax.set_title(f"real GreenHouse path: {len(pairs)} loop pairs")
     ax.set_xlabel("x (m)"); ax.set_ylabel("z (m)")
     return fig
+
+
+def is_days(dataset) -> bool:
+    """Whether ``dataset`` is a render of the greenhouse over days (``daysmake.is_days``)."""
+    return daysmake.is_days(dataset)
+
+
+def same_place_frames(dataset, aisles=None) -> pd.DataFrame:
+    """The same places on every day of a days render: for each aisle in ``aisles`` (default: the first,
+    the middle and the last aisle), day-00's middle frame of that aisle (the place) and, on every day,
+    the frame on that aisle nearest the place's camera, looking the same way where the day drives the
+    aisle that way, else the nearest looking the other way. Columns: place (aisle), day, light,
+    offset_days, frame (stream index), distance_m (hall frame, to the place's camera), direction (+1 / -1),
+    same_direction. A day that never enters the aisle has no row for it."""
+    p = daysmake.frame_places(dataset)
+    n = p.hall.n_aisles
+    aisles = sorted({0, n // 2, n - 1}) if aisles is None else list(aisles)
+    rows = []
+    for a in aisles:
+        ref = np.flatnonzero((p.day == 0) & (p.aisle == a))
+        if not len(ref):
+            continue
+        r = int(ref[len(ref) // 2])
+        for k, name in enumerate(p.names):
+            on = np.flatnonzero((p.day == k) & (p.aisle == a))
+            if not len(on):
+                continue
+            same = on[p.direction[on] == p.direction[r]]
+            pool = same if len(same) else on
+            d = np.hypot(p.x[pool] - p.x[r], p.z[pool] - p.z[r])
+            f = int(pool[np.argmin(d)])
+            rows.append({"place": f"aisle {a}", "day": name, "light": p.lights[k], "offset_days": p.offsets[k],
+                         "frame": f, "distance_m": float(d.min()), "direction": int(p.direction[f]),
+                         "same_direction": bool(len(same))})
+    return pd.DataFrame(rows)
+
+
+def figure_days(dataset, table: pd.DataFrame):
+    """Frames of every day side by side (columns: days; rows: the places of ``table``, from
+    :func:`same_place_frames`), each titled with its day, light, offset and frame, "other way" where
+    the day drives the aisle in the other direction. Returns the figure."""
+    import matplotlib.pyplot as plt
+
+    paths = sequence.list_frames(dataset)
+    days, places = list(dict.fromkeys(table.day)), list(dict.fromkeys(table.place))
+    fig, axes = plt.subplots(len(places), len(days), figsize=(2.6 * len(days), 2.5 * len(places)), squeeze=False)
+    for ax in axes.ravel():
+        ax.axis("off")
+    for r in table.itertuples():
+        ax = axes[places.index(r.place), days.index(r.day)]
+        ax.imshow(sequence.read_image(paths[r.frame])[..., ::-1])            # BGR -> RGB
+        ax.set_title(f"{r.day} (+{r.offset_days} d), {r.light}\n{r.place}, frame {r.frame}"
+                     + ("" if r.same_direction else ", other way"), fontsize=7)
+    fig.suptitle("the same places on every day (columns), as rendered")
+    fig.tight_layout()
+    return fig
+
+
+def renderer_scope() -> str:
+    """Markdown: what the days' renderer models and what it does not (``dayscene.MODELLED`` and
+    ``dayscene.NOT_MODELLED``), for notebook 00 and the README."""
+    return ("**What the renderer models:** " + "; ".join(dayscene.MODELLED) + ".\n\n"
+            "**What it does not model:** " + "; ".join(dayscene.NOT_MODELLED) + ".")
 
 
 PAPER_FRAMES = 2260           # the main paper's frames of the real GreenHouse set (2261 recorded)

@@ -92,6 +92,17 @@ class DaysHall:
         """x of the route's line in the left and the right side corridor."""
         return self.side / 2, self.width - self.side / 2
 
+    def aisle_at(self, x, z) -> np.ndarray:
+        """The aisle each point stands in: x, z (N,) metres in the hall frame. Returns (N,) int64, the
+        aisle index (0 .. n_aisles - 1) where the point lies between the two beds' centre lines of that
+        aisle and along the beds (bed_z0 .. bed_z0 + bed_length), else -1 (cross aisles, corridors)."""
+        x, z = np.asarray(x, dtype=np.float64), np.asarray(z, dtype=np.float64)
+        if x.shape != z.shape or x.ndim != 1:
+            raise ValueError(f"x and z must be (N,) arrays of one length, got shapes {x.shape} and {z.shape}")
+        a = np.floor((x - self.bed_x[0]) / self.bed_pitch).astype(np.int64)
+        inside = (a >= 0) & (a < self.n_aisles) & (z >= self.bed_z0) & (z <= self.bed_z0 + self.bed_length)
+        return np.where(inside, a, -1)
+
 
 TINY_HALL = DaysHall(n_aisles=2, bed_length=3.0)
 

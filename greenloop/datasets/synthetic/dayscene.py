@@ -10,9 +10,8 @@ three corners. The day sets the light, the plants' growth, the harvested beds an
 crates (``days.Day``). Everything but the day's changes is drawn from the same seeded numbers
 every day, so a plant stays the same plant from day to day.
 
-What it does not model: shadows, the sun's direct beams and sky through the roof, wind, motion
-blur, rolling shutter, dust or condensation; the light is one Lambert direction per day, a gain
-and a tint.
+What it models and what it does not: ``MODELLED`` and ``NOT_MODELLED`` (notebook 00 prints them;
+the light is one Lambert direction per day, a gain and a tint).
 """
 from __future__ import annotations
 
@@ -25,6 +24,20 @@ from greenloop.datasets.synthetic.plants import _hole, _pack_plants, _rosette
 from greenloop.datasets.synthetic.scene import (_add_bed, _box, _finish_quads, _new_builder, _prism,
                                                 FOG_COLOR, Scene)
 from greenloop.datasets.synthetic.textures import _rect, _smooth_noise, _stack_atlas, _wall_base, TEX_RES
+
+# What the days' renderer models and what it does not: notebook 00 and the README read these, so the
+# claim is written once, here, beside the code that makes it true.
+MODELLED = ("one fixed layout: beds of four lettuce varieties, posts, roof chords, LED bars, irrigation pipes, "
+            "portal frames, doors and fans shared by neighbouring aisles, a tank, a cabinet and a dosing unit",
+            "one light per day: sun from an azimuth and elevation, overcast, or night under the LED bars, each a "
+            "Lambert direction, a gain and a tint (with sensor.py's brightness drift and exposure flicker along the route)",
+            "plant growth (size, leaf count, colour) and harvested beds (empty holes), the same plants every day",
+            "carts and crates moved from day to day",
+            "each day's route: its aisle order and each aisle's direction",
+            "a mild Gaussian lens blur and D435i-like depth (quantised disparity, no reading beyond 10 m)")
+NOT_MODELLED = ("shadows", "the sun's direct beams and the sky through the roof", "wind (the plants never move)",
+                "motion blur", "rolling shutter", "dust or condensation", "people or other moving objects",
+                "per-pixel sensor noise (0 in the days' frames)")
 
 BED_TOPS = ((215, 220, 218), (60, 72, 88), (210, 215, 215))   # growing surfaces, BGR, by bed
 GREY = (180, 182, 178)

@@ -31,11 +31,12 @@ import json
 import os
 import shutil
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import yaml
 
-from greenloop.datasets import odometry
+from greenloop.datasets import odometry, sequence
 from greenloop.datasets.sequence import DEPTH_SCALE, write_trajectory
 from greenloop.datasets.synthetic.camera import _check_size, write_camera_yaml
 from greenloop.datasets.synthetic.days import day_route, DaysHall, design_days, TINY_HALL
@@ -157,6 +158,50 @@ def up_to_date(folder, n_days: int = 5, tiny: bool = False, seed: int = 0, size=
     return (meta.get("format") == 1 and meta.get("n_days") == n_days and meta.get("tiny") == bool(tiny)
             and meta.get("seed") == seed and [meta.get("width"), meta.get("height")] == list(size)
             and meta.get("spacing_m") == spacing)
+
+
+class Places(NamedTuple):
+    """Where every frame of a days folder's stream was taken, (N,) arrays over its frames: day (index
+    into ``lights``, the traversal), aisle (``days.DaysHall.aisle_at``: 0 .. n_aisles - 1, -1 outside
+    the aisles), direction (+1: the camera looks towards +z of the hall, the beds' far end; -1 the
+    other way; 0 outside the aisles), x, z (metres, hall frame); lights: each day's light (days.LIGHTS);
+    names: each day's name; offsets: each day's days since the first; hall: the ``days.DaysHall``."""
+    day: np.ndarray
+    aisle: np.ndarray
+    direction: np.ndarray
+    x: np.ndarray
+    z: np.ndarray
+    lights: tuple
+    names: tuple
+    offsets: tuple
+    hall: DaysHall
+
+
+def is_days(folder) -> bool:
+    """Whether ``folder`` (a path or ``sequence.Sequence``) is a finished render of the days (holds META)."""
+    return (Path(folder) / META).is_file()
+
+
+def frame_places(folder) -> Places:
+    """:class:`Places` of a days folder's stream (``make_greenhouse_days``' output): the hall and the
+    days from its META, the hall frame from day-00's route rebuilt from the same arguments (the world
+    frame is its first camera), the poses from its CameraTrajectory.txt. FileNotFoundError without META."""
+    path = Path(folder) / META
+    if not path.is_file():
+        raise FileNotFoundError(f"{path} not found: {folder} is no render of the greenhouse days; make one with "
+                                f"python -m greenloop data greenhouse-days FOLDER")
+    meta = json.loads(path.read_text())
+    hall = DaysHall(**meta["hall"])
+    first = design_days(meta["n_days"], hall, meta["seed"])[0]
+    from_world = day_route(first, hall, meta["spacing_m"], meta["seed"], 0)[0][0]    # hall <- world
+    seq = sequence.open(folder)
+    poses = from_world[None] @ seq.poses()[1]
+    x, z = poses[:, 0, 3], poses[:, 2, 3]
+    aisle = hall.aisle_at(x, z)
+    direction = np.where(aisle >= 0, np.where(poses[:, 2, 2] >= 0, 1, -1), 0)
+    return Places(seq.traversal_index(), aisle, direction, x, z, tuple(d["light"] for d in meta["days"]),
+                  tuple(d["name"] for d in meta["days"]), tuple(int(d["offset_days"]) for d in meta["days"]),
+                  hall)
 
 
 def _worker_init(days, hall, poses, arcs, to_world, size, seed, out) -> None:

@@ -10,6 +10,7 @@ The calls, in the notebook's order (each returns what one table or figure shows)
     decisions = decide(data)            # entries without a score (the dictionary): trained, declared
     timed = stream_and_time(data, tuned, decisions)   # thresholds, stream = matrix check, timing
     result = board(data, split, tuned, timed, decisions)
+    splits = days.day_splits(data, tuned, timed)      # a render of the greenhouse over days only, else None
 
 A detector added to the registry (docs/ARCHITECTURE.md, "Adding a detector") is described, tuned,
 scored, checked and timed here with the others: no notebook changes. ``registry`` arguments
@@ -27,7 +28,7 @@ import pandas as pd
 from greenloop import evaluate, groundtruth, report
 from greenloop.datasets import sequence
 from greenloop.datasets.sequence import list_frames
-from greenloop.experiments.leaderboard import rows as lb
+from greenloop.experiments.leaderboard import days, rows as lb
 from greenloop.methods.greenloop_seq import seqmatch
 from greenloop.methods.interface import Data
 from greenloop.methods.registry import REGISTRY
