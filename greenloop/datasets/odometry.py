@@ -100,18 +100,7 @@ def _text_format(path: Path) -> str:
 
 def _read_kitti(path: Path) -> tuple[np.ndarray, np.ndarray]:
     """A KITTI pose file -> (line numbers (N,) float64, poses (N, 4, 4)); ValueError naming a bad line."""
-    rows = []
-    for k, line in _data_lines(path):
-        try:
-            vals = [float(v) for v in line.split()]
-        except ValueError:
-            vals = []
-        if len(vals) != 12 or not np.all(np.isfinite(vals)):
-            raise ValueError(f"{path}:{k}: expected 12 numbers (a 3 x 4 pose row by row), got {line[:80]!r}; "
-                             f"fix or remove that line")
-        rows.append(vals)
-    if not rows:
-        raise ValueError(f"{path} holds no poses: expected lines of 12 numbers (KITTI)")
+    rows = sequence.number_rows(path, 12, "(a 3 x 4 pose row by row)", "lines of 12 numbers (KITTI)")
     poses = np.tile(np.eye(4), (len(rows), 1, 1))
     poses[:, :3, :] = np.asarray(rows).reshape(-1, 3, 4)
     return np.arange(len(rows), dtype=np.float64), poses

@@ -576,6 +576,27 @@ def _read_trajectory_file(path: Path, n_frames: int | None):
     return frame_ids, poses
 
 
+def number_rows(path, n: int, what: str, expected: str) -> list[list[float]]:
+    """The rows of ``n`` finite numbers (commas allowed) of a text file's lines that are neither blank
+    nor ``#`` comments: a trajectory's poses (TUM's 8, KITTI's 12). ValueError naming the first bad line
+    (``what`` says what its numbers are) or a file without a row (``expected``: the lines it should hold)."""
+    rows = []
+    for lineno, line in enumerate(Path(path).read_text().splitlines(), 1):
+        line = line.strip()
+        if not line or line.startswith("#"):
+            continue
+        try:
+            vals = [float(v) for v in line.replace(",", " ").split()]
+        except ValueError:
+            vals = []
+        if len(vals) != n or not np.all(np.isfinite(vals)):
+            raise ValueError(f"{path}:{lineno}: expected {n} numbers {what}, got {line[:80]!r}; fix or remove that line")
+        rows.append(vals)
+    if not rows:
+        raise ValueError(f"{path} holds no poses: expected {expected}")
+    return rows
+
+
 def read_tum(path) -> tuple[np.ndarray, np.ndarray]:
     """A TUM trajectory file ``t tx ty tz qx qy qz qw`` (``#`` comments, commas allowed), as written:
     (t (N,) float64 as in the file (seconds, or frame numbers in CameraTrajectory.txt), poses
@@ -583,22 +604,7 @@ def read_tum(path) -> tuple[np.ndarray, np.ndarray]:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"trajectory {path} not found: give a TUM file `t tx ty tz qx qy qz qw`")
-    rows = []
-    for lineno, line in enumerate(path.read_text().splitlines(), 1):
-        line = line.strip()
-        if not line or line.startswith("#"):
-            continue
-        parts = line.replace(",", " ").split()
-        try:
-            vals = [float(v) for v in parts]
-        except ValueError:
-            vals = []
-        if len(vals) != 8 or not np.all(np.isfinite(vals)):
-            raise ValueError(f"{path}:{lineno}: expected 8 numbers `t tx ty tz qx qy qz qw`, got "
-                             f"{line[:80]!r}; fix or remove that line")
-        rows.append(vals)
-    if not rows:
-        raise ValueError(f"{path} holds no poses: expected lines `t tx ty tz qx qy qz qw`")
+    rows = number_rows(path, 8, "`t tx ty tz qx qy qz qw`", "lines `t tx ty tz qx qy qz qw`")
     a = np.asarray(rows)
     q = a[:, 4:8]
     if np.any(np.linalg.norm(q, axis=1) < 1e-9):

@@ -23,7 +23,7 @@ from greenloop.datasets.synthetic.hall import _check_seed, BED_TOP
 from greenloop.datasets.synthetic.plants import _hole, _pack_plants, _rosette
 from greenloop.datasets.synthetic.scene import (_add_bed, _box, _finish_quads, _new_builder, _prism,
                                                 FOG_COLOR, Scene)
-from greenloop.datasets.synthetic.textures import _rect, _smooth_noise, _stack_atlas, _wall_base, TEX_RES
+from greenloop.datasets.synthetic.textures import _fan, _rect, _smooth_noise, _stack_atlas, _wall_base, TEX_RES
 
 # What the days' renderer models and what it does not: notebook 00 and the README read these, so the
 # claim is written once, here, beside the code that makes it true.
@@ -212,11 +212,6 @@ def _days_atlas(rng, hall: DaysHall):
     for xc in hall.bed_x[1::2]:   # shared by the two aisles beside bed xc
         _rect(front, xc - 0.7, 0.0, xc + 0.7, 2.5, (118, 104, 92), (70, 65, 60))
         _rect(front, xc - 0.3, 2.65, xc + 0.3, 2.85, (60, 170, 40))
-        c = (int(xc * s), int(back.shape[0] - 1.9 * s))
-        cv2.rectangle(back, (c[0] - 32, c[1] - 32), (c[0] + 32, c[1] + 32), (185, 188, 190), -1)
-        cv2.circle(back, c, 29, (45, 48, 50), -1)
-        for a in np.arange(0, 360, 15):
-            e = (int(c[0] + 29 * np.cos(np.radians(a))), int(c[1] + 29 * np.sin(np.radians(a))))
-            cv2.line(back, c, e, (150, 150, 150), 1, cv2.LINE_AA)
+        _fan(back, xc, hub=False)
     faces = [cv2.GaussianBlur(t, (0, 0), 0.8) for t in (floor, roof, left, right, front, back)]
     return _stack_atlas(faces)

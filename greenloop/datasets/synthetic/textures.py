@@ -114,6 +114,20 @@ def _wall_base(rng, length: float, outside_seed_scale: float) -> np.ndarray:
     return tex
 
 
+def _fan(tex, xc: float, hub: bool = True) -> None:
+    """Draw an exhaust fan centred xc metres along a wall texture, 1.9 m up: its housing, blades and
+    (``hub``) its hub."""
+    s = 1.0 / TEX_RES
+    c = (int(xc * s), int(tex.shape[0] - 1.9 * s))
+    cv2.rectangle(tex, (c[0] - 32, c[1] - 32), (c[0] + 32, c[1] + 32), (185, 188, 190), -1)
+    cv2.circle(tex, c, 29, (45, 48, 50), -1)
+    for a in np.arange(0, 360, 15):
+        e = (int(c[0] + 29 * np.cos(np.radians(a))), int(c[1] + 29 * np.sin(np.radians(a))))
+        cv2.line(tex, c, e, (150, 150, 150), 1, cv2.LINE_AA)
+    if hub:
+        cv2.circle(tex, c, 5, (170, 170, 170), -1)
+
+
 def _rect(tex, x0, y0, x1, y1, color, border=None):
     """Fill a wall rectangle given in metres (x along the wall, y = height above the floor)."""
     s = 1.0 / TEX_RES
@@ -162,13 +176,7 @@ def _texture_walls(rng) -> list[np.ndarray]:
         cv2.circle(front, (int((9.95 + 0.15 * i) * s), int(front.shape[0] - 1.7 * s)), 3, col, -1)
     # back wall: three exhaust fans, a door
     for xc in (2.6, 7.0, 11.4):
-        c = (int(xc * s), int(back.shape[0] - 1.9 * s))
-        cv2.rectangle(back, (c[0] - 32, c[1] - 32), (c[0] + 32, c[1] + 32), (185, 188, 190), -1)
-        cv2.circle(back, c, 29, (45, 48, 50), -1)
-        for a in np.arange(0, 360, 15):
-            e = (int(c[0] + 29 * np.cos(np.radians(a))), int(c[1] + 29 * np.sin(np.radians(a))))
-            cv2.line(back, c, e, (150, 150, 150), 1, cv2.LINE_AA)
-        cv2.circle(back, c, 5, (170, 170, 170), -1)
+        _fan(back, xc)
     _rect(back, 4.3, 0.0, 5.3, 2.1, (80, 120, 60), (50, 60, 50))
     return [cv2.GaussianBlur(t, (0, 0), 0.8) for t in (left, right, front, back)]
 
