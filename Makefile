@@ -84,7 +84,7 @@ synthetic: $(SYNTHETIC)/synthetic.json ## generate the embedded synthetic greenh
 $(SYNTHETIC)/synthetic.json: | $(STAMP)
 	$(BIN)/python -m greenloop data synthetic $(SYNTHETIC) --overwrite
 
-greenhouse-days: $(DAYS)/greenhouse_days.json ## render the greenhouse over 5 days (issue 65: ~8,000 frames, the days and their stream)
+greenhouse-days: $(DAYS)/greenhouse_days.json ## render the greenhouse over 5 days (~8,000 frames: the days and their stream)
 
 # Rendered into a temporary folder and renamed at the end: greenhouse_days.json in place means a
 # complete render (and the command itself skips a folder already rendered with the same arguments).

@@ -1,4 +1,4 @@
-"""Short recordings (issue 64, point 4): cuts of 60-300 frames from a sequence folder, scored with
+"""Short recordings: cuts of 60-300 frames from a sequence folder, scored with
 ``detect``'s named configurations as a user runs them (``greenloop.detect.plan`` / ``run``, no flags
 but the method and verification on or off), against the cut's ground truth.
 
@@ -14,7 +14,7 @@ a short drive without revisit the paper's 150 frames and leave it no candidate t
 Which cuts a dataset gives (:func:`cuts_for`):
 
 * a folder with traversals (Gardens Point's layout, Nordland's protocol stream): the same ``n`` places
-  of each traversal then of the next ("revisit", day-time unless a traversal's name says night or winter: issue 64 states the recall of
+  of each traversal then of the next ("revisit", day-time unless a traversal's name says night or winter: the targets state the recall of
   night pairs and of Nordland's seasons but sets no target for it);
 * a folder with poses (the synthetic greenhouse): the first revisit, both visits ("revisit");
   the longest stretch without any loop ("no-revisit"); the two most alike straight legs that are
@@ -43,13 +43,13 @@ from greenloop import detect, exclusion, groundtruth, report
 from greenloop.datasets import sequence
 from greenloop.methods import registry
 
-CONFIGURATIONS = (registry.DEFAULT, "greenloop-seq-cnn")   # the named configurations issue 64 decides between
-POSE_TARGETS = dict(rot_deg=2.0, dir_deg=10.0, metric_m=0.3)  # degrees, degrees, metres (issue 64's Targets)
+CONFIGURATIONS = (registry.DEFAULT, "greenloop-seq-cnn")   # the named configurations the targets decide between
+POSE_TARGETS = dict(rot_deg=2.0, dir_deg=10.0, metric_m=0.3)  # degrees, degrees, metres (the targets' pose errors)
 MIN_PRECISION = 0.99       # of declared closures, on every cut
 MIN_RECALL = 0.5           # of revisit frames, on cuts with a day-time revisit
 CUT_FRAMES = (60, 300)     # a short recording's length, frames
 LEG_TURN_DEG = 20.0        # a straight leg: heading within this of its first frame's
-STATED_ONLY = ("night", "winter")   # a traversal pair so named: its recall is stated, not a target (issue 64)
+STATED_ONLY = ("night", "winter")   # a traversal pair so named: its recall is stated, not a target (the targets)
 NEIGHBOUR_MIN_M = 0.5      # metres across the heading: a neighbouring line, not the same aisle's next stretch
 MIN_LEG = 20               # frames: shorter straight runs are corners, not legs
 
@@ -366,7 +366,7 @@ def short_recordings(dataset, out_dir, configurations=CONFIGURATIONS, verify=(Fa
             f"than the run's exclusion) a right closure declares. Cuts of {sequence.open(dataset).path}.")
     report.write_table(table, out_dir / "short_recordings", "Short recordings: detect's named configurations",
                        note, decimals=3)
-    report.write_table(targets(table), out_dir / "short_targets", "Short recordings: issue 64's targets",
+    report.write_table(targets(table), out_dir / "short_targets", "Short recordings: the detector's targets",
                        f"precision >= {MIN_PRECISION:.0%} of declared closures; no closure on a no-revisit cut; "
                        f"recall >= {MIN_RECALL:.0%} of revisit frames on day-time revisit cuts; pose medians "
                        f"within {POSE_TARGETS}.")

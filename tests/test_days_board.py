@@ -1,4 +1,4 @@
-"""Notebook 13's splits and notebook 00's days on the greenhouse over days (issue 65, points 4 and 5).
+"""Notebook 13's splits and notebook 00's days on the greenhouse over days.
 
 A tiny three-day render (two aisles, 160x120 every 0.25 m): day-00 sun, day-01 overcast, day-02 night
 (the plan's night is its third day); aisle 1 is driven -z on day-00 and +z on day-01 and day-02. Scores

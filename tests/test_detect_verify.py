@@ -1,4 +1,4 @@
-"""detect.run with a geometric verifier (issue 64): each candidate the detector declares is checked
+"""detect.run with a geometric verifier: each candidate the detector declares is checked
 on its two frames, rejected ones are not declared, and every declared closure carries exactly the
 verifier's inliers and relative pose in the printed lines, the --matches CSV and the Closure records.
 The verifier here is a fake that knows each frame by its bytes: what detect does with its answer is

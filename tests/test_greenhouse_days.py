@@ -1,4 +1,4 @@
-"""The greenhouse over days (issue 65): the larger hall, its days, odometry, ground truth, CLI.
+"""The greenhouse over days: the larger hall, its days, odometry, ground truth, CLI.
 
 Tiny parameters throughout (a two-aisle hall, two days, 160x120 frames every 0.25 m), and the
 guard that the single-day sequence the main paper rests on renders byte for byte as before.

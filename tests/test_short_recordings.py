@@ -1,5 +1,5 @@
 """Short recordings (greenloop.short_recordings): the cuts carry their source's ground truth
-re-indexed, and the scorer counts right and wrong closures and the targets as issue 64 states them."""
+re-indexed, and the scorer counts right and wrong closures and the targets as the detector's targets state them."""
 from __future__ import annotations
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""Time and memory of the pose graph at a recording's scale (issue 66's target: ``slam`` on 10,000
+"""Time and memory of the pose graph at a recording's scale (the target: ``slam`` on 10,000
 frames within 2 minutes on 2 cores, memory stated).
 
 A 10,000-pose route (laps around a rectangle, ``trajectory.rectangle_route``), its odometry drifted

@@ -109,7 +109,7 @@ def _synthetic(sets) -> None:
 
 def _greenhouse_days(sets) -> None:
     dm = synthetic.daysmake
-    s = sets.add_parser("greenhouse-days", help="render the greenhouse over days (issue 65): a larger hall, "
+    s = sets.add_parser("greenhouse-days", help="render the greenhouse over days: a larger hall, "
                                                 "one sequence folder per day and the multi-day stream")
     s.add_argument("out", help="output folder (the stream; the days in OUT/days/)")
     s.add_argument("--days", type=int, default=5, help="recording days (default %(default)s; >= 5 for every light)")

@@ -1,4 +1,4 @@
-"""Notebook 14's study: do the closures remove the odometry's drift? (issue 66, point 4)
+"""Notebook 14's study: do the closures remove the odometry's drift?
 
 For a sequence with true poses (its CameraTrajectory.txt, (N, 4, 4) camera-to-world, metres):
 
@@ -437,7 +437,7 @@ def conclusion(out_dir) -> str:
     """Notebook 14's last cell, in Markdown, from the tables it wrote under ``out_dir``
     (ate_table.csv, per_seed.csv, robustness.csv, summary.json): the odometry's ATE, each arm's
     loop factors and its ATE with each back end against the odometry per seed, the robustness
-    curve, and issue 66's target on the default's verified closures where this run verified."""
+    curve, and the target on the default's verified closures (ATE at most half the odometry's) where this run verified."""
     out_dir = Path(out_dir)
     table, per_seed = pd.read_csv(out_dir / "ate_table.csv"), pd.read_csv(out_dir / "per_seed.csv")
     info = json.loads((out_dir / "summary.json").read_text())

@@ -133,7 +133,7 @@ _LITE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 # of CALIBRATION_GAMMAS, CALIBRATION_DIM (brightness scaled) and CALIBRATION_CONTRAST and mirrored, so that its
 # activation ranges cover bright, dark and washed-out real frames without any data of the user's. Chosen on
 # R@1 of Nordland's and Gardens Point's target streams against sets without the dark views and sets of those
-# datasets' own frames (issue 68's report): none kept every night-time query of Gardens Point.
+# datasets' own frames (tools/int8_measure.py): none kept every night-time query of Gardens Point.
 CALIBRATION_VIEWS, CALIBRATION_SIZE, CALIBRATION_GAMMAS, CALIBRATION_DIM, CALIBRATION_CONTRAST = \
     24, (160, 120), (0.5, 2.0, 3.0), 0.3, 1.8
 # what a cached int8 descriptor's key records of its calibration set (features.descriptor)

@@ -49,7 +49,7 @@ from greenloop.datasets.synthetic.route import (_look_rotation, CAM_HEIGHT, CAM_
                                                 route_length)
 from greenloop.util.progress import bar as tqdm  # in the terminal, never in a notebook
 
-SPACING = 0.10            # metres between frames of the full benchmark: 5 days, ~8,000 frames (issue 65)
+SPACING = 0.10            # metres between frames of the full benchmark: 5 days, ~8,000 frames
 TINY_SPACING = 0.25       # metres, --tiny
 TINY_SIZE = (160, 120)
 FULL_SIZE = (640, 480)

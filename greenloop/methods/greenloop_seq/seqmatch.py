@@ -103,7 +103,7 @@ DEFAULT_THRESHOLD = 3.0
 CNN_NAME = "greenloop-seq-cnn"
 # store_dtype: its stored rows' type, a knob of detect (--store-dtype): "int8" reads a quarter of the bytes per
 # stored frame with the same R@1 on Nordland and Gardens Point, yet it does not bring the configuration to the
-# frame rate of the targets on one core (the CNN alone costs more), so float32 stays its default (issue 68).
+# frame rate of the targets on one core (the CNN alone costs more), so float32 stays its default.
 CNN_KNOBS = dict(DEFAULT_KNOBS, descriptor="gradients+efficientnetlite0", store_dtype="float32")
 CNN_THRESHOLD = 3.4      # the same rule under the same calibration: 3.3922 (3.1 under "zscore")
 # the named configurations, never tuned: {name: (knobs, fixed threshold)}, the CLI's default first
