@@ -14,8 +14,8 @@ a short drive without revisit the paper's 150 frames and leave it no candidate t
 Which cuts a dataset gives (:func:`cuts_for`):
 
 * a folder with traversals (Gardens Point's layout, Nordland's protocol stream): the same ``n`` places
-  of each traversal then of the next ("revisit", day-time unless a traversal's name says night or winter: the targets state the recall of
-  night pairs and of Nordland's seasons but sets no target for it);
+  of each traversal then of the next ("revisit", day-time unless a traversal's name says night or
+  winter: the recall of night pairs and of Nordland's seasons is stated, not targeted);
 * a folder with poses (the synthetic greenhouse): the first revisit, both visits ("revisit");
   the longest stretch without any loop ("no-revisit"); the two most alike straight legs that are
   no loop, driven one after the other ("neighbour": the neighbouring aisle); and the legs that do
@@ -49,7 +49,7 @@ MIN_PRECISION = 0.99       # of declared closures, on every cut
 MIN_RECALL = 0.5           # of revisit frames, on cuts with a day-time revisit
 CUT_FRAMES = (60, 300)     # a short recording's length, frames
 LEG_TURN_DEG = 20.0        # a straight leg: heading within this of its first frame's
-STATED_ONLY = ("night", "winter")   # a traversal pair so named: its recall is stated, not a target (the targets)
+STATED_ONLY = ("night", "winter")   # a traversal pair so named: its recall is stated, not a target
 NEIGHBOUR_MIN_M = 0.5      # metres across the heading: a neighbouring line, not the same aisle's next stretch
 MIN_LEG = 20               # frames: shorter straight runs are corners, not legs
 
