@@ -17,9 +17,8 @@ Verification (``run(verifier=...)``, :class:`Checker`): each event the detector 
 candidate; a geometric verifier ``(query, match, frame_q, frame_m, depth_q, depth_m) ->
 Verification-like`` (fields accepted, inliers, model, R, t, metric; by default ``registry.verifier``'s
 ``verification.PairCheck``: the pair's geometry, then 3 consistent candidates) is applied to its frame
-numbers and its two decoded frames (the match
-read from disk when it is older than the window; depth in metres from the folder's depth/ where it
-has one, else None). The rule, stated once (:meth:`Checker.check`): a candidate is declared when
+numbers and its two decoded frames (the match read from disk when it is older than the window; depth
+in metres from the folder's depth/ where it has one, else None). The rule, stated once (:meth:`Checker.check`): a candidate is declared when
 the verifier accepts it, and declared unverified (verified None) where it could not check it
 (accepted None, or model "too-small"); a rejected one is not declared. Each declared closure is an
 ``interface.Closure`` (``Run.closures``) carrying the inlier count and the relative pose.
