@@ -37,6 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from greenloop.datasets.synthetic import build_scene, camera_intrinsics, render_frame, route_world  # noqa: E402
 from greenloop.methods.verification import default_camera, DEFAULT_RULE, verify_pair  # noqa: E402
+from greenloop import report  # noqa: E402
 from greenloop.util.files import write_atomic  # noqa: E402
 
 DEFAULT_NAME = "orb-3000 (default)"
@@ -138,6 +139,7 @@ def _pct(x) -> str:
 def summary(df: pd.DataFrame) -> str:
     """summary.md: per (set, config, size, pair kind) the inliers, what the default rule accepts,
     the accepted pairs' poses where known, and the time per pair."""
+    prov = report.provenance()
     lines = ["# Verification: inliers of loop and other pairs, the default rule, time per pair", "",
              f"Default rule: {DEFAULT_RULE}.", "",
              "Written by tools/verification_measure.py (its docstring says which pairs). Inliers: "
@@ -145,7 +147,9 @@ def summary(df: pd.DataFrame) -> str:
              "fitted (median); accepted: by the default rule; wrong pose: accepted pairs whose pose "
              "misses rotation <= 2 deg and translation <= 0.3 m (direction <= 10 deg without depth); "
              "ms: median per pair (both frames' features, matching, geometry), CPU time of the thread "
-             "and wall time on a shared 2-core machine.", "",
+             f"and wall time on {prov['cpu']}, nothing else computing; commit {str(prov['git_commit'])[:12]}"
+             f"{' (dirty)' if prov.get('git_dirty') else ''}, environment {str(prov['environment_hash'])[:12]}, "
+             f"{prov['date']}.", "",
              "| set | config | size | pairs | kind | inliers | ratio | accepted | wrong pose | ms cpu / wall |",
              "|" + "---|" * 10]
     for (s, c, z, p), g in df.groupby(["set", "config", "size", "pair"], sort=False):
