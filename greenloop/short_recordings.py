@@ -320,7 +320,7 @@ def cuts_for(dataset, n: int = 100) -> list[Cut]:
 
 
 def targets(table: pd.DataFrame) -> pd.DataFrame:
-    """Issue 64's targets on each row of :func:`short_recordings`' table: precision (>= MIN_PRECISION of
+    """The detector's targets on each row of :func:`short_recordings`' table: precision (>= MIN_PRECISION of
     the declared closures; met by a silent run), silent (a no-revisit cut declares nothing), recall
     (>= MIN_RECALL of the revisit frames on a day-time revisit cut), pose (medians within POSE_TARGETS
     where closures carry a pose and the cut has poses). Each is True / False, or None where it does

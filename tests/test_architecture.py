@@ -48,7 +48,7 @@ def _reached(start: str, edges: dict) -> set:
 
 
 def test_a_users_run_enters_methods_by_the_registry_only_and_never_runs_through_speed():
-    """Issue 64, point 5: detect.py and cli/ import from methods/ only the registry and the interface
+    """The registry is the only door: detect.py and cli/ import from methods/ only the registry and the interface
     (no method's internals), and a user's detect (greenloop.detect, greenloop.cli.detect) reaches
     nothing of speed/ (the measuring layer), directly or through what it imports."""
     found = architecture.imports(PACKAGE)

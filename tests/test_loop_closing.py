@@ -132,5 +132,5 @@ def test_the_draft_notebook_writes_its_tables_and_conclusion(tiny_sequence, tmp_
     assert info["verify"] is True and info["curve_arm"] in info["arms"] and "greenloop-seq-grad (verified)" in info["arms"]
     text = lc.conclusion(folder)
     assert "Odometry alone" in text and "Unverified arms" in text and wording.num(odometry, 3) in text
-    assert "Issue 66's target (GNC with greenloop-seq-grad (verified)'s closures" in text
+    assert "The target (GNC with greenloop-seq-grad (verified)'s closures" in text
     assert (folder / "trajectories_gnc.png").is_file() and (folder / "robustness.png").is_file()

@@ -422,14 +422,14 @@ def _own_false_sentence(curve: pd.DataFrame, table: pd.DataFrame, arm: str) -> s
 
 
 def _target_sentence(per_seed: pd.DataFrame, arm: str) -> str:
-    """Issue 66's target on this sequence: GNC with ``arm``'s closures at most half the odometry's ATE,
+    """The loop-closing target on this sequence: GNC with ``arm``'s closures at most half the odometry's ATE,
     seed by seed."""
     odo = per_seed[per_seed.arm == ODOMETRY].set_index("seed")["ate_m"]
     g = per_seed[(per_seed.arm == arm) & (per_seed.back_end == "gnc")].set_index("seed")["ate_m"]
     if g.empty:
-        return f"Issue 66's target is not judged: no arm {arm}."
+        return f"The target (GNC with the default's verified closures at most half the odometry's ATE) is not judged: no arm {arm}."
     met = int((g <= 0.5 * odo.loc[g.index]).sum())
-    return (f"Issue 66's target (GNC with {arm}'s closures at most half the odometry's ATE): met on {met} of "
+    return (f"The target (GNC with {arm}'s closures at most half the odometry's ATE): met on {met} of "
             f"{len(g)} seeds ({wording.num(100 * g.mean() / odo.mean(), 0)} % of the odometry's mean ATE).")
 
 
@@ -455,6 +455,6 @@ def conclusion(out_dir) -> str:
                  "of the two views. A verified loop factor that is false by the pose rule carries the geometry's own "
                  "relative pose, so GNC may rightly keep it.")
     lines.append(_target_sentence(per_seed, f"{DETECTORS[0]} (verified)") if info.get("verify") else
-                 "Issue 66's target (GNC with the default's *verified* closures halving the odometry's ATE) is not "
+                 "The target (GNC with the default's *verified* closures halving the odometry's ATE) is not "
                  "judged here: this run did not verify (verify = False).")
     return wording.heading(out_dir.parent, STEM) + "\n\n" + " ".join(lines)

@@ -93,7 +93,7 @@ def make_greenhouse_days(folder, n_days: int = 5, tiny: bool = False, seed: int 
                          overwrite: bool = False, progress: bool = True) -> Path:
     """Render the days of the hall into ``folder`` (module doc: the files).
 
-    n_days: >= 1 (>= 5 for the issue's design: sun, overcast, night, evening, after a harvest);
+    n_days: >= 1 (>= 5 for the benchmark's design: sun, overcast, night, evening, after a harvest);
     tiny: the two-aisle hall at 160x120 every 0.25 m (tests); seed: everything (frames,
     odometry, objects, routes' jitter) is byte-identical for the same arguments and any worker
     count; size: (width, height) pixels (default 640x480, tiny 160x120); spacing: metres between
