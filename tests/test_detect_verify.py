@@ -3,7 +3,6 @@ on its two frames, rejected ones are not declared, and every declared closure ca
 verifier's inliers and relative pose in the printed lines, the --matches CSV and the Closure records.
 The verifier here is a fake that knows each frame by its bytes: what detect does with its answer is
 under test, not the geometry."""
-from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -14,7 +13,7 @@ from greenloop import detect
 from greenloop.datasets import sequence
 from greenloop.methods import registry
 from greenloop.methods.interface import Closure
-from greenloop.methods.verification import PairCheck
+from greenloop.methods.verification import PairCheck, Verification
 
 from conftest import run_cli
 from test_seqdetect import _revisit_folder
@@ -22,19 +21,6 @@ from test_seqdetect import _revisit_folder
 KNOBS = dict(descriptor="pixels-patchnorm", seq_len=3, contrast_window=0)
 RVEC = np.array([0.1, -0.2, 0.3])                 # rad: 21.4 degrees
 T = np.array([0.6, 0.0, 0.8])
-
-
-class Verification(NamedTuple):
-    """The fields of the verification stage's record (greenloop/methods/verification)."""
-    accepted: bool | None
-    inliers: int
-    inlier_ratio: float
-    matches: int
-    model: str
-    R: np.ndarray | None
-    t: np.ndarray | None
-    metric: bool
-    reason: str
 
 
 def _fake(folder):

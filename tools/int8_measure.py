@@ -1,4 +1,4 @@
-"""The CNN configuration's cheaper forms: the CNN configuration (greenloop-seq-cnn) float against its int8 CNN part
+"""The CNN configuration (greenloop-seq-cnn) float against its int8 CNN part
 (features.FUSED_INT8) and its int8 rows (store_dtype "int8"), each alone and both: R@1 (%) on a
 dataset's target streams (sequence.yaml's protocol, built and scored as the leaderboard's target
 protocols: experiments.leaderboard.prepare / _protocol / tune and leaderboard.rows.metric_rows), and

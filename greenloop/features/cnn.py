@@ -242,29 +242,30 @@ def _lite_graph(model, calib=None, ckey=None):
     if calib is not None:
         return _check_int8(model, interp, details, calib[:4])
     probe = np.random.default_rng(0).uniform(-1, 1, (2, *model.inputs[0].shape[1:])).astype(np.float32)
+    for w, got in _probe_outputs(model, interp, details, probe):
+        if got.shape != w.shape or not np.allclose(got, w, rtol=1e-3, atol=1e-4 * max(np.abs(w).max(), 1e-12)):
+            raise RuntimeError(f"the TFLite graph of {model.name} does not give its outputs on a probe batch")
+    return interp, interp.get_input_details()[0]["index"], [d["index"] for d in details]
+
+
+def _probe_outputs(model, interp, details, probe) -> list[tuple[np.ndarray, np.ndarray]]:
+    """[(the Keras model's output, the TFLite graph's), ...] per output (``details``' order) on the probe
+    batch (k, h, w, c) float32: the check of a converted graph against its model."""
     interp.resize_tensor_input(interp.get_input_details()[0]["index"], probe.shape)
     interp.allocate_tensors()
     interp.set_tensor(interp.get_input_details()[0]["index"], probe)
     interp.invoke()
     want = model.predict_on_batch(probe)
-    for d, w in zip(details, want if isinstance(want, (list, tuple)) else [want]):
-        w, got = np.asarray(w), interp.get_tensor(d["index"])
-        if got.shape != w.shape or not np.allclose(got, w, rtol=1e-3, atol=1e-4 * max(np.abs(w).max(), 1e-12)):
-            raise RuntimeError(f"the TFLite graph of {model.name} does not give its outputs on a probe batch")
-    return interp, interp.get_input_details()[0]["index"], [d["index"] for d in details]
+    return [(np.asarray(w), interp.get_tensor(d["index"]))
+            for d, w in zip(details, want if isinstance(want, (list, tuple)) else [want])]
 
 
 def _check_int8(model, interp, details, probe):
     """(interpreter, input index, output indices) of an int8 graph whose every output keeps
     INT8_MIN_COSINE (per frame, flattened) with the model's on probe (k, h, w, c) float32 inputs;
     RuntimeError otherwise (a graph quantised out of its calibration's range)."""
-    interp.resize_tensor_input(interp.get_input_details()[0]["index"], probe.shape)
-    interp.allocate_tensors()
-    interp.set_tensor(interp.get_input_details()[0]["index"], probe)
-    interp.invoke()
-    want = model.predict_on_batch(probe)
-    for d, w in zip(details, want if isinstance(want, (list, tuple)) else [want]):
-        w, got = np.asarray(w).reshape(len(probe), -1), interp.get_tensor(d["index"]).reshape(len(probe), -1)
+    for w, got in _probe_outputs(model, interp, details, probe):
+        w, got = w.reshape(len(probe), -1), got.reshape(len(probe), -1)
         cos = (w * got).sum(1) / np.maximum(np.linalg.norm(w, axis=1) * np.linalg.norm(got, axis=1), 1e-12)
         if got.shape != w.shape or not np.all(cos >= INT8_MIN_COSINE):
             raise RuntimeError(f"the int8 TFLite graph of {model.name} does not keep a cosine of {INT8_MIN_COSINE} "
