@@ -215,6 +215,6 @@ def test_paired_table_resolves_a_planted_gap_and_calls_identical_scores_a_tie():
     assert (~tie.resolved).all() and (tie.result == lb.TIE).all()
     back = lb.paired_table(S, [("noise minus good", "noise", "good")], GT, 5, None, 10)
     assert back.result.iloc[0] == "good above noise" and back.high.iloc[0] < 0
-    assert "a tie (the interval holds 0)" in lb.paired_sentence(t, "copy minus noise")
+    assert "tie (the interval holds 0)" in lb.paired_sentence(t, "copy minus noise")
     assert "resolved: good above noise" in lb.paired_sentence(t, "good minus noise", "R@1")
     assert lb.paired_sentence(t, "absent") == "" and lb.paired_table(S, [], GT, 5, None).empty

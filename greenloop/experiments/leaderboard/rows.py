@@ -198,7 +198,7 @@ def comparisons(S: dict, pairs, GT, exclude: int, queries, block: int = 10, n_bo
 
 PAIRED_COLUMNS = ["comparison", "a", "b", "metric", "difference", "low", "high", "queries", "block", "blocks",
                   "resolved", "result"]
-TIE = "tie"                                  # a paired interval that holds 0 (:func:`paired_table`'s result)
+TIE = goals.TIE                              # a paired interval of exactly [0, 0] (study.targets.paired_word)
 
 
 def paired_table(S: dict, named_pairs, GT, exclude: int, queries, block: int = 10, n_boot: int = N_BOOT,
@@ -212,7 +212,8 @@ def paired_table(S: dict, named_pairs, GT, exclude: int, queries, block: int = 1
     of :data:`PAIRED_COLUMNS`, one row per pair and metric of :data:`COMPARED`: difference, low, high
     (a minus b and its 95 % interval, percentage points, to 0.01), queries (Q scored), block (queries
     per bootstrap run) and blocks (runs, ceil(Q / block)), resolved ([low, high] excludes 0) and
-    result ("a above b", "b above a" with the arms' names, or :data:`TIE`)."""
+    result ("a above b", "b above a" with the arms' names, else the one word rule of paired intervals,
+    ``study.targets.paired_word``: tie, uninformative or not resolved)."""
     named_pairs = list(named_pairs)
     if not named_pairs:
         return pd.DataFrame(columns=PAIRED_COLUMNS)
@@ -220,20 +221,20 @@ def paired_table(S: dict, named_pairs, GT, exclude: int, queries, block: int = 1
     t = comparisons(S, list(names), GT, exclude, queries, block, n_boot, seed).rename(columns={"lo": "low", "hi": "high"})
     t["comparison"] = [names[(a, b)] for a, b in zip(t.a, t.b)]
     t["block"], t["blocks"] = int(block), -(-t["queries"] // int(block))
-    t["result"] = [TIE if not r else f"{a} above {b}" if lo > 0 else f"{b} above {a}"
-                   for a, b, lo, r in zip(t.a, t.b, t.low, t.resolved)]
+    t["result"] = [goals.paired_word(lo, hi) if not r else f"{a} above {b}" if lo > 0 else f"{b} above {a}"
+                   for a, b, lo, hi, r in zip(t.a, t.b, t.low, t.high, t.resolved)]
     return t[PAIRED_COLUMNS]
 
 
 def paired_sentence(t: pd.DataFrame, comparison: str, metric: str = "AUC-PR") -> str:
     """One comparison of :func:`paired_table` (read back from paired.csv) in words: the difference
-    in points with its paired interval, the queries and blocks, and "resolved: ..." or "a tie"; ""
-    where the table lacks it."""
+    in points with its paired interval, the queries and blocks, and "resolved: ..." or the word
+    ``study.targets.paired_word`` gives an interval that holds 0; "" where the table lacks it."""
     rows = t[(t.comparison == comparison) & (t.metric == metric)]
     if not len(rows):
         return ""
     r = rows.iloc[0]
-    tail = f"resolved: {r.result}" if r.resolved else "a tie (the interval holds 0)"
+    tail = f"resolved: {r.result}" if r.resolved else f"{goals.paired_word(r.low, r.high)} (the interval holds 0)"
     return (f"{comparison}: {metric} {r.difference:+.2f} points [{r.low:+.2f}, {r.high:+.2f}] (paired bootstrap over "
             f"{int(r.queries)} queries in {int(r.blocks)} blocks of {int(r.block)}), {tail}")
 
